@@ -1,0 +1,223 @@
+"""The shifting CCD with mask: azimuth compression as a time-integrating correlator.
+
+Psaltis & Wagner 1981, "Description of the processor" and eq. 5: every range-compressed pulse is
+multiplied by a mask whose transmittance along the shift direction is the azimuth chirp (its rate
+k1/y0 depends on range, so the mask is two-dimensional), added into the CCD, and the charge
+shifts one row per pulse; the row that reaches the readout register after N pulses is a finished
+image line.  Here a circular row index replaces the physical shift:
+
+    g[p, r] = Σ_{k=0}^{N-1} line[p - N + 1 + k, r] · mask[k, r]            (1)
+
+line p is the pulse at aperture position k = N-1 of the line that completes with it.  Output line
+j = p - (N - 1) (p ≥ N - 1) is focused at the aperture centre, along-track
+x = x_0 + (j + (N - 1)/2) d.  Each output sums exactly N terms from a zeroed row, so nothing can
+drift however long the stream runs.
+
+Two implementations of (1) behind one interface (push lines, get finished lines):
+DirectCorrelator (the emulation: a numba shift register, O(N) per pixel per pulse) and
+FFTCorrelator (overlap-save blocks, O(log N), lines leave in blocks).  correlate_reference is the
+NumPy float64 batch version both are tested against.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+from scipy import fft as sfft
+
+from .lens_plan import next_pow2
+from .params import Config
+from .windows import window
+
+FFT_WORKERS = 2
+
+
+def aperture_offsets_m(cfg: Config) -> np.ndarray:
+    """Along-track offset of each aperture row from the aperture centre, x_k = (k-(N-1)/2)·d."""
+    n = cfg.processor.aperture_pulses
+    return (np.arange(n) - 0.5 * (n - 1)) * cfg.geometry.along_track_step_m
+
+
+def design_mask(cfg: Config, range_m: np.ndarray) -> np.ndarray:
+    """Mask[k, r] (complex128): conjugate of the expected azimuth phase history, windowed.
+
+    The expected phase of a scatterer at closest-approach range R seen from offset x_k is
+    -4π/λ·(sqrt(R² + x_k²) - R) (exact range history; Psaltis eq. 2 is its parabolic limit
+    k1/y0·x²).  With ``per_bin_mask`` each range column uses its own R (the k1/y0 dependence);
+    otherwise every column uses the range centre.  Scaled by 1/N, so a unit-amplitude history
+    compresses to a unit peak with the rectangular window.  Phase formed in float64, reduced
+    mod 2π before the exponential.
+    """
+    proc = cfg.processor
+    x = aperture_offsets_m(cfg)[:, None]
+    if proc.per_bin_mask:
+        r = np.asarray(range_m, dtype=np.float64)[None, :]
+    else:
+        centre = proc.range_centre_m or cfg.geometry.slant_range_m
+        r = np.full((1, len(range_m)), float(centre))
+    # sqrt(R² + x²) - R = x² / (sqrt(R² + x²) + R): no cancellation for x ≪ R.
+    excess_m = x * x / (np.sqrt(r * r + x * x) + r)
+    cycles = np.mod(2.0 * excess_m / cfg.geometry.wavelength_m, 1.0)
+    w = window(proc.azimuth_window, proc.aperture_pulses)[:, None]
+    return w * np.exp(2j * math.pi * cycles) / proc.aperture_pulses
+
+
+def correlate_reference(lines: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Float64 batch evaluation of eq. (1): lines[P, Nr] → image[P-N+1, Nr] (complex128)."""
+    lines = np.asarray(lines, dtype=np.complex128)
+    mask = np.asarray(mask, dtype=np.complex128)
+    n = mask.shape[0]
+    if lines.ndim != 2 or lines.shape[1] != mask.shape[1]:
+        raise ValueError(f"lines must be [pulses, {mask.shape[1]}], got {lines.shape}")
+    if lines.shape[0] < n:
+        return np.zeros((0, mask.shape[1]), np.complex128)
+    windows = sliding_window_view(lines, n, axis=0)  # [P-N+1, Nr, N]
+    return np.einsum("prk,kr->pr", windows, mask)
+
+
+class Correlator:
+    """Common interface: push range-compressed lines, receive finished image lines."""
+
+    def __init__(self, mask: np.ndarray):
+        mask = np.asarray(mask)
+        if mask.ndim != 2 or mask.shape[0] < 2:
+            raise ValueError("mask must be [N >= 2, range_bins]")
+        self.aperture = mask.shape[0]
+        self.range_bins = mask.shape[1]
+        self.pulses_in = 0
+        self.lines_out = 0
+
+    def _check(self, lines: np.ndarray) -> np.ndarray:
+        lines = np.asarray(lines)
+        if lines.ndim != 2 or lines.shape[1] != self.range_bins:
+            raise ValueError(f"lines must be [pulses, {self.range_bins}], got {lines.shape}")
+        return np.ascontiguousarray(lines, dtype=np.complex64)
+
+    def push(self, lines: np.ndarray) -> np.ndarray:
+        raise NotImplementedError  # abstract: the two subclasses implement it
+
+    def flush(self) -> np.ndarray:
+        """Emit every line whose pulses have all arrived (nothing is ever held back after this)."""
+        return np.zeros((0, self.range_bins), np.complex64)
+
+
+@numba.njit(parallel=True, nogil=True, cache=True)
+def _shift_register(acc, mask_rev, head, lines, out):  # pragma: no cover - compiled
+    # acc[r, slot]: slot (head + j) % N completes after j more pulses; mask_rev[r, j] = mask[N-1-j, r].
+    # For each pulse b:  acc[r, (head+j)%N] += line[b, r] * mask[N-1-j, r]  for all j,
+    # then acc[r, head] is the finished line, the row is zeroed and head advances (the shift).
+    n = acc.shape[1]
+    for r in numba.prange(acc.shape[0]):
+        h = head
+        a = acc[r]
+        m = mask_rev[r]
+        for b in range(lines.shape[0]):
+            v = lines[b, r]
+            split = n - h
+            for j in range(split):
+                a[h + j] += v * m[j]
+            for j in range(split, n):
+                a[h + j - n] += v * m[j]
+            out[b, r] = a[h]
+            a[h] = 0
+            h += 1
+            if h == n:
+                h = 0
+
+
+class DirectCorrelator(Correlator):
+    """The CCD emulation: a circular shift register of N rows, one finished line per pulse."""
+
+    def __init__(self, mask: np.ndarray):
+        super().__init__(mask)
+        self._mask_rev = np.ascontiguousarray(np.asarray(mask)[::-1].T, dtype=np.complex64)
+        self._acc = np.zeros((self.range_bins, self.aperture), np.complex64)
+        self._head = 0
+
+    def push(self, lines: np.ndarray) -> np.ndarray:
+        lines = self._check(lines)
+        out = np.empty_like(lines)
+        if len(lines):
+            _shift_register(self._acc, self._mask_rev, self._head, lines, out)
+        self._head = (self._head + len(lines)) % self.aperture
+        # Lines completing before the N-th pulse saw a partial aperture: not emitted.
+        skip = max(0, min(len(lines), self.aperture - 1 - self.pulses_in))
+        self.pulses_in += len(lines)
+        out = out[skip:]
+        self.lines_out += len(out)
+        return out
+
+
+class FFTCorrelator(Correlator):
+    """Overlap-save evaluation of eq. (1): lines leave in blocks of ``block_lines``.
+
+    Eq. (1) is the convolution g = line ⊛ h with h[q] = mask[N-1-q]; each block transforms the
+    last N-1 lines plus up to B new ones (FFT length M = N - 1 + B, a power of two) along
+    azimuth, multiplies by H = DFT(h) per range column and keeps the B fully covered outputs.
+    """
+
+    def __init__(self, mask: np.ndarray, fft_length: int | None = None):
+        super().__init__(mask)
+        n = self.aperture
+        m = fft_length or next_pow2(2 * n)
+        if m < n or m & (m - 1):
+            raise ValueError(f"fft_length must be a power of two >= N = {n}")
+        self.fft_length = m
+        self.block_lines = m - n + 1
+        h = np.zeros((m, self.range_bins), np.complex128)
+        h[:n] = np.asarray(mask, dtype=np.complex128)[::-1]
+        self._H = sfft.fft(h, axis=0).astype(np.complex64)
+        self._window = np.zeros((m, self.range_bins), np.complex64)  # history + new lines
+        self._filled = n - 1  # rows of _window holding data (history starts as zeros)
+        self._pending = 0  # new lines in the window not yet emitted
+
+    def _run_block(self) -> np.ndarray:
+        n, b = self.aperture, self._pending
+        spec = sfft.fft(self._window, axis=0, workers=FFT_WORKERS, overwrite_x=False)
+        spec *= self._H
+        y = sfft.ifft(spec, axis=0, workers=FFT_WORKERS, overwrite_x=True)
+        out = y[n - 1: n - 1 + b].astype(np.complex64)
+        # Keep the last N-1 lines as history for the next block.
+        end = n - 1 + b
+        self._window[: n - 1] = self._window[end - (n - 1): end]
+        self._window[n - 1:] = 0
+        self._pending = 0
+        # Skip outputs whose aperture is incomplete (pulses before the N-th).
+        first_pulse = self.pulses_in - b
+        skip = max(0, min(b, n - 1 - first_pulse))
+        out = out[skip:]
+        self.lines_out += len(out)
+        return out
+
+    def push(self, lines: np.ndarray) -> np.ndarray:
+        lines = self._check(lines)
+        outs = []
+        i = 0
+        while i < len(lines):
+            take = min(len(lines) - i, self.block_lines - self._pending)
+            row = self.aperture - 1 + self._pending
+            self._window[row: row + take] = lines[i: i + take]
+            self._pending += take
+            self.pulses_in += take
+            i += take
+            if self._pending == self.block_lines:
+                outs.append(self._run_block())
+        return np.concatenate(outs) if outs else np.zeros((0, self.range_bins), np.complex64)
+
+    def flush(self) -> np.ndarray:
+        # Outputs are causal (line p needs pulses ≤ p), so a partial block is exact: the
+        # zero rows after the pending lines only feed outputs that are discarded.
+        if self._pending == 0:
+            return np.zeros((0, self.range_bins), np.complex64)
+        return self._run_block()
+
+
+def make_correlator(kind: str, mask: np.ndarray, fft_length: int | None = None) -> Correlator:
+    if kind == "direct":
+        return DirectCorrelator(mask)
+    if kind == "fft":
+        return FFTCorrelator(mask, fft_length)
+    raise ValueError(f"correlator must be 'direct' or 'fft', got {kind!r}")

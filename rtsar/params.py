@@ -1,0 +1,347 @@
+"""Frozen, self-validating parameter sets: waveform, strip-map geometry, processor; presets.
+
+Conventions (used everywhere in rtsar)
+--------------------------------------
+* SI units; names carry the unit where it could be doubted (``prf_hz``, ``slant_range_m``).
+* Complex baseband with carrier ``exp(+i 2π f0 t)``; a return from slant range R carries the
+  two-way phase ``-4π R / λ`` with λ = c / f0 and f0 the *centre* frequency of the chirp, for both
+  waveforms (pulsed radar after heterodyne and matched filter; FMCW lidar after dechirp on
+  receive, the local oscillator delayed to ``reference_range_m``).
+* Array axes: ``echo[pulse, sample]``, ``line[pulse, range_bin]``, ``image[azimuth, range]``.
+* Along-track: pulse ``p`` is taken at ``x_p = p * along_track_step_m`` (stop-and-hop).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, replace
+
+C_M_PER_S = 299_792_458.0
+
+WINDOWS = ("rect", "hann", "hamming", "taylor")
+PRECISIONS = ("complex64",)
+
+
+def _positive(obj, *names):
+    for name in names:
+        value = getattr(obj, name)
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise ValueError(f"{type(obj).__name__}.{name} must be a finite number > 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class PulsedChirp:
+    """Pulsed linear-FM radar (Psaltis & Wagner 1981, eq. 1: s(t) = a(t) exp j(ω0 t + α t²)).
+
+    The receive window is the acousto-optic cell's time aperture: the samples of one pulse that
+    the AO cell holds at the instant the laser fires.  Range compression is a matched filter.
+    """
+
+    bandwidth_hz: float
+    pulse_duration_s: float
+    sample_rate_hz: float  # complex (I/Q) samples per second
+    receive_window_s: float  # AO cell time aperture
+    kind: str = field(default="pulsed", init=False)
+
+    def __post_init__(self):
+        _positive(self, "bandwidth_hz", "pulse_duration_s", "sample_rate_hz", "receive_window_s")
+        if self.sample_rate_hz < self.bandwidth_hz:
+            raise ValueError(
+                f"sample_rate_hz {self.sample_rate_hz:g} < bandwidth_hz {self.bandwidth_hz:g}: "
+                "complex sampling must cover the chirp bandwidth"
+            )
+        if self.pulse_samples >= self.samples_per_shot:
+            raise ValueError("pulse_duration_s must be shorter than receive_window_s")
+
+    @property
+    def chirp_rate_hz_per_s(self) -> float:
+        return self.bandwidth_hz / self.pulse_duration_s
+
+    @property
+    def samples_per_shot(self) -> int:
+        return int(round(self.receive_window_s * self.sample_rate_hz))
+
+    @property
+    def pulse_samples(self) -> int:
+        return int(round(self.pulse_duration_s * self.sample_rate_hz))
+
+    @property
+    def range_resolution_m(self) -> float:
+        """c / 2B (Psaltis eq. 6)."""
+        return C_M_PER_S / (2.0 * self.bandwidth_hz)
+
+
+@dataclass(frozen=True)
+class FMCWChirp:
+    """FMCW chirp with dechirp on receive (Crouch 2012, ch. 3, eqs. 3.1-3.5).
+
+    The local oscillator is delayed to ``reference_range_m`` so the beat frequency
+    f = K (τ - τ_ref) spans only the range window: with complex sampling at ``sample_rate_hz`` the
+    unambiguous range window is ``samples_per_shot`` cells of c/2B (stretch processing).
+    """
+
+    bandwidth_hz: float
+    chirp_duration_s: float
+    sample_rate_hz: float  # complex (I/Q) samples per second of the beat signal
+    reference_range_m: float  # range matched by the LO delay
+    kind: str = field(default="fmcw", init=False)
+
+    def __post_init__(self):
+        _positive(self, "bandwidth_hz", "chirp_duration_s", "sample_rate_hz", "reference_range_m")
+        if self.samples_per_shot < 8:
+            raise ValueError("FMCW shot must hold at least 8 samples (sample_rate_hz * chirp_duration_s)")
+
+    @property
+    def chirp_rate_hz_per_s(self) -> float:
+        return self.bandwidth_hz / self.chirp_duration_s
+
+    @property
+    def samples_per_shot(self) -> int:
+        return int(round(self.chirp_duration_s * self.sample_rate_hz))
+
+    @property
+    def range_resolution_m(self) -> float:
+        """c / 2B (Crouch eq. 3.6)."""
+        return C_M_PER_S / (2.0 * self.bandwidth_hz)
+
+    @property
+    def unambiguous_range_m(self) -> float:
+        """Range extent covered by the beat bandwidth fs: c fs / (2K)."""
+        return C_M_PER_S * self.sample_rate_hz / (2.0 * self.chirp_rate_hz_per_s)
+
+
+Waveform = PulsedChirp | FMCWChirp
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Broadside strip-map geometry, straight track (Crouch Fig. 8; Psaltis Fig. 1).
+
+    ``slant_range_m`` is the closest-approach range to the scene centre; ``antenna_length_m`` is
+    the real aperture D along track, whose footprint λR/D is the illuminated length L (Crouch
+    eq. 4.9).  ``platform_height_m`` is only needed for scatterers given in ground range.
+    """
+
+    wavelength_m: float
+    slant_range_m: float
+    along_track_step_m: float  # platform advance per pulse
+    prf_hz: float
+    antenna_length_m: float
+    platform_height_m: float = 0.0
+
+    def __post_init__(self):
+        _positive(self, "wavelength_m", "slant_range_m", "along_track_step_m", "prf_hz",
+                  "antenna_length_m")
+        if not (math.isfinite(self.platform_height_m) and 0 <= self.platform_height_m < self.slant_range_m):
+            raise ValueError("platform_height_m must be in [0, slant_range_m)")
+
+    @property
+    def speed_mps(self) -> float:
+        return self.along_track_step_m * self.prf_hz
+
+    @property
+    def carrier_hz(self) -> float:
+        return C_M_PER_S / self.wavelength_m
+
+    @property
+    def illuminated_length_m(self) -> float:
+        """Real-aperture footprint L = λR/D (Crouch eq. 4.9)."""
+        return self.wavelength_m * self.slant_range_m / self.antenna_length_m
+
+
+@dataclass(frozen=True)
+class Processor:
+    """Processor settings: the CCD size, windows, micro-batch and correlator mode.
+
+    aperture_pulses   N, rows of the shifting CCD (synthetic aperture in pulses)
+    range_bins        columns of the CCD (range cells kept after the AO lens)
+    range_centre_m    slant range of the middle column (None: the geometry's scene centre)
+    range_oversampling  FFT zero-padding factor of the lens (power of two)
+    range_window, azimuth_window   one of WINDOWS ("taylor": n̄ = 4, -35 dB)
+    per_bin_mask      True: mask chirp rate per range bin (Psaltis eq. 5, k1/y0); False: one mask
+    correlator        "direct" (shift register, numba) or "fft" (overlap-save block)
+    fft_length        FFT correlator block transform length M (power of two >= N; None: 2N);
+                      lines leave in blocks of M - N + 1: the latency/throughput knob of "fft"
+    micro_batch       pulses per AO-lens launch
+    """
+
+    aperture_pulses: int
+    range_bins: int
+    range_centre_m: float | None = None
+    range_oversampling: int = 1
+    range_window: str = "rect"
+    azimuth_window: str = "rect"
+    per_bin_mask: bool = True
+    correlator: str = "fft"
+    fft_length: int | None = None
+    micro_batch: int = 64
+    precision: str = "complex64"
+
+    def __post_init__(self):
+        for name in ("aperture_pulses", "range_bins", "range_oversampling", "micro_batch"):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and value >= 1):
+                raise ValueError(f"Processor.{name} must be an integer >= 1, got {value!r}")
+        if self.aperture_pulses < 2:
+            raise ValueError("Processor.aperture_pulses must be >= 2")
+        if self.range_oversampling & (self.range_oversampling - 1):
+            raise ValueError("Processor.range_oversampling must be a power of two")
+        for name in ("range_window", "azimuth_window"):
+            if getattr(self, name) not in WINDOWS:
+                raise ValueError(f"Processor.{name} must be one of {WINDOWS}, got {getattr(self, name)!r}")
+        if self.correlator not in ("direct", "fft"):
+            raise ValueError(f"Processor.correlator must be 'direct' or 'fft', got {self.correlator!r}")
+        if self.fft_length is not None and not (
+            isinstance(self.fft_length, int) and self.fft_length >= self.aperture_pulses
+            and not self.fft_length & (self.fft_length - 1)
+        ):
+            raise ValueError("Processor.fft_length must be a power of two >= aperture_pulses")
+        if self.precision not in PRECISIONS:
+            raise ValueError(f"Processor.precision must be one of {PRECISIONS}")
+        if self.range_centre_m is not None and not (
+            math.isfinite(self.range_centre_m) and self.range_centre_m > 0
+        ):
+            raise ValueError("Processor.range_centre_m must be > 0")
+
+
+@dataclass(frozen=True)
+class Config:
+    """Everything the simulator and the processor need, validated as a whole."""
+
+    waveform: Waveform
+    geometry: Geometry
+    processor: Processor
+
+    def __post_init__(self):
+        g, p = self.geometry, self.processor
+        # The mask chirp must be sampled: at the aperture edge the azimuth phase may advance by
+        # less than π per pulse, 4π/λ · d · (A/2)/R < π  ⇔  d·A/(2R) < λ/4.
+        half_aperture_m = 0.5 * p.aperture_pulses * g.along_track_step_m
+        phase_step = 4 * math.pi / g.wavelength_m * g.along_track_step_m * half_aperture_m / g.slant_range_m
+        if phase_step >= math.pi:
+            raise ValueError(
+                f"azimuth chirp aliased: phase advances {phase_step:.2f} rad per pulse at the edge of "
+                f"the {p.aperture_pulses}-pulse aperture (limit π); shorten the aperture or the step"
+            )
+        if isinstance(self.waveform, FMCWChirp):
+            if self.waveform.reference_range_m <= 0:
+                raise ValueError("FMCW reference_range_m must be > 0")
+
+    # ---- derived quantities used by theory tables ---------------------------------------
+    @property
+    def synthetic_aperture_m(self) -> float:
+        return self.processor.aperture_pulses * self.geometry.along_track_step_m
+
+    def azimuth_resolution_m(self, slant_range_m: float | None = None) -> float:
+        """λR/(2L) with L the synthetic aperture (Crouch eq. 4.8), unweighted."""
+        r = self.geometry.slant_range_m if slant_range_m is None else slant_range_m
+        return self.geometry.wavelength_m * r / (2.0 * self.synthetic_aperture_m)
+
+    @property
+    def range_curvature_m(self) -> float:
+        """Range migration across the aperture, sqrt(R² + (A/2)²) - R."""
+        r = self.geometry.slant_range_m
+        return math.hypot(r, 0.5 * self.synthetic_aperture_m) - r
+
+    def to_dict(self) -> dict:
+        d = {"waveform": asdict(self.waveform), "geometry": asdict(self.geometry),
+             "processor": asdict(self.processor)}
+        return d
+
+    def with_processor(self, **changes) -> Config:
+        return replace(self, processor=replace(self.processor, **changes))
+
+
+def waveform_from_dict(d: dict) -> Waveform:
+    d = dict(d)
+    kind = d.pop("kind", None)
+    if kind == "pulsed":
+        return PulsedChirp(**d)
+    if kind == "fmcw":
+        return FMCWChirp(**d)
+    raise ValueError(f"waveform.kind must be 'pulsed' or 'fmcw', got {kind!r}")
+
+
+def config_from_dict(d: dict) -> Config:
+    """Inverse of Config.to_dict (unknown keys raise TypeError naming them)."""
+    proc = dict(d["processor"])
+    return Config(waveform_from_dict(d["waveform"]), Geometry(**d["geometry"]), Processor(**proc))
+
+
+# ---- presets -------------------------------------------------------------------------------
+def _psaltis_jpl() -> Config:
+    # Experimental processor of Psaltis & Wagner (Table 1): 40 MHz chirp, 10 µs AO aperture,
+    # 512 x 320 CCD, L ≈ 15 km illuminated.  L-band (JPL), 20 km slant range, 250 m/s.
+    # D = 2·step (Nyquist in azimuth, Crouch eq. 4.10) makes ρA = λR/(2Nd) = L/N (Psaltis eq. 7).
+    return Config(
+        PulsedChirp(bandwidth_hz=40e6, pulse_duration_s=3.2e-6, sample_rate_hz=48e6,
+                    receive_window_s=10e-6),
+        Geometry(wavelength_m=0.235, slant_range_m=20e3, along_track_step_m=0.15625,
+                 prf_hz=1600.0, antenna_length_m=0.3125),
+        Processor(aperture_pulses=512, range_bins=320),
+    )
+
+
+def _psaltis_max() -> Config:
+    # "Maximum possible" column of Table 1: 1200 range cells, ρR < 1 m, ρA ~ 15 m, N = 512.
+    # X-band, 15 km, PRF 10 kHz, 300 m/s; D = 2·step so ρA = L/N ≈ 15.3 m.
+    return Config(
+        PulsedChirp(bandwidth_hz=200e6, pulse_duration_s=2e-6, sample_rate_hz=240e6,
+                    receive_window_s=7.5e-6),
+        Geometry(wavelength_m=0.03125, slant_range_m=15e3, along_track_step_m=0.03,
+                 prf_hz=10e3, antenna_length_m=0.06),
+        Processor(aperture_pulses=512, range_bins=1200),
+    )
+
+
+def _crouch_sal() -> Config:
+    # Crouch (2012) stripmap SAL: 1.55 µm, 3 THz over 300 ms, 10 µm steps, 2048 shots in the
+    # aperture, ≈1.5 m range, 10 µm fibre aperture.  The LO is delayed to 1.5 m so the beat
+    # band is 3.4 kHz wide: 1024 complex samples per shot, a 51 mm unambiguous range window.
+    return Config(
+        FMCWChirp(bandwidth_hz=3e12, chirp_duration_s=0.3, sample_rate_hz=1024 / 0.3,
+                  reference_range_m=1.5),
+        Geometry(wavelength_m=1.55e-6, slant_range_m=1.5, along_track_step_m=10e-6,
+                 prf_hz=2.0, antenna_length_m=10e-6),
+        Processor(aperture_pulses=2048, range_bins=512),
+    )
+
+
+def _zhao_insal() -> Config:
+    # Zhao et al. (2014): 1550 nm, 2.4 m, 8 mm synthetic aperture (233 µm azimuth resolution),
+    # 100 ms of chirp giving 170 µm range resolution (B ≈ 0.88 THz), 0.4 mm real apertures.
+    return Config(
+        FMCWChirp(bandwidth_hz=0.8817e12, chirp_duration_s=0.1, sample_rate_hz=2560.0,
+                  reference_range_m=2.4),
+        Geometry(wavelength_m=1.55e-6, slant_range_m=2.4, along_track_step_m=50e-6,
+                 prf_hz=5.0, antenna_length_m=0.4e-3),
+        Processor(aperture_pulses=160, range_bins=256),
+    )
+
+
+def _tiny() -> Config:
+    # A small, fast variant of psaltis-jpl for tests and quick looks.
+    return Config(
+        PulsedChirp(bandwidth_hz=40e6, pulse_duration_s=2.0e-6, sample_rate_hz=48e6,
+                    receive_window_s=4.0e-6),
+        Geometry(wavelength_m=0.235, slant_range_m=2e3, along_track_step_m=0.5,
+                 prf_hz=500.0, antenna_length_m=1.0),
+        Processor(aperture_pulses=64, range_bins=64, micro_batch=16),
+    )
+
+
+PRESETS = {
+    "psaltis-jpl": _psaltis_jpl,
+    "psaltis-max": _psaltis_max,
+    "crouch-sal": _crouch_sal,
+    "zhao-insal": _zhao_insal,
+    "tiny": _tiny,
+}
+
+
+def preset(name: str) -> Config:
+    """Return the named preset (see PRESETS); raises ValueError listing the names."""
+    try:
+        return PRESETS[name]()
+    except KeyError:
+        raise ValueError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}") from None

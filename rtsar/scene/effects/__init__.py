@@ -1,0 +1,32 @@
+"""Scene effects: opt-in by name, one module per effect, imported only when a scene names it.
+
+REGISTRY maps an effect name to "module:Class".  ``load_effects`` imports a module the first time
+a scene names its effect, so an effect that is not named is never computed and never imported.
+Effect hooks (see base.Effect) are called by the simulator once per pulse.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+REGISTRY: dict[str, str] = {
+    "noise": "rtsar.scene.effects.noise:ReceiverNoise",
+    "antenna_pattern": "rtsar.scene.effects.antenna:AntennaPattern",
+}
+
+
+def load_effects(specs, config):
+    """Instantiate the named effects, in order.  specs: iterable of (name, params dict)."""
+    effects = []
+    for name, params in specs:
+        try:
+            target = REGISTRY[name]
+        except KeyError:
+            raise ValueError(f"unknown effect {name!r}; known effects: {sorted(REGISTRY)}") from None
+        module_name, class_name = target.split(":")
+        cls = getattr(importlib.import_module(module_name), class_name)
+        try:
+            effects.append(cls(config, **params))
+        except TypeError as exc:
+            raise ValueError(f"effect {name!r}: {exc}") from None
+    return effects

@@ -1,0 +1,214 @@
+"""Scene files (TOML): which instrument, which scatterers, which effects.
+
+Format (every key optional unless marked)::
+
+    preset = "psaltis-jpl"        # one of rtsar.params.PRESETS; or give all three tables below
+    seed = 1                      # RNG seed of the effects (noise, ...)
+    pulses = 4096                 # shots to simulate (default: enough to image every target)
+    start_along_track_m = -40.0   # platform position of shot 0 (default: first target - A/2 - margin)
+
+    [waveform]    # overrides of the preset's fields (kind = "pulsed" | "fmcw" when no preset)
+    [geometry]    # wavelength_m, slant_range_m, along_track_step_m, prf_hz, antenna_length_m, ...
+    [processor]   # aperture_pulses, range_bins, windows, correlator, micro_batch, ...
+
+    [[targets]]                   # point scatterers
+    along_track_m = 0.0           # required
+    slant_range_m = 20000.0       # closest-approach slant range, or:
+    # ground_range_m = ...; height_m = 0.0   (needs geometry.platform_height_m > 0)
+    amplitude = 1.0               # |a|
+    phase_rad = 0.0               # arg a
+
+    [[effects]]                   # simulated only when named here, in this order
+    name = "noise"                # see rtsar.scene.effects.REGISTRY
+    snr_db = 10.0                 # the effect's own parameters
+
+Unknown keys are errors (a typo must not silently fall back to a default).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..params import Config, FMCWChirp, Geometry, Processor, PulsedChirp, preset, waveform_from_dict
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+_TOP_KEYS = {"preset", "seed", "pulses", "start_along_track_m", "waveform", "geometry",
+             "processor", "targets", "effects", "name"}
+_TARGET_KEYS = {"along_track_m", "slant_range_m", "ground_range_m", "height_m", "amplitude",
+                "phase_rad"}
+DEMO_SCENE = Path(__file__).with_name("scenes") / "demo.toml"
+
+
+@dataclass(frozen=True, eq=False)
+class Targets:
+    """Point scatterers: closest-approach position and complex amplitude (arrays of equal size)."""
+
+    along_track_m: np.ndarray
+    slant_range_m: np.ndarray
+    amplitude: np.ndarray  # complex128
+
+    def __len__(self):
+        return len(self.along_track_m)
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    config: Config
+    targets: Targets
+    pulses: int
+    start_along_track_m: float
+    seed: int = 0
+    effects: tuple = ()  # ((name, {params}), ...)
+    name: str = "scene"
+
+    def along_track_of(self, pulse: np.ndarray | int):
+        return self.start_along_track_m + np.asarray(pulse) * self.config.geometry.along_track_step_m
+
+    def to_dict(self) -> dict:
+        """Round-trippable description (written next to every output)."""
+        return {
+            "name": self.name,
+            "seed": self.seed,
+            "pulses": self.pulses,
+            "start_along_track_m": self.start_along_track_m,
+            **self.config.to_dict(),
+            "targets": [
+                {"along_track_m": float(x), "slant_range_m": float(r), "amplitude": float(abs(a)),
+                 "phase_rad": float(np.angle(a))}
+                for x, r, a in zip(self.targets.along_track_m, self.targets.slant_range_m,
+                                   self.targets.amplitude, strict=True)
+            ],
+            "effects": [{"name": n, **p} for n, p in self.effects],
+        }
+
+
+def _override(obj, table: dict, what: str):
+    names = {f.name for f in fields(obj) if f.init}
+    unknown = set(table) - names - {"kind"}
+    if unknown:
+        raise ValueError(f"[{what}] unknown keys {sorted(unknown)}; known: {sorted(names)}")
+    if "kind" in table and table["kind"] != obj.kind:
+        raise ValueError(f"[{what}] kind {table['kind']!r} differs from the preset's {obj.kind!r}")
+    return replace(obj, **{k: v for k, v in table.items() if k != "kind"})
+
+
+def _config(d: dict) -> Config:
+    if "preset" in d:
+        base = preset(d["preset"])
+        wf = _override(base.waveform, d.get("waveform", {}), "waveform")
+        geo = _override(base.geometry, d.get("geometry", {}), "geometry")
+        proc = _override(base.processor, d.get("processor", {}), "processor")
+        return Config(wf, geo, proc)
+    missing = [k for k in ("waveform", "geometry", "processor") if k not in d]
+    if missing:
+        raise ValueError(f"scene needs a preset or the tables {missing}")
+    return Config(waveform_from_dict(d["waveform"]), Geometry(**d["geometry"]),
+                  Processor(**d["processor"]))
+
+
+def _targets(rows: list, cfg: Config) -> Targets:
+    xs, rs, amps = [], [], []
+    for i, t in enumerate(rows):
+        unknown = set(t) - _TARGET_KEYS
+        if unknown:
+            raise ValueError(f"targets[{i}]: unknown keys {sorted(unknown)}; known: {sorted(_TARGET_KEYS)}")
+        if "along_track_m" not in t:
+            raise ValueError(f"targets[{i}]: along_track_m is required")
+        if ("slant_range_m" in t) == ("ground_range_m" in t):
+            raise ValueError(f"targets[{i}]: give exactly one of slant_range_m, ground_range_m")
+        if "slant_range_m" in t:
+            if "height_m" in t:
+                raise ValueError(f"targets[{i}]: height_m goes with ground_range_m")
+            r = float(t["slant_range_m"])
+        else:
+            h_platform = cfg.geometry.platform_height_m
+            if h_platform <= 0:
+                raise ValueError(f"targets[{i}]: ground_range_m needs geometry.platform_height_m > 0")
+            r = math.hypot(float(t["ground_range_m"]), h_platform - float(t.get("height_m", 0.0)))
+        amp = float(t.get("amplitude", 1.0)) * np.exp(1j * float(t.get("phase_rad", 0.0)))
+        values = (float(t["along_track_m"]), r, amp.real, amp.imag)
+        if not all(math.isfinite(v) for v in values) or r <= 0:
+            raise ValueError(f"targets[{i}]: positions and amplitude must be finite, range > 0")
+        xs.append(values[0])
+        rs.append(r)
+        amps.append(amp)
+    return Targets(np.array(xs, float), np.array(rs, float), np.array(amps, np.complex128))
+
+
+def _scan_extent(cfg: Config, targets: Targets, start, pulses) -> tuple[float, int]:
+    """Default scan: from A/2 plus a margin before the first target to as far after the last."""
+    step = cfg.geometry.along_track_step_m
+    n = cfg.processor.aperture_pulses
+    margin_m = (0.5 * n + max(8, n // 8)) * step
+    lo = float(targets.along_track_m.min()) if len(targets) else 0.0
+    hi = float(targets.along_track_m.max()) if len(targets) else 0.0
+    start = float(lo - margin_m if start is None else start)
+    if not math.isfinite(start):
+        raise ValueError("scene: start_along_track_m must be finite")
+    if pulses is None:
+        pulses = int(math.ceil((hi + margin_m - start) / step)) + 1
+    if not (isinstance(pulses, int) and pulses >= 1):
+        raise ValueError(f"scene: pulses must be an integer >= 1, got {pulses!r}")
+    return start, pulses
+
+
+def scene_from_dict(d: dict, name: str = "scene") -> Scene:
+    """Build and validate a Scene from the parsed TOML mapping."""
+    unknown = set(d) - _TOP_KEYS
+    if unknown:
+        raise ValueError(f"scene: unknown keys {sorted(unknown)}; known: {sorted(_TOP_KEYS)}")
+    cfg = _config(d)
+    targets = _targets(d.get("targets", []), cfg)
+    start, pulses = _scan_extent(cfg, targets, d.get("start_along_track_m"), d.get("pulses"))
+    effects = []
+    for i, e in enumerate(d.get("effects", [])):
+        if "name" not in e:
+            raise ValueError(f"effects[{i}]: name is required")
+        params = {k: v for k, v in e.items() if k != "name"}
+        effects.append((e["name"], params))
+    seed = d.get("seed", 0)
+    if not isinstance(seed, int):
+        raise ValueError("scene: seed must be an integer")
+    return Scene(cfg, targets, pulses, start, seed, tuple(effects), d.get("name", name))
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read a TOML scene file (errors name the file and the offending key)."""
+    path = Path(path)
+    try:
+        with path.open("rb") as f:
+            d = tomllib.load(f)
+    except FileNotFoundError:
+        raise ValueError(f"scene file not found: {path}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{path}: not valid TOML: {exc}") from None
+    try:
+        return scene_from_dict(d, name=path.stem)
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"{path}: {exc}") from None
+
+
+def point_scene(cfg: Config, along_track_m, slant_range_m, amplitude=None, effects=(), seed=0,
+                pulses=None, start_along_track_m=None, name="points") -> Scene:
+    """Programmatic scene of point targets (used by tests and reports)."""
+    x = np.atleast_1d(np.asarray(along_track_m, dtype=float))
+    r = np.atleast_1d(np.asarray(slant_range_m, dtype=float))
+    a = np.ones(x.shape, np.complex128) if amplitude is None else np.asarray(amplitude, np.complex128)
+    if not (x.shape == r.shape == a.shape):
+        raise ValueError("along_track_m, slant_range_m and amplitude must have one length")
+    targets = Targets(x, r, a)
+    start, pulses = _scan_extent(cfg, targets, start_along_track_m, pulses)
+    return Scene(cfg, targets, pulses, start, seed, tuple((n, dict(p)) for n, p in effects), name)
+
+
+__all__ = ["Scene", "Targets", "load_scene", "scene_from_dict", "point_scene", "DEMO_SCENE",
+           "PulsedChirp", "FMCWChirp"]

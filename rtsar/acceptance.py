@@ -78,18 +78,29 @@ def azimuth_weights(cfg: Config, slant_range_m: float, antenna: bool) -> np.ndar
     w = window(cfg.processor.azimuth_window, cfg.processor.aperture_pulses)
     if antenna:
         g = cfg.geometry
-        w = w * np.sinc(g.antenna_length_m / g.wavelength_m * aperture_offsets_m(cfg)
-                        / slant_range_m) ** 2
+        w = (
+            w
+            * np.sinc(g.antenna_length_m / g.wavelength_m * aperture_offsets_m(cfg) / slant_range_m)
+            ** 2
+        )
     return w
 
 
-def _focus_one(cfg: Config, x: float, r: float, effects: list, lens_backend: str,
-               margin_lines: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _focus_one(
+    cfg: Config, x: float, r: float, effects: list, lens_backend: str, margin_lines: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One isolated target, with margin_lines image lines either side of it."""
     n, step = cfg.processor.aperture_pulses, cfg.geometry.along_track_step_m
     start = x - (0.5 * (n - 1) + margin_lines) * step
-    scene = point_scene(cfg, [x], [r], effects=effects, seed=11, start_along_track_m=start,
-                        pulses=n + 2 * margin_lines)
+    scene = point_scene(
+        cfg,
+        [x],
+        [r],
+        effects=effects,
+        seed=11,
+        start_along_track_m=start,
+        pulses=n + 2 * margin_lines,
+    )
     sim = Simulator(scene)
     eng = StreamProcessor(cfg, lens_backend, start_along_track_m=scene.start_along_track_m)
     batch = cfg.processor.micro_batch
@@ -104,8 +115,12 @@ def _focus_one(cfg: Config, x: float, r: float, effects: list, lens_backend: str
     return image, eng.azimuth_m(0, len(image)), eng.range_m
 
 
-def run_point_targets(cfg: Config, lens_backend: str = "opencl", antenna: bool = False,
-                      noise_snr_db: float | None = None) -> list[TargetResult]:
+def run_point_targets(
+    cfg: Config,
+    lens_backend: str = "opencl",
+    antenna: bool = False,
+    noise_snr_db: float | None = None,
+) -> list[TargetResult]:
     """Focus each acceptance target alone with the streaming engine and measure it."""
     effects = []
     if antenna:
@@ -123,25 +138,44 @@ def run_point_targets(cfg: Config, lens_backend: str = "opencl", antenna: bool =
         # Room for ±12 IRW of sidelobes in azimuth (the ISLR extent is ±10 IRW).
         chip = max(64, int(np.ceil(12 * az_irw / step)))
         image, az, rg = _focus_one(cfg, x, r, effects, lens_backend, chip + 8)
-        rep = analyse_point_target(image, az, rg, near_azimuth_m=x, near_range_m=r,
-                                   search_radius_m=(3 * rho_a, 3 * rho_r), chip=chip)
-        results.append(TargetResult(
-            label, x, r,
-            abs(rep.azimuth_m - x) / rho_a, abs(rep.range_m - r) / rho_r,
-            rep.azimuth.irw_m, az_irw,
-            rep.range.irw_m, SINC_IRW * rho_r * theoretical_irw_factor(rw),
-            rep.azimuth.pslr_db, rep.range.pslr_db,
-            theoretical_pslr_db(aw), theoretical_pslr_db(rw),
-            rep.azimuth.islr_db, rep.range.islr_db,
-        ))
+        rep = analyse_point_target(
+            image,
+            az,
+            rg,
+            near_azimuth_m=x,
+            near_range_m=r,
+            search_radius_m=(3 * rho_a, 3 * rho_r),
+            chip=chip,
+        )
+        results.append(
+            TargetResult(
+                label,
+                x,
+                r,
+                abs(rep.azimuth_m - x) / rho_a,
+                abs(rep.range_m - r) / rho_r,
+                rep.azimuth.irw_m,
+                az_irw,
+                rep.range.irw_m,
+                SINC_IRW * rho_r * theoretical_irw_factor(rw),
+                rep.azimuth.pslr_db,
+                rep.range.pslr_db,
+                theoretical_pslr_db(aw),
+                theoretical_pslr_db(rw),
+                rep.azimuth.islr_db,
+                rep.range.islr_db,
+            )
+        )
     return results
 
 
 def markdown_table(rows: list[tuple[str, str, TargetResult]]) -> str:
     """rows: (preset, windows, result) → a Markdown table of measured vs theory."""
-    head = ("| preset | windows | target | az. error [cells] | rg. error [cells] | "
-            "az. IRW meas / theory | ratio | rg. IRW meas / theory | ratio | "
-            "az. PSLR meas / theory [dB] | rg. PSLR meas / theory [dB] | az. / rg. ISLR [dB] |")
+    head = (
+        "| preset | windows | target | az. error [cells] | rg. error [cells] | "
+        "az. IRW meas / theory | ratio | rg. IRW meas / theory | ratio | "
+        "az. PSLR meas / theory [dB] | rg. PSLR meas / theory [dB] | az. / rg. ISLR [dB] |"
+    )
     lines = [head, "|" + "---|" * 12]
 
     def fmt_len(v):
@@ -158,6 +192,6 @@ def markdown_table(rows: list[tuple[str, str, TargetResult]]) -> str:
             f"{fmt_len(t.range_irw_m)} / {fmt_len(t.range_irw_theory_m)} | "
             f"{t.range_irw_ratio:.3f} | {t.azimuth_pslr_db:.1f} / {t.azimuth_pslr_theory_db:.1f} | "
             f"{t.range_pslr_db:.1f} / {t.range_pslr_theory_db:.1f} | "
-            f"{t.azimuth_islr_db:.1f} / {t.range_islr_db:.1f} |")
+            f"{t.azimuth_islr_db:.1f} / {t.range_islr_db:.1f} |"
+        )
     return "\n".join(lines)
-

@@ -38,12 +38,21 @@ def bench_lens(cfg, batches=(16, 64, 256), seconds=1.0, device=None) -> list[dic
     cl_lens, np_lens = AOLens(plan, device=device), NumpyLens(plan)
     rows = []
     for b in batches:
-        shots = (rng.standard_normal((b, plan.samples_per_shot))
-                 + 1j * rng.standard_normal((b, plan.samples_per_shot))).astype(np.complex64)
+        shots = (
+            rng.standard_normal((b, plan.samples_per_shot))
+            + 1j * rng.standard_normal((b, plan.samples_per_shot))
+        ).astype(np.complex64)
         r_cl = _rate(lambda s=shots: cl_lens.compress(s), b, seconds)
         r_np = _rate(lambda s=shots: np_lens.compress(s), b, seconds)
-        rows.append({"stage": "lens", "batch": b, "opencl_pulses_per_s": r_cl,
-                     "numpy_fft_pulses_per_s": r_np, "opencl_over_numpy": r_cl / r_np})
+        rows.append(
+            {
+                "stage": "lens",
+                "batch": b,
+                "opencl_pulses_per_s": r_cl,
+                "numpy_fft_pulses_per_s": r_np,
+                "opencl_over_numpy": r_cl / r_np,
+            }
+        )
     return rows
 
 
@@ -51,14 +60,24 @@ def bench_correlators(cfg, batch=64, seconds=1.0) -> list[dict]:
     plan = make_plan(cfg)
     mask = design_mask(cfg, plan.range_m)
     rng = np.random.default_rng(1)
-    lines = (rng.standard_normal((batch, plan.bin_count))
-             + 1j * rng.standard_normal((batch, plan.bin_count))).astype(np.complex64)
+    lines = (
+        rng.standard_normal((batch, plan.bin_count))
+        + 1j * rng.standard_normal((batch, plan.bin_count))
+    ).astype(np.complex64)
     rates = {}
     for name, corr in (("direct", DirectCorrelator(mask)), ("fft", FFTCorrelator(mask))):
         rates[name] = _rate(lambda c=corr: c.push(lines), batch, seconds)
-    return [{"stage": "correlator", "batch": batch, "direct_pulses_per_s": rates["direct"],
-             "fft_pulses_per_s": rates["fft"], "fft_over_direct": rates["fft"] / rates["direct"],
-             "aperture_pulses": mask.shape[0], "range_bins": mask.shape[1]}]
+    return [
+        {
+            "stage": "correlator",
+            "batch": batch,
+            "direct_pulses_per_s": rates["direct"],
+            "fft_pulses_per_s": rates["fft"],
+            "fft_over_direct": rates["fft"] / rates["direct"],
+            "aperture_pulses": mask.shape[0],
+            "range_bins": mask.shape[1],
+        }
+    ]
 
 
 def run_bench(args) -> int:
@@ -68,29 +87,49 @@ def run_bench(args) -> int:
     cfg = preset(name)
     out = sys.stdout
     seconds = args.seconds
-    print(f"rtsar bench: preset {name} (samples/shot {cfg.waveform.samples_per_shot}, "
-          f"{cfg.processor.range_bins} range bins, N = {cfg.processor.aperture_pulses}, "
-          f"PRF {cfg.geometry.prf_hz:g} Hz); OpenCL: {device_info(args.device)}", file=out)
+    print(
+        f"rtsar bench: preset {name} (samples/shot {cfg.waveform.samples_per_shot}, "
+        f"{cfg.processor.range_bins} range bins, N = {cfg.processor.aperture_pulses}, "
+        f"PRF {cfg.geometry.prf_hz:g} Hz); OpenCL: {device_info(args.device)}",
+        file=out,
+    )
     lens_rows = bench_lens(cfg, seconds=seconds, device=args.device)
     print("\nAO lens (range compression), pulses/s", file=out)
     print(f"{'batch':>6} {'OpenCL':>12} {'NumPy FFT':>12} {'OpenCL/NumPy':>13}", file=out)
     for r in lens_rows:
-        print(f"{r['batch']:6d} {r['opencl_pulses_per_s']:12,.0f} "
-              f"{r['numpy_fft_pulses_per_s']:12,.0f} {r['opencl_over_numpy']:13.2f}", file=out)
+        print(
+            f"{r['batch']:6d} {r['opencl_pulses_per_s']:12,.0f} "
+            f"{r['numpy_fft_pulses_per_s']:12,.0f} {r['opencl_over_numpy']:13.2f}",
+            file=out,
+        )
     corr_rows = bench_correlators(cfg, seconds=seconds)
     print("\nShifting CCD (azimuth correlation), pulses/s", file=out)
     for r in corr_rows:
-        print(f"batch {r['batch']}: direct {r['direct_pulses_per_s']:,.0f}, "
-              f"fft {r['fft_pulses_per_s']:,.0f}, fft/direct {r['fft_over_direct']:.1f}x "
-              f"({r['aperture_pulses']} x {r['range_bins']})", file=out)
+        print(
+            f"batch {r['batch']}: direct {r['direct_pulses_per_s']:,.0f}, "
+            f"fft {r['fft_pulses_per_s']:,.0f}, fft/direct {r['fft_over_direct']:.1f}x "
+            f"({r['aperture_pulses']} x {r['range_bins']})",
+            file=out,
+        )
     prf = cfg.geometry.prf_hz
     best = max(corr_rows[0]["fft_pulses_per_s"], corr_rows[0]["direct_pulses_per_s"])
     lens_best = max(r["opencl_pulses_per_s"] for r in lens_rows)
-    print(f"\nreal-time factors at PRF {prf:g} Hz: lens {lens_best / prf:.2f}x, "
-          f"best correlator {best / prf:.2f}x", file=out)
+    print(
+        f"\nreal-time factors at PRF {prf:g} Hz: lens {lens_best / prf:.2f}x, "
+        f"best correlator {best / prf:.2f}x",
+        file=out,
+    )
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"preset": name, "device": device_info(args.device),
-                       "lens": lens_rows, "correlator": corr_rows}, f, indent=2)
+            json.dump(
+                {
+                    "preset": name,
+                    "device": device_info(args.device),
+                    "lens": lens_rows,
+                    "correlator": corr_rows,
+                },
+                f,
+                indent=2,
+            )
         print(f"wrote {args.json}", file=out)
     return 0

@@ -106,7 +106,8 @@ class Correlator:
 
 @numba.njit(parallel=True, nogil=True, cache=True)
 def _shift_register(acc, mask_rev, head, lines, out):  # pragma: no cover - compiled
-    # acc[r, slot]: slot (head + j) % N completes after j more pulses; mask_rev[r, j] = mask[N-1-j, r].
+    # acc[r, slot]: slot (head + j) % N completes after j more pulses;
+    # mask_rev[r, j] = mask[N-1-j, r].
     # For each pulse b:  acc[r, (head+j)%N] += line[b, r] * mask[N-1-j, r]  for all j,
     # then acc[r, head] is the finished line, the row is zeroed and head advances (the shift).
     n = acc.shape[1]
@@ -179,11 +180,11 @@ class FFTCorrelator(Correlator):
         spec = sfft.fft(self._window, axis=0, workers=FFT_WORKERS, overwrite_x=False)
         spec *= self._H
         y = sfft.ifft(spec, axis=0, workers=FFT_WORKERS, overwrite_x=True)
-        out = y[n - 1: n - 1 + b].astype(np.complex64)
+        out = y[n - 1 : n - 1 + b].astype(np.complex64)
         # Keep the last N-1 lines as history for the next block.
         end = n - 1 + b
-        self._window[: n - 1] = self._window[end - (n - 1): end]
-        self._window[n - 1:] = 0
+        self._window[: n - 1] = self._window[end - (n - 1) : end]
+        self._window[n - 1 :] = 0
         self._pending = 0
         # Skip outputs whose aperture is incomplete (pulses before the N-th).
         first_pulse = self.pulses_in - b
@@ -199,7 +200,7 @@ class FFTCorrelator(Correlator):
         while i < len(lines):
             take = min(len(lines) - i, self.block_lines - self._pending)
             row = self.aperture - 1 + self._pending
-            self._window[row: row + take] = lines[i: i + take]
+            self._window[row : row + take] = lines[i : i + take]
             self._pending += take
             self.pulses_in += take
             i += take

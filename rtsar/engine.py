@@ -40,14 +40,20 @@ class Lines:
 class StreamProcessor:
     """Range compression + azimuth correlation of a shot stream, with fixed memory."""
 
-    def __init__(self, config: Config, lens_backend: str = "opencl", device: str | None = None,
-                 start_along_track_m: float = 0.0):
+    def __init__(
+        self,
+        config: Config,
+        lens_backend: str = "opencl",
+        device: str | None = None,
+        start_along_track_m: float = 0.0,
+    ):
         self.config = config
         self.plan = make_plan(config)
         self.lens = make_lens(self.plan, lens_backend, device)
         self.mask = design_mask(config, self.plan.range_m)
-        self.correlator = make_correlator(config.processor.correlator, self.mask,
-                                          config.processor.fft_length)
+        self.correlator = make_correlator(
+            config.processor.correlator, self.mask, config.processor.fft_length
+        )
         self.start_along_track_m = float(start_along_track_m)
         self.lines_out = 0
 
@@ -77,12 +83,16 @@ class StreamProcessor:
         return self._emit(self.correlator.flush())
 
 
-def process_block(config: Config, shots: np.ndarray, lens_backend: str = "opencl",
-                  start_along_track_m: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def process_block(
+    config: Config,
+    shots: np.ndarray,
+    lens_backend: str = "opencl",
+    start_along_track_m: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Convenience: run a whole array of shots through the engine → (image, azimuth_m, range_m)."""
     eng = StreamProcessor(config, lens_backend, start_along_track_m=start_along_track_m)
     batch = config.processor.micro_batch
-    parts = [eng.push(shots[i: i + batch]).lines for i in range(0, len(shots), batch)]
+    parts = [eng.push(shots[i : i + batch]).lines for i in range(0, len(shots), batch)]
     parts.append(eng.flush().lines)
     image = np.concatenate(parts) if parts else np.zeros((0, eng.plan.bin_count), np.complex64)
     return image, eng.azimuth_m(0, len(image)), eng.range_m

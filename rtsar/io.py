@@ -30,18 +30,23 @@ FORMAT_VERSION = 1
 class RecordingWriter:
     """Append shots to a new recording file; use as a context manager."""
 
-    def __init__(self, path: str | Path, config: Config, scene: dict | None = None,
-                 chunk_pulses: int = 64):
+    def __init__(
+        self, path: str | Path, config: Config, scene: dict | None = None, chunk_pulses: int = 64
+    ):
         self.path = Path(path)
         self._f = h5py.File(self.path, "w")
         s = config.waveform.samples_per_shot
         chunk = max(1, min(chunk_pulses, 1024))
-        self._shots = self._f.create_dataset("shots", (0, s), np.complex64, maxshape=(None, s),
-                                             chunks=(chunk, s))
+        self._shots = self._f.create_dataset(
+            "shots", (0, s), np.complex64, maxshape=(None, s), chunks=(chunk, s)
+        )
         self._meta = {
             name: self._f.create_dataset(name, (0,), dtype, maxshape=(None,), chunks=(4096,))
-            for name, dtype in (("pulse_index", np.int64), ("time_s", np.float64),
-                                ("along_track_m", np.float64))
+            for name, dtype in (
+                ("pulse_index", np.int64),
+                ("time_s", np.float64),
+                ("along_track_m", np.float64),
+            )
         }
         a = self._f.attrs
         a["format"] = RECORDING_FORMAT
@@ -56,12 +61,15 @@ class RecordingWriter:
         n = len(samples)
         end = self.pulses + n
         self._shots.resize(end, axis=0)
-        self._shots[self.pulses:end] = samples
-        for name, values in (("pulse_index", pulse_index), ("time_s", time_s),
-                             ("along_track_m", along_track_m)):
+        self._shots[self.pulses : end] = samples
+        for name, values in (
+            ("pulse_index", pulse_index),
+            ("time_s", time_s),
+            ("along_track_m", along_track_m),
+        ):
             ds = self._meta[name]
             ds.resize(end, axis=0)
-            ds[self.pulses:end] = np.atleast_1d(values)
+            ds[self.pulses : end] = np.atleast_1d(values)
         self.pulses = end
 
     def close(self) -> None:
@@ -88,7 +96,7 @@ class Recording:
         """Shots in blocks of ``size`` pulses (the last block may be shorter)."""
         shots = self._file["shots"]
         for i in range(0, self.pulses, size):
-            yield shots[i: i + size]
+            yield shots[i : i + size]
 
     def close(self) -> None:
         self._file.close()
@@ -133,8 +141,14 @@ def open_recording(path: str | Path) -> Recording:
     return Recording(Path(path), cfg, json.loads(f.attrs.get("scene", "{}")), pulses, start, f)
 
 
-def write_image(path: str | Path, image: np.ndarray, azimuth_m: np.ndarray, range_m: np.ndarray,
-                config: Config, **attrs) -> None:
+def write_image(
+    path: str | Path,
+    image: np.ndarray,
+    azimuth_m: np.ndarray,
+    range_m: np.ndarray,
+    config: Config,
+    **attrs,
+) -> None:
     with h5py.File(path, "w") as f:
         f.create_dataset("image", data=np.asarray(image, np.complex64))
         f.create_dataset("azimuth_m", data=np.asarray(azimuth_m, np.float64))

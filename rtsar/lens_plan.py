@@ -60,7 +60,8 @@ def _pulsed_lags(wf: PulsedChirp, bins: int) -> tuple[int, int]:
     if bins > valid:
         raise ValueError(
             f"range window of {bins} bins exceeds the {valid} fully compressed lags of a "
-            f"{wf.receive_window_s * 1e6:g} µs receive window with a {wf.pulse_duration_s * 1e6:g} µs pulse"
+            f"{wf.receive_window_s * 1e6:g} µs receive window with a "
+            f"{wf.pulse_duration_s * 1e6:g} µs pulse"
         )
     first = (valid - bins) // 2
     return first, valid
@@ -100,18 +101,31 @@ def make_plan(cfg: Config) -> LensPlan:
         if bin_start < -nfft // 2 or bin_start + bins > nfft // 2:
             raise ValueError(
                 f"range window {bins} bins around {centre:g} m leaves the unambiguous window "
-                f"±{wf.unambiguous_range_m / 2:g} m about reference_range_m {wf.reference_range_m:g} m"
+                f"±{wf.unambiguous_range_m / 2:g} m about reference_range_m "
+                f"{wf.reference_range_m:g} m"
             )
         k = bin_start + np.arange(bins)
         w = window(proc.range_window, S)
         # Time origin at the middle sample: multiply bin k by exp(-i π k S / nfft) (sign +1 DFT).
         post = np.exp(-1j * math.pi * k * S / nfft) / S
-        return LensPlan(S, nfft, w.astype(np.complex128), +1, None, -1, bin_start, bins, post,
-                        wf.reference_range_m + k * bin_m)
+        return LensPlan(
+            S,
+            nfft,
+            w.astype(np.complex128),
+            +1,
+            None,
+            -1,
+            bin_start,
+            bins,
+            post,
+            wf.reference_range_m + k * bin_m,
+        )
     if isinstance(wf, PulsedChirp):
         if proc.range_oversampling != 1:
-            raise ValueError("range_oversampling must be 1 for pulsed waveforms (sample_rate_hz "
-                             "already oversamples the chirp band)")
+            raise ValueError(
+                "range_oversampling must be 1 for pulsed waveforms (sample_rate_hz "
+                "already oversamples the chirp band)"
+            )
         nfft = next_pow2(S)
         first, _ = _pulsed_lags(wf, bins)
         replica = pulsed_replica(wf)
@@ -122,8 +136,18 @@ def make_plan(cfg: Config) -> LensPlan:
         post = np.full(bins, 1.0 / (nfft * wf.pulse_samples), dtype=np.complex128)
         tau0 = receive_window_open_s(cfg)
         lags = first + np.arange(bins)
-        return LensPlan(S, nfft, np.ones(S, np.complex128), -1, spectrum, +1, first, bins, post,
-                        0.5 * C_M_PER_S * (tau0 + lags / wf.sample_rate_hz))
+        return LensPlan(
+            S,
+            nfft,
+            np.ones(S, np.complex128),
+            -1,
+            spectrum,
+            +1,
+            first,
+            bins,
+            post,
+            0.5 * C_M_PER_S * (tau0 + lags / wf.sample_rate_hz),
+        )
     raise TypeError(f"unsupported waveform {type(wf).__name__}")
 
 

@@ -16,8 +16,14 @@ from .engine import StreamProcessor
 from .scene import Scene, Simulator
 
 
-def run_live(scene: Scene, duration_s: float | None = None, lens_backend: str = "opencl",
-             device: str | None = None, output=None, stream=None) -> int:
+def run_live(
+    scene: Scene,
+    duration_s: float | None = None,
+    lens_backend: str = "opencl",
+    device: str | None = None,
+    output=None,
+    stream=None,
+) -> int:
     stream = stream or sys.stdout
     cfg = scene.config
     prf = cfg.geometry.prf_hz
@@ -25,10 +31,13 @@ def run_live(scene: Scene, duration_s: float | None = None, lens_backend: str = 
     sim = Simulator(scene)
     eng = StreamProcessor(cfg, lens_backend, device, scene.start_along_track_m)
     n_ap = cfg.processor.aperture_pulses
-    print(f"rtsar run: scene '{scene.name}' ({len(scene.targets)} targets, "
-          f"{scene.pulses} shots at {prf:g} Hz = {scene.pulses / prf:.1f} s), "
-          f"CCD {n_ap} x {cfg.processor.range_bins}, micro-batch {batch}, "
-          f"{cfg.processor.correlator} correlator, {lens_backend} lens", file=stream)
+    print(
+        f"rtsar run: scene '{scene.name}' ({len(scene.targets)} targets, "
+        f"{scene.pulses} shots at {prf:g} Hz = {scene.pulses / prf:.1f} s), "
+        f"CCD {n_ap} x {cfg.processor.range_bins}, micro-batch {batch}, "
+        f"{cfg.processor.correlator} correlator, {lens_backend} lens",
+        file=stream,
+    )
     parts, latencies = [], []
     busy = 0.0
     late_batches = 0
@@ -61,24 +70,38 @@ def run_live(scene: Scene, duration_s: float | None = None, lens_backend: str = 
             last_report = done
             elapsed = done - t0
             lat = np.array(latencies[-2000:]) * 1e3
-            lat_txt = (f"latency median {np.median(lat):6.2f} ms p99 {np.percentile(lat, 99):6.2f} ms"
-                       if len(lat) else "latency      -")
-            print(f"t={elapsed:6.2f} s  pulses {p:7d}  lines {eng.lines_out:7d}  "
-                  f"PRF {p / elapsed:8.1f} Hz  load {100 * busy / elapsed:5.1f} %  {lat_txt}  "
-                  f"late batches {late_batches}", file=stream, flush=True)
+            lat_txt = (
+                f"latency median {np.median(lat):6.2f} ms p99 {np.percentile(lat, 99):6.2f} ms"
+                if len(lat)
+                else "latency      -"
+            )
+            print(
+                f"t={elapsed:6.2f} s  pulses {p:7d}  lines {eng.lines_out:7d}  "
+                f"PRF {p / elapsed:8.1f} Hz  load {100 * busy / elapsed:5.1f} %  {lat_txt}  "
+                f"late batches {late_batches}",
+                file=stream,
+                flush=True,
+            )
     tail = eng.flush()
     if output:
         parts.append(tail.lines)
         from .io import write_image
 
         image = np.concatenate(parts)
-        write_image(output, image, eng.azimuth_m(0, len(image)), eng.range_m, cfg,
-                    source=f"live:{scene.name}", lens=lens_backend,
-                    correlator=cfg.processor.correlator)
+        write_image(
+            output,
+            image,
+            eng.azimuth_m(0, len(image)),
+            eng.range_m,
+            cfg,
+            source=f"live:{scene.name}",
+            lens=lens_backend,
+            correlator=cfg.processor.correlator,
+        )
         print(f"wrote {output}: {image.shape[0]} x {image.shape[1]}", file=stream)
     lat = np.array(latencies) * 1e3
-    summary = (f"done: {p} pulses, {eng.lines_out} lines, processing load {100 * busy / max(time.perf_counter() - t0, 1e-9):.1f} % "
-               f"of real time")
+    load = 100 * busy / max(time.perf_counter() - t0, 1e-9)
+    summary = f"done: {p} pulses, {eng.lines_out} lines, processing load {load:.1f} % of real time"
     if len(lat):
         summary += f", latency median {np.median(lat):.2f} ms, p99 {np.percentile(lat, 99):.2f} ms"
     print(summary, file=stream)

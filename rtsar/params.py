@@ -26,7 +26,9 @@ def _positive(obj, *names):
     for name in names:
         value = getattr(obj, name)
         if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-            raise ValueError(f"{type(obj).__name__}.{name} must be a finite number > 0, got {value!r}")
+            raise ValueError(
+                f"{type(obj).__name__}.{name} must be a finite number > 0, got {value!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -89,7 +91,9 @@ class FMCWChirp:
     def __post_init__(self):
         _positive(self, "bandwidth_hz", "chirp_duration_s", "sample_rate_hz", "reference_range_m")
         if self.samples_per_shot < 8:
-            raise ValueError("FMCW shot must hold at least 8 samples (sample_rate_hz * chirp_duration_s)")
+            raise ValueError(
+                "FMCW shot must hold at least 8 samples (sample_rate_hz * chirp_duration_s)"
+            )
 
     @property
     def chirp_rate_hz_per_s(self) -> float:
@@ -130,9 +134,18 @@ class Geometry:
     platform_height_m: float = 0.0
 
     def __post_init__(self):
-        _positive(self, "wavelength_m", "slant_range_m", "along_track_step_m", "prf_hz",
-                  "antenna_length_m")
-        if not (math.isfinite(self.platform_height_m) and 0 <= self.platform_height_m < self.slant_range_m):
+        _positive(
+            self,
+            "wavelength_m",
+            "slant_range_m",
+            "along_track_step_m",
+            "prf_hz",
+            "antenna_length_m",
+        )
+        if not (
+            math.isfinite(self.platform_height_m)
+            and 0 <= self.platform_height_m < self.slant_range_m
+        ):
             raise ValueError("platform_height_m must be in [0, slant_range_m)")
 
     @property
@@ -188,11 +201,16 @@ class Processor:
             raise ValueError("Processor.range_oversampling must be a power of two")
         for name in ("range_window", "azimuth_window"):
             if getattr(self, name) not in WINDOWS:
-                raise ValueError(f"Processor.{name} must be one of {WINDOWS}, got {getattr(self, name)!r}")
+                raise ValueError(
+                    f"Processor.{name} must be one of {WINDOWS}, got {getattr(self, name)!r}"
+                )
         if self.correlator not in ("direct", "fft"):
-            raise ValueError(f"Processor.correlator must be 'direct' or 'fft', got {self.correlator!r}")
+            raise ValueError(
+                f"Processor.correlator must be 'direct' or 'fft', got {self.correlator!r}"
+            )
         if self.fft_length is not None and not (
-            isinstance(self.fft_length, int) and self.fft_length >= self.aperture_pulses
+            isinstance(self.fft_length, int)
+            and self.fft_length >= self.aperture_pulses
             and not self.fft_length & (self.fft_length - 1)
         ):
             raise ValueError("Processor.fft_length must be a power of two >= aperture_pulses")
@@ -217,11 +235,14 @@ class Config:
         # The mask chirp must be sampled: at the aperture edge the azimuth phase may advance by
         # less than π per pulse, 4π/λ · d · (A/2)/R < π  ⇔  d·A/(2R) < λ/4.
         half_aperture_m = 0.5 * p.aperture_pulses * g.along_track_step_m
-        phase_step = 4 * math.pi / g.wavelength_m * g.along_track_step_m * half_aperture_m / g.slant_range_m
+        phase_step = (
+            4 * math.pi / g.wavelength_m * g.along_track_step_m * half_aperture_m / g.slant_range_m
+        )
         if phase_step >= math.pi:
             raise ValueError(
-                f"azimuth chirp aliased: phase advances {phase_step:.2f} rad per pulse at the edge of "
-                f"the {p.aperture_pulses}-pulse aperture (limit π); shorten the aperture or the step"
+                f"azimuth chirp aliased: phase advances {phase_step:.2f} rad per pulse at the "
+                f"edge of the {p.aperture_pulses}-pulse aperture (limit π); shorten the aperture "
+                "or the step"
             )
         if isinstance(self.waveform, FMCWChirp):
             if self.waveform.reference_range_m <= 0:
@@ -244,8 +265,11 @@ class Config:
         return math.hypot(r, 0.5 * self.synthetic_aperture_m) - r
 
     def to_dict(self) -> dict:
-        d = {"waveform": asdict(self.waveform), "geometry": asdict(self.geometry),
-             "processor": asdict(self.processor)}
+        d = {
+            "waveform": asdict(self.waveform),
+            "geometry": asdict(self.geometry),
+            "processor": asdict(self.processor),
+        }
         return d
 
     def with_processor(self, **changes) -> Config:
@@ -274,10 +298,16 @@ def _psaltis_jpl() -> Config:
     # 512 x 320 CCD, L ≈ 15 km illuminated.  L-band (JPL), 20 km slant range, 250 m/s.
     # D = 2·step (Nyquist in azimuth, Crouch eq. 4.10) makes ρA = λR/(2Nd) = L/N (Psaltis eq. 7).
     return Config(
-        PulsedChirp(bandwidth_hz=40e6, pulse_duration_s=3.2e-6, sample_rate_hz=48e6,
-                    receive_window_s=10e-6),
-        Geometry(wavelength_m=0.235, slant_range_m=20e3, along_track_step_m=0.15625,
-                 prf_hz=1600.0, antenna_length_m=0.3125),
+        PulsedChirp(
+            bandwidth_hz=40e6, pulse_duration_s=3.2e-6, sample_rate_hz=48e6, receive_window_s=10e-6
+        ),
+        Geometry(
+            wavelength_m=0.235,
+            slant_range_m=20e3,
+            along_track_step_m=0.15625,
+            prf_hz=1600.0,
+            antenna_length_m=0.3125,
+        ),
         Processor(aperture_pulses=512, range_bins=320),
     )
 
@@ -286,10 +316,16 @@ def _psaltis_max() -> Config:
     # "Maximum possible" column of Table 1: 1200 range cells, ρR < 1 m, ρA ~ 15 m, N = 512.
     # X-band, 15 km, PRF 10 kHz, 300 m/s; D = 2·step so ρA = L/N ≈ 15.3 m.
     return Config(
-        PulsedChirp(bandwidth_hz=200e6, pulse_duration_s=2e-6, sample_rate_hz=240e6,
-                    receive_window_s=7.5e-6),
-        Geometry(wavelength_m=0.03125, slant_range_m=15e3, along_track_step_m=0.03,
-                 prf_hz=10e3, antenna_length_m=0.06),
+        PulsedChirp(
+            bandwidth_hz=200e6, pulse_duration_s=2e-6, sample_rate_hz=240e6, receive_window_s=7.5e-6
+        ),
+        Geometry(
+            wavelength_m=0.03125,
+            slant_range_m=15e3,
+            along_track_step_m=0.03,
+            prf_hz=10e3,
+            antenna_length_m=0.06,
+        ),
         Processor(aperture_pulses=512, range_bins=1200),
     )
 
@@ -299,10 +335,19 @@ def _crouch_sal() -> Config:
     # aperture, ≈1.5 m range, 10 µm fibre aperture.  The LO is delayed to 1.5 m so the beat
     # band is 3.4 kHz wide: 1024 complex samples per shot, a 51 mm unambiguous range window.
     return Config(
-        FMCWChirp(bandwidth_hz=3e12, chirp_duration_s=0.3, sample_rate_hz=1024 / 0.3,
-                  reference_range_m=1.5),
-        Geometry(wavelength_m=1.55e-6, slant_range_m=1.5, along_track_step_m=10e-6,
-                 prf_hz=2.0, antenna_length_m=10e-6),
+        FMCWChirp(
+            bandwidth_hz=3e12,
+            chirp_duration_s=0.3,
+            sample_rate_hz=1024 / 0.3,
+            reference_range_m=1.5,
+        ),
+        Geometry(
+            wavelength_m=1.55e-6,
+            slant_range_m=1.5,
+            along_track_step_m=10e-6,
+            prf_hz=2.0,
+            antenna_length_m=10e-6,
+        ),
         Processor(aperture_pulses=2048, range_bins=512),
     )
 
@@ -311,10 +356,19 @@ def _zhao_insal() -> Config:
     # Zhao et al. (2014): 1550 nm, 2.4 m, 8 mm synthetic aperture (233 µm azimuth resolution),
     # 100 ms of chirp giving 170 µm range resolution (B ≈ 0.88 THz), 0.4 mm real apertures.
     return Config(
-        FMCWChirp(bandwidth_hz=0.8817e12, chirp_duration_s=0.1, sample_rate_hz=2560.0,
-                  reference_range_m=2.4),
-        Geometry(wavelength_m=1.55e-6, slant_range_m=2.4, along_track_step_m=50e-6,
-                 prf_hz=5.0, antenna_length_m=0.4e-3),
+        FMCWChirp(
+            bandwidth_hz=0.8817e12,
+            chirp_duration_s=0.1,
+            sample_rate_hz=2560.0,
+            reference_range_m=2.4,
+        ),
+        Geometry(
+            wavelength_m=1.55e-6,
+            slant_range_m=2.4,
+            along_track_step_m=50e-6,
+            prf_hz=5.0,
+            antenna_length_m=0.4e-3,
+        ),
         Processor(aperture_pulses=160, range_bins=256),
     )
 
@@ -322,10 +376,16 @@ def _zhao_insal() -> Config:
 def _tiny() -> Config:
     # A small, fast variant of psaltis-jpl for tests and quick looks.
     return Config(
-        PulsedChirp(bandwidth_hz=40e6, pulse_duration_s=2.0e-6, sample_rate_hz=48e6,
-                    receive_window_s=4.0e-6),
-        Geometry(wavelength_m=0.235, slant_range_m=2e3, along_track_step_m=0.5,
-                 prf_hz=500.0, antenna_length_m=1.0),
+        PulsedChirp(
+            bandwidth_hz=40e6, pulse_duration_s=2.0e-6, sample_rate_hz=48e6, receive_window_s=4.0e-6
+        ),
+        Geometry(
+            wavelength_m=0.235,
+            slant_range_m=2e3,
+            along_track_step_m=0.5,
+            prf_hz=500.0,
+            antenna_length_m=1.0,
+        ),
         Processor(aperture_pulses=64, range_bins=64, micro_batch=16),
     )
 

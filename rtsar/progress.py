@@ -1,4 +1,4 @@
-"""A progress line on stderr for long work: in place on a terminal, a line every few seconds in logs."""
+"""Progress of long work on stderr: in place on a terminal, a line every few seconds in logs."""
 
 from __future__ import annotations
 
@@ -7,7 +7,9 @@ import time
 
 
 class Progress:
-    def __init__(self, total: int, label: str, unit: str = "pulses", stream=None, every_s: float = 5.0):
+    def __init__(
+        self, total: int, label: str, unit: str = "pulses", stream=None, every_s: float = 5.0
+    ):
         self.total, self.label, self.unit = max(1, int(total)), label, unit
         self.stream = stream or sys.stderr
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
@@ -22,8 +24,10 @@ class Progress:
         self._last = now
         rate = done / max(now - self.t0, 1e-9)
         eta = (self.total - done) / rate if rate > 0 else float("inf")
-        msg = (f"{self.label}: {done}/{self.total} {self.unit} ({100 * done / self.total:5.1f} %), "
-               f"{rate:,.0f} {self.unit}/s, eta {eta:5.1f} s {extra}")
+        msg = (
+            f"{self.label}: {done}/{self.total} {self.unit} ({100 * done / self.total:5.1f} %), "
+            f"{rate:,.0f} {self.unit}/s, eta {eta:5.1f} s {extra}"
+        )
         self.stream.write(("\r" + msg + "   ") if self.tty else (msg + "\n"))
         self.stream.flush()
 

@@ -18,8 +18,9 @@ def to_db(image: np.ndarray, dynamic_range_db: float) -> np.ndarray:
     return np.maximum(db, -dynamic_range_db)
 
 
-def save_quicklook(path, image, azimuth_m, range_m, dynamic_range_db: float = 50.0,
-                   title: str = "") -> None:
+def save_quicklook(
+    path, image, azimuth_m, range_m, dynamic_range_db: float = 50.0, title: str = ""
+) -> None:
     """Write a PNG: range across, azimuth (along track) down, grey scale in dB."""
     import matplotlib
 
@@ -41,8 +42,15 @@ def save_quicklook(path, image, azimuth_m, range_m, dynamic_range_db: float = 50
     extent = [range_m[0] / scale, range_m[-1] / scale, azimuth_m[-1] / scale, azimuth_m[0] / scale]
     height = min(12.0, max(3.0, 8.0 * image.shape[0] / max(image.shape[1], 1)))
     fig, ax = plt.subplots(figsize=(8, height), dpi=100)
-    im = ax.imshow(db, cmap="gray", vmin=-dynamic_range_db, vmax=0, extent=extent,
-                   aspect="auto", interpolation="nearest")
+    im = ax.imshow(
+        db,
+        cmap="gray",
+        vmin=-dynamic_range_db,
+        vmax=0,
+        extent=extent,
+        aspect="auto",
+        interpolation="nearest",
+    )
     ax.set_xlabel(f"slant range [{unit}]")
     ax.set_ylabel(f"along track [{unit}]")
     ax.set_title(title)

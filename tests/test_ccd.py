@@ -21,14 +21,15 @@ TOL = 1e-5  # float32 accumulation of N terms: ~sqrt(N)·6e-8 ≪ 1e-5
 
 def test_reference_equals_naive_loops(rng):
     lines, mask = crandn(rng, 40, 5), crandn(rng, 9, 5)
-    np.testing.assert_allclose(correlate_reference(lines, mask), correlate_loops(lines, mask),
-                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(
+        correlate_reference(lines, mask), correlate_loops(lines, mask), rtol=1e-12, atol=1e-12
+    )
 
 
 def _stream(corr, lines, sizes):
     out, i = [], 0
     for b in sizes:
-        out.append(corr.push(lines[i:i + b]))
+        out.append(corr.push(lines[i : i + b]))
         i += b
     assert i == len(lines)
     out.append(corr.flush())

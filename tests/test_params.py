@@ -50,14 +50,19 @@ def test_sal_presets_match_the_papers():
     assert zh.geometry.illuminated_length_m == pytest.approx(9.3e-3, rel=0.01)
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    (dict(bandwidth_hz=-1.0), "bandwidth_hz"),
-    (dict(sample_rate_hz=10e6), "sample_rate_hz"),
-    (dict(pulse_duration_s=20e-6), "shorter"),
-    (dict(receive_window_s=math.nan), "receive_window_s"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(bandwidth_hz=-1.0), "bandwidth_hz"),
+        (dict(sample_rate_hz=10e6), "sample_rate_hz"),
+        (dict(pulse_duration_s=20e-6), "shorter"),
+        (dict(receive_window_s=math.nan), "receive_window_s"),
+    ],
+)
 def test_pulsed_validation(kwargs, match):
-    base = dict(bandwidth_hz=40e6, pulse_duration_s=3e-6, sample_rate_hz=48e6, receive_window_s=1e-5)
+    base = dict(
+        bandwidth_hz=40e6, pulse_duration_s=3e-6, sample_rate_hz=48e6, receive_window_s=1e-5
+    )
     with pytest.raises(ValueError, match=match):
         PulsedChirp(**{**base, **kwargs})
 

@@ -34,10 +34,12 @@ def test_phase_follows_exact_range_history(name, offset_m):
         return np.angle(np.exp(1j * a))
 
     # The same target seen from broadside and from along-track offset x (one pulse each).
-    broadside, _ = _peak_phase(cfg, point_scene(cfg, [0.0], [r0], start_along_track_m=0.0,
-                                               pulses=1), 0)
-    seen, _ = _peak_phase(cfg, point_scene(cfg, [0.0], [r0], start_along_track_m=offset_m,
-                                          pulses=1), 0)
+    broadside, _ = _peak_phase(
+        cfg, point_scene(cfg, [0.0], [r0], start_along_track_m=0.0, pulses=1), 0
+    )
+    seen, _ = _peak_phase(
+        cfg, point_scene(cfg, [0.0], [r0], start_along_track_m=offset_m, pulses=1), 0
+    )
     exact = -4 * np.pi * (np.hypot(r0, offset_m) - r0) / lam
     parabolic = -4 * np.pi * offset_m**2 / (2 * r0) / lam
     assert abs(wrap(seen - broadside - exact)) < 0.02
@@ -70,8 +72,11 @@ def test_demo_scene_loads():
 
 
 def test_ground_range_with_height():
-    d = {"preset": "tiny", "geometry": {"platform_height_m": 1000.0},
-         "targets": [{"along_track_m": 0.0, "ground_range_m": 1700.0, "height_m": 20.0}]}
+    d = {
+        "preset": "tiny",
+        "geometry": {"platform_height_m": 1000.0},
+        "targets": [{"along_track_m": 0.0, "ground_range_m": 1700.0, "height_m": 20.0}],
+    }
     scene = scene_from_dict(d)
     assert scene.targets.slant_range_m[0] == pytest.approx(np.hypot(1700.0, 980.0))
 

@@ -3,5 +3,13 @@
 from .model import DEMO_SCENE, Scene, Targets, load_scene, point_scene, scene_from_dict
 from .simulator import Shot, Simulator
 
-__all__ = ["DEMO_SCENE", "Scene", "Targets", "load_scene", "point_scene", "scene_from_dict",
-           "Shot", "Simulator"]
+__all__ = [
+    "DEMO_SCENE",
+    "Scene",
+    "Targets",
+    "load_scene",
+    "point_scene",
+    "scene_from_dict",
+    "Shot",
+    "Simulator",
+]

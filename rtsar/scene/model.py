@@ -5,7 +5,7 @@ Format (every key optional unless marked)::
     preset = "psaltis-jpl"        # one of rtsar.params.PRESETS; or give all three tables below
     seed = 1                      # RNG seed of the effects (noise, ...)
     pulses = 4096                 # shots to simulate (default: enough to image every target)
-    start_along_track_m = -40.0   # platform position of shot 0 (default: first target - A/2 - margin)
+    start_along_track_m = -40.0   # position of shot 0 (default: first target - A/2 - margin)
 
     [waveform]    # overrides of the preset's fields (kind = "pulsed" | "fmcw" when no preset)
     [geometry]    # wavelength_m, slant_range_m, along_track_step_m, prf_hz, antenna_length_m, ...
@@ -41,10 +41,26 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-_TOP_KEYS = {"preset", "seed", "pulses", "start_along_track_m", "waveform", "geometry",
-             "processor", "targets", "effects", "name"}
-_TARGET_KEYS = {"along_track_m", "slant_range_m", "ground_range_m", "height_m", "amplitude",
-                "phase_rad"}
+_TOP_KEYS = {
+    "preset",
+    "seed",
+    "pulses",
+    "start_along_track_m",
+    "waveform",
+    "geometry",
+    "processor",
+    "targets",
+    "effects",
+    "name",
+}
+_TARGET_KEYS = {
+    "along_track_m",
+    "slant_range_m",
+    "ground_range_m",
+    "height_m",
+    "amplitude",
+    "phase_rad",
+}
 DEMO_SCENE = Path(__file__).with_name("scenes") / "demo.toml"
 
 
@@ -71,7 +87,9 @@ class Scene:
     name: str = "scene"
 
     def along_track_of(self, pulse: np.ndarray | int):
-        return self.start_along_track_m + np.asarray(pulse) * self.config.geometry.along_track_step_m
+        return (
+            self.start_along_track_m + np.asarray(pulse) * self.config.geometry.along_track_step_m
+        )
 
     def to_dict(self) -> dict:
         """Round-trippable description (written next to every output)."""
@@ -82,10 +100,18 @@ class Scene:
             "start_along_track_m": self.start_along_track_m,
             **self.config.to_dict(),
             "targets": [
-                {"along_track_m": float(x), "slant_range_m": float(r), "amplitude": float(abs(a)),
-                 "phase_rad": float(np.angle(a))}
-                for x, r, a in zip(self.targets.along_track_m, self.targets.slant_range_m,
-                                   self.targets.amplitude, strict=True)
+                {
+                    "along_track_m": float(x),
+                    "slant_range_m": float(r),
+                    "amplitude": float(abs(a)),
+                    "phase_rad": float(np.angle(a)),
+                }
+                for x, r, a in zip(
+                    self.targets.along_track_m,
+                    self.targets.slant_range_m,
+                    self.targets.amplitude,
+                    strict=True,
+                )
             ],
             "effects": [{"name": n, **p} for n, p in self.effects],
         }
@@ -111,8 +137,9 @@ def _config(d: dict) -> Config:
     missing = [k for k in ("waveform", "geometry", "processor") if k not in d]
     if missing:
         raise ValueError(f"scene needs a preset or the tables {missing}")
-    return Config(waveform_from_dict(d["waveform"]), Geometry(**d["geometry"]),
-                  Processor(**d["processor"]))
+    return Config(
+        waveform_from_dict(d["waveform"]), Geometry(**d["geometry"]), Processor(**d["processor"])
+    )
 
 
 def _targets(rows: list, cfg: Config) -> Targets:
@@ -120,7 +147,9 @@ def _targets(rows: list, cfg: Config) -> Targets:
     for i, t in enumerate(rows):
         unknown = set(t) - _TARGET_KEYS
         if unknown:
-            raise ValueError(f"targets[{i}]: unknown keys {sorted(unknown)}; known: {sorted(_TARGET_KEYS)}")
+            raise ValueError(
+                f"targets[{i}]: unknown keys {sorted(unknown)}; known: {sorted(_TARGET_KEYS)}"
+            )
         if "along_track_m" not in t:
             raise ValueError(f"targets[{i}]: along_track_m is required")
         if ("slant_range_m" in t) == ("ground_range_m" in t):
@@ -132,7 +161,9 @@ def _targets(rows: list, cfg: Config) -> Targets:
         else:
             h_platform = cfg.geometry.platform_height_m
             if h_platform <= 0:
-                raise ValueError(f"targets[{i}]: ground_range_m needs geometry.platform_height_m > 0")
+                raise ValueError(
+                    f"targets[{i}]: ground_range_m needs geometry.platform_height_m > 0"
+                )
             r = math.hypot(float(t["ground_range_m"]), h_platform - float(t.get("height_m", 0.0)))
         amp = float(t.get("amplitude", 1.0)) * np.exp(1j * float(t.get("phase_rad", 0.0)))
         values = (float(t["along_track_m"]), r, amp.real, amp.imag)
@@ -197,12 +228,25 @@ def load_scene(path: str | Path) -> Scene:
         raise ValueError(f"{path}: {exc}") from None
 
 
-def point_scene(cfg: Config, along_track_m, slant_range_m, amplitude=None, effects=(), seed=0,
-                pulses=None, start_along_track_m=None, name="points") -> Scene:
+def point_scene(
+    cfg: Config,
+    along_track_m,
+    slant_range_m,
+    amplitude=None,
+    effects=(),
+    seed=0,
+    pulses=None,
+    start_along_track_m=None,
+    name="points",
+) -> Scene:
     """Programmatic scene of point targets (used by tests and reports)."""
     x = np.atleast_1d(np.asarray(along_track_m, dtype=float))
     r = np.atleast_1d(np.asarray(slant_range_m, dtype=float))
-    a = np.ones(x.shape, np.complex128) if amplitude is None else np.asarray(amplitude, np.complex128)
+    a = (
+        np.ones(x.shape, np.complex128)
+        if amplitude is None
+        else np.asarray(amplitude, np.complex128)
+    )
     if not (x.shape == r.shape == a.shape):
         raise ValueError("along_track_m, slant_range_m and amplitude must have one length")
     targets = Targets(x, r, a)
@@ -210,5 +254,13 @@ def point_scene(cfg: Config, along_track_m, slant_range_m, amplitude=None, effec
     return Scene(cfg, targets, pulses, start, seed, tuple((n, dict(p)) for n, p in effects), name)
 
 
-__all__ = ["Scene", "Targets", "load_scene", "scene_from_dict", "point_scene", "DEMO_SCENE",
-           "PulsedChirp", "FMCWChirp"]
+__all__ = [
+    "Scene",
+    "Targets",
+    "load_scene",
+    "scene_from_dict",
+    "point_scene",
+    "DEMO_SCENE",
+    "PulsedChirp",
+    "FMCWChirp",
+]

@@ -47,10 +47,12 @@ class Simulator:
         cfg = scene.config
         self.config = cfg
         self.effects = load_effects(scene.effects, cfg)
-        self._gain_effects = [e for e in self.effects
-                              if type(e).target_gain is not Effect.target_gain]
-        self._shot_effects = [e for e in self.effects
-                              if type(e).apply_to_shot is not Effect.apply_to_shot]
+        self._gain_effects = [
+            e for e in self.effects if type(e).target_gain is not Effect.target_gain
+        ]
+        self._shot_effects = [
+            e for e in self.effects if type(e).apply_to_shot is not Effect.apply_to_shot
+        ]
         self._rng = np.random.default_rng(scene.seed)
         self._next = 0
         wf = cfg.waveform
@@ -70,7 +72,7 @@ class Simulator:
         lam = cfg.geometry.wavelength_m
         x_p = float(self.scene.along_track_of(pulse))
         offset = tg.along_track_m - x_p
-        r = np.sqrt(tg.slant_range_m ** 2 + offset ** 2)
+        r = np.sqrt(tg.slant_range_m**2 + offset**2)
         gain = tg.amplitude.copy()
         for e in self._gain_effects:
             gain *= e.target_gain(pulse, offset, r)
@@ -98,8 +100,9 @@ class Simulator:
                     continue
                 tau = 2.0 * rj / C_M_PER_S
                 dtau = 2.0 * (rj - wf.reference_range_m) / C_M_PER_S
-                const = math.fmod(-2.0 * (rj - wf.reference_range_m) / lam
-                                  + 0.5 * k * dtau * (tau + tau_ref), 1.0)
+                const = math.fmod(
+                    -2.0 * (rj - wf.reference_range_m) / lam + 0.5 * k * dtau * (tau + tau_ref), 1.0
+                )
                 cycles = np.mod(const - k * dtau * self._t, 1.0)
                 out += gj * np.exp(2j * math.pi * cycles)
         for e in self._shot_effects:
@@ -109,11 +112,17 @@ class Simulator:
     def shot(self, pulse: int) -> Shot:
         """The next shot; pulses must be requested in order (effects keep RNG state)."""
         if pulse != self._next:
-            raise ValueError(f"shots are generated in order: expected pulse {self._next}, got {pulse}")
+            raise ValueError(
+                f"shots are generated in order: expected pulse {self._next}, got {pulse}"
+            )
         self._next += 1
         g = self.config.geometry
-        return Shot(pulse, pulse / g.prf_hz, float(self.scene.along_track_of(pulse)),
-                    self._echo(pulse).astype(np.complex64))
+        return Shot(
+            pulse,
+            pulse / g.prf_hz,
+            float(self.scene.along_track_of(pulse)),
+            self._echo(pulse).astype(np.complex64),
+        )
 
     def shots(self, count: int | None = None) -> Iterator[Shot]:
         """Yield the scene's shots one at a time (all remaining ones by default)."""
@@ -127,4 +136,3 @@ class Simulator:
         if not shots:
             return np.zeros((0, self.samples_per_shot), np.complex64)
         return np.stack([s.samples for s in shots])
-

@@ -22,7 +22,9 @@ def load_effects(specs, config):
         try:
             target = REGISTRY[name]
         except KeyError:
-            raise ValueError(f"unknown effect {name!r}; known effects: {sorted(REGISTRY)}") from None
+            raise ValueError(
+                f"unknown effect {name!r}; known effects: {sorted(REGISTRY)}"
+            ) from None
         module_name, class_name = target.split(":")
         cls = getattr(importlib.import_module(module_name), class_name)
         try:

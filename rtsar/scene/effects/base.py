@@ -14,8 +14,9 @@ class Effect:
 
     name = "effect"
 
-    def target_gain(self, pulse: int, along_offset_m: np.ndarray,
-                    slant_range_m: np.ndarray) -> np.ndarray | None:
+    def target_gain(
+        self, pulse: int, along_offset_m: np.ndarray, slant_range_m: np.ndarray
+    ) -> np.ndarray | None:
         return None
 
     def apply_to_shot(self, pulse: int, samples: np.ndarray, rng: np.random.Generator) -> None:

@@ -1,0 +1,230 @@
+"""The AO lens in OpenCL: batched range compression of radar / lidar pulses.
+
+In the acousto-optic processor the lens performs a Fourier transform of the light diffracted by
+the AO cell that holds the received pulse (Psaltis & Wagner 1981, 'Description of the
+processor').  Here the lens is the chain described by a :class:`rtsar.lens_plan.LensPlan`,
+
+    x·pre → DFT(sign1, nfft) → [·spectrum → DFT(sign2, nfft)] → bins → ·post,
+
+evaluated in single precision for a batch of pulses in one kernel launch (``kernels/lens.cl``).
+:func:`rtsar.lens_plan.compress_reference` is the float64 NumPy reference it is tested against.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pyopencl as cl
+
+from . import opencl
+from .lens_plan import LensPlan
+
+__all__ = ["KERNELS", "AOLens"]
+
+KERNELS = ("lanes", "group")
+_MAX_LANES = 8
+_MAX_GROUP = 256
+
+
+class AOLens:
+    """Range compressor (the "AO lens") for one :class:`~rtsar.lens_plan.LensPlan`.
+
+    The lens of the optical processor Fourier-transforms the pulse held by the AO cell
+    (Psaltis & Wagner 1981, 'Description of the processor'); this class applies the same
+    transform, with the matched filter or window of the plan, to batches of digitised pulses.
+
+    Parameters
+    ----------
+    plan : LensPlan
+        What to compute (from :func:`rtsar.lens_plan.make_plan`).
+    context : pyopencl.Context, optional
+        Context to work in.  A queue on its first device is created unless ``queue`` is given.
+    queue : pyopencl.CommandQueue, optional
+        In-order queue to enqueue on (its context is used).
+    device : pyopencl.Device or str, optional
+        Device, or substring of its platform / device name, when neither ``context`` nor
+        ``queue`` is given; default: ``RTSAR_OPENCL_DEVICE`` or PoCL's CPU device (see
+        :mod:`rtsar.opencl`).  Instances on the same device share one context and queue.
+    kernel : {"lanes", "group"}, optional
+        ``"lanes"``: one work-item transforms 8 pulses at once in SIMD vectors (fast on CPUs);
+        ``"group"``: one work-group per pulse (for GPUs).  Default: by device type.
+    lanes : int, optional
+        Pulses per work-item of the ``"lanes"`` kernel (1, 2, 4 or 8; default 8, fewer if
+        the device's local memory is too small).
+
+    Notes
+    -----
+    ``compress`` may be called with any batch size; device buffers are kept between calls and
+    grown when a larger batch arrives (on CPU devices the kernel reads the input array in
+    place).  Calls on one instance are serialised by a lock; the
+    blocking copy of the result releases the GIL while the device works.
+    """
+
+    def __init__(
+        self,
+        plan: LensPlan,
+        context: cl.Context | None = None,
+        queue: cl.CommandQueue | None = None,
+        device: cl.Device | str | None = None,
+        kernel: str | None = None,
+        lanes: int | None = None,
+    ):
+        if not isinstance(plan, LensPlan):
+            raise TypeError(f"plan must be a LensPlan, got {type(plan).__name__}")
+        nfft, S = int(plan.nfft), int(plan.samples_per_shot)
+        if nfft < 2 or nfft & (nfft - 1):
+            raise ValueError(f"plan.nfft must be a power of two >= 2, got {nfft}")
+        if not 1 <= S <= nfft:
+            raise ValueError(f"plan.samples_per_shot must be in 1..nfft={nfft}, got {S}")
+        if plan.bin_count < 1:
+            raise ValueError("plan.bin_count must be >= 1")
+        self.plan = plan
+
+        if queue is None:
+            if context is None:
+                queue = opencl.default_queue(device)
+            else:
+                queue = cl.CommandQueue(context)
+        self.queue = queue
+        self.context = queue.context
+        self.device = queue.device
+
+        if kernel is None:
+            kernel = "lanes" if self.device.type & cl.device_type.CPU else "group"
+        if kernel not in KERNELS:
+            raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
+        self.kernel_name = kernel
+
+        local = int(self.device.local_mem_size)
+        defines = {
+            "NFFT": nfft,
+            "LOG2_NFFT": nfft.bit_length() - 1,
+            "S": S,
+            "BIN_COUNT": int(plan.bin_count),
+            "BIN_OFFSET": int(plan.bin_start) % nfft,
+            "SIGN1": 1 if plan.sign1 > 0 else -1,
+            "SIGN2": 1 if plan.sign2 > 0 else -1,
+            "TWO_PASS": int(plan.two_pass),
+        }
+        if kernel == "lanes":
+            if lanes is None:
+                lanes = _MAX_LANES
+                while lanes > 1 and 16 * lanes * nfft > local:
+                    lanes //= 2
+            if lanes not in (1, 2, 4, 8):
+                raise ValueError(f"lanes must be 1, 2, 4 or 8, got {lanes}")
+            need = 16 * lanes * nfft
+            self.lanes, self.group_size = lanes, 1
+            defines["LANES"] = lanes
+        else:
+            group = min(_MAX_GROUP, max(1, nfft // 8), int(self.device.max_work_group_size))
+            need = 16 * nfft
+            self.lanes, self.group_size = 1, group
+            defines["GROUP_SIZE"] = group
+        if need > local:
+            raise ValueError(
+                f"nfft={nfft} needs {need} bytes of local memory per work-group; "
+                f"{self.device.name.strip()} has {local}"
+            )
+        self.program = opencl.build_program(self.context, "lens.cl", defines)
+        self._kernel = cl.Kernel(self.program, f"lens_{kernel}")  # own instance: args are state
+
+        mf = cl.mem_flags
+        twiddle = np.exp(-2j * np.pi * np.arange(nfft) / nfft).astype(np.complex64)
+        spectrum = plan.spectrum if plan.two_pass else np.zeros(1)
+
+        def constant(a):
+            return cl.Buffer(
+                self.context, mf.READ_ONLY | mf.COPY_HOST_PTR,
+                hostbuf=np.ascontiguousarray(a, dtype=np.complex64),
+            )
+
+        self._constants = [constant(plan.pre), constant(spectrum), constant(plan.post),
+                           constant(twiddle)]
+        # CPU devices read the caller's array in place (USE_HOST_PTR): one command less per
+        # call, which is a good part of a small batch's time with PoCL.
+        self._zero_copy = bool(self.device.type & cl.device_type.CPU
+                               and self.device.host_unified_memory)
+        self._capacity = 0
+        self._shots_buf = self._lines_buf = None
+        self._lock = threading.Lock()
+
+    def __repr__(self) -> str:
+        p = self.plan
+        return (f"AOLens(S={p.samples_per_shot}, nfft={p.nfft}, bins={p.bin_count}, "
+                f"two_pass={p.two_pass}, kernel={self.kernel_name!r}, "
+                f"device={self.device.name.strip()!r})")
+
+    def _check(self, shots) -> np.ndarray:
+        x = np.asarray(shots)
+        S = self.plan.samples_per_shot
+        if x.ndim != 2 or x.shape[1] != S:
+            raise ValueError(f"shots must be a 2-D array [pulses, {S}], got shape {x.shape}")
+        if x.dtype == np.complex128:
+            x = x.astype(np.complex64)
+        elif x.dtype != np.complex64:
+            raise ValueError(f"shots must be complex64 (or complex128, cast), got {x.dtype}")
+        return np.ascontiguousarray(x)
+
+    def _ensure(self, pulses: int) -> None:
+        if pulses <= self._capacity:
+            return
+        capacity = max(pulses, 2 * self._capacity)
+        mf = cl.mem_flags
+        if not self._zero_copy:
+            self._shots_buf = cl.Buffer(self.context, mf.READ_ONLY,
+                                        capacity * self.plan.samples_per_shot * 8)
+        self._lines_buf = cl.Buffer(self.context, mf.WRITE_ONLY,
+                                    capacity * self.plan.bin_count * 8)
+        self._capacity = capacity
+
+    def compress(self, shots: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Range-compress a batch of pulses.
+
+        Parameters
+        ----------
+        shots : ndarray, complex64 [pulses, samples_per_shot]
+            Received samples, one pulse per row (complex128 is accepted and cast).
+        out : ndarray, complex64 [pulses, bin_count], optional
+            C-contiguous array to write the result into.
+
+        Returns
+        -------
+        ndarray, complex64 [pulses, bin_count]
+            The compressed lines; column b is bin ``plan.bin_start + b`` (range ``plan.range_m``).
+
+        Raises
+        ------
+        ValueError
+            Wrong shape or dtype of ``shots`` or ``out``.
+        """
+        x = self._check(shots)
+        pulses, bins = x.shape[0], self.plan.bin_count
+        if out is None:
+            out = np.empty((pulses, bins), np.complex64)
+        elif (not isinstance(out, np.ndarray) or out.shape != (pulses, bins)
+              or out.dtype != np.complex64 or not out.flags.c_contiguous):
+            raise ValueError(
+                f"out must be a C-contiguous complex64 array of shape {(pulses, bins)}"
+            )
+        if pulses == 0:
+            return out
+        if pulses >= 2**31:
+            raise ValueError("too many pulses in one batch")
+        groups = -(-pulses // self.lanes)
+        with self._lock:
+            self._ensure(pulses)
+            if self._zero_copy:
+                shots_buf = cl.Buffer(self.context, cl.mem_flags.READ_ONLY
+                                      | cl.mem_flags.USE_HOST_PTR, hostbuf=x)
+            else:
+                shots_buf = self._shots_buf
+                cl.enqueue_copy(self.queue, shots_buf, x, is_blocking=False)
+            self._kernel(self.queue, (groups * self.group_size,), (self.group_size,),
+                         shots_buf, self._lines_buf, *self._constants, np.uint32(pulses))
+            # blocking: x stays referenced until the kernel is done; the GIL is released
+            cl.enqueue_copy(self.queue, out, self._lines_buf, is_blocking=True)
+        return out
+
+    __call__ = compress

@@ -1,0 +1,59 @@
+"""Point-target acceptance on every preset, full size: position, IRW, PSLR against theory.
+
+Theory (rtsar.acceptance): IRW = 0.886·ρ·k_w with ρR = c/2B, ρA = λR/2L and k_w the window's
+broadening; PSLR ≈ -13.26 dB unweighted, ≤ -30 dB with the Taylor window (n̄ = 4, -35 dB).
+"""
+
+import numpy as np
+import pytest
+
+from rtsar.acceptance import run_point_targets
+from rtsar.ccd import aperture_offsets_m
+from rtsar.params import PRESETS, preset
+from rtsar.windows import window
+
+RECT_PSLR_DB = -13.26
+LENS = "opencl"  # the acceptance runs through the OpenCL AO lens, as the instrument does
+
+
+def curvature_bias_cells(cfg, windows):
+    """Where the uncorrected range curvature puts the range peak: the window-weighted mean of
+    the migration x²/2R over the aperture, in range cells (the CCD integrates each column)."""
+    x = aperture_offsets_m(cfg)
+    w = window(windows, len(x))
+    r = cfg.geometry.slant_range_m
+    return float(np.sum(w * x**2 / (2 * r)) / np.sum(w)) / cfg.waveform.range_resolution_m
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("windows", ["rect", "taylor"])
+@pytest.mark.parametrize("name", sorted(PRESETS))
+def test_point_targets_focus_as_theory_says(name, windows):
+    cfg = preset(name).with_processor(range_window=windows, azimuth_window=windows)
+    bias = curvature_bias_cells(cfg, windows)
+    for t in run_point_targets(cfg, lens_backend=LENS):
+        where = f"{name}/{windows}/{t.label}"
+        assert t.azimuth_error_cells <= 1 / 8, where
+        if bias <= 1 / 16:
+            assert t.range_error_cells <= 1 / 8, where
+        else:
+            # crouch-sal: curvature 35 µm = 0.7 ρR is not corrected by the CCD; the peak sits
+            # where the physics puts it (see the closing note of the core issue).
+            assert abs(t.range_error_cells - bias) <= 0.03, (where, t.range_error_cells, bias)
+        assert 0.9 <= t.azimuth_irw_ratio <= 1.1, (where, t.azimuth_irw_ratio)
+        assert 0.9 <= t.range_irw_ratio <= 1.1, (where, t.range_irw_ratio)
+        if windows == "rect":
+            assert abs(t.azimuth_pslr_db - RECT_PSLR_DB) <= 0.7, (where, t.azimuth_pslr_db)
+            assert abs(t.range_pslr_db - RECT_PSLR_DB) <= 1.5, (where, t.range_pslr_db)
+        else:
+            assert t.azimuth_pslr_db <= -30.0, (where, t.azimuth_pslr_db)
+            assert t.range_pslr_db <= -30.0, (where, t.range_pslr_db)
+
+
+def test_antenna_pattern_broadens_azimuth_as_predicted():
+    """With the two-way beam simulated, theory includes the beam in the azimuth weights."""
+    cfg = preset("zhao-insal")  # beam footprint 9.3 mm vs an 8 mm aperture: a strong taper
+    plain = run_point_targets(cfg, lens_backend="numpy")[1]
+    beam = run_point_targets(cfg, lens_backend="numpy", antenna=True)[1]
+    assert beam.azimuth_irw_m > 1.05 * plain.azimuth_irw_m  # measured: about 1.10
+    assert 0.95 <= beam.azimuth_irw_ratio <= 1.05

@@ -1,0 +1,179 @@
+"""The OpenCL AO lens (rtsar.lens.AOLens) against the float64 reference compress_reference."""
+
+import math
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pyopencl")
+
+from rtsar import opencl  # noqa: E402
+from rtsar.lens import KERNELS, AOLens  # noqa: E402
+from rtsar.lens_plan import LensPlan, compress_reference, make_plan, pulsed_replica  # noqa: E402
+from rtsar.params import FMCWChirp, PulsedChirp, preset  # noqa: E402
+
+PRESETS = ("psaltis-max", "psaltis-jpl", "crouch-sal", "zhao-insal", "tiny")
+TOL = 1e-5
+
+_lenses: dict = {}
+
+
+def lens_for(name: str, kernel: str) -> AOLens:
+    """One AOLens per (preset, kernel), shared by the tests of this module."""
+    key = (name, kernel)
+    if key not in _lenses:
+        _lenses[key] = AOLens(make_plan(preset(name)), kernel=kernel)
+    return _lenses[key]
+
+
+def rel_rms(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
+
+
+def noise(rng, pulses: int, samples: int) -> np.ndarray:
+    return (rng.standard_normal((pulses, samples))
+            + 1j * rng.standard_normal((pulses, samples))).astype(np.complex64)
+
+
+def chirp_echoes(name: str, pulses: int, rng) -> np.ndarray:
+    """Simulated-like shots: a few point echoes per pulse plus weak noise."""
+    wf = preset(name).waveform
+    S = wf.samples_per_shot
+    x = np.zeros((pulses, S), np.complex128)
+    for p in range(pulses):
+        for _ in range(3):
+            amp = rng.uniform(0.2, 1.0) * np.exp(2j * math.pi * rng.uniform())
+            if isinstance(wf, PulsedChirp):
+                rep = pulsed_replica(wf)
+                start = int(rng.integers(0, S - rep.size + 1))
+                x[p, start:start + rep.size] += amp * rep
+            else:
+                assert isinstance(wf, FMCWChirp)
+                f = rng.uniform(-0.4, 0.4)  # beat frequency in cycles per sample
+                x[p] += amp * np.exp(2j * math.pi * f * np.arange(S))
+    x += 0.01 * noise(rng, pulses, S)
+    return x.astype(np.complex64)
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+@pytest.mark.parametrize("name", PRESETS)
+def test_presets_match_reference(name, kernel):
+    lens = lens_for(name, kernel)
+    rng = np.random.default_rng(2024)
+    for pulses in (1, 7, 64):
+        x = noise(rng, pulses, lens.plan.samples_per_shot)
+        y = lens.compress(x)
+        assert y.shape == (pulses, lens.plan.bin_count) and y.dtype == np.complex64
+        assert rel_rms(y, compress_reference(lens.plan, x)) <= TOL, (name, kernel, pulses)
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+@pytest.mark.parametrize("name", PRESETS)
+def test_chirp_echoes_match_reference(name, kernel):
+    lens = lens_for(name, kernel)
+    x = chirp_echoes(name, 9, np.random.default_rng(7))
+    ref = compress_reference(lens.plan, x)
+    y = lens.compress(x)
+    assert rel_rms(y, ref) <= TOL
+    np.testing.assert_array_equal(np.argmax(abs(y), axis=1), np.argmax(abs(ref), axis=1))
+
+
+def synthetic_plan(S, nfft, sign1, two_pass, bin_start, bin_count, seed=0) -> LensPlan:
+    rng = np.random.default_rng(seed)
+
+    def c(n):
+        return rng.standard_normal(n) + 1j * rng.standard_normal(n)
+
+    return LensPlan(S, nfft, c(S), sign1, c(nfft) if two_pass else None, -sign1, bin_start,
+                    bin_count, c(bin_count), np.arange(bin_count, dtype=float))
+
+
+@pytest.mark.parametrize(
+    "S, nfft, sign1, two_pass, bin_start, bin_count",
+    [
+        (2, 2, -1, True, 0, 2),  # a single radix-2 stage
+        (13, 16, +1, True, -5, 11),  # radix 8 + 2, odd sizes, wrapping bins
+        (30, 32, -1, False, 29, 7),  # radix 8 + 4, bins wrap past nfft
+        (501, 512, +1, True, -300, 513),  # radix 8 only, more bins than half the line
+    ],
+)
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_odd_plans(kernel, S, nfft, sign1, two_pass, bin_start, bin_count):
+    plan = synthetic_plan(S, nfft, sign1, two_pass, bin_start, bin_count)
+    lens = AOLens(plan, kernel=kernel)
+    x = noise(np.random.default_rng(3), 11, S)
+    assert rel_rms(lens.compress(x), compress_reference(plan, x)) <= TOL
+
+
+def test_lanes_and_buffer_reuse():
+    plan = make_plan(preset("tiny"))
+    rng = np.random.default_rng(11)
+    for lanes in (1, 2, 4, 8, "copy"):
+        lens = AOLens(plan, kernel="lanes", lanes=8 if lanes == "copy" else lanes)
+        if lanes == "copy":  # the path of devices that do not read host memory in place
+            lens._zero_copy = False
+        for pulses in (64, 3, 65, 8, 130):  # shrink, grow, exact multiple, grow again
+            x = noise(rng, pulses, plan.samples_per_shot)
+            assert rel_rms(lens.compress(x), compress_reference(plan, x)) <= TOL, (lanes, pulses)
+
+
+def test_complex128_out_and_empty():
+    lens = lens_for("tiny", "lanes")
+    S, bins = lens.plan.samples_per_shot, lens.plan.bin_count
+    x = noise(np.random.default_rng(5), 5, S).astype(np.complex128)
+    out = np.empty((5, bins), np.complex64)
+    y = lens(x, out=out)
+    assert y is out
+    assert rel_rms(y, compress_reference(lens.plan, x)) <= TOL
+    assert lens.compress(np.zeros((0, S), np.complex64)).shape == (0, bins)
+    x_strided = noise(np.random.default_rng(6), 8, 2 * S)[:, ::2]
+    assert rel_rms(lens.compress(x_strided), compress_reference(lens.plan, x_strided)) <= TOL
+
+
+def test_bad_input_raises():
+    lens = lens_for("tiny", "lanes")
+    S, bins = lens.plan.samples_per_shot, lens.plan.bin_count
+    with pytest.raises(ValueError, match="shape"):
+        lens.compress(np.zeros(S, np.complex64))
+    with pytest.raises(ValueError, match="shape"):
+        lens.compress(np.zeros((4, S + 1), np.complex64))
+    with pytest.raises(ValueError, match="shape"):
+        lens.compress(np.zeros((2, 4, S), np.complex64))
+    with pytest.raises(ValueError, match="complex64"):
+        lens.compress(np.zeros((4, S), np.float32))
+    with pytest.raises(ValueError, match="out"):
+        lens.compress(np.zeros((4, S), np.complex64), out=np.empty((4, bins + 1), np.complex64))
+    with pytest.raises(ValueError, match="kernel"):
+        AOLens(lens.plan, kernel="fastest")
+    with pytest.raises(ValueError, match="lanes"):
+        AOLens(lens.plan, kernel="lanes", lanes=3)
+
+
+def test_kernels_found_by_loader():
+    folder = opencl.kernels_dir()
+    assert folder.joinpath("lens.cl").is_file()
+    source = opencl.kernel_source("lens.cl")
+    assert "lens_lanes" in source and "lens_group" in source
+    with pytest.raises(FileNotFoundError):
+        opencl.kernel_source("no-such-kernel.cl")
+
+
+def test_program_cache_and_devices(monkeypatch):
+    queue = opencl.default_queue()
+    assert queue is opencl.default_queue()
+    defines = {"NFFT": 8, "LOG2_NFFT": 3, "S": 8, "BIN_COUNT": 8, "BIN_OFFSET": 0, "SIGN1": -1,
+               "LANES": 1}
+    prog = opencl.build_program(queue.context, "lens.cl", defines)
+    assert prog is opencl.build_program(queue.context, "lens.cl", dict(defines))
+    assert isinstance(opencl.device_info(), str) and opencl.device_info(queue)
+    monkeypatch.setenv(opencl.ENV_DEVICE, "no-such-device-anywhere")
+    with pytest.raises(RuntimeError, match="no OpenCL device matches"):
+        opencl.select_device()
+    label = queue.device.name.strip()
+    assert opencl.select_device(label[:6]).name == queue.device.name
+
+
+def test_no_platform_message(monkeypatch):
+    monkeypatch.setattr(opencl.cl, "get_platforms", lambda: [])
+    with pytest.raises(RuntimeError, match=r"pip install pyopencl\[pocl\]"):
+        opencl.select_device()

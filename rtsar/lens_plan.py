@@ -151,9 +151,9 @@ def make_plan(cfg: Config) -> LensPlan:
     raise TypeError(f"unsupported waveform {type(wf).__name__}")
 
 
-def _dft(x: np.ndarray, sign: int, n: int) -> np.ndarray:
-    """Unnormalised DFT along the last axis with exponent sign ±1."""
-    return np.fft.fft(x, n, axis=-1) if sign < 0 else np.fft.ifft(x, n, axis=-1) * n
+def _dft(x: np.ndarray, sign: int, n: int, fft=np.fft) -> np.ndarray:
+    """Unnormalised DFT along the last axis with exponent sign ±1 (fft: numpy.fft or scipy.fft)."""
+    return fft.fft(x, n, axis=-1) if sign < 0 else fft.ifft(x, n, axis=-1) * n
 
 
 def compress_reference(plan: LensPlan, shots: np.ndarray) -> np.ndarray:
@@ -175,7 +175,15 @@ class NumpyLens:
     OpenCL lens against, and a fallback where no OpenCL device is wanted.
     """
 
-    def __init__(self, plan: LensPlan):
+    def __init__(self, plan: LensPlan, library: str = "numpy"):
+        if library == "numpy":
+            self._fft = np.fft
+        elif library == "scipy":
+            from scipy import fft as scipy_fft
+
+            self._fft = scipy_fft
+        else:
+            raise ValueError("library must be 'numpy' or 'scipy'")
         self.plan = plan
         self._pre = plan.pre.astype(np.complex64)
         self._spec = None if plan.spectrum is None else plan.spectrum.astype(np.complex64)
@@ -187,7 +195,7 @@ class NumpyLens:
         x = np.asarray(shots)
         if x.ndim != 2 or x.shape[1] != p.samples_per_shot:
             raise ValueError(f"shots must be [pulses, {p.samples_per_shot}], got {x.shape}")
-        y = _dft(x.astype(np.complex64, copy=False) * self._pre, p.sign1, p.nfft)
+        y = _dft(x.astype(np.complex64, copy=False) * self._pre, p.sign1, p.nfft, self._fft)
         if self._spec is not None:
-            y = _dft(y * self._spec, p.sign2, p.nfft)
+            y = _dft(y * self._spec, p.sign2, p.nfft, self._fft)
         return (y[:, self._idx] * self._post).astype(np.complex64, copy=False)

@@ -124,6 +124,9 @@ def cmd_process(args) -> int:
         dt = time.perf_counter() - t0
         prog.done(done)
     image = np.concatenate(parts)
+    if eng.nonfinite_pulses:
+        print(f"warning: {eng.nonfinite_pulses} of {done} shots held NaN/Inf and were zeroed",
+              file=sys.stderr)
     if len(image) == 0:
         return _die(
             f"{args.recording} holds {rec.pulses} shots, fewer than the aperture of "
@@ -138,6 +141,7 @@ def cmd_process(args) -> int:
         source=str(args.recording),
         lens=args.lens,
         correlator=cfg.processor.correlator,
+        nonfinite_pulses=eng.nonfinite_pulses,
     )
     print(
         f"wrote {args.output}: image {image.shape[0]} azimuth × {image.shape[1]} range, "

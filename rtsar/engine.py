@@ -56,6 +56,8 @@ class StreamProcessor:
         )
         self.start_along_track_m = float(start_along_track_m)
         self.lines_out = 0
+        self.pulses_in = 0
+        self.nonfinite_pulses = 0  # pulses holding NaN/Inf, zeroed so azimuth timing holds
 
     @property
     def range_m(self) -> np.ndarray:
@@ -74,7 +76,19 @@ class StreamProcessor:
         return out
 
     def push(self, shots: np.ndarray) -> Lines:
-        """Process a micro-batch of shots [pulse, sample]; return the lines it completed."""
+        """Process a micro-batch of shots [pulse, sample]; return the lines it completed.
+
+        A pulse holding NaN or Inf is replaced by zeros (the azimuth timing is kept) and counted
+        in ``nonfinite_pulses``; it never reaches the image.
+        """
+        shots = np.asarray(shots)
+        if shots.ndim == 2 and shots.size:
+            bad = ~np.isfinite(shots).all(axis=1)
+            if bad.any():
+                shots = shots.copy()
+                shots[bad] = 0
+                self.nonfinite_pulses += int(bad.sum())
+        self.pulses_in += len(shots)
         compressed = self.lens.compress(shots)
         return self._emit(self.correlator.push(compressed))
 

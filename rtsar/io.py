@@ -5,7 +5,8 @@ Recording (``rtsar simulate``):  /shots complex64 [pulse, sample], /pulse_index 
 format_version, config (JSON of the effective configuration), scene (JSON), rtsar_version.
 
 Image (``rtsar process``):  /image complex64 [azimuth, range], /azimuth_m, /range_m float64;
-attributes format="rtsar-image", format_version, config (JSON), source, lens, correlator.
+attributes format="rtsar-image", format_version, config (JSON), source, lens, correlator,
+nonfinite_pulses (shots zeroed because they held NaN/Inf).
 Complex values are HDF5 compounds of two floats named r and i (h5py's convention).
 """
 

@@ -265,6 +265,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     s.add_argument("--json", metavar="FILE", help="also write the results as JSON")
     s.add_argument("--seconds", type=float, default=1.0, help="time per measurement")
+    s.add_argument("--preset", default="psaltis-max",
+                   help="geometry to measure at (default psaltis-max: 1200 bins, N = 512)")
     s.add_argument("--device", help="OpenCL platform/device name substring")
     s.set_defaults(func=cmd_bench)
     return p

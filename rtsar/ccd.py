@@ -137,6 +137,10 @@ class DirectCorrelator(Correlator):
         self._mask_rev = np.ascontiguousarray(np.asarray(mask)[::-1].T, dtype=np.complex64)
         self._acc = np.zeros((self.range_bins, self.aperture), np.complex64)
         self._head = 0
+        # Compile (or load from numba's cache) now, on scratch arrays: the first real push then
+        # costs what every push costs.
+        scratch = np.zeros((1, 2), np.complex64)
+        _shift_register(scratch.copy(), scratch.copy(), 0, scratch[:, :1], scratch[:, :1].copy())
 
     def push(self, lines: np.ndarray) -> np.ndarray:
         lines = self._check(lines)

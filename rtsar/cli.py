@@ -24,15 +24,19 @@ def _die(msg: str) -> int:
 
 
 def cmd_presets(args) -> int:
+    from .lens_plan import make_plan
     from .params import PRESETS, preset
 
     rows = []
     for name in PRESETS:
         c = preset(name)
+        rm = make_plan(c).range_m
         rows.append(
             {
                 "preset": name,
                 "waveform": c.waveform.kind,
+                "slant_range_m": c.geometry.slant_range_m,
+                "swath_m": [float(rm[0]), float(rm[-1])],
                 "range_resolution_m": c.waveform.range_resolution_m,
                 "azimuth_resolution_m": c.azimuth_resolution_m(),
                 "aperture_pulses": c.processor.aperture_pulses,
@@ -48,18 +52,31 @@ def cmd_presets(args) -> int:
         print(json.dumps(rows, indent=2))
         return 0
     print(
-        f"{'preset':12} {'kind':6} {'rho_R':>10} {'rho_A':>10} {'N':>5} {'bins':>5} "
-        f"{'samples':>7} {'PRF Hz':>8} {'L illum.':>10} {'aperture':>10} {'curvature':>10}"
+        f"{'preset':12} {'kind':6} {'swath (slant range)':>23} {'rho_R':>10} {'rho_A':>10} "
+        f"{'N':>5} {'bins':>5} {'samples':>7} {'PRF Hz':>8} {'L illum.':>10} {'aperture':>10} "
+        f"{'curvature':>10}"
     )
     for r in rows:
+        swath = f"{r['swath_m'][0]:.6g}–{r['swath_m'][1]:.6g}"
         print(
-            f"{r['preset']:12} {r['waveform']:6} {r['range_resolution_m']:10.4g} "
+            f"{r['preset']:12} {r['waveform']:6} {swath:>23} {r['range_resolution_m']:10.4g} "
             f"{r['azimuth_resolution_m']:10.4g} {r['aperture_pulses']:5d} {r['range_bins']:5d} "
             f"{r['samples_per_shot']:7d} {r['prf_hz']:8g} {r['illuminated_length_m']:10.4g} "
             f"{r['synthetic_aperture_m']:10.4g} {r['range_curvature_m']:10.3g}"
         )
     print("(lengths in metres; rho_A = λR/2L unweighted, Crouch eq. 4.8)")
     return 0
+
+
+def _warn_outside_swath(scene) -> None:
+    outside = scene.targets_outside_swath()
+    if outside:
+        from .lens_plan import make_plan
+
+        rm = make_plan(scene.config).range_m
+        print(f"warning: {len(outside)} of {len(scene.targets)} targets (indices {outside[:10]}) "
+              f"lie outside the range window {rm[0]:.6g}–{rm[-1]:.6g} m and will not be imaged",
+              file=sys.stderr)
 
 
 def cmd_simulate(args) -> int:
@@ -71,7 +88,10 @@ def cmd_simulate(args) -> int:
     if args.pulses is not None:
         from dataclasses import replace
 
+        if args.pulses < 1:
+            return _die(f"--pulses must be >= 1, got {args.pulses}")
         scene = replace(scene, pulses=args.pulses)
+    _warn_outside_swath(scene)
     sim = Simulator(scene)
     prog = Progress(scene.pulses, "simulate")
     batch = scene.config.processor.micro_batch
@@ -109,7 +129,7 @@ def cmd_process(args) -> int:
         changes = {}
         if args.correlator:
             changes["correlator"] = args.correlator
-        if args.micro_batch:
+        if args.micro_batch is not None:
             changes["micro_batch"] = args.micro_batch
         cfg = rec.config.with_processor(**changes) if changes else rec.config
         eng = StreamProcessor(cfg, args.lens, args.device, rec.start_along_track_m)
@@ -172,6 +192,13 @@ def cmd_run(args) -> int:
     from .scene import DEMO_SCENE, load_scene
 
     scene = load_scene(args.scene or DEMO_SCENE)
+    if args.duration is not None and args.duration <= 0:
+        return _die(f"--duration must be > 0 seconds, got {args.duration}")
+    if args.correlator:
+        from dataclasses import replace
+
+        scene = replace(scene, config=scene.config.with_processor(correlator=args.correlator))
+    _warn_outside_swath(scene)
     return run_live(
         scene,
         duration_s=args.duration,
@@ -253,15 +280,17 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--duration", type=float, help="stop after this many seconds")
     s.add_argument("--lens", default="opencl", choices=("opencl", "numpy"), help=lens_help)
     s.add_argument("--device", help="OpenCL platform/device name substring")
-    s.add_argument("-o", "--output", help="also write the focused image here (.h5)")
+    s.add_argument("--correlator", choices=("direct", "fft"),
+                   help="direct: one line per pulse (CCD emulation); fft: blocks, lower load")
+    s.add_argument("-o", "--output", help="also write the focused image here (.h5; also on Ctrl-C)")
     s.set_defaults(func=cmd_run)
 
     s = sub.add_parser(
         "bench",
         help="throughput of the lens and correlators in one run",
-        description="Not a test: measures pulses/s of the AO lens (OpenCL vs "
-        "NumPy FFT on the same batch) and of the direct and FFT "
-        "correlators at the psaltis-max geometry, as ratios.",
+        description="Not a test: measures pulses/s of the AO lens (OpenCL vs the same plan on "
+        "NumPy's and SciPy's FFT, and one bare FFT of the batch) and of the direct and FFT "
+        "correlators, in one run, as ratios.",
     )
     s.add_argument("--json", metavar="FILE", help="also write the results as JSON")
     s.add_argument("--seconds", type=float, default=1.0, help="time per measurement")
@@ -280,7 +309,7 @@ def main(argv=None) -> int:
         return 0
     try:
         return args.func(args)
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, RuntimeError) as exc:
         return _die(str(exc))
     except KeyboardInterrupt:
         print("\nrtsar: interrupted", file=sys.stderr)

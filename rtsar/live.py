@@ -45,43 +45,48 @@ def run_live(
     t0 = time.perf_counter()
     last_report = t0
     limit = scene.pulses if duration_s is None else min(scene.pulses, int(duration_s * prf))
-    while p < limit:
-        count = min(batch, limit - p)
-        shots = sim.block(count)
-        arrivals = t0 + (p + np.arange(count)) / prf
-        wait = arrivals[-1] - time.perf_counter()
-        if wait > 0:
-            time.sleep(wait)
-        else:
-            late_batches += 1
-        start = time.perf_counter()
-        out = eng.push(shots)
-        done = time.perf_counter()
-        busy += done - start
-        if len(out.lines):
-            # Line j completes with pulse j + N - 1.
-            last_pulse = out.first_line + np.arange(len(out.lines)) + n_ap - 1
-            arrived = t0 + last_pulse / prf
-            latencies.extend((done - arrived).tolist())
-            if output:
-                parts.append(out.lines)
-        p += count
-        if done - last_report >= 0.5 or p >= limit:
-            last_report = done
-            elapsed = done - t0
-            lat = np.array(latencies[-2000:]) * 1e3
-            lat_txt = (
-                f"latency median {np.median(lat):6.2f} ms p99 {np.percentile(lat, 99):6.2f} ms"
-                if len(lat)
-                else "latency      -"
-            )
-            print(
-                f"t={elapsed:6.2f} s  pulses {p:7d}  lines {eng.lines_out:7d}  "
-                f"PRF {p / elapsed:8.1f} Hz  load {100 * busy / elapsed:5.1f} %  {lat_txt}  "
-                f"late batches {late_batches}",
-                file=stream,
-                flush=True,
-            )
+    interrupted = False
+    try:
+        while p < limit:
+            count = min(batch, limit - p)
+            shots = sim.block(count)
+            arrivals = t0 + (p + np.arange(count)) / prf
+            wait = arrivals[-1] - time.perf_counter()
+            if wait > 0:
+                time.sleep(wait)
+            else:
+                late_batches += 1
+            start = time.perf_counter()
+            out = eng.push(shots)
+            done = time.perf_counter()
+            busy += done - start
+            if len(out.lines):
+                # Line j completes with pulse j + N - 1.
+                last_pulse = out.first_line + np.arange(len(out.lines)) + n_ap - 1
+                arrived = t0 + last_pulse / prf
+                latencies.extend((done - arrived).tolist())
+                if output:
+                    parts.append(out.lines)
+            p += count
+            if done - last_report >= 0.5 or p >= limit:
+                last_report = done
+                elapsed = done - t0
+                lat = np.array(latencies[-2000:]) * 1e3
+                lat_txt = (
+                    f"latency median {np.median(lat):6.2f} ms p99 {np.percentile(lat, 99):6.2f} ms"
+                    if len(lat)
+                    else "latency      -"
+                )
+                print(
+                    f"t={elapsed:6.2f} s  pulses {p:7d}  lines {eng.lines_out:7d}  "
+                    f"PRF {p / elapsed:8.1f} Hz  load {100 * busy / elapsed:5.1f} %  {lat_txt}  "
+                    f"late batches {late_batches}",
+                    file=stream,
+                    flush=True,
+                )
+    except KeyboardInterrupt:  # stop cleanly: flush, write what was focused, summarise
+        interrupted = True
+        print("\ninterrupted: finishing", file=stream)
     tail = eng.flush()
     if output:
         parts.append(tail.lines)
@@ -97,6 +102,7 @@ def run_live(
             source=f"live:{scene.name}",
             lens=lens_backend,
             correlator=cfg.processor.correlator,
+            nonfinite_pulses=eng.nonfinite_pulses,
         )
         print(f"wrote {output}: {image.shape[0]} x {image.shape[1]}", file=stream)
     lat = np.array(latencies) * 1e3
@@ -105,4 +111,4 @@ def run_live(
     if len(lat):
         summary += f", latency median {np.median(lat):.2f} ms, p99 {np.percentile(lat, 99):.2f} ms"
     print(summary, file=stream)
-    return 0
+    return 130 if interrupted else 0

@@ -19,6 +19,8 @@ class Progress:
 
     def update(self, done: int, extra: str = "") -> None:
         now = time.perf_counter()
+        if self._last == float("inf"):
+            return
         if now - self._last < self.every_s and done < self.total:
             return
         self._last = now
@@ -30,9 +32,12 @@ class Progress:
         )
         self.stream.write(("\r" + msg + "   ") if self.tty else (msg + "\n"))
         self.stream.flush()
+        if done >= self.total and not self.tty:
+            self._last = float("inf")  # the final line is printed once
 
     def done(self, done: int, extra: str = "") -> None:
-        self._last = -1e9
-        self.update(done, extra)
+        if self._last != float("inf"):  # in logs update() may have printed the final line
+            self._last = -1e9
+            self.update(done, extra)
         if self.tty:
             self.stream.write("\n")

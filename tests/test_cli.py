@@ -98,3 +98,17 @@ def test_nonfinite_shots_are_zeroed_counted_and_never_reach_the_image():
     assert np.isfinite(image).all() and image.shape == clean.shape
     # Dropping two of 64 aperture pulses costs a little peak, nothing more.
     assert np.abs(image).max() == pytest.approx(np.abs(clean).max(), rel=0.1)
+
+
+def test_user_mistakes_get_one_line_errors(tmp_path, capsys, monkeypatch):
+    scene_file = tmp_path / "s.toml"
+    scene_file.write_text(SCENE.format(correlator="fft").replace("2000.0", "20000.0"))
+    rec = tmp_path / "r.h5"
+    assert main(["simulate", str(scene_file), "-o", str(rec), "--pulses", "0"]) == 2
+    assert "--pulses" in capsys.readouterr().err
+    assert main(["simulate", str(scene_file), "-o", str(rec)]) == 0
+    assert "outside the range window" in capsys.readouterr().err
+    monkeypatch.setenv("RTSAR_OPENCL_DEVICE", "no-such-device-xyz")
+    assert main(["process", str(rec), "-o", str(tmp_path / "i.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("rtsar: error:") and "Traceback" not in err

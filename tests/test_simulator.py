@@ -146,3 +146,22 @@ def test_shots_come_in_order():
     sim.shot(0)
     with pytest.raises(ValueError, match="in order"):
         sim.shot(2)
+
+
+def test_scene_errors_name_the_key(tmp_path):
+    f = tmp_path / "s.toml"
+    f.write_text('preset = "tiny"\n[targets]\nalong_track_m = 0\n')
+    with pytest.raises(ValueError, match=r"\[\[targets\]\]"):
+        load_scene(f)
+    f.write_text('preset = "tiny"\n[[targets]]\nalong_track_m = 0\nslant_range_m = "far"\n')
+    with pytest.raises(ValueError, match=r"targets\[0\]\.slant_range_m"):
+        load_scene(f)
+    f.write_text('preset = "tiny"\n[[effects]]\nname = "noise"\nsnr = 3\n')
+    with pytest.raises(ValueError, match=r"s\.toml.*'snr'.*snr_db"):
+        load_scene(f)
+
+
+def test_targets_outside_the_swath_are_reported():
+    cfg = preset("tiny")
+    scene = point_scene(cfg, [0.0, 0.0], [2000.0, 20000.0])
+    assert scene.targets_outside_swath() == [1]

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from ..params import Config, FMCWChirp, Geometry, Processor, PulsedChirp, preset, waveform_from_dict
+from .effects import load_effects
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -85,6 +86,15 @@ class Scene:
     seed: int = 0
     effects: tuple = ()  # ((name, {params}), ...)
     name: str = "scene"
+
+    def targets_outside_swath(self) -> list[int]:
+        """Indices of targets whose range lies outside the processor's range window."""
+        from ..lens_plan import make_plan
+
+        rm = make_plan(self.config).range_m
+        margin = self.config.waveform.range_resolution_m
+        r = self.targets.slant_range_m
+        return [int(i) for i in np.flatnonzero((r < rm[0] - margin) | (r > rm[-1] + margin))]
 
     def along_track_of(self, pulse: np.ndarray | int):
         return (
@@ -142,6 +152,20 @@ def _config(d: dict) -> Config:
     )
 
 
+def _number(table: dict, key: str, where: str, default=None) -> float:
+    value = table.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{where}.{key} must be a number, got {value!r}")
+    return float(value)
+
+
+def _table_list(d: dict, key: str) -> list:
+    rows = d.get(key, [])
+    if not isinstance(rows, list) or not all(isinstance(r, dict) for r in rows):
+        raise ValueError(f"'{key}' must be an array of tables: write [[{key}]], not [{key}]")
+    return rows
+
+
 def _targets(rows: list, cfg: Config) -> Targets:
     xs, rs, amps = [], [], []
     for i, t in enumerate(rows):
@@ -154,21 +178,21 @@ def _targets(rows: list, cfg: Config) -> Targets:
             raise ValueError(f"targets[{i}]: along_track_m is required")
         if ("slant_range_m" in t) == ("ground_range_m" in t):
             raise ValueError(f"targets[{i}]: give exactly one of slant_range_m, ground_range_m")
+        where = f"targets[{i}]"
         if "slant_range_m" in t:
             if "height_m" in t:
-                raise ValueError(f"targets[{i}]: height_m goes with ground_range_m")
-            r = float(t["slant_range_m"])
+                raise ValueError(f"{where}: height_m goes with ground_range_m")
+            r = _number(t, "slant_range_m", where)
         else:
             h_platform = cfg.geometry.platform_height_m
             if h_platform <= 0:
-                raise ValueError(
-                    f"targets[{i}]: ground_range_m needs geometry.platform_height_m > 0"
-                )
-            r = math.hypot(float(t["ground_range_m"]), h_platform - float(t.get("height_m", 0.0)))
-        amp = float(t.get("amplitude", 1.0)) * np.exp(1j * float(t.get("phase_rad", 0.0)))
-        values = (float(t["along_track_m"]), r, amp.real, amp.imag)
+                raise ValueError(f"{where}: ground_range_m needs geometry.platform_height_m > 0")
+            r = math.hypot(_number(t, "ground_range_m", where),
+                           h_platform - _number(t, "height_m", where, 0.0))
+        amp = _number(t, "amplitude", where, 1.0) * np.exp(1j * _number(t, "phase_rad", where, 0.0))
+        values = (_number(t, "along_track_m", where), r, amp.real, amp.imag)
         if not all(math.isfinite(v) for v in values) or r <= 0:
-            raise ValueError(f"targets[{i}]: positions and amplitude must be finite, range > 0")
+            raise ValueError(f"{where}: positions and amplitude must be finite, range > 0")
         xs.append(values[0])
         rs.append(r)
         amps.append(amp)
@@ -179,7 +203,9 @@ def _scan_extent(cfg: Config, targets: Targets, start, pulses) -> tuple[float, i
     """Default scan: from A/2 plus a margin before the first target to as far after the last."""
     step = cfg.geometry.along_track_step_m
     n = cfg.processor.aperture_pulses
-    margin_m = (0.5 * n + max(8, n // 8)) * step
+    # Past the first/last target: half an aperture plus 8 azimuth resolutions (at least 8 lines),
+    # so the outermost targets' mainlobes and first sidelobes are inside the image.
+    margin_m = 0.5 * n * step + max(8 * step, 8 * cfg.azimuth_resolution_m())
     lo = float(targets.along_track_m.min()) if len(targets) else 0.0
     hi = float(targets.along_track_m.max()) if len(targets) else 0.0
     start = float(lo - margin_m if start is None else start)
@@ -198,14 +224,15 @@ def scene_from_dict(d: dict, name: str = "scene") -> Scene:
     if unknown:
         raise ValueError(f"scene: unknown keys {sorted(unknown)}; known: {sorted(_TOP_KEYS)}")
     cfg = _config(d)
-    targets = _targets(d.get("targets", []), cfg)
+    targets = _targets(_table_list(d, "targets"), cfg)
     start, pulses = _scan_extent(cfg, targets, d.get("start_along_track_m"), d.get("pulses"))
     effects = []
-    for i, e in enumerate(d.get("effects", [])):
+    for i, e in enumerate(_table_list(d, "effects")):
         if "name" not in e:
             raise ValueError(f"effects[{i}]: name is required")
         params = {k: v for k, v in e.items() if k != "name"}
         effects.append((e["name"], params))
+    load_effects(effects, cfg)  # validates names and parameters now, so errors name the file
     seed = d.get("seed", 0)
     if not isinstance(seed, int):
         raise ValueError("scene: seed must be an integer")

@@ -8,6 +8,7 @@ Effect hooks (see base.Effect) are called by the simulator once per pulse.
 from __future__ import annotations
 
 import importlib
+import inspect
 
 REGISTRY: dict[str, str] = {
     "noise": "rtsar.scene.effects.noise:ReceiverNoise",
@@ -27,8 +28,13 @@ def load_effects(specs, config):
             ) from None
         module_name, class_name = target.split(":")
         cls = getattr(importlib.import_module(module_name), class_name)
+        accepted = [p for p in inspect.signature(cls).parameters if p != "config"]
+        unknown = set(params) - set(accepted)
+        if unknown:
+            raise ValueError(f"effect {name!r}: unknown parameters {sorted(unknown)}; "
+                             f"it takes {accepted}")
         try:
             effects.append(cls(config, **params))
         except TypeError as exc:
-            raise ValueError(f"effect {name!r}: {exc}") from None
+            raise ValueError(f"effect {name!r}: {exc}; it takes {accepted}") from None
     return effects

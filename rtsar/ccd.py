@@ -22,6 +22,7 @@ NumPy float64 batch version both are tested against.
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 
 import numba
 import numpy as np
@@ -78,7 +79,7 @@ def correlate_reference(lines: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return np.einsum("prk,kr->pr", windows, mask)
 
 
-class Correlator:
+class Correlator(ABC):
     """Common interface: push range-compressed lines, receive finished image lines."""
 
     def __init__(self, mask: np.ndarray):
@@ -96,8 +97,9 @@ class Correlator:
             raise ValueError(f"lines must be [pulses, {self.range_bins}], got {lines.shape}")
         return np.ascontiguousarray(lines, dtype=np.complex64)
 
+    @abstractmethod
     def push(self, lines: np.ndarray) -> np.ndarray:
-        raise NotImplementedError  # abstract: the two subclasses implement it
+        """Add lines[pulse, range_bin]; return the image lines they completed."""
 
     def flush(self) -> np.ndarray:
         """Emit every line whose pulses have all arrived (nothing is ever held back after this)."""

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .ccd import aperture_offsets_m
-from .engine import StreamProcessor
+from .engine import focus_batches
 from .lens_plan import make_plan
 from .metrics import analyse_point_target, theoretical_irw_factor, theoretical_pslr_db
 from .params import Config
@@ -102,17 +102,9 @@ def _focus_one(
         pulses=n + 2 * margin_lines,
     )
     sim = Simulator(scene)
-    eng = StreamProcessor(cfg, lens_backend, start_along_track_m=scene.start_along_track_m)
-    batch = cfg.processor.micro_batch
-    parts = []
-    done = 0
-    while done < scene.pulses:
-        shots = sim.block(min(batch, scene.pulses - done))
-        done += len(shots)
-        parts.append(eng.push(shots).lines)
-    parts.append(eng.flush().lines)
-    image = np.concatenate(parts)
-    return image, eng.azimuth_m(0, len(image)), eng.range_m
+    b = cfg.processor.micro_batch
+    batches = (sim.block(b) for _ in range(0, scene.pulses, b))
+    return focus_batches(cfg, batches, lens_backend, scene.start_along_track_m)
 
 
 def run_point_targets(

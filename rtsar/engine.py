@@ -7,6 +7,7 @@ as fast as possible), so batch results are streaming results.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -97,6 +98,20 @@ class StreamProcessor:
         return self._emit(self.correlator.flush())
 
 
+def focus_batches(
+    config: Config,
+    batches: Iterable[np.ndarray],
+    lens_backend: str = "opencl",
+    start_along_track_m: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Run micro-batches of shots through the engine, flush → (image, azimuth_m, range_m)."""
+    eng = StreamProcessor(config, lens_backend, start_along_track_m=start_along_track_m)
+    parts = [eng.push(shots).lines for shots in batches]
+    parts.append(eng.flush().lines)
+    image = np.concatenate(parts)
+    return image, eng.azimuth_m(0, len(image)), eng.range_m
+
+
 def process_block(
     config: Config,
     shots: np.ndarray,
@@ -104,9 +119,6 @@ def process_block(
     start_along_track_m: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Convenience: run a whole array of shots through the engine → (image, azimuth_m, range_m)."""
-    eng = StreamProcessor(config, lens_backend, start_along_track_m=start_along_track_m)
-    batch = config.processor.micro_batch
-    parts = [eng.push(shots[i : i + batch]).lines for i in range(0, len(shots), batch)]
-    parts.append(eng.flush().lines)
-    image = np.concatenate(parts) if parts else np.zeros((0, eng.plan.bin_count), np.complex64)
-    return image, eng.azimuth_m(0, len(image)), eng.range_m
+    b = config.processor.micro_batch
+    batches = (shots[i : i + b] for i in range(0, len(shots), b))
+    return focus_batches(config, batches, lens_backend, start_along_track_m)

@@ -46,10 +46,6 @@ class LensPlan:
     def two_pass(self) -> bool:
         return self.spectrum is not None
 
-    @property
-    def range_spacing_m(self) -> float:
-        return float(self.range_m[1] - self.range_m[0]) if self.bin_count > 1 else math.nan
-
 
 def next_pow2(n: int) -> int:
     return 1 << max(0, (int(n) - 1).bit_length())

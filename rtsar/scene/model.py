@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..params import Config, FMCWChirp, Geometry, Processor, PulsedChirp, preset, waveform_from_dict
+from ..params import Config, Geometry, Processor, preset, waveform_from_dict
 from .effects import load_effects
 
 if sys.version_info >= (3, 11):
@@ -288,6 +288,4 @@ __all__ = [
     "scene_from_dict",
     "point_scene",
     "DEMO_SCENE",
-    "PulsedChirp",
-    "FMCWChirp",
 ]

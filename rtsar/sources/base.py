@@ -1,0 +1,54 @@
+"""The common currency of all sources: a batch of shots with their sequence numbers and times.
+
+A source is an iterator of :class:`ShotBatch`.  Sequence numbers are the instrument's pulse
+counter (they may skip, repeat or go backwards on a bad link: :mod:`rtsar.ingest` sorts that
+out); ``timestamp_s`` is the instrument's own clock; ``arrival_s`` is when the shot reached this
+host, on the ``time.perf_counter()`` clock, and is what latency is measured from.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class ShotBatch:
+    """``n`` shots: samples[n, samples_per_shot] (complex64) and per-shot metadata."""
+
+    seq: np.ndarray  # int64[n], instrument pulse counter
+    timestamp_s: np.ndarray  # float64[n], instrument clock (s)
+    arrival_s: np.ndarray  # float64[n], host time.perf_counter() at arrival (s)
+    samples: np.ndarray  # complex64[n, samples_per_shot]
+
+    def __post_init__(self):
+        n = len(self.seq)
+        if not (len(self.timestamp_s) == len(self.arrival_s) == len(self.samples) == n):
+            raise ValueError("ShotBatch fields must all have one entry per shot")
+
+    def __len__(self) -> int:
+        return len(self.seq)
+
+
+class Source:
+    """Base class of shot sources: iterate to receive :class:`ShotBatch` es.
+
+    ``live`` sources (simulator at its PRF, serial instrument) cannot be paused: when the
+    pipeline is full their shots are dropped and counted.  Non-live sources (replay) block.
+    ``counters`` holds the source's own tallies (e.g. frames with a bad CRC); ``close`` stops it.
+    """
+
+    live: bool = True
+    description: str = "source"
+
+    def __init__(self):
+        self.counters: dict[str, int] = {}
+        self._stop = False
+
+    def __iter__(self) -> Iterator[ShotBatch]:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def close(self) -> None:
+        self._stop = True

@@ -9,7 +9,11 @@ import time
 from pathlib import Path
 
 EPILOG = """examples:
-  rtsar run                                  live demo: the built-in scene streamed at its PRF
+  rtsar run                                  live demo: the built-in scene streamed at its PRF,
+                                             strips published on tcp://127.0.0.1:5555
+  rtsar view --png live.png                  snapshot of the live strips (or a window)
+  rtsar subscribe -o live.h5                 record the published strips into an image file
+  rtsar replay rec.h5 --rate max             a recording through the live pipeline
   rtsar presets                              the instrument presets and their theoretical figures
   rtsar simulate scene.toml -o rec.h5        raw shots of a scene
   rtsar process rec.h5 -o img.h5             range + azimuth compression (streaming engine)
@@ -74,9 +78,11 @@ def _warn_outside_swath(scene) -> None:
         from .lens_plan import make_plan
 
         rm = make_plan(scene.config).range_m
-        print(f"warning: {len(outside)} of {len(scene.targets)} targets (indices {outside[:10]}) "
-              f"lie outside the range window {rm[0]:.6g}–{rm[-1]:.6g} m and will not be imaged",
-              file=sys.stderr)
+        print(
+            f"warning: {len(outside)} of {len(scene.targets)} targets (indices {outside[:10]}) "
+            f"lie outside the range window {rm[0]:.6g}–{rm[-1]:.6g} m and will not be imaged",
+            file=sys.stderr,
+        )
 
 
 def cmd_simulate(args) -> int:
@@ -145,8 +151,10 @@ def cmd_process(args) -> int:
         prog.done(done)
     image = np.concatenate(parts)
     if eng.nonfinite_pulses:
-        print(f"warning: {eng.nonfinite_pulses} of {done} shots held NaN/Inf and were zeroed",
-              file=sys.stderr)
+        print(
+            f"warning: {eng.nonfinite_pulses} of {done} shots held NaN/Inf and were zeroed",
+            file=sys.stderr,
+        )
     if len(image) == 0:
         return _die(
             f"{args.recording} holds {rec.pulses} shots, fewer than the aperture of "
@@ -187,25 +195,148 @@ def cmd_quicklook(args) -> int:
     return 0
 
 
-def cmd_run(args) -> int:
-    from .live import run_live
-    from .scene import DEMO_SCENE, load_scene
+def _settings(args):
+    from .pipeline import PipelineSettings
 
-    scene = load_scene(args.scene or DEMO_SCENE)
-    if args.duration is not None and args.duration <= 0:
-        return _die(f"--duration must be > 0 seconds, got {args.duration}")
-    if args.correlator:
-        from dataclasses import replace
-
-        scene = replace(scene, config=scene.config.with_processor(correlator=args.correlator))
-    _warn_outside_swath(scene)
-    return run_live(
-        scene,
-        duration_s=args.duration,
+    return PipelineSettings(
         lens_backend=args.lens,
         device=args.device,
-        output=args.output,
+        stages=args.stages,
+        strip_lines=args.strip_lines,
+        max_batch=args.max_batch or 0,
     )
+
+
+def _processor_changes(args, cfg):
+    changes = {}
+    if args.correlator:
+        changes["correlator"] = args.correlator
+    return cfg.with_processor(**changes) if changes else cfg
+
+
+def _strip_lines(args, prf_hz: float) -> None:
+    """--strip-ms → lines at the PRF (at least one)."""
+    if args.strip_ms is not None:
+        if args.strip_ms <= 0:
+            raise ValueError(f"--strip-ms must be > 0, got {args.strip_ms}")
+        args.strip_lines = max(1, round(args.strip_ms * 1e-3 * prf_hz))
+    if args.strip_lines < 1:
+        raise ValueError(f"--strip-lines must be >= 1, got {args.strip_lines}")
+
+
+def cmd_run(args) -> int:
+    from dataclasses import replace
+
+    from .live import run_stream
+    from .scene import DEMO_SCENE, load_scene
+
+    if args.duration is not None and args.duration <= 0:
+        return _die(f"--duration must be > 0 seconds, got {args.duration}")
+    if args.serial:
+        from .params import preset
+        from .sources.serial import SerialSource
+
+        if args.scene:
+            cfg = load_scene(args.scene).config
+        else:
+            cfg = preset(args.preset) if args.preset else load_scene(DEMO_SCENE).config
+        cfg = _processor_changes(args, cfg)
+        _strip_lines(args, cfg.geometry.prf_hz)
+        source = SerialSource(
+            args.serial,
+            cfg.waveform.samples_per_shot,
+            baudrate=args.baudrate,
+            idle_timeout_s=args.duration,
+        )
+        return run_stream(
+            cfg,
+            source,
+            _settings(args),
+            args.endpoint,
+            args.delivery,
+            output=args.output,
+            curve_secret_key=args.curve_key,
+        )
+    from .sources.sim import SimSource
+
+    if args.preset:
+        return _die("--preset applies to --serial; a scene file carries its own configuration")
+    scene = load_scene(args.scene or DEMO_SCENE)
+    scene = replace(scene, config=_processor_changes(args, scene.config))
+    _warn_outside_swath(scene)
+    _strip_lines(args, scene.config.geometry.prf_hz)
+    pulses = None if args.duration is None else int(args.duration * scene.config.geometry.prf_hz)
+    source = SimSource(scene, pulses)
+    return run_stream(
+        scene.config,
+        source,
+        _settings(args),
+        args.endpoint,
+        args.delivery,
+        scene.start_along_track_m,
+        args.output,
+        args.curve_key,
+        total_pulses=source.total,
+    )
+
+
+def cmd_replay(args) -> int:
+    from .io import open_recording
+    from .live import run_stream
+    from .sources.replay import ReplaySource
+
+    with open_recording(args.recording) as rec:
+        cfg = _processor_changes(args, rec.config)
+        _strip_lines(args, cfg.geometry.prf_hz)
+        batch = args.max_batch or cfg.processor.micro_batch
+        source = ReplaySource.from_recording(rec, args.rate, batch)
+        return run_stream(
+            cfg,
+            source,
+            _settings(args),
+            args.endpoint,
+            args.delivery,
+            rec.start_along_track_m,
+            args.output,
+            args.curve_key,
+            wait_subscribers=args.wait_subscribers,
+            total_pulses=rec.pulses,
+        )
+
+
+def cmd_subscribe(args) -> int:
+    from .client import subscribe
+
+    if args.timeout is not None and args.timeout <= 0:
+        return _die(f"--timeout must be > 0 seconds, got {args.timeout}")
+    return subscribe(args.endpoint, args.output, args.curve_server_key, args.timeout)
+
+
+def cmd_view(args) -> int:
+    from .client import view
+
+    if args.lines < 1:
+        return _die(f"--lines must be >= 1, got {args.lines}")
+    return view(
+        args.endpoint,
+        args.png,
+        args.lines,
+        args.dynamic_range_db,
+        args.curve_server_key,
+        args.timeout,
+    )
+
+
+def cmd_keygen(args) -> int:
+    import zmq.auth
+
+    Path(args.directory).mkdir(parents=True, exist_ok=True)
+    public, secret = zmq.auth.create_certificates(args.directory, args.name)
+    print(
+        f"wrote {public} (give to subscribers: --curve-server-key)\n"
+        f"wrote {secret} (keep private: run/replay --curve-key)"
+    )
+    return 0
 
 
 def cmd_bench(args) -> int:
@@ -270,20 +401,163 @@ def build_parser() -> argparse.ArgumentParser:
     )
     s.set_defaults(func=cmd_quicklook)
 
+    def pipeline_options(s, delivery: str) -> None:
+        g = s.add_argument_group("processing")
+        g.add_argument("--lens", default="opencl", choices=("opencl", "numpy"), help=lens_help)
+        g.add_argument("--device", help="OpenCL platform/device name substring")
+        g.add_argument(
+            "--correlator",
+            choices=("direct", "fft", "partitioned"),
+            help="direct: CCD shift register, one line per pulse; fft: overlap-save "
+            "blocks (fast, one block of latency); partitioned: low latency, fast",
+        )
+        g.add_argument(
+            "--stages",
+            choices=("split", "fused"),
+            default="split",
+            help="split: lens and CCD in their own threads (default); fused: one",
+        )
+        g.add_argument(
+            "--max-batch",
+            type=int,
+            help="most pulses per lens launch "
+            "(default: the configuration's micro_batch; fewer when keeping up)",
+        )
+        g = s.add_argument_group("publication (ZeroMQ; wire format in README 'Strip protocol')")
+        g.add_argument(
+            "--endpoint",
+            default="tcp://127.0.0.1:5555",
+            help="where to publish strips (default tcp://127.0.0.1:5555, loopback)",
+        )
+        g.add_argument(
+            "--delivery",
+            choices=("drop", "lossless"),
+            default=delivery,
+            help="drop: a slow subscriber loses strips, the pipeline never waits; "
+            f"lossless: the pipeline waits for the slowest subscriber (default "
+            f"{delivery})",
+        )
+        g.add_argument("--strip-lines", type=int, default=16, help="lines per strip (default 16)")
+        g.add_argument("--strip-ms", type=float, help="strip length in ms at the PRF instead")
+        g.add_argument(
+            "--curve-key",
+            metavar="SECRET_KEY_FILE",
+            help="encrypt with ZeroMQ CURVE (key pair from `rtsar keygen`)",
+        )
+        s.add_argument(
+            "-o",
+            "--output",
+            help="also write the focused image here, losslessly (.h5; also on Ctrl-C)",
+        )
+
     s = sub.add_parser(
         "run",
-        help="live demo: stream a simulated scene at its PRF",
-        description="Simulate a scene live, paced at its PRF, through the "
-        "streaming engine; prints rates, latency and counters.",
+        help="live processing: the demo scene (default), a scene, or a serial instrument",
+        description="Stream shots live through the pipeline (ingest checks, AO lens, shifting "
+        "CCD) and publish image strips over ZeroMQ. Without arguments: the built-in demo scene "
+        "simulated at its PRF, published on tcp://127.0.0.1:5555. Watch it with "
+        "`rtsar view tcp://127.0.0.1:5555` or record it with `rtsar subscribe`.",
     )
-    s.add_argument("--scene", help="scene file (default: the built-in demo scene)")
-    s.add_argument("--duration", type=float, help="stop after this many seconds")
-    s.add_argument("--lens", default="opencl", choices=("opencl", "numpy"), help=lens_help)
-    s.add_argument("--device", help="OpenCL platform/device name substring")
-    s.add_argument("--correlator", choices=("direct", "fft"),
-                   help="direct: one line per pulse (CCD emulation); fft: blocks, lower load")
-    s.add_argument("-o", "--output", help="also write the focused image here (.h5; also on Ctrl-C)")
+    src = s.add_argument_group("source")
+    src.add_argument(
+        "--scene",
+        help="scene file to simulate live (default: the demo scene); "
+        "with --serial: the configuration to process with",
+    )
+    src.add_argument(
+        "--serial",
+        metavar="URL",
+        help="read framed shots from an instrument: a "
+        "serial port, a pty, or socket://HOST:PORT (frame format: README)",
+    )
+    src.add_argument("--preset", help="with --serial: processing configuration preset")
+    src.add_argument("--baudrate", type=int, default=3_000_000, help="serial line rate")
+    src.add_argument(
+        "--duration", type=float, help="stop after this many seconds (serial: of silence)"
+    )
+    pipeline_options(s, "drop")
     s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser(
+        "replay",
+        help="replay a recording through the pipeline at real rate, a factor, or max",
+        description="Replay a recording (from `rtsar simulate`) on an absolute schedule "
+        "(start + n/PRF: no drift) and publish strips like `rtsar run`. Lossless by default: "
+        "the replay waits for the slowest subscriber. Use --wait-subscribers 1 when a "
+        "`rtsar subscribe` must see the stream from its first strip.",
+    )
+    s.add_argument("recording", help="recording (.h5)")
+    s.add_argument(
+        "--rate",
+        default="real",
+        help="real (recorded PRF, default), max (as fast as possible) or a factor",
+    )
+    s.add_argument(
+        "--wait-subscribers",
+        type=int,
+        default=0,
+        metavar="N",
+        help="wait until N subscribers are connected before starting",
+    )
+    pipeline_options(s, "lossless")
+    s.set_defaults(func=cmd_replay)
+
+    s = sub.add_parser(
+        "subscribe",
+        help="record published strips into an image file",
+        description="Receive strips from a publisher and write them, as they come, into an "
+        "image file (same layout as `rtsar process`). Stops at the stream's end message, on "
+        "Ctrl-C or after --timeout seconds of silence. Missed strips are zero lines, counted "
+        "and listed in the file.",
+    )
+    s.add_argument(
+        "endpoint",
+        nargs="?",
+        default="tcp://127.0.0.1:5555",
+        help="publisher (default tcp://127.0.0.1:5555)",
+    )
+    s.add_argument("-o", "--output", required=True, help="image file to write (.h5)")
+    s.add_argument("--timeout", type=float, help="stop after this many seconds of silence")
+    s.add_argument(
+        "--curve-server-key",
+        metavar="PUBLIC_KEY_FILE",
+        help="the publisher's public key when it uses CURVE",
+    )
+    s.set_defaults(func=cmd_subscribe)
+
+    s = sub.add_parser(
+        "view",
+        help="live waterfall of published strips (or a PNG snapshot)",
+        description="Show the newest image lines as a scrolling waterfall (dB re peak). "
+        "Needs a display; --png FILE waits for --lines lines and writes a snapshot instead. "
+        "A viewer that cannot keep up skips strips; it never slows the processor.",
+    )
+    s.add_argument(
+        "endpoint",
+        nargs="?",
+        default="tcp://127.0.0.1:5555",
+        help="publisher (default tcp://127.0.0.1:5555)",
+    )
+    s.add_argument("--png", metavar="FILE", help="write a snapshot PNG and exit")
+    s.add_argument("--lines", type=int, default=1024, help="lines shown (default 1024)")
+    s.add_argument("--dynamic-range-db", type=float, default=50.0, help="dB shown (default 50)")
+    s.add_argument(
+        "--timeout",
+        type=float,
+        default=30.0,
+        help="--png: give up after this many seconds of silence (default 30)",
+    )
+    s.add_argument(
+        "--curve-server-key",
+        metavar="PUBLIC_KEY_FILE",
+        help="the publisher's public key when it uses CURVE",
+    )
+    s.set_defaults(func=cmd_view)
+
+    s = sub.add_parser("keygen", help="make a CURVE key pair for encrypted publication")
+    s.add_argument("directory", help="folder to write NAME.key and NAME.key_secret into")
+    s.add_argument("--name", default="rtsar", help="file name stem (default rtsar)")
+    s.set_defaults(func=cmd_keygen)
 
     s = sub.add_parser(
         "bench",
@@ -294,8 +568,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     s.add_argument("--json", metavar="FILE", help="also write the results as JSON")
     s.add_argument("--seconds", type=float, default=1.0, help="time per measurement")
-    s.add_argument("--preset", default="psaltis-max",
-                   help="geometry to measure at (default psaltis-max: 1200 bins, N = 512)")
+    s.add_argument(
+        "--preset",
+        default="psaltis-max",
+        help="geometry to measure at (default psaltis-max: 1200 bins, N = 512)",
+    )
     s.add_argument("--device", help="OpenCL platform/device name substring")
     s.set_defaults(func=cmd_bench)
     return p

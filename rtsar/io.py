@@ -165,3 +165,46 @@ def write_image(
 def read_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
     with _open(path, IMAGE_FORMAT) as f:
         return (f["image"][...], f["azimuth_m"][...], f["range_m"][...], dict(f.attrs))
+
+
+class ImageWriter:
+    """Write an image file line block by line block (streams of any length, bounded memory).
+
+    Same layout as :func:`write_image`; ``close(**attrs)`` adds the final attributes.
+    """
+
+    def __init__(
+        self, path: str | Path, config: Config, range_m: np.ndarray, chunk_lines: int = 64, **attrs
+    ):
+        self.path = Path(path)
+        self._f = h5py.File(self.path, "w")
+        nr = len(range_m)
+        self._image = self._f.create_dataset(
+            "image", (0, nr), np.complex64, maxshape=(None, nr), chunks=(chunk_lines, nr)
+        )
+        self._azimuth = self._f.create_dataset(
+            "azimuth_m", (0,), np.float64, maxshape=(None,), chunks=(4096,)
+        )
+        self._f.create_dataset("range_m", data=np.asarray(range_m, np.float64))
+        a = self._f.attrs
+        a["format"] = IMAGE_FORMAT
+        a["format_version"] = FORMAT_VERSION
+        a["config"] = json.dumps(config.to_dict())
+        a["rtsar_version"] = __version__
+        for k, v in attrs.items():
+            a[k] = v
+        self.lines = 0
+
+    def write(self, lines: np.ndarray, azimuth_m: np.ndarray) -> None:
+        end = self.lines + len(lines)
+        self._image.resize(end, axis=0)
+        self._image[self.lines : end] = lines
+        self._azimuth.resize(end, axis=0)
+        self._azimuth[self.lines : end] = azimuth_m
+        self.lines = end
+
+    def close(self, **attrs) -> None:
+        if self._f.id.valid:
+            for k, v in attrs.items():
+                self._f.attrs[k] = v
+            self._f.close()

@@ -1,8 +1,7 @@
-"""Live demo: a scene simulated at its PRF, focused by the streaming engine as shots arrive.
+"""Run a source through the pipeline with a ZeroMQ publisher and a live status line.
 
-The simulator plays the instrument: shot p is released at t0 + p/PRF (absolute schedule, so no
-drift accumulates).  Shots are processed in micro-batches; a line's latency is measured from the
-arrival of the last pulse it contains to the moment the engine returned it.
+Shared by ``rtsar run`` (simulated scene or serial instrument) and ``rtsar replay``.  Ctrl-C stops
+the source; what already arrived is still focused, published and (with ``-o``) written.
 """
 
 from __future__ import annotations
@@ -10,105 +9,119 @@ from __future__ import annotations
 import sys
 import time
 
-import numpy as np
+from .params import Config
+from .pipeline import Pipeline, PipelineSettings
+from .publish import ZmqPublisher
+from .record import ImageFileSink
 
-from .engine import StreamProcessor
-from .scene import Scene, Simulator
+
+def format_status(d: dict, total: int | None = None) -> str:
+    c = d["counters"]
+    done = c.get("pulses_processed", 0)
+    progress = f"/{total}" if total else ""
+    problems = []
+    for key, label in (
+        ("dropped_pulses", "dropped"),
+        ("gap_pulses", "gap-filled"),
+        ("duplicates", "dup"),
+        ("late_pulses", "late"),
+        ("nonfinite_pulses", "NaN/Inf"),
+        ("wrong_length_pulses", "bad length"),
+        ("discontinuities", "jumps"),
+        ("frames_bad", "bad frames"),
+    ):
+        if c.get(key):
+            problems.append(f"{label} {c[key]}")
+    return (
+        f"t={d['elapsed_s']:6.1f} s  pulses {done}{progress}  {d['pulse_rate_hz']:8.0f} Hz  "
+        f"lines {c.get('lines_out', 0)}  strips {c.get('strips_published', 0)}  "
+        f"latency median {d['latency_recent_median_ms']:6.2f} ms p99 "
+        f"{d['latency_recent_p99_ms']:6.2f} ms  "
+        + ("  ".join(problems) if problems else "no drops/gaps")
+    )
 
 
-def run_live(
-    scene: Scene,
-    duration_s: float | None = None,
-    lens_backend: str = "opencl",
-    device: str | None = None,
-    output=None,
+def run_stream(
+    config: Config,
+    source,
+    settings: PipelineSettings,
+    endpoint: str,
+    delivery: str,
+    start_along_track_m: float = 0.0,
+    output: str | None = None,
+    curve_secret_key=None,
+    wait_subscribers: int = 0,
+    total_pulses: int | None = None,
     stream=None,
 ) -> int:
+    """Run until the source ends or Ctrl-C; print status lines and a summary; return exit code."""
     stream = stream or sys.stdout
-    cfg = scene.config
-    prf = cfg.geometry.prf_hz
-    batch = cfg.processor.micro_batch
-    sim = Simulator(scene)
-    eng = StreamProcessor(cfg, lens_backend, device, scene.start_along_track_m)
-    n_ap = cfg.processor.aperture_pulses
+    publisher = ZmqPublisher(endpoint, delivery, curve_secret_key=curve_secret_key)
+    sinks: list = [publisher]
+    if output:
+        sinks.append(ImageFileSink(output, source.description))
+    tty = hasattr(stream, "isatty") and stream.isatty()
+    last = [0.0]
+
+    def show(d: dict) -> None:
+        now = time.perf_counter()
+        if d.get("final") or now - last[0] >= (0.5 if tty else 5.0):
+            last[0] = now
+            line = format_status(d, total_pulses)
+            stream.write(("\r" + line + "  ") if tty else (line + "\n"))
+            stream.flush()
+
+    n = config.processor
     print(
-        f"rtsar run: scene '{scene.name}' ({len(scene.targets)} targets, "
-        f"{scene.pulses} shots at {prf:g} Hz = {scene.pulses / prf:.1f} s), "
-        f"CCD {n_ap} x {cfg.processor.range_bins}, micro-batch {batch}, "
-        f"{cfg.processor.correlator} correlator, {lens_backend} lens",
+        f"rtsar: {source.description}; CCD {n.aperture_pulses} x {n.range_bins}, "
+        f"{n.correlator} correlator, {settings.lens_backend} lens, {settings.stages} stages, "
+        f"strips of {settings.strip_lines} lines on {endpoint} ({delivery})",
         file=stream,
+        flush=True,
     )
-    parts, latencies = [], []
-    busy = 0.0
-    late_batches = 0
-    p = 0
-    t0 = time.perf_counter()
-    last_report = t0
-    limit = scene.pulses if duration_s is None else min(scene.pulses, int(duration_s * prf))
     interrupted = False
     try:
-        while p < limit:
-            count = min(batch, limit - p)
-            shots = sim.block(count)
-            arrivals = t0 + (p + np.arange(count)) / prf
-            wait = arrivals[-1] - time.perf_counter()
-            if wait > 0:
-                time.sleep(wait)
-            else:
-                late_batches += 1
-            start = time.perf_counter()
-            out = eng.push(shots)
-            done = time.perf_counter()
-            busy += done - start
-            if len(out.lines):
-                # Line j completes with pulse j + N - 1.
-                last_pulse = out.first_line + np.arange(len(out.lines)) + n_ap - 1
-                arrived = t0 + last_pulse / prf
-                latencies.extend((done - arrived).tolist())
-                if output:
-                    parts.append(out.lines)
-            p += count
-            if done - last_report >= 0.5 or p >= limit:
-                last_report = done
-                elapsed = done - t0
-                lat = np.array(latencies[-2000:]) * 1e3
-                lat_txt = (
-                    f"latency median {np.median(lat):6.2f} ms p99 {np.percentile(lat, 99):6.2f} ms"
-                    if len(lat)
-                    else "latency      -"
-                )
-                print(
-                    f"t={elapsed:6.2f} s  pulses {p:7d}  lines {eng.lines_out:7d}  "
-                    f"PRF {p / elapsed:8.1f} Hz  load {100 * busy / elapsed:5.1f} %  {lat_txt}  "
-                    f"late batches {late_batches}",
-                    file=stream,
-                    flush=True,
-                )
-    except KeyboardInterrupt:  # stop cleanly: flush, write what was focused, summarise
-        interrupted = True
-        print("\ninterrupted: finishing", file=stream)
-    tail = eng.flush()
-    if output:
-        parts.append(tail.lines)
-        from .io import write_image
-
-        image = np.concatenate(parts)
-        write_image(
-            output,
-            image,
-            eng.azimuth_m(0, len(image)),
-            eng.range_m,
-            cfg,
-            source=f"live:{scene.name}",
-            lens=lens_backend,
-            correlator=cfg.processor.correlator,
-            nonfinite_pulses=eng.nonfinite_pulses,
+        if wait_subscribers:
+            print(
+                f"waiting for {wait_subscribers} subscriber(s) on {endpoint} …",
+                file=stream,
+                flush=True,
+            )
+            publisher.wait_for_subscribers(wait_subscribers)
+        pipe = Pipeline(
+            config,
+            source,
+            sinks,
+            settings,
+            start_along_track_m,
+            on_stats=show,
+            stats_every_s=0.5 if tty else 1.0,
         )
-        print(f"wrote {output}: {image.shape[0]} x {image.shape[1]}", file=stream)
-    lat = np.array(latencies) * 1e3
-    load = 100 * busy / max(time.perf_counter() - t0, 1e-9)
-    summary = f"done: {p} pulses, {eng.lines_out} lines, processing load {load:.1f} % of real time"
-    if len(lat):
-        summary += f", latency median {np.median(lat):.2f} ms, p99 {np.percentile(lat, 99):.2f} ms"
-    print(summary, file=stream)
+        pipe.start()
+        try:
+            stats = pipe.join()
+        except KeyboardInterrupt:
+            interrupted = True
+            stream.write("\ninterrupted: the pulses already received are being finished\n")
+            stats = pipe.join()
+    except KeyboardInterrupt:
+        interrupted = True
+        publisher.close()
+        return 130
+    finally:
+        publisher.close()
+    if tty:
+        stream.write("\n")
+    d = stats.as_dict()
+    c = d["counters"]
+    print(
+        f"done: {c['pulses_processed']} pulses in {d['elapsed_s']:.1f} s "
+        f"({d['pulse_rate_hz']:,.0f} Hz), {c['lines_out']} lines in {c['strips_published']} "
+        f"strips; latency median {d['latency_median_ms']:.2f} ms, p99 {d['latency_p99_ms']:.2f} "
+        f"ms; dropped {c['dropped_pulses']}, gap-filled {c.get('gap_pulses', 0)}, "
+        f"flagged lines {c['flagged_lines']}",
+        file=stream,
+    )
+    if output:
+        print(f"wrote {output}: {sinks[1].lines} lines", file=stream)
     return 130 if interrupted else 0

@@ -1,0 +1,38 @@
+"""Release shots on an absolute schedule, t0 + n / rate (as GNU Radio's throttle block does).
+
+Sleeping a fixed period per shot accumulates every oversleep; scheduling shot n at t0 + n/rate
+does not, so the achieved rate over a long run is the requested one.
+"""
+
+from __future__ import annotations
+
+import time
+
+
+class Pacer:
+    """Schedule for shot n: ``t0 + n / rate_hz`` on the perf_counter clock."""
+
+    def __init__(self, rate_hz: float, t0: float | None = None):
+        if not rate_hz > 0:
+            raise ValueError(f"rate must be > 0, got {rate_hz!r}")
+        self.rate_hz = float(rate_hz)
+        self.t0 = time.perf_counter() if t0 is None else float(t0)
+
+    def due(self, n: int) -> float:
+        """When shot n is due (perf_counter seconds)."""
+        return self.t0 + n / self.rate_hz
+
+    def wait(self, n: int, stop=lambda: False) -> float:
+        """Sleep until shot n is due (in short naps so ``stop()`` is honoured); return its time."""
+        t = self.due(n)
+        while not stop():
+            left = t - time.perf_counter()
+            if left <= 0:
+                break
+            time.sleep(min(left, 0.05))
+        return t
+
+
+def release_chunk(rate_hz: float, max_wait_s: float = 0.0005) -> int:
+    """Shots released together: as many as arrive within ``max_wait_s`` (at least one)."""
+    return max(1, int(rate_hz * max_wait_s))

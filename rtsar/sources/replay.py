@@ -1,0 +1,95 @@
+"""Replay of shots from a recording (or an in-memory array) at the real rate, a factor, or max.
+
+``rate="real"`` releases shot n at t0 + n/PRF (absolute schedule: no drift), a number f at
+t0 + n/(f·PRF), ``"max"`` as fast as the pipeline takes them.  Replay is not live: when the
+pipeline is full it waits (back-pressure) instead of dropping.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+
+import numpy as np
+
+from .base import ShotBatch, Source
+from .pacing import Pacer, release_chunk
+
+
+def parse_rate(text: str | float) -> float | None:
+    """'real' → 1.0, 'max' → None (unpaced), '2.5' → 2.5; ValueError otherwise."""
+    if isinstance(text, (int, float)):
+        value = float(text)
+    elif text == "max":
+        return None
+    elif text == "real":
+        return 1.0
+    else:
+        try:
+            value = float(text)
+        except ValueError:
+            raise ValueError(f"rate must be 'real', 'max' or a factor > 0, got {text!r}") from None
+    if not (np.isfinite(value) and value > 0):
+        raise ValueError(f"rate factor must be > 0, got {text!r}")
+    return value
+
+
+class ReplaySource(Source):
+    """Shots from array-likes (an h5py dataset or NumPy arrays) at ``rate`` (see parse_rate).
+
+    ``shots[pulse, sample]``, ``pulse_index`` and ``time_s`` per shot; ``prf_hz`` is the recorded
+    rate.  Paced replay: arrival = scheduled time; unpaced: the time the shot was read.
+    """
+
+    live = False
+
+    def __init__(
+        self,
+        shots,
+        pulse_index,
+        time_s,
+        prf_hz: float,
+        rate: str | float = "real",
+        batch: int = 64,
+        description: str = "replay",
+    ):
+        super().__init__()
+        self.shots = shots
+        self.pulse_index = np.asarray(pulse_index, np.int64)
+        self.time_s = np.asarray(time_s, np.float64)
+        self.total = len(self.pulse_index)
+        if not (len(shots) == len(self.time_s) == self.total):
+            raise ValueError("shots, pulse_index and time_s must have one entry per shot")
+        self.prf_hz = float(prf_hz)
+        self.factor = parse_rate(rate)
+        self.chunk = batch if self.factor is None else release_chunk(self.prf_hz * self.factor)
+        self.released = 0
+        self.description = description
+
+    @classmethod
+    def from_recording(cls, recording, rate="real", batch: int = 64) -> ReplaySource:
+        f = recording._file
+        return cls(
+            f["shots"],
+            f["pulse_index"][...],
+            f["time_s"][...],
+            recording.config.geometry.prf_hz,
+            rate,
+            batch,
+            description=f"replay of {recording.path} ({rate})",
+        )
+
+    def __iter__(self) -> Iterator[ShotBatch]:
+        pacer = None if self.factor is None else Pacer(self.prf_hz * self.factor)
+        p = 0
+        while p < self.total and not self._stop:
+            n = min(self.chunk, self.total - p)
+            samples = np.asarray(self.shots[p : p + n], np.complex64)
+            if pacer is None:
+                arrival = np.full(n, time.perf_counter())
+            else:
+                pacer.wait(p + n - 1, lambda: self._stop)
+                arrival = pacer.t0 + np.arange(p, p + n) / pacer.rate_hz
+            yield ShotBatch(self.pulse_index[p : p + n], self.time_s[p : p + n], arrival, samples)
+            p += n
+            self.released = p

@@ -154,6 +154,7 @@ class ZmqPublisher:
         except zmq.ZMQError as exc:
             s.close(0)
             raise ValueError(f"cannot bind {endpoint}: {exc}") from None
+        self.endpoint = s.getsockopt_string(zmq.LAST_ENDPOINT)  # resolves a port given as *
         self._closed = False
 
     def _poll_subscriptions(self, timeout_ms: int = 0) -> None:

@@ -1,0 +1,94 @@
+"""Ingest checks: gaps, jumps, duplicates, late shots, NaN/Inf and wrong lengths."""
+
+import numpy as np
+
+from rtsar.ingest import Ingest
+from rtsar.sources.base import ShotBatch
+
+S = 8
+
+
+def batch(seq, samples=None):
+    seq = np.asarray(seq, np.int64)
+    if samples is None:
+        samples = (seq[:, None] + 1 + np.zeros((1, S))).astype(np.complex64)  # value = seq + 1
+    t = seq * 1e-3
+    return ShotBatch(seq, t, t + 10.0, samples)
+
+
+def stream(ing, batches):
+    """Feed batches; return (samples, flagged, first_pulse of each block) of the whole output."""
+    blocks = [b for x in batches for b in ing(x)]
+    for a, b in zip(blocks, blocks[1:], strict=False):
+        assert b.first_pulse == a.first_pulse + len(a)  # consecutive, whatever came in
+    return (
+        np.concatenate([b.samples for b in blocks]),
+        np.concatenate([b.flagged for b in blocks]),
+    )
+
+
+def test_in_order_stream_passes_unchanged():
+    ing = Ingest(S, aperture_pulses=4)
+    x, f = stream(ing, [batch(range(100, 110)), batch(range(110, 113))])
+    np.testing.assert_array_equal(x[:, 0].real, np.arange(101, 114))
+    assert not f.any()
+    assert ing.counters["pulses_accepted"] == 13 and ing.counters["gap_pulses"] == 0
+
+
+def test_gap_is_zero_filled_and_flagged():
+    ing = Ingest(S, aperture_pulses=4)
+    x, f = stream(ing, [batch([0, 1, 2, 5, 6]), batch([9])])
+    np.testing.assert_array_equal(x[:, 0].real, [1, 2, 3, 0, 0, 6, 7, 0, 0, 10])
+    np.testing.assert_array_equal(f, [0, 0, 0, 1, 1, 0, 0, 1, 1, 0])
+    assert ing.counters["gaps"] == 2 and ing.counters["gap_pulses"] == 4
+
+
+def test_duplicates_and_late_shots_are_dropped_and_counted():
+    ing = Ingest(S, aperture_pulses=4)
+    x, f = stream(ing, [batch([0, 1, 1, 2, 4, 3, 5, 2])])
+    # 1 repeated (duplicate), 3 arrives after its slot was filled (late), 2 again (duplicate).
+    np.testing.assert_array_equal(x[:, 0].real, [1, 2, 3, 0, 5, 6])
+    c = ing.counters
+    assert c["duplicates"] == 2 and c["late_pulses"] == 1 and c["gap_pulses"] == 1
+    assert c["pulses_received"] == 8 and c["pulses_accepted"] == 5
+
+
+def test_large_jump_is_a_discontinuity_that_clears_the_ccd():
+    ing = Ingest(S, aperture_pulses=4, max_gap_pulses=10)
+    x, f = stream(ing, [batch([0, 1]), batch([1000, 1001]), batch([5])])
+    # Each jump inserts N = 4 zero pulses instead of a million.
+    assert len(x) == 2 + 4 + 2 + 4 + 1
+    assert ing.counters["discontinuities"] == 2
+    np.testing.assert_array_equal(f, [0, 0, 1, 1, 1, 1, 0, 0, 1, 1, 1, 1, 0])
+
+
+def test_nonfinite_and_wrong_length_pulses_are_zeroed_and_flagged():
+    ing = Ingest(S, aperture_pulses=4)
+    good = batch(range(4))
+    good.samples[1, 3] = np.nan
+    good.samples[2, 0] = np.inf
+    x, f = stream(ing, [good, batch(range(4, 6), np.ones((2, S + 1), np.complex64))])
+    assert np.isfinite(x).all()
+    np.testing.assert_array_equal(f, [0, 1, 1, 0, 1, 1])
+    assert not x[[1, 2, 4, 5]].any()
+    assert ing.counters["nonfinite_pulses"] == 2 and ing.counters["wrong_length_pulses"] == 2
+
+
+def test_random_link_faults_keep_every_surviving_shot_in_its_slot(rng):
+    # Whatever is lost, repeated or reordered, a shot that is accepted sits at index seq - seq0.
+    seq = np.arange(2000)
+    keep = seq[rng.random(len(seq)) > 0.05]
+    dup = rng.choice(keep, 40)
+    arrived = np.concatenate([keep, dup])
+    order = np.argsort(np.concatenate([keep, dup + rng.integers(1, 5, len(dup))]), kind="stable")
+    arrived = arrived[order]
+    ing = Ingest(S, aperture_pulses=16)
+    chunks = np.split(arrived, np.sort(rng.choice(len(arrived), 50, replace=False)))
+    x, f = stream(ing, [batch(c) for c in chunks if len(c)])
+    val = x[:, 0].real.astype(int)
+    ok = val > 0
+    np.testing.assert_array_equal(val[ok] - 1, np.flatnonzero(ok))  # value = slot + 1
+    assert (f == ~ok).all()
+    c = ing.counters
+    assert c["pulses_accepted"] + c["duplicates"] + c["late_pulses"] == len(arrived)
+    assert c["pulses_accepted"] + c["gap_pulses"] == len(x)

@@ -1,0 +1,186 @@
+"""ZeroMQ strips: wire format, replay → subscribe equals process, stalled subscribers, CURVE."""
+
+import json
+import socket
+import threading
+import time
+
+import numpy as np
+import pytest
+import zmq
+
+from rtsar.cli import main
+from rtsar.io import read_image
+from rtsar.params import preset
+from rtsar.pipeline import Pipeline, PipelineSettings
+from rtsar.publish import StripSubscriber, ZmqPublisher, decode, is_local_endpoint
+from rtsar.scene import Simulator, point_scene
+from rtsar.sources.replay import ReplaySource
+
+SCENE = """
+preset = "tiny"
+seed = 5
+[[targets]]
+along_track_m = 0.0
+slant_range_m = 2000.0
+[[targets]]
+along_track_m = 12.0
+slant_range_m = 1960.0
+[[effects]]
+name = "noise"
+snr_db = 10.0
+"""
+
+
+def free_endpoint() -> str:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp://127.0.0.1:{s.getsockname()[1]}"
+
+
+def test_replay_max_into_subscribe_equals_process(tmp_path):
+    scene, rec = tmp_path / "s.toml", tmp_path / "r.h5"
+    scene.write_text(SCENE)
+    assert main(["simulate", str(scene), "-o", str(rec)]) == 0
+    assert main(["process", str(rec), "-o", str(tmp_path / "batch.h5")]) == 0
+    ep = free_endpoint()
+    codes = []
+    sub = threading.Thread(
+        target=lambda: codes.append(
+            main(["subscribe", ep, "-o", str(tmp_path / "sub.h5"), "--timeout", "30"])
+        )
+    )
+    sub.start()
+    args = ["replay", str(rec), "--rate", "max", "--endpoint", ep, "--wait-subscribers", "1"]
+    assert main(args + ["--strip-lines", "5"]) == 0
+    sub.join(60)
+    assert codes == [0]
+    batch, az_b, rg_b, _ = read_image(tmp_path / "batch.h5")
+    streamed, az_s, rg_s, attrs = read_image(tmp_path / "sub.h5")
+    assert streamed.shape == batch.shape
+    assert np.abs(streamed - batch).max() <= 1e-6 * np.abs(batch).max()
+    np.testing.assert_allclose(az_s, az_b, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(rg_s, rg_b, rtol=1e-12)
+    assert attrs["complete"] and attrs["missing_lines"] == 0 and attrs["missed_strips"] == 0
+    assert json.loads(attrs["counters"])["pulses_processed"] > 0
+
+
+@pytest.fixture(scope="module")
+def tiny_shots():
+    cfg = preset("tiny")
+    scene = point_scene(cfg, [0.0], [cfg.geometry.slant_range_m], pulses=1200)
+    return cfg, Simulator(scene).block(scene.pulses)
+
+
+def run_pipeline(cfg, shots, publisher, repeat=1):
+    shots = np.concatenate([shots] * repeat)
+    seq = np.arange(len(shots))
+    src = ReplaySource(shots, seq, seq / cfg.geometry.prf_hz, cfg.geometry.prf_hz, "max", 64)
+    t = time.perf_counter()
+    Pipeline(cfg, src, [publisher], PipelineSettings(strip_lines=4)).run()
+    return time.perf_counter() - t
+
+
+def test_messages_carry_the_documented_header_and_payload(tiny_shots):
+    cfg, shots = tiny_shots
+    pub = ZmqPublisher("tcp://127.0.0.1:*", "lossless")
+    sub = StripSubscriber(pub.endpoint)
+    assert pub.wait_for_subscribers(1, timeout_s=10)
+    run_pipeline(cfg, shots, pub)
+    msgs = []
+    while (m := sub.recv(2.0)) is not None:
+        msgs.append(m)
+        if m.topic == "end":
+            break
+    pub.close()
+    sub.close()
+    strips = [m for m in msgs if m.topic == "strip"]
+    assert msgs[-1].topic == "end" and strips
+    h = strips[0].header
+    for key in (
+        "seq",
+        "first_line",
+        "line_count",
+        "range_bins",
+        "azimuth_first_m",
+        "azimuth_step_m",
+        "range_first_m",
+        "range_step_m",
+        "first_pulse_arrival_unix_s",
+        "last_pulse_arrival_unix_s",
+        "publish_unix_s",
+        "flagged_lines",
+        "counters",
+    ):
+        assert key in h
+    assert strips[0].lines.shape == (h["line_count"], h["range_bins"]) == (4, 64)
+    assert h["first_pulse_arrival_unix_s"] <= h["last_pulse_arrival_unix_s"] <= h["publish_unix_s"]
+    assert [m.header["seq"] for m in strips] == list(range(len(strips)))
+    assert sum(m.header["line_count"] for m in strips) == msgs[-1].header["counters"]["lines_out"]
+
+
+def test_decode_rejects_malformed_messages():
+    good = [
+        b"strip",
+        json.dumps(
+            {
+                "format": "rtsar-strip",
+                "version": 1,
+                "line_count": 2,
+                "range_bins": 3,
+                "dtype": "complex64",
+            }
+        ).encode(),
+        bytes(48),
+    ]
+    assert decode(good).lines.shape == (2, 3)
+    for bad in (
+        [b"strip"],
+        [b"strip", b"{not json", b""],
+        [b"strip", b"[1]", b""],
+        good[:2] + [bytes(40)],
+        [good[0], good[1].replace(b"rtsar", b"other"), good[2]],
+    ):
+        with pytest.raises(ValueError):
+            decode(bad)
+
+
+def test_a_stalled_subscriber_does_not_stall_the_pipeline(tiny_shots):
+    cfg, shots = tiny_shots
+    pub = ZmqPublisher("tcp://127.0.0.1:*", "drop", hwm_messages=20)
+    stalled = zmq.Context.instance().socket(zmq.SUB)
+    stalled.setsockopt(zmq.RCVHWM, 20)
+    stalled.setsockopt(zmq.RCVBUF, 4096)
+    stalled.setsockopt(zmq.SUBSCRIBE, b"")
+    stalled.connect(pub.endpoint)
+    assert pub.wait_for_subscribers(1, timeout_s=10)
+    result = []
+    t = threading.Thread(target=lambda: result.append(run_pipeline(cfg, shots, pub, repeat=8)))
+    t.start()
+    t.join(120)  # the subscriber never reads: with a blocking publisher this would hang
+    assert not t.is_alive() and result
+    assert pub.sent["strip"] > 200  # far more than both high-water marks hold
+    stalled.close(0)
+    pub.close()
+
+
+def test_curve_encryption_needs_the_server_key(tmp_path, tiny_shots):
+    assert main(["keygen", str(tmp_path)]) == 0
+    pub = ZmqPublisher("tcp://127.0.0.1:*", "drop", curve_secret_key=tmp_path / "rtsar.key_secret")
+    good = StripSubscriber(pub.endpoint, curve_server_key=tmp_path / "rtsar.key")
+    plain = StripSubscriber(pub.endpoint)
+    assert pub.wait_for_subscribers(1, timeout_s=10)
+    pub.send("stats", {"hello": 1})
+    assert good.recv(5.0).header == {"hello": 1}
+    assert plain.recv(0.3) is None
+    for s in (good, plain, pub):
+        s.close()
+
+
+def test_endpoints_default_to_loopback():
+    assert is_local_endpoint("tcp://127.0.0.1:5555") and is_local_endpoint("ipc:///tmp/x")
+    assert not is_local_endpoint("tcp://0.0.0.0:5555") and not is_local_endpoint("tcp://*:5555")
+    warnings = []
+    pub = ZmqPublisher("tcp://0.0.0.0:*", warn=warnings.append)
+    pub.close()
+    assert warnings and "without encryption" in warnings[0]

@@ -52,8 +52,10 @@ class ReplaySource(Source):
         rate: str | float = "real",
         batch: int = 64,
         description: str = "replay",
+        live: bool = False,
     ):
         super().__init__()
+        self.live = live  # True: behave as an instrument (dropped when the pipeline is full)
         self.shots = shots
         self.pulse_index = np.asarray(pulse_index, np.int64)
         self.time_s = np.asarray(time_s, np.float64)
@@ -65,6 +67,9 @@ class ReplaySource(Source):
         self.chunk = batch if self.factor is None else release_chunk(self.prf_hz * self.factor)
         self.released = 0
         self.description = description
+        # (shots released, perf_counter time) of the first and latest release: achieved rate.
+        self.first_release: tuple[int, float] | None = None
+        self.last_release: tuple[int, float] | None = None
 
     @classmethod
     def from_recording(cls, recording, rate="real", batch: int = 64) -> ReplaySource:
@@ -90,6 +95,16 @@ class ReplaySource(Source):
             else:
                 pacer.wait(p + n - 1, lambda: self._stop)
                 arrival = pacer.t0 + np.arange(p, p + n) / pacer.rate_hz
+            self.last_release = (p + n, time.perf_counter())
+            if self.first_release is None:
+                self.first_release = self.last_release
             yield ShotBatch(self.pulse_index[p : p + n], self.time_s[p : p + n], arrival, samples)
             p += n
             self.released = p
+
+    def achieved_rate_hz(self) -> float:
+        """Shots per second between the first and the latest release (NaN before two)."""
+        if self.first_release is None or self.last_release[0] == self.first_release[0]:
+            return float("nan")
+        (n0, t0), (n1, t1) = self.first_release, self.last_release
+        return (n1 - n0) / (t1 - t0)

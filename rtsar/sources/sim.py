@@ -15,7 +15,7 @@ from .pacing import Pacer, release_chunk
 class SimSource(Source):
     """Shots of ``scene`` on the absolute schedule t0 + p/PRF; arrival time = scheduled time.
 
-    Shots are generated ahead and released in chunks of about 0.5 ms of pulses; a shot's arrival
+    Shots are generated ahead and released in chunks (up to 8 pulses, at most 1 ms); arrival
     is when the instrument would have delivered it, so the wait for its chunk counts as latency.
     If generation falls behind the schedule, shots go out late (their arrival stays the
     scheduled time) and ``counters["late_releases"]`` counts the chunks.

@@ -1,0 +1,205 @@
+"""SerialSource over loop://, a pseudo-terminal and a TCP socket fed by the fake instrument."""
+
+import socket
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+from conftest import crandn
+from tools_loader import load_tool
+
+from rtsar.params import preset
+from rtsar.scene import point_scene
+from rtsar.sources.frame import FrameParser, encode_frame
+from rtsar.sources.serial import SerialSource
+
+
+def _collect(source):
+    batches = list(source)
+    seq = np.concatenate([b.seq for b in batches]) if batches else np.zeros(0, np.int64)
+    return batches, seq
+
+
+def test_loop_batches_channels_and_wrong_lengths(rng):
+    x = crandn(rng, 10, 2, 16, dtype=np.complex64)  # [shot, channel, sample]
+    src = SerialSource("loop://", 16, batch_frames=4, idle_timeout_s=0.2, channel=1)
+    src.port.write(rng.bytes(100))
+    for k in range(10):
+        src.port.write(encode_frame(k, 1000 * k, x[k]))
+        if k == 4:
+            src.port.write(encode_frame(90, 0, x[k, :, :8]))  # too short
+            src.port.write(encode_frame(91, 0, x[k, 0]))  # no channel 1
+            src.port.write(b"\x1a\xcf\xfc\x1d" + rng.bytes(40))  # a false sync
+    batches, seq = _collect(src)
+    assert [len(b) for b in batches] == [4, 4, 2]
+    assert seq.dtype == np.int64
+    np.testing.assert_array_equal(seq, np.arange(10))
+    np.testing.assert_array_equal(np.concatenate([b.samples for b in batches]), x[:, 1])
+    np.testing.assert_allclose(np.concatenate([b.timestamp_s for b in batches]), 1e-6 * seq)
+    assert all(b.samples.dtype == np.complex64 and b.samples.shape[1] == 16 for b in batches)
+    assert src.counters["wrong_length"] == 2
+    assert src.counters["frames_ok"] == 12
+    assert src.counters["header_crc_errors"] >= 1
+    assert src.stop_reason.startswith("no bytes")
+    assert not src.port.is_open
+
+
+def test_sequence_numbers_above_int64_keep_their_bits():
+    src = SerialSource("loop://", 4, idle_timeout_s=0.1)
+    src.port.write(encode_frame(2**64 - 1, 0, np.ones(4)))
+    _, seq = _collect(src)
+    assert seq.tolist() == [-1]
+
+
+def test_close_stops_iteration_promptly():
+    src = SerialSource("loop://", 8, poll_s=0.05)  # nothing ever arrives
+    done = threading.Event()
+    thread = threading.Thread(target=lambda: (list(src), done.set()))
+    thread.start()
+    time.sleep(0.1)
+    t0 = time.perf_counter()
+    src.close()
+    assert done.wait(2.0)
+    assert time.perf_counter() - t0 < 0.5
+    thread.join()
+    assert src.stop_reason == "closed"
+    assert not src.port.is_open
+
+
+def test_close_before_iterating():
+    src = SerialSource("loop://", 8)
+    src.close()
+    assert not src.port.is_open
+    assert list(src) == []
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.parametrize(
+    "url", [f"socket://127.0.0.1:{_free_port()}", "/no/such/tty", "nosuchscheme://x"]
+)
+def test_bad_url_is_a_clear_error(url):
+    with pytest.raises(ValueError, match="cannot open instrument port") as info:
+        SerialSource(url, 8)
+    assert url in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "kwargs", [{"samples_per_shot": 0}, {"batch_frames": 0}, {"channel": -1}, {"idle_timeout_s": 0}]
+)
+def test_bad_arguments(kwargs):
+    args = {"url": "loop://", "samples_per_shot": 8, **kwargs}
+    with pytest.raises(ValueError, match=next(iter(kwargs))):
+        SerialSource(**args)
+
+
+def _tiny_shots(pulses):
+    cfg = preset("tiny")
+    scene = point_scene(
+        cfg, [0.0], [cfg.geometry.slant_range_m], pulses=pulses, start_along_track_m=-1.0
+    )
+    fake = load_tool("fake_instrument")
+    return cfg, np.concatenate(list(fake.scene_shots(scene, block=64)))
+
+
+def test_fake_instrument_over_tcp_with_corruption():
+    fake = load_tool("fake_instrument")
+    prf = 5000.0
+    cfg, shots = _tiny_shots(400)
+    server = fake.listen("127.0.0.1:0")
+    port = server.getsockname()[1]
+    result = {}
+
+    def serve():
+        with server:
+            result["summary"] = fake.serve_tcp(
+                server, [shots], prf, start_delay_s=0.1, corrupt=0.01, seed=3
+            )
+
+    thread = threading.Thread(target=serve)
+    thread.start()
+    src = SerialSource(
+        f"socket://127.0.0.1:{port}",
+        cfg.waveform.samples_per_shot,
+        batch_frames=32,
+        idle_timeout_s=5.0,
+    )
+    batches, seq = _collect(src)
+    thread.join(5.0)
+    summary = result["summary"]
+    assert summary.corrupted >= 1  # the seed must exercise the case
+    assert (summary.shots, summary.sent, summary.stopped) == (400, 400, None)
+
+    intact = np.setdiff1d(np.arange(400), summary.corrupted_seqs)
+    np.testing.assert_array_equal(seq, intact)
+    np.testing.assert_array_equal(np.concatenate([b.samples for b in batches]), shots[intact])
+    np.testing.assert_allclose(np.concatenate([b.timestamp_s for b in batches]), seq / prf)
+    assert all(len(b) <= 32 for b in batches)
+    c = src.counters
+    assert c["header_crc_errors"] + c["payload_crc_errors"] == summary.corrupted
+    assert c["frames_ok"] == len(intact)
+    assert src.stop_reason.startswith("link closed")  # the instrument hung up
+
+
+def test_emit_drops_duplicates_and_keeps_the_schedule(rng):
+    fake = load_tool("fake_instrument")
+    shots = crandn(rng, 60, 8)
+    prf = 1000.0
+    written, times = [], []
+
+    def write(frame):
+        written.append(frame)
+        times.append(time.perf_counter())
+
+    t0 = time.perf_counter()
+    blocks = [shots[:25], shots[25:]]
+    summary = fake.emit_frames(write, blocks, prf, drop=0.1, duplicate=0.1, seed=5)
+    assert summary.dropped >= 1 and summary.duplicated >= 1
+    assert summary.sent == 60 - summary.dropped + summary.duplicated == len(written)
+    frames = FrameParser().feed(b"".join(written))
+    seqs = [f.sequence for f in frames]
+    assert sorted(set(seqs)) == sorted(set(range(60)) - set(summary.dropped_seqs))
+    assert len(seqs) - len(set(seqs)) == summary.duplicated
+    # Absolute schedule: frame n never leaves before t0 + n / PRF.
+    due = t0 + np.array(seqs) / prf
+    assert np.all(np.array(times) >= due - 1e-4)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="pty reader detection is Linux's")
+def test_fake_instrument_on_a_pty():
+    fake = load_tool("fake_instrument")
+    cfg, shots = _tiny_shots(200)
+    pty = fake.Pty()
+    result = {}
+
+    def serve():
+        result["summary"] = fake.serve_pty(
+            pty, [shots], 5000.0, start_delay_s=0.1, linger_s=5.0, sample_type="ci16", scale=1e3
+        )
+
+    thread = threading.Thread(target=serve)
+    thread.start()
+    try:
+        src = SerialSource(pty.path, cfg.waveform.samples_per_shot, idle_timeout_s=5.0)
+        got = []
+        for batch in src:
+            got.append(batch)
+            if sum(len(b) for b in got) >= 200:
+                break
+        src.close()  # the instrument sees the reader go and stops lingering
+        thread.join(5.0)
+        assert not thread.is_alive()
+    finally:
+        pty.close()
+    seq = np.concatenate([b.seq for b in got])
+    np.testing.assert_array_equal(seq, np.arange(200))
+    x = 1000.0 * shots
+    want = np.rint(x.real) + 1j * np.rint(x.imag)
+    np.testing.assert_array_equal(np.concatenate([b.samples for b in got]), want)
+    assert result["summary"].sent == 200

@@ -28,7 +28,11 @@ def format_status(d: dict, total: int | None = None) -> str:
         ("nonfinite_pulses", "NaN/Inf"),
         ("wrong_length_pulses", "bad length"),
         ("discontinuities", "jumps"),
-        ("frames_bad", "bad frames"),
+        ("header_crc_errors", "header CRC errors"),
+        ("payload_crc_errors", "payload CRC errors"),
+        ("bad_headers", "bad headers"),
+        ("wrong_length", "wrong-length frames"),
+        ("late_releases", "late releases"),
     ):
         if c.get(key):
             problems.append(f"{label} {c[key]}")

@@ -243,10 +243,15 @@ class Pipeline:
         self.stats = PipelineStats()
         self.on_stats = on_stats
         self.stats_every_s = stats_every_s
-        c = self.stats.counters
-        for name in ("dropped_pulses", "pulses_processed", "lines_out", "flagged_lines"):
-            c[name] = 0
-        c["strips_published"] = 0
+        # The pipeline's own counters (source and ingest keep theirs; counters() merges).
+        names = (
+            "dropped_pulses",
+            "pulses_processed",
+            "lines_out",
+            "flagged_lines",
+            "strips_published",
+        )
+        self.own = dict.fromkeys(names, 0)
         # Arrival time and flag of recent pulses, indexed by pulse % ring (lines need the
         # arrivals of their first and last pulses; the ring spans the CCD plus the queues).
         block = config.processor.fft_length or 2 * n
@@ -270,7 +275,7 @@ class Pipeline:
                 if self._stop.is_set():
                     break
                 if not self.q_shots.put(batch, block=not live):
-                    self.stats.counters["dropped_pulses"] += len(batch)
+                    self.own["dropped_pulses"] += len(batch)
         finally:
             self.q_shots.close()
 
@@ -329,7 +334,7 @@ class Pipeline:
         idx = block.first_pulse + np.arange(len(block))
         self._arrival[idx % ring] = block.arrival_s
         self._flag_pulses.extend(idx[block.flagged].tolist())
-        self.stats.counters["pulses_processed"] += len(block)
+        self.own["pulses_processed"] += len(block)
         lines = self.engine.correlator.push(block.samples)
         return self._line_block(lines)
 
@@ -352,8 +357,8 @@ class Pipeline:
             flagged = (k < len(fl)) & (fl[np.minimum(k, len(fl) - 1)] <= j + n - 1)
         else:
             flagged = np.zeros(len(j), bool)
-        self.stats.counters["lines_out"] += len(lines)
-        self.stats.counters["flagged_lines"] += int(flagged.sum())
+        self.own["lines_out"] += len(lines)
+        self.own["flagged_lines"] += int(flagged.sum())
         return LineBlock(
             first, lines, self._arrival[j % ring], self._arrival[(j + n - 1) % ring], flagged
         )
@@ -417,19 +422,19 @@ class Pipeline:
             sink.strip(strip, self)
         done = time.perf_counter()
         self.stats.latency.add(done - np.concatenate([p.last_arrival_s for p in parts]))
-        self.stats.counters["strips_published"] += 1
+        self.own["strips_published"] += 1
         return rest
 
     def counters(self) -> dict:
         """All counters: source, ingest and pipeline."""
         c = dict(self.source.counters)
         c.update(self.ingest.counters)
-        c.update(self.stats.counters)
+        c.update(self.own)
         return c
 
     def _send_stats(self, final: bool = False) -> None:
         self.stats.elapsed_s = time.perf_counter() - self.stats.started_s
-        self.stats.counters.update(self.counters())
+        self.stats.counters = self.counters()
         d = self.stats.as_dict()
         d["queue_fill"] = {
             q.name: q.size / q.capacity for q in (self.q_shots, self.q_lines, self.q_image)

@@ -5,7 +5,8 @@ CCD shifts one row per pulse), so the position of every pulse in the stream must
 the link loses, repeats or reorders shots.  The instrument's sequence number says where a shot
 belongs:
 
-* a gap (sequence jumps ahead by g ≤ ``max_gap_pulses``): g zero pulses are inserted, flagged;
+* a gap (sequence jumps ahead by g ≤ ``max_gap_pulses``): g zero pulses are inserted, flagged
+  (they cost no memory, and the AO lens skips them: a zero pulse compresses to a zero line);
 * a larger jump either way (instrument restarted): a *discontinuity* — N zero pulses are inserted
   (they clear the CCD so no line mixes the two sides) and the count restarts from the new number;
   azimuth positions after it are relative to the restart;
@@ -53,11 +54,12 @@ class PulseBlock:
 class Ingest:
     """Sequence, value and shape checks; call with each ShotBatch, get PulseBlocks back."""
 
-    def __init__(self, samples_per_shot: int, aperture_pulses: int, max_gap_pulses: int = 0):
+    def __init__(self, samples_per_shot: int, aperture_pulses: int, max_gap_pulses: int):
         self.samples_per_shot = int(samples_per_shot)
         self.aperture_pulses = int(aperture_pulses)
-        # Default: up to 4 apertures of missing shots are filled one for one.
-        self.max_gap_pulses = int(max_gap_pulses) or 4 * self.aperture_pulses
+        self.max_gap_pulses = max(int(max_gap_pulses), 1)
+        # Zero-filled pulses are read-only views of one zero row: a long gap costs no memory.
+        self._zero_row = np.zeros((1, self.samples_per_shot), np.complex64)
         self.counters = dict.fromkeys(COUNTERS, 0)
         self.next_pulse = 0  # stream index of the next pulse
         self._next_seq: int | None = None  # sequence number expected next
@@ -67,7 +69,7 @@ class Ingest:
     def _zeros(self, count: int, arrival: float) -> PulseBlock:
         block = PulseBlock(
             self.next_pulse,
-            np.zeros((count, self.samples_per_shot), np.complex64),
+            np.broadcast_to(self._zero_row, (count, self.samples_per_shot)),
             np.full(count, arrival),
             np.ones(count, bool),
         )

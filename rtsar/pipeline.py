@@ -176,6 +176,7 @@ class PipelineSettings:
     strip_lines: int = 16  # lines per published strip
     queue_pulses: int = 0  # capacity of each queue (0: 8 apertures of pulses)
     max_batch: int = 0  # most pulses per lens launch / CCD push (0: config micro_batch)
+    max_gap_pulses: int = 0  # longer sequence jumps are discontinuities (0: 60 s of pulses)
 
     def __post_init__(self):
         if self.stages not in STAGE_LAYOUTS:
@@ -239,7 +240,8 @@ class Pipeline:
         self.q_shots = BoundedQueue(capacity, "shots")
         self.q_lines = BoundedQueue(capacity, "compressed")
         self.q_image = BoundedQueue(capacity, "image lines")
-        self.ingest = Ingest(config.waveform.samples_per_shot, n)
+        max_gap = s.max_gap_pulses or max(4 * n, int(60 * config.geometry.prf_hz))
+        self.ingest = Ingest(config.waveform.samples_per_shot, n, max_gap)
         self.stats = PipelineStats()
         self.on_stats = on_stats
         self.stats_every_s = stats_every_s
@@ -288,19 +290,24 @@ class Pipeline:
                     break
                 t = time.perf_counter()
                 blocks = [b for batch in batches for b in self.ingest(batch)]
-                if not blocks:
-                    continue
-                block = _concat(blocks)
-                block.samples = self.engine.lens.compress(block.samples)
+                for block in _groups(blocks, self.max_batch):
+                    if block.flagged.all():  # zero pulses (gap fill): zero lines, no launch
+                        block.samples = np.zeros(
+                            (len(block), self.engine.plan.bin_count), np.complex64
+                        )
+                    else:
+                        block.samples = self.engine.lens.compress(block.samples)
+                    if self.settings.stages == "fused":
+                        out = self._ccd_step([block])
+                        if out is not None:
+                            busy += time.perf_counter() - t
+                            self.q_image.put(out)
+                            t = time.perf_counter()
+                    else:
+                        busy += time.perf_counter() - t
+                        self.q_lines.put(block)
+                        t = time.perf_counter()
                 busy += time.perf_counter() - t
-                if self.settings.stages == "fused":
-                    t = time.perf_counter()
-                    out = self._ccd_step([block])
-                    busy += time.perf_counter() - t
-                    if out is not None:
-                        self.q_image.put(out)
-                else:
-                    self.q_lines.put(block)
             if self.settings.stages == "fused":
                 tail = self._ccd_flush()
                 if tail is not None:
@@ -509,6 +516,26 @@ def _concat(blocks: list[PulseBlock]) -> PulseBlock:
         np.concatenate([b.arrival_s for b in blocks]),
         np.concatenate([b.flagged for b in blocks]),
     )
+
+
+def _groups(blocks: list[PulseBlock], most: int):
+    """Consecutive pulse blocks regrouped into blocks of at most ``most`` pulses."""
+    pending, size = [], 0
+    for b in blocks:
+        start = 0
+        while start < len(b):
+            take = min(len(b) - start, most - size)
+            sl = slice(start, start + take)
+            pending.append(
+                PulseBlock(b.first_pulse + start, b.samples[sl], b.arrival_s[sl], b.flagged[sl])
+            )
+            size += take
+            start += take
+            if size == most:
+                yield _concat(pending)
+                pending, size = [], 0
+    if pending:
+        yield _concat(pending)
 
 
 def _slice(b: LineBlock, start: int, stop: int) -> LineBlock:

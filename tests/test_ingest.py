@@ -28,7 +28,7 @@ def stream(ing, batches):
 
 
 def test_in_order_stream_passes_unchanged():
-    ing = Ingest(S, aperture_pulses=4)
+    ing = Ingest(S, aperture_pulses=4, max_gap_pulses=16)
     x, f = stream(ing, [batch(range(100, 110)), batch(range(110, 113))])
     np.testing.assert_array_equal(x[:, 0].real, np.arange(101, 114))
     assert not f.any()
@@ -36,7 +36,7 @@ def test_in_order_stream_passes_unchanged():
 
 
 def test_gap_is_zero_filled_and_flagged():
-    ing = Ingest(S, aperture_pulses=4)
+    ing = Ingest(S, aperture_pulses=4, max_gap_pulses=16)
     x, f = stream(ing, [batch([0, 1, 2, 5, 6]), batch([9])])
     np.testing.assert_array_equal(x[:, 0].real, [1, 2, 3, 0, 0, 6, 7, 0, 0, 10])
     np.testing.assert_array_equal(f, [0, 0, 0, 1, 1, 0, 0, 1, 1, 0])
@@ -44,7 +44,7 @@ def test_gap_is_zero_filled_and_flagged():
 
 
 def test_duplicates_and_late_shots_are_dropped_and_counted():
-    ing = Ingest(S, aperture_pulses=4)
+    ing = Ingest(S, aperture_pulses=4, max_gap_pulses=16)
     x, f = stream(ing, [batch([0, 1, 1, 2, 4, 3, 5, 2])])
     # 1 repeated (duplicate), 3 arrives after its slot was filled (late), 2 again (duplicate).
     np.testing.assert_array_equal(x[:, 0].real, [1, 2, 3, 0, 5, 6])
@@ -63,7 +63,7 @@ def test_large_jump_is_a_discontinuity_that_clears_the_ccd():
 
 
 def test_nonfinite_and_wrong_length_pulses_are_zeroed_and_flagged():
-    ing = Ingest(S, aperture_pulses=4)
+    ing = Ingest(S, aperture_pulses=4, max_gap_pulses=16)
     good = batch(range(4))
     good.samples[1, 3] = np.nan
     good.samples[2, 0] = np.inf
@@ -82,7 +82,7 @@ def test_random_link_faults_keep_every_surviving_shot_in_its_slot(rng):
     arrived = np.concatenate([keep, dup])
     order = np.argsort(np.concatenate([keep, dup + rng.integers(1, 5, len(dup))]), kind="stable")
     arrived = arrived[order]
-    ing = Ingest(S, aperture_pulses=16)
+    ing = Ingest(S, aperture_pulses=16, max_gap_pulses=64)
     chunks = np.split(arrived, np.sort(rng.choice(len(arrived), 50, replace=False)))
     x, f = stream(ing, [batch(c) for c in chunks if len(c)])
     val = x[:, 0].real.astype(int)

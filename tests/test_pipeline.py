@@ -92,7 +92,7 @@ def test_missing_pulses_are_zero_filled_and_their_lines_flagged(tiny):
 
 
 class Flood(Source):
-    """A live source far faster than the pipeline: 50 batches at once, no pacing."""
+    """A live source delivering 50 batches while the pipeline is stuck (``done`` set after)."""
 
     live = True
     description = "flood"
@@ -100,30 +100,42 @@ class Flood(Source):
     def __init__(self, shots):
         super().__init__()
         self.shots = shots
+        self.done = threading.Event()
 
     def __iter__(self):
-        for k in range(50):
+        for k in range(51):
+            if k == 50:  # one more batch once the pipeline has drained: it closes the gap
+                self.done.set()
+                time.sleep(0.3)
             seq = k * len(self.shots) + np.arange(len(self.shots))
             yield ShotBatch(seq, seq * 1.0, np.full(len(seq), time.perf_counter()), self.shots)
 
 
-class SlowSink(Collect):
+class StuckSink(Collect):
+    """Publishes nothing until the source has delivered everything: the queues must fill."""
+
+    def __init__(self, release: threading.Event):
+        super().__init__()
+        self.release = release
+
     def strip(self, strip, pipeline):
-        time.sleep(0.002)
+        self.release.wait(30)
         super().strip(strip, pipeline)
 
 
 def test_live_overload_drops_are_counted_and_timing_kept(tiny):
     cfg, _, shots = tiny
     settings = PipelineSettings(queue_pulses=64, strip_lines=4)
-    sink = SlowSink()
-    Pipeline(cfg, Flood(shots[:32]), [sink], settings).run()
+    source = Flood(shots[:32])
+    sink = StuckSink(source.done)
+    Pipeline(cfg, source, [sink], settings).run()
     c = sink.final["counters"]
     assert c["dropped_pulses"] > 0
-    # Dropped shots were zero-filled by ingest (except any at the very end), so every pulse slot
-    # up to the last received shot went through the CCD: the image keeps its timing.
-    assert c["pulses_processed"] == c["pulses_accepted"] + c["gap_pulses"]
-    assert c["pulses_received"] == 50 * 32 - c["dropped_pulses"]
+    # Every dropped shot was zero-filled by ingest, so all 51 * 32 pulse slots went through the
+    # CCD: the image keeps its timing, and the lines that hold a filled pulse are flagged.
+    assert c["gap_pulses"] == c["dropped_pulses"]
+    assert c["pulses_received"] == 51 * 32 - c["dropped_pulses"] == c["pulses_accepted"]
+    assert c["pulses_processed"] == 51 * 32
     assert c["flagged_lines"] > 0
 
 

@@ -1,4 +1,4 @@
-"""``rtsar bench``: throughput of the AO lens and of the two correlators, measured in one run.
+"""``rtsar bench``: throughput of the AO lens and of the correlators, measured in one run.
 
 Not a test.  Machines are shared and noisy, so every figure is reported beside its comparison
 measured in the same run (ratios), at the psaltis-max geometry (1200 range bins, N = 512) unless
@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from .ccd import DirectCorrelator, FFTCorrelator, design_mask
+from .ccd import DirectCorrelator, FFTCorrelator, PartitionedCorrelator, design_mask
 from .lens_plan import NumpyLens, make_plan
 from .params import preset
 
@@ -72,17 +72,35 @@ def bench_lens(cfg, batches=(16, 64, 256), seconds=1.0, device=None, rounds=3) -
     return rows
 
 
-def bench_correlators(cfg, batch=64, seconds=1.0) -> list[dict]:
+def bench_correlators(cfg, batch=64, seconds=1.0, pushes=400) -> list[dict]:
+    """Pulses/s of the three correlators, pushes of ``batch`` lines, measured in one run.
+
+    The partitioned correlator (blocks of ``cfg.processor.partition_lines`` = L) is also fed the
+    way a low-latency stream feeds it, one block per push: its pulses/s then, and the time of
+    such a push (what it adds to a line's latency), median and 99th percentile of ``pushes``.
+    """
     plan = make_plan(cfg)
     mask = design_mask(cfg, plan.range_m)
+    block = min(cfg.processor.partition_lines, mask.shape[0])
     rng = np.random.default_rng(1)
-    lines = (
-        rng.standard_normal((batch, plan.bin_count))
-        + 1j * rng.standard_normal((batch, plan.bin_count))
-    ).astype(np.complex64)
+    shape = (max(batch, block), plan.bin_count)
+    lines = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(np.complex64)
+    corrs = {
+        "direct": DirectCorrelator(mask),
+        "fft": FFTCorrelator(mask),
+        "partitioned": PartitionedCorrelator(mask, block),
+    }
     rates = {}
-    for name, corr in (("direct", DirectCorrelator(mask)), ("fft", FFTCorrelator(mask))):
-        rates[name] = _rate(lambda c=corr: c.push(lines), batch, seconds)
+    for name, corr in corrs.items():
+        rates[name] = _rate(lambda c=corr, x=lines[:batch]: c.push(x), batch, seconds)
+    streaming = corrs["partitioned"]
+    one_block = lines[:block]
+    block_rate = _rate(lambda: streaming.push(one_block), block, seconds)
+    times = np.empty(pushes)
+    for i in range(pushes):
+        t0 = time.perf_counter()
+        streaming.push(one_block)
+        times[i] = time.perf_counter() - t0
     return [
         {
             "stage": "correlator",
@@ -90,6 +108,12 @@ def bench_correlators(cfg, batch=64, seconds=1.0) -> list[dict]:
             "direct_pulses_per_s": rates["direct"],
             "fft_pulses_per_s": rates["fft"],
             "fft_over_direct": rates["fft"] / rates["direct"],
+            "partitioned_pulses_per_s": rates["partitioned"],
+            "partitioned_over_fft": rates["partitioned"] / rates["fft"],
+            "partition_lines": block,
+            "partitioned_one_block_pulses_per_s": block_rate,
+            "partitioned_push_median_ms": 1e3 * float(np.median(times)),
+            "partitioned_push_p99_ms": 1e3 * float(np.percentile(times, 99)),
             "aperture_pulses": mask.shape[0],
             "range_bins": mask.shape[1],
         }

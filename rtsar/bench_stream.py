@@ -148,7 +148,7 @@ def isolated_correlator_rate(cfg: Config, batch: int, seconds: float = 1.0) -> f
         p.correlator,
         design_mask(cfg, plan.range_m),
         p.fft_length,
-        partition_lines=getattr(p, "partition_lines", None),
+        partition_lines=p.partition_lines,
     )
     rng = np.random.default_rng(2)
     shape = (batch, plan.bin_count)

@@ -52,8 +52,9 @@ class StreamProcessor:
         self.plan = make_plan(config)
         self.lens = make_lens(self.plan, lens_backend, device)
         self.mask = design_mask(config, self.plan.range_m)
+        p = config.processor
         self.correlator = make_correlator(
-            config.processor.correlator, self.mask, config.processor.fft_length
+            p.correlator, self.mask, p.fft_length, partition_lines=p.partition_lines
         )
         self.start_along_track_m = float(start_along_track_m)
         self.lines_out = 0

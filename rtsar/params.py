@@ -172,11 +172,22 @@ class Processor:
     range_oversampling  FFT zero-padding factor of the lens (power of two)
     range_window, azimuth_window   one of WINDOWS ("taylor": n̄ = 4, -35 dB)
     per_bin_mask      True: mask chirp rate per range bin (Psaltis eq. 5, k1/y0); False: one mask
-    correlator        "direct" (shift register, numba) or "fft" (overlap-save block)
+    correlator        one of CORRELATORS: "direct" (shift register, numba: one line per pulse,
+                      N multiply-adds per pixel per line), "fft" (overlap-save blocks of
+                      M - N + 1 lines: fastest, latency ~N pulses) or "partitioned"
+                      (partitioned overlap-save: lines leave in blocks of partition_lines)
     fft_length        FFT correlator block transform length M (power of two >= N; None: 2N);
                       lines leave in blocks of M - N + 1: the latency/throughput knob of "fft"
+    partition_lines   L, the block of the "partitioned" correlator: a power of two, at most N
+                      (checked when that correlator is chosen).  A line leaves at most L - 1
+                      pulses after its last pulse, plus one block's compute time; each line
+                      costs 2N/L complex multiply-adds per pixel and its share of two 2L-point
+                      transforms, so halving L halves the wait and doubles the multiply-adds.
+                      16 at 10 kHz PRF: ≤ 1.5 ms wait, 64 multiply-adds per pixel (N = 512)
     micro_batch       pulses per AO-lens launch
     """
+
+    CORRELATORS = ("direct", "fft", "partitioned")  # no annotation: a constant, not a field
 
     aperture_pulses: int
     range_bins: int
@@ -187,6 +198,7 @@ class Processor:
     per_bin_mask: bool = True
     correlator: str = "fft"
     fft_length: int | None = None
+    partition_lines: int = 16
     micro_batch: int = 64
     precision: str = "complex64"
 
@@ -204,9 +216,16 @@ class Processor:
                 raise ValueError(
                     f"Processor.{name} must be one of {WINDOWS}, got {getattr(self, name)!r}"
                 )
-        if self.correlator not in ("direct", "fft"):
+        if self.correlator not in self.CORRELATORS:
             raise ValueError(
-                f"Processor.correlator must be 'direct' or 'fft', got {self.correlator!r}"
+                f"Processor.correlator must be one of {self.CORRELATORS}, got {self.correlator!r}"
+            )
+        lines = self.partition_lines
+        if not (isinstance(lines, int) and lines >= 1 and not lines & (lines - 1)):
+            raise ValueError(f"Processor.partition_lines must be a power of two, got {lines!r}")
+        if self.correlator == "partitioned" and lines > self.aperture_pulses:
+            raise ValueError(
+                f"Processor.partition_lines {lines} exceeds aperture_pulses {self.aperture_pulses}"
             )
         if self.fft_length is not None and not (
             isinstance(self.fft_length, int)

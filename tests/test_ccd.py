@@ -1,4 +1,4 @@
-"""The shifting CCD: direct and FFT correlators against the float64 batch reference."""
+"""The shifting CCD: direct, FFT and partitioned correlators against the float64 batch reference."""
 
 import numpy as np
 import pytest
@@ -8,9 +8,11 @@ from naive import correlate_loops
 from rtsar.ccd import (
     DirectCorrelator,
     FFTCorrelator,
+    PartitionedCorrelator,
     aperture_offsets_m,
     correlate_reference,
     design_mask,
+    make_correlator,
 )
 from rtsar.lens_plan import make_plan
 from rtsar.metrics import relative_rms
@@ -36,7 +38,7 @@ def _stream(corr, lines, sizes):
     return np.concatenate(out)
 
 
-@pytest.mark.parametrize("cls", [DirectCorrelator, FFTCorrelator])
+@pytest.mark.parametrize("cls", [DirectCorrelator, FFTCorrelator, PartitionedCorrelator])
 def test_streaming_equals_batch_reference(cls, rng):
     n, nr, p = 64, 23, 700
     mask = crandn(rng, n, nr) / n
@@ -89,6 +91,107 @@ def test_long_run_has_no_drift():
     expected = correlate_reference(history, mask)[0]
     assert relative_rms(first, expected) < TOL
     np.testing.assert_array_equal(last, first)  # bit-identical: each line sums exactly N terms
+
+
+@pytest.mark.parametrize(
+    "n, block, bins",
+    [(64, 16, 23), (64, 1, 5), (64, 64, 5), (50, 16, 7), (37, 8, 40), (2, 1, 3), (2, 2, 3)],
+)
+def test_partitioned_matches_reference(n, block, bins, rng):
+    """L = 1, L = N, N not a multiple of L (a zero-padded last partition) and range bins not a
+    multiple of the column group (zero-padded columns) included."""
+    mask = crandn(rng, n, bins) / n
+    lines = crandn(rng, 5 * n + 3, bins, dtype=np.complex64)
+    ref = correlate_reference(lines, mask)
+    corr = PartitionedCorrelator(mask, block)
+    assert corr.partitions == -(-n // block)
+    got = _stream(corr, lines, [len(lines)])
+    assert got.shape == ref.shape
+    assert relative_rms(got, ref) < TOL
+    assert corr.pulses_in == len(lines) and corr.lines_out == len(ref)
+
+
+def test_partitioned_output_does_not_depend_on_push_sizes(rng):
+    n, nr, p = 48, 9, 613
+    mask, lines = crandn(rng, n, nr) / n, crandn(rng, p, nr, dtype=np.complex64)
+    one_push = _stream(PartitionedCorrelator(mask, 8), lines, [p])
+    by_line = _stream(PartitionedCorrelator(mask, 8), lines, [1] * p)
+    odd = _stream(PartitionedCorrelator(mask, 8), lines, [5, 3, 200, 1, 7, 131, 266])
+    for got in (by_line, odd):
+        assert got.shape == one_push.shape == (p - n + 1, nr)
+        assert relative_rms(got, one_push) < 1e-6  # the same sums, block by block
+
+
+def test_partitioned_flush_emits_every_complete_line_and_the_stream_goes_on(rng):
+    n, nr, block = 32, 5, 16
+    mask, lines = crandn(rng, n, nr) / n, crandn(rng, 200, nr, dtype=np.complex64)
+    ref = correlate_reference(lines, mask)
+    corr = PartitionedCorrelator(mask, block)
+    # Before the N-th pulse nothing is complete, flushed or not.
+    assert len(corr.push(lines[: n - 1])) == 0 and len(corr.flush()) == 0
+    got = [corr.push(lines[n - 1 : 70])]  # 70 pulses: 64 in whole blocks, 6 pending
+    assert corr.lines_out == 64 - n + 1
+    got.append(corr.flush())  # the 6 pending pulses complete 6 more lines
+    assert corr.lines_out == 70 - n + 1 == corr.pulses_in - n + 1
+    assert len(corr.flush()) == 0  # nothing twice
+    # Flushing does not disturb the stream: the rest equals the batch result.
+    got += [corr.push(lines[70:75]), corr.flush(), corr.push(lines[75:]), corr.flush()]
+    got = np.concatenate(got)
+    assert got.shape == ref.shape and corr.lines_out == len(ref)
+    assert relative_rms(got, ref) < TOL
+
+
+@pytest.mark.parametrize("block", [4, 16])
+def test_partitioned_first_line_is_the_first_full_aperture(block, rng):
+    n = 16
+    corr = PartitionedCorrelator(crandn(rng, n, 3), block)
+    assert len(corr.push(crandn(rng, n - 1, 3))) == 0
+    assert len(corr.push(crandn(rng, 1, 3))) == 1  # pulse N completes a block and a line
+    assert corr.pulses_in == n and corr.lines_out == 1
+
+
+def test_all_correlators_agree(rng):
+    n, nr = 40, 6
+    mask, lines = crandn(rng, n, nr) / n, crandn(rng, 333, nr, dtype=np.complex64)
+    sizes = [17, 1, 64, 100, 151]
+    outs = {
+        kind: _stream(make_correlator(kind, mask, partition_lines=8), lines, sizes)
+        for kind in ("direct", "fft", "partitioned")
+    }
+    for a in outs:
+        for b in outs:
+            assert relative_rms(outs[a], outs[b]) < 2 * TOL, (a, b)
+
+
+def test_partitioned_long_run_stays_on_the_reference():
+    """10⁵ pulses of a periodic history: every line equals its batch value (nothing drifts)."""
+    n, nr, total = 64, 4, 100_003  # 100 003: a partial block is left for flush()
+    rng = np.random.default_rng(5)
+    mask = (crandn(rng, n, nr) / n).astype(np.complex64)
+    history = crandn(rng, n, nr, dtype=np.complex64)
+    expected = correlate_reference(np.tile(history, (2, 1)), mask)[:n]  # line j: expected[j % n]
+    stream = np.tile(history, (total // n + 1, 1))[:total]
+    corr = PartitionedCorrelator(mask, 16)
+    pushes = [stream[i : i + 999] for i in range(0, total, 999)]  # blocks straddle pushes
+    worst = 0.0
+    for push in [*pushes, None]:
+        first = corr.lines_out
+        out = corr.flush() if push is None else corr.push(push)
+        if len(out):
+            want = expected[(first + np.arange(len(out))) % n]
+            worst = max(worst, relative_rms(out, want))
+    assert corr.lines_out == total - n + 1
+    assert worst < TOL
+
+
+def test_partitioned_block_must_be_a_power_of_two_up_to_n(rng):
+    mask = crandn(rng, 32, 3)
+    for block in (0, 3, 64, 2.0):
+        with pytest.raises(ValueError, match="block_lines"):
+            PartitionedCorrelator(mask, block)
+    assert make_correlator("partitioned", mask, partition_lines=32).block_lines == 32
+    with pytest.raises(ValueError, match="partitioned"):
+        make_correlator("fourier", mask)
 
 
 def test_mask_is_conjugate_exact_history_and_per_bin():

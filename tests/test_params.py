@@ -89,3 +89,23 @@ def test_aliased_aperture_is_refused():
 def test_unknown_preset_lists_names():
     with pytest.raises(ValueError, match="psaltis-jpl"):
         preset("nope")
+
+
+def test_partition_lines_is_a_power_of_two_up_to_the_aperture():
+    base = dict(aperture_pulses=64, range_bins=8, correlator="partitioned")
+    assert Processor(**base).partition_lines == 16
+    assert Processor(**base, partition_lines=1).partition_lines == 1
+    assert Processor(**base, partition_lines=64).partition_lines == 64  # L = N: one partition
+    for bad in (0, -16, 3, 24, 2.0, None):
+        with pytest.raises(ValueError, match="partition_lines must be a power of two"):
+            Processor(**base, partition_lines=bad)
+    with pytest.raises(ValueError, match="partition_lines 128 exceeds aperture_pulses 64"):
+        Processor(**base, partition_lines=128)
+    # Only the partitioned correlator uses the knob: a short aperture with the default is fine.
+    assert Processor(aperture_pulses=8, range_bins=8, correlator="fft").partition_lines == 16
+    with pytest.raises(ValueError, match="partition_lines 16 exceeds aperture_pulses 8"):
+        Processor(aperture_pulses=8, range_bins=8, correlator="partitioned")
+    with pytest.raises(ValueError, match="'direct', 'fft', 'partitioned'"):
+        Processor(aperture_pulses=64, range_bins=8, correlator="shift-register")
+    cfg = preset("psaltis-max").with_processor(correlator="partitioned", partition_lines=32)
+    assert config_from_dict(cfg.to_dict()) == cfg

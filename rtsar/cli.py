@@ -346,6 +346,8 @@ def cmd_bench(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .params import Processor
+
     p = argparse.ArgumentParser(
         prog="rtsar",
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -384,8 +386,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--device", help="OpenCL platform/device name substring")
     s.add_argument(
         "--correlator",
-        choices=("direct", "fft"),
-        help="direct = CCD shift-register emulation; fft = overlap-save blocks",
+        choices=Processor.CORRELATORS,
+        help="direct = CCD shift-register emulation; fft = overlap-save blocks; "
+        "partitioned = partitioned overlap-save (low latency)",
     )
     s.add_argument("--micro-batch", type=int, help="pulses per lens launch")
     s.set_defaults(func=cmd_process)
@@ -407,7 +410,7 @@ def build_parser() -> argparse.ArgumentParser:
         g.add_argument("--device", help="OpenCL platform/device name substring")
         g.add_argument(
             "--correlator",
-            choices=("direct", "fft", "partitioned"),
+            choices=Processor.CORRELATORS,
             help="direct: CCD shift register, one line per pulse; fft: overlap-save "
             "blocks (fast, one block of latency); partitioned: low latency, fast",
         )

@@ -59,16 +59,19 @@ def bench_lens(cfg, batches=(16, 64, 256), seconds=1.0, device=None, rounds=3) -
             for name, call in calls.items():
                 rate = _rate(lambda s=shots, f=call: f(s), b, seconds / rounds)
                 best[name] = max(best[name], rate)
-        rows.append({
-            "stage": "lens", "batch": b,
-            "opencl_pulses_per_s": best["opencl"],
-            "numpy_fft_pulses_per_s": best["numpy"],
-            "scipy_fft_pulses_per_s": best["scipy"],
-            "numpy_one_fft_pulses_per_s": best["numpy_one_fft"],
-            "opencl_over_numpy": best["opencl"] / best["numpy"],
-            "opencl_over_scipy": best["opencl"] / best["scipy"],
-            "opencl_over_numpy_one_fft": best["opencl"] / best["numpy_one_fft"],
-        })
+        rows.append(
+            {
+                "stage": "lens",
+                "batch": b,
+                "opencl_pulses_per_s": best["opencl"],
+                "numpy_fft_pulses_per_s": best["numpy"],
+                "scipy_fft_pulses_per_s": best["scipy"],
+                "numpy_one_fft_pulses_per_s": best["numpy_one_fft"],
+                "opencl_over_numpy": best["opencl"] / best["numpy"],
+                "opencl_over_scipy": best["opencl"] / best["scipy"],
+                "opencl_over_numpy_one_fft": best["opencl"] / best["numpy_one_fft"],
+            }
+        )
     return rows
 
 
@@ -123,7 +126,7 @@ def bench_correlators(cfg, batch=64, seconds=1.0, pushes=400) -> list[dict]:
 def run_bench(args) -> int:
     from .opencl import device_info
 
-    name = getattr(args, "preset", None) or "psaltis-max"
+    name = getattr(args, "preset", None) or "psaltis-max"  # lens and correlators alone
     cfg = preset(name)
     out = sys.stdout
     seconds = args.seconds
@@ -135,15 +138,23 @@ def run_bench(args) -> int:
     )
     lens_rows = bench_lens(cfg, seconds=seconds, device=args.device)
     print("\nAO lens (range compression), pulses/s", file=out)
-    print("(NumPy/SciPy: the same plan in complex64; 1 FFT: one bare np.fft.fft of the batch)",
-          file=out)
-    print(f"{'batch':>6} {'OpenCL':>10} {'NumPy':>10} {'SciPy':>10} {'1 FFT':>10} "
-          f"{'CL/NumPy':>9} {'CL/SciPy':>9} {'CL/1 FFT':>9}", file=out)
+    print(
+        "(NumPy/SciPy: the same plan in complex64; 1 FFT: one bare np.fft.fft of the batch)",
+        file=out,
+    )
+    print(
+        f"{'batch':>6} {'OpenCL':>10} {'NumPy':>10} {'SciPy':>10} {'1 FFT':>10} "
+        f"{'CL/NumPy':>9} {'CL/SciPy':>9} {'CL/1 FFT':>9}",
+        file=out,
+    )
     for r in lens_rows:
-        print(f"{r['batch']:6d} {r['opencl_pulses_per_s']:10,.0f} "
-              f"{r['numpy_fft_pulses_per_s']:10,.0f} {r['scipy_fft_pulses_per_s']:10,.0f} "
-              f"{r['numpy_one_fft_pulses_per_s']:10,.0f} {r['opencl_over_numpy']:9.2f} "
-              f"{r['opencl_over_scipy']:9.2f} {r['opencl_over_numpy_one_fft']:9.2f}", file=out)
+        print(
+            f"{r['batch']:6d} {r['opencl_pulses_per_s']:10,.0f} "
+            f"{r['numpy_fft_pulses_per_s']:10,.0f} {r['scipy_fft_pulses_per_s']:10,.0f} "
+            f"{r['numpy_one_fft_pulses_per_s']:10,.0f} {r['opencl_over_numpy']:9.2f} "
+            f"{r['opencl_over_scipy']:9.2f} {r['opencl_over_numpy_one_fft']:9.2f}",
+            file=out,
+        )
     corr_rows = bench_correlators(cfg, seconds=seconds)
     print("\nShifting CCD (azimuth correlation), pulses/s", file=out)
     for r in corr_rows:
@@ -161,6 +172,29 @@ def run_bench(args) -> int:
         f"best correlator {best / prf:.2f}x",
         file=out,
     )
+    from .bench_stream import bench_pipeline
+
+    pipeline_rows = []
+    names = (
+        [getattr(args, "preset", None)]
+        if getattr(args, "preset", None)
+        else ["psaltis-max", "psaltis-jpl"]
+    )
+    print(
+        "\nLive pipeline end to end (simulated shots from memory, strips published on a "
+        "loopback ZeroMQ socket)",
+        file=out,
+    )
+    for pname in names:
+        pipeline_rows.append(
+            bench_pipeline(
+                pname,
+                preset(pname),
+                seconds=max(2.0, 2 * seconds),
+                real_seconds=args.real_seconds,
+                log=lambda m: print(m, file=out, flush=True),
+            )
+        )
     if args.json:
         with open(args.json, "w") as f:
             json.dump(
@@ -169,6 +203,7 @@ def run_bench(args) -> int:
                     "device": device_info(args.device),
                     "lens": lens_rows,
                     "correlator": corr_rows,
+                    "pipeline": pipeline_rows,
                 },
                 f,
                 indent=2,

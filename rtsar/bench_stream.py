@@ -202,3 +202,70 @@ __all__ = [
     "numpy_range_doppler",
     "stream_run",
 ]
+
+
+def bench_pipeline(name: str, cfg: Config, seconds: float, real_seconds: float, log=print) -> dict:
+    """The streaming figures of one preset, all measured in this call (see module docstring)."""
+    shots = bench_shots(cfg, 2048)
+    result = {"preset": name, "prf_hz": cfg.geometry.prf_hz, "runs": []}
+
+    def run(label, c, rate, secs, **kw):
+        stalled = kw.pop("stalled_subscriber", False)
+        r = stream_run(c, shots, secs, rate, PipelineSettings(**kw), stalled_subscriber=stalled)
+        r["label"] = label
+        result["runs"].append(r)
+        log(
+            f"  {label:34} {r['real_time_factor']:6.2f}x RT  dropped {r['dropped_pulses']:5d}  "
+            f"latency median {r['latency_median_ms']:8.2f} ms  p99 {r['latency_p99_ms']:8.2f} ms"
+            + (f"  PRF error {100 * r['prf_error']:+.3f} %" if "prf_error" in r else "")
+        )
+        return r
+
+    log(
+        f"{name}: PRF {cfg.geometry.prf_hz:g} Hz, CCD {cfg.processor.aperture_pulses} x "
+        f"{cfg.processor.range_bins}, {cfg.waveform.samples_per_shot} samples/shot"
+    )
+    # Warm-up (OpenCL build, numba cache, FFT plans), not recorded.
+    stream_run(cfg.with_processor(correlator="partitioned"), shots, 0.5, "max", PipelineSettings())
+    for kind in ("partitioned", "fft"):
+        c = cfg.with_processor(correlator=kind)
+        top = run(f"{kind}: max rate", c, "max", seconds)
+        run(f"{kind}: real rate ({real_seconds:g} s)", c, "real", real_seconds)
+        iso = isolated_correlator_rate(c, top["max_batch"], seconds=min(seconds, 1.0))
+        top["isolated_correlator_pulses_per_s"] = iso
+        if "ccd_stage_pulses_per_s" in top:
+            top["ccd_stage_over_isolated"] = top["ccd_stage_pulses_per_s"] / iso
+    part = cfg.with_processor(correlator="partitioned")
+    run("partitioned: max rate, fused stages", part, "max", seconds, stages="fused")
+    base = result["runs"][0]
+    # A stalled subscriber (connected, never reads) against no subscriber, back to back.
+    none = run("partitioned: max rate (repeat)", part, "max", seconds)
+    stalled = run(
+        "partitioned: max rate, stalled sub.", part, "max", seconds, stalled_subscriber=True
+    )
+    result["stalled_subscriber_over_none"] = stalled["pulses_per_s"] / none["pulses_per_s"]
+    for mb in (8, 16, 256):
+        run(f"partitioned: max rate, max batch {mb}", part, "max", seconds, max_batch=mb)
+    rd = bench_numpy_range_doppler(cfg, np.concatenate([shots] * 2))
+    result["numpy_range_doppler_pulses_per_s"] = rd
+    result["pipeline_over_numpy_range_doppler"] = {
+        r["label"]: r["pulses_per_s"] / rd for r in result["runs"] if r["rate"] == "max"
+    }
+    log(
+        f"  plain NumPy batch range-Doppler (4096 pulses): {rd:,.0f} pulses/s = "
+        f"{rd / cfg.geometry.prf_hz:.2f}x RT; pipeline (partitioned) / NumPy = "
+        f"{base['pulses_per_s'] / rd:.2f}"
+    )
+    for r in result["runs"][:3:2]:
+        if "ccd_stage_over_isolated" in r:
+            log(
+                f"  {r['correlator']} CCD stage in the pipeline: "
+                f"{r['ccd_stage_pulses_per_s']:,.0f} pulses/s = "
+                f"{r['ccd_stage_over_isolated']:.2f} of the same correlator alone "
+                f"({r['isolated_correlator_pulses_per_s']:,.0f})"
+            )
+    log(
+        f"  throughput with a stalled subscriber / with none: "
+        f"{result['stalled_subscriber_over_none']:.2f}"
+    )
+    return result

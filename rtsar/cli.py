@@ -573,8 +573,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seconds", type=float, default=1.0, help="time per measurement")
     s.add_argument(
         "--preset",
-        default="psaltis-max",
-        help="geometry to measure at (default psaltis-max: 1200 bins, N = 512)",
+        help="measure at this preset only (default: lens and correlators at psaltis-max; "
+        "the live pipeline at psaltis-max and psaltis-jpl)",
+    )
+    s.add_argument(
+        "--real-seconds",
+        type=float,
+        default=10.0,
+        help="length of each real-rate pipeline run (default 10 s)",
     )
     s.add_argument("--device", help="OpenCL platform/device name substring")
     s.set_defaults(func=cmd_bench)

@@ -8,6 +8,7 @@ host, on the ``time.perf_counter()`` clock, and is what latency is measured from
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -32,7 +33,7 @@ class ShotBatch:
         return len(self.seq)
 
 
-class Source:
+class Source(ABC):
     """Base class of shot sources: iterate to receive :class:`ShotBatch` es.
 
     ``live`` sources (simulator at its PRF, serial instrument) cannot be paused: when the
@@ -47,8 +48,9 @@ class Source:
         self.counters: dict[str, int] = {}
         self._stop = False
 
-    def __iter__(self) -> Iterator[ShotBatch]:  # pragma: no cover - interface
-        raise NotImplementedError
+    @abstractmethod
+    def __iter__(self) -> Iterator[ShotBatch]:
+        """Yield batches until the source ends or ``close()`` is called."""
 
     def close(self) -> None:
         self._stop = True

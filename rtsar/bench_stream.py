@@ -23,6 +23,7 @@ import time
 import numpy as np
 import zmq
 
+from .bench import _rate
 from .ccd import design_mask, make_correlator
 from .lens_plan import make_plan
 from .params import Config
@@ -153,12 +154,7 @@ def isolated_correlator_rate(cfg: Config, batch: int, seconds: float = 1.0) -> f
     rng = np.random.default_rng(2)
     shape = (batch, plan.bin_count)
     lines = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(np.complex64)
-    corr.push(lines)
-    n, t0 = 0, time.perf_counter()
-    while time.perf_counter() - t0 < seconds or n < 3 * batch:
-        corr.push(lines)
-        n += batch
-    return n / (time.perf_counter() - t0)
+    return _rate(lambda: corr.push(lines), batch, seconds)
 
 
 def numpy_range_doppler(cfg: Config, shots: np.ndarray) -> np.ndarray:

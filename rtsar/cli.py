@@ -505,6 +505,19 @@ def build_parser() -> argparse.ArgumentParser:
     pipeline_options(s, "lossless")
     s.set_defaults(func=cmd_replay)
 
+    def subscriber_options(s) -> None:
+        s.add_argument(
+            "endpoint",
+            nargs="?",
+            default="tcp://127.0.0.1:5555",
+            help="publisher (default tcp://127.0.0.1:5555)",
+        )
+        s.add_argument(
+            "--curve-server-key",
+            metavar="PUBLIC_KEY_FILE",
+            help="the publisher's public key when it uses CURVE",
+        )
+
     s = sub.add_parser(
         "subscribe",
         help="record published strips into an image file",
@@ -513,19 +526,9 @@ def build_parser() -> argparse.ArgumentParser:
         "Ctrl-C or after --timeout seconds of silence. Missed strips are zero lines, counted "
         "and listed in the file.",
     )
-    s.add_argument(
-        "endpoint",
-        nargs="?",
-        default="tcp://127.0.0.1:5555",
-        help="publisher (default tcp://127.0.0.1:5555)",
-    )
+    subscriber_options(s)
     s.add_argument("-o", "--output", required=True, help="image file to write (.h5)")
     s.add_argument("--timeout", type=float, help="stop after this many seconds of silence")
-    s.add_argument(
-        "--curve-server-key",
-        metavar="PUBLIC_KEY_FILE",
-        help="the publisher's public key when it uses CURVE",
-    )
     s.set_defaults(func=cmd_subscribe)
 
     s = sub.add_parser(
@@ -535,12 +538,7 @@ def build_parser() -> argparse.ArgumentParser:
         "Needs a display; --png FILE waits for --lines lines and writes a snapshot instead. "
         "A viewer that cannot keep up skips strips; it never slows the processor.",
     )
-    s.add_argument(
-        "endpoint",
-        nargs="?",
-        default="tcp://127.0.0.1:5555",
-        help="publisher (default tcp://127.0.0.1:5555)",
-    )
+    subscriber_options(s)
     s.add_argument("--png", metavar="FILE", help="write a snapshot PNG and exit")
     s.add_argument("--lines", type=int, default=1024, help="lines shown (default 1024)")
     s.add_argument("--dynamic-range-db", type=float, default=50.0, help="dB shown (default 50)")
@@ -549,11 +547,6 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=30.0,
         help="--png: give up after this many seconds of silence (default 30)",
-    )
-    s.add_argument(
-        "--curve-server-key",
-        metavar="PUBLIC_KEY_FILE",
-        help="the publisher's public key when it uses CURVE",
     )
     s.set_defaults(func=cmd_view)
 

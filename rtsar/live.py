@@ -108,9 +108,7 @@ def run_stream(
             interrupted = True
             stream.write("\ninterrupted: the pulses already received are being finished\n")
             stats = pipe.join()
-    except KeyboardInterrupt:
-        interrupted = True
-        publisher.close()
+    except KeyboardInterrupt:  # while waiting for subscribers: nothing was processed
         return 130
     finally:
         publisher.close()

@@ -290,24 +290,19 @@ class Pipeline:
                     break
                 t = time.perf_counter()
                 blocks = [b for batch in batches for b in self.ingest(batch)]
+                busy += time.perf_counter() - t
                 for block in _groups(blocks, self.max_batch):
+                    t = time.perf_counter()
                     if block.flagged.all():  # zero pulses (gap fill): zero lines, no launch
                         block.samples = np.zeros(
                             (len(block), self.engine.plan.bin_count), np.complex64
                         )
                     else:
                         block.samples = self.engine.lens.compress(block.samples)
-                    if self.settings.stages == "fused":
-                        out = self._ccd_step([block])
-                        if out is not None:
-                            busy += time.perf_counter() - t
-                            self.q_image.put(out)
-                            t = time.perf_counter()
-                    else:
-                        busy += time.perf_counter() - t
-                        self.q_lines.put(block)
-                        t = time.perf_counter()
-                busy += time.perf_counter() - t
+                    out = self._ccd_step([block]) if self.settings.stages == "fused" else block
+                    busy += time.perf_counter() - t
+                    if out is not None:
+                        (self.q_image if self.settings.stages == "fused" else self.q_lines).put(out)
             if self.settings.stages == "fused":
                 tail = self._ccd_flush()
                 if tail is not None:

@@ -16,6 +16,7 @@ import numpy as np
 
 from .io import ImageWriter
 from .params import config_from_dict
+from .publish import strip_header
 
 
 class StripRecorder:
@@ -88,8 +89,6 @@ class ImageFileSink:
         self.lines = 0
 
     def strip(self, strip, pipeline) -> None:
-        from .publish import strip_header
-
         self.recorder.add_strip(strip_header(strip, pipeline), strip.lines)
 
     def stats(self, stats: dict, pipeline) -> None:

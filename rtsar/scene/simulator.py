@@ -11,23 +11,26 @@ written in complex baseband with the conventions of rtsar.params:
   s[n] = a_j · exp i2π[-f0 Δτ - K Δτ t' + K Δτ (τ + τ_ref)/2],  Δτ = τ - τ_ref
   (the last term is Crouch's residual κτ²/2, kept).
 
-Phases are accumulated in cycles in float64 and reduced mod 1 before the exponential; shots are
-cast to complex64 only at the end.  Effects named by the scene are applied in order; others are
-neither imported nor called.
+A chirp deviation e(u) (cycles, u from the middle of the transmitted chirp; effects supply it)
+adds e(t_n - τ - Tp/2) to a pulsed return and e(t' - τ) - e(t' - τ_ref) to a dechirped FMCW
+return.  Phases are accumulated in cycles in float64 and reduced mod 1 before the exponential;
+shots are cast to complex64 only at the end.  Effects named by the scene are applied in order;
+others are neither imported nor called.  Auxiliary receive channels (effects' ``aux_channels``)
+travel beside the main channel in ``Shot.aux``.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..lens_plan import receive_window_open_s
 from ..params import C_M_PER_S, FMCWChirp, PulsedChirp
 from .effects import load_effects
-from .effects.base import Effect
+from .effects.base import Effect, PulseContext
 from .model import Scene
 
 
@@ -37,6 +40,7 @@ class Shot:
     time_s: float  # nominal transmit time, index / PRF
     along_track_m: float
     samples: np.ndarray  # complex64[samples_per_shot]
+    aux: dict = field(default_factory=dict)  # name → complex64[samples_per_shot]
 
 
 class Simulator:
@@ -47,12 +51,11 @@ class Simulator:
         cfg = scene.config
         self.config = cfg
         self.effects = load_effects(scene.effects, cfg)
-        self._gain_effects = [
-            e for e in self.effects if type(e).target_gain is not Effect.target_gain
-        ]
-        self._shot_effects = [
-            e for e in self.effects if type(e).apply_to_shot is not Effect.apply_to_shot
-        ]
+        self._gain_effects = self._overriding("target_gain")
+        self._shot_effects = self._overriding("apply_to_shot")
+        self._chirp_effects = self._overriding("chirp_deviation_cycles")
+        self._position_effects = self._overriding("along_track_error_m")
+        self._aux_effects = self._overriding("aux_channels")
         self._rng = np.random.default_rng(scene.seed)
         self._next = 0
         wf = cfg.waveform
@@ -66,21 +69,24 @@ class Simulator:
         else:  # pragma: no cover - params validation prevents it
             raise TypeError(type(wf).__name__)
 
+    def _overriding(self, hook: str) -> list[Effect]:
+        """The effects that implement ``hook`` (the others are never called for it)."""
+        return [e for e in self.effects if getattr(type(e), hook) is not getattr(Effect, hook)]
+
     # -- one shot -------------------------------------------------------------------------
-    def _echo(self, pulse: int) -> np.ndarray:
-        cfg, tg = self.config, self.scene.targets
-        lam = cfg.geometry.wavelength_m
-        x_p = float(self.scene.along_track_of(pulse))
-        offset = tg.along_track_m - x_p
-        r = np.sqrt(tg.slant_range_m**2 + offset**2)
-        gain = tg.amplitude.copy()
-        for e in self._gain_effects:
-            gain *= e.target_gain(pulse, offset, r)
+    def echo(self, range_m, gain, deviation=None, lo_range_m=None) -> np.ndarray:
+        """Returns from scatterers at ranges ``range_m`` with complex ``gain`` (complex128 samples).
+
+        The exact synthesis of the module docstring for any set of (effective, e.g. bistatic
+        half-path) ranges; ``deviation`` is the chirp deviation e(u) in cycles (None: ideal chirp)
+        and ``lo_range_m`` the FMCW LO delay as a range (None: the waveform's reference range).
+        """
         out = np.zeros(self.samples_per_shot, np.complex128)
-        wf = cfg.waveform
+        wf = self.config.waveform
+        lam = self.config.geometry.wavelength_m
         if isinstance(wf, PulsedChirp):
             fs, k, tp = wf.sample_rate_hz, wf.chirp_rate_hz_per_s, wf.pulse_duration_s
-            for rj, gj in zip(r, gain, strict=True):
+            for rj, gj in zip(np.atleast_1d(range_m), np.atleast_1d(gain), strict=True):
                 if gj == 0:
                     continue
                 tau = 2.0 * rj / C_M_PER_S
@@ -90,24 +96,82 @@ class Simulator:
                     continue
                 u = self._t[lo:hi] - tau - 0.5 * tp
                 carrier = math.fmod(-2.0 * rj / lam, 1.0)
-                cycles = np.mod(carrier + 0.5 * k * u * u, 1.0)
-                out[lo:hi] += gj * np.exp(2j * math.pi * cycles)
-        else:
-            k = wf.chirp_rate_hz_per_s
-            tau_ref = 2.0 * wf.reference_range_m / C_M_PER_S
-            for rj, gj in zip(r, gain, strict=True):
-                if gj == 0:
-                    continue
-                tau = 2.0 * rj / C_M_PER_S
-                dtau = 2.0 * (rj - wf.reference_range_m) / C_M_PER_S
-                const = math.fmod(
-                    -2.0 * (rj - wf.reference_range_m) / lam + 0.5 * k * dtau * (tau + tau_ref), 1.0
-                )
-                cycles = np.mod(const - k * dtau * self._t, 1.0)
-                out += gj * np.exp(2j * math.pi * cycles)
+                cycles = carrier + 0.5 * k * u * u
+                if deviation is not None:
+                    cycles = cycles + deviation(u)
+                out[lo:hi] += gj * np.exp(2j * math.pi * np.mod(cycles, 1.0))
+            return out
+        k = wf.chirp_rate_hz_per_s
+        r_lo = wf.reference_range_m if lo_range_m is None else float(lo_range_m)
+        tau_ref = 2.0 * r_lo / C_M_PER_S
+        lo_dev = None if deviation is None else deviation(self._t - tau_ref)
+        for rj, gj in zip(np.atleast_1d(range_m), np.atleast_1d(gain), strict=True):
+            if gj == 0:
+                continue
+            tau = 2.0 * rj / C_M_PER_S
+            dtau = 2.0 * (rj - r_lo) / C_M_PER_S
+            const = math.fmod(-2.0 * (rj - r_lo) / lam + 0.5 * k * dtau * (tau + tau_ref), 1.0)
+            cycles = const - k * dtau * self._t
+            if deviation is not None:
+                cycles = cycles + (deviation(self._t - tau) - lo_dev)
+            out += gj * np.exp(2j * math.pi * np.mod(cycles, 1.0))
+        return out
+
+    def _deviation(self, pulse: int):
+        """The summed chirp deviation of the effects for this pulse, e(u) in cycles, or None."""
+        if not self._chirp_effects:
+            return None
+
+        def total(u):
+            acc = np.zeros(np.shape(u))
+            for e in self._chirp_effects:
+                d = e.chirp_deviation_cycles(pulse, u)
+                if d is not None:
+                    acc = acc + d
+            return acc
+
+        return total
+
+    def platform_along_track_m(self, pulse: int) -> float:
+        """True platform position at this pulse: nominal x_p plus the effects' errors."""
+        x_p = float(self.scene.along_track_of(pulse))
+        for e in self._position_effects:
+            x_p += float(e.along_track_error_m(pulse))
+        return x_p
+
+    def _echo(self, pulse: int) -> tuple[np.ndarray, dict]:
+        tg = self.scene.targets
+        x_p = self.platform_along_track_m(pulse)
+        offset = tg.along_track_m - x_p
+        r = np.sqrt(tg.slant_range_m**2 + offset**2)
+        gain = tg.amplitude.copy()
+        for e in self._gain_effects:
+            gain *= e.target_gain(pulse, offset, r)
+        deviation = self._deviation(pulse)
+        out = self.echo(r, gain, deviation)
         for e in self._shot_effects:
             e.apply_to_shot(pulse, out, self._rng)
-        return out
+        aux = {}
+        if self._aux_effects:
+            ctx = PulseContext(
+                pulse,
+                self.config,
+                x_p,
+                tg,
+                offset,
+                r,
+                gain,
+                self._t,
+                deviation,
+                lambda range_m, g, lo_range_m=None: self.echo(range_m, g, deviation, lo_range_m),
+                self._rng,
+            )
+            for e in self._aux_effects:
+                for name, samples in e.aux_channels(ctx).items():
+                    if name in aux:
+                        raise ValueError(f"two effects produce the auxiliary channel {name!r}")
+                    aux[name] = np.asarray(samples).astype(np.complex64)
+        return out, aux
 
     def shot(self, pulse: int) -> Shot:
         """The next shot; pulses must be requested in order (effects keep RNG state)."""
@@ -117,11 +181,13 @@ class Simulator:
             )
         self._next += 1
         g = self.config.geometry
+        samples, aux = self._echo(pulse)
         return Shot(
             pulse,
             pulse / g.prf_hz,
             float(self.scene.along_track_of(pulse)),
-            self._echo(pulse).astype(np.complex64),
+            samples.astype(np.complex64),
+            aux,
         )
 
     def shots(self, count: int | None = None) -> Iterator[Shot]:
@@ -130,9 +196,19 @@ class Simulator:
         while self._next < stop:
             yield self.shot(self._next)
 
+    @property
+    def has_aux_channels(self) -> bool:
+        """True when some effect adds auxiliary receive channels."""
+        return bool(self._aux_effects)
+
     def block(self, count: int) -> np.ndarray:
-        """The next ``count`` shots as one complex64 array [pulse, sample]."""
+        """The next ``count`` shots as one complex64 array [pulse, sample] (main channel)."""
+        return self.block_with_aux(count)[0]
+
+    def block_with_aux(self, count: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """The next ``count`` shots: main channel [pulse, sample], {aux name: [pulse, sample]}."""
         shots = list(self.shots(count))
         if not shots:
-            return np.zeros((0, self.samples_per_shot), np.complex64)
-        return np.stack([s.samples for s in shots])
+            return np.zeros((0, self.samples_per_shot), np.complex64), {}
+        aux = {name: np.stack([s.aux[name] for s in shots]) for name in shots[0].aux}
+        return np.stack([s.samples for s in shots]), aux

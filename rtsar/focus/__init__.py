@@ -1,0 +1,2 @@
+"""Phase-error correction and focusing: chirp alignment and linearization, phase-to-retro,
+the reference-region method, phase gradient autofocus."""

@@ -105,16 +105,22 @@ class Simulator:
         r_lo = wf.reference_range_m if lo_range_m is None else float(lo_range_m)
         tau_ref = 2.0 * r_lo / C_M_PER_S
         lo_dev = None if deviation is None else deviation(self._t - tau_ref)
-        for rj, gj in zip(np.atleast_1d(range_m), np.atleast_1d(gain), strict=True):
-            if gj == 0:
-                continue
+        r_all = np.atleast_1d(np.asarray(range_m, np.float64))
+        g_all = np.atleast_1d(np.asarray(gain, np.complex128))
+        keep = g_all != 0
+        r_all, g_all = r_all[keep], g_all[keep]
+        # Scatterers in chunks of a [targets, samples] phase matrix (bounded memory, vectorised).
+        chunk = max(1, (1 << 20) // self.samples_per_shot)
+        for i in range(0, len(r_all), chunk):
+            rj, gj = r_all[i : i + chunk, None], g_all[i : i + chunk]
             tau = 2.0 * rj / C_M_PER_S
             dtau = 2.0 * (rj - r_lo) / C_M_PER_S
-            const = math.fmod(-2.0 * (rj - r_lo) / lam + 0.5 * k * dtau * (tau + tau_ref), 1.0)
-            cycles = const - k * dtau * self._t
+            const = np.fmod(-2.0 * (rj - r_lo) / lam + 0.5 * k * dtau * (tau + tau_ref), 1.0)
+            cycles = const - k * dtau * self._t[None, :]
             if deviation is not None:
-                cycles = cycles + (deviation(self._t - tau) - lo_dev)
-            out += gj * np.exp(2j * math.pi * np.mod(cycles, 1.0))
+                for row in range(len(gj)):
+                    cycles[row] += deviation(self._t - tau[row, 0]) - lo_dev
+            out += gj @ np.exp(2j * math.pi * np.mod(cycles, 1.0))
         return out
 
     def _deviation(self, pulse: int):

@@ -13,6 +13,18 @@ import inspect
 REGISTRY: dict[str, str] = {
     "noise": "rtsar.scene.effects.noise:ReceiverNoise",
     "antenna_pattern": "rtsar.scene.effects.antenna:AntennaPattern",
+    # chirp defects and the reference channels (Crouch ch. 3, HCN; Zhao channels 1-2)
+    "chirp_nonlinearity": "rtsar.scene.effects.chirp:ChirpNonlinearity",
+    "start_frequency_jitter": "rtsar.scene.effects.chirp:StartFrequencyJitter",
+    "reference_interferometer": "rtsar.scene.effects.channels:ReferenceInterferometer",
+    "hcn_cell": "rtsar.scene.effects.channels:HCNCell",
+    # platform phase errors (Crouch ch. 4; INO phase-error patent)
+    "piston": "rtsar.scene.effects.platform:PistonError",
+    "along_track_jitter": "rtsar.scene.effects.platform:AlongTrackJitter",
+    "reference_region": "rtsar.scene.effects.reference_region:ReferenceRegion",
+    # 3D: extra receivers (Zhao 2014; Crouch ch. 6-7; INO 3D patent)
+    "interferometric_receivers": "rtsar.scene.effects.receivers:InterferometricReceivers",
+    "amplitude_modulation_3d": "rtsar.scene.effects.sam3d:AmplitudeModulation3D",
 }
 
 

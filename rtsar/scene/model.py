@@ -72,6 +72,17 @@ class Targets:
     along_track_m: np.ndarray
     slant_range_m: np.ndarray
     amplitude: np.ndarray  # complex128
+    # Optional 3D position (None when a scene gives slant ranges only): horizontal distance from
+    # the track and height above the reference plane, for receivers off the main one (3D effects).
+    ground_range_m: np.ndarray | None = None
+    height_m: np.ndarray | None = None
+
+    def __post_init__(self):
+        n = len(self.along_track_m)
+        for name in ("slant_range_m", "amplitude", "ground_range_m", "height_m"):
+            value = getattr(self, name)
+            if value is not None and len(value) != n:
+                raise ValueError(f"Targets.{name} has {len(value)} entries, expected {n}")
 
     def __len__(self):
         return len(self.along_track_m)

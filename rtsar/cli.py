@@ -19,6 +19,7 @@ EPILOG = """examples:
   rtsar process rec.h5 -o img.h5             range + azimuth compression (streaming engine)
   rtsar quicklook img.h5 -o img.png          dB image with axes in metres
   rtsar bench                                lens and correlator throughput in one run
+  rtsar tradeoff                             what accuracy costs in time: every knob, one run
 """
 
 
@@ -339,6 +340,12 @@ def cmd_keygen(args) -> int:
     return 0
 
 
+def cmd_tradeoff(args) -> int:
+    from .tradeoff import run
+
+    return run(args)
+
+
 def cmd_bench(args) -> int:
     from .bench import run_bench
 
@@ -577,6 +584,21 @@ def build_parser() -> argparse.ArgumentParser:
     )
     s.add_argument("--device", help="OpenCL platform/device name substring")
     s.set_defaults(func=cmd_bench)
+
+    from .tradeoff import add_arguments as tradeoff_arguments
+
+    s = sub.add_parser(
+        "tradeoff",
+        help="what accuracy costs in time: every processor knob, quality against cost",
+        description="Varies each processor knob alone from the preset's defaults (precision, "
+        "correlator mode and block, micro-batch, aperture, windows, lens, mask per range bin, "
+        "range migration, physical CCD) on scenes whose targets stress it; measures image error "
+        "against a float64 reference, IRW/PSLR/ISLR/position of point targets, pulses/s and the "
+        "line latency at the PRF, in one run.  Writes JSON, Markdown and a Pareto plot (PNG). "
+        "Not a test: about 5 minutes on 2 cores (--quick: seconds).",
+    )
+    tradeoff_arguments(s)
+    s.set_defaults(func=cmd_tradeoff)
     return p
 
 

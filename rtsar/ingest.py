@@ -13,13 +13,17 @@ belongs:
 * a duplicate (sequence seen before) or a late shot (its slot was already zero-filled): dropped;
 * NaN/Inf samples or the wrong number of samples: the pulse is zeroed and flagged.
 
+Auxiliary channels (``ShotBatch.aux``: reference interferometer, HCN cell, second receiver) travel
+with their pulse: filled, zeroed and dropped together with it.  A shot whose auxiliary channel is
+bad (NaN/Inf, wrong length, missing) is zeroed in every channel and counted like a bad main channel.
+
 Nothing is silent: every case has a counter (``Ingest.counters``), reported in strip headers and
 stats.  Flagged pulses mark the image lines whose aperture contains them.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -34,7 +38,7 @@ COUNTERS = (
     "duplicates",  # shots whose sequence number was already in the stream
     "late_pulses",  # shots arriving after their slot was zero-filled
     "nonfinite_pulses",  # shots holding NaN/Inf, zeroed
-    "wrong_length_pulses",  # shots with the wrong sample count, zeroed
+    "wrong_length_pulses",  # shots with the wrong sample count (or a missing channel), zeroed
 )
 
 
@@ -46,9 +50,36 @@ class PulseBlock:
     samples: np.ndarray  # complex64[n, samples_per_shot] (or [n, range_bins] after the lens)
     arrival_s: np.ndarray  # float64[n], perf_counter time the shot arrived (fill: next arrival)
     flagged: np.ndarray  # bool[n], zero-filled or zeroed pulses
+    aux: dict = field(default_factory=dict)  # name → complex64[n, samples_per_shot]
 
     def __len__(self) -> int:
         return len(self.samples)
+
+    def slice(self, start: int, stop: int) -> PulseBlock:
+        sl = slice(start, stop)
+        return PulseBlock(
+            self.first_pulse + start,
+            self.samples[sl],
+            self.arrival_s[sl],
+            self.flagged[sl],
+            {k: v[sl] for k, v in self.aux.items()},
+        )
+
+
+def concat_blocks(blocks: list[PulseBlock]) -> PulseBlock:
+    """Consecutive pulse blocks as one (raises if they are not consecutive)."""
+    if len(blocks) == 1:
+        return blocks[0]
+    for a, b in zip(blocks, blocks[1:], strict=False):
+        if b.first_pulse != a.first_pulse + len(a):  # ingest guarantees this
+            raise RuntimeError("pulse blocks are not consecutive")
+    return PulseBlock(
+        blocks[0].first_pulse,
+        np.concatenate([b.samples for b in blocks]),
+        np.concatenate([b.arrival_s for b in blocks]),
+        np.concatenate([b.flagged for b in blocks]),
+        {k: np.concatenate([b.aux[k] for b in blocks]) for k in blocks[0].aux},
+    )
 
 
 class Ingest:
@@ -61,6 +92,7 @@ class Ingest:
         # Zero-filled pulses are read-only views of one zero row: a long gap costs no memory.
         self._zero_row = np.zeros((1, self.samples_per_shot), np.complex64)
         self.counters = dict.fromkeys(COUNTERS, 0)
+        self.aux_names: tuple[str, ...] | None = None  # fixed by the first batch
         self.next_pulse = 0  # stream index of the next pulse
         self._next_seq: int | None = None  # sequence number expected next
         self._filled: set[int] = set()  # recently zero-filled sequence numbers (late detection)
@@ -72,6 +104,10 @@ class Ingest:
             np.broadcast_to(self._zero_row, (count, self.samples_per_shot)),
             np.full(count, arrival),
             np.ones(count, bool),
+            {
+                k: np.broadcast_to(self._zero_row, (count, self.samples_per_shot))
+                for k in self.aux_names or ()
+            },
         )
         self.next_pulse += count
         return block
@@ -88,20 +124,32 @@ class Ingest:
         c["pulses_received"] += n
         if n == 0:
             return []
-        samples = np.asarray(batch.samples)
+        if self.aux_names is None:
+            self.aux_names = tuple(sorted(batch.aux))
+        channels = {"": batch.samples}
+        channels.update({k: batch.aux.get(k) for k in self.aux_names})
         flagged = np.zeros(n, bool)
-        if samples.ndim != 2 or samples.shape[1] != self.samples_per_shot:
+        wrong = any(
+            a is None or np.ndim(a) != 2 or np.shape(a)[1] != self.samples_per_shot
+            for a in channels.values()
+        )
+        if wrong:
             c["wrong_length_pulses"] += n
-            samples = np.zeros((n, self.samples_per_shot), np.complex64)
+            channels = {k: np.zeros((n, self.samples_per_shot), np.complex64) for k in channels}
             flagged[:] = True
         else:
-            samples = np.asarray(samples, np.complex64)
-            bad = ~np.isfinite(samples.view(np.float32)).all(axis=1)
+            channels = {k: np.asarray(a, np.complex64) for k, a in channels.items()}
+            bad = np.zeros(n, bool)
+            for a in channels.values():
+                bad |= ~np.isfinite(a.view(np.float32)).all(axis=1)
             if bad.any():
-                samples = samples.copy()
-                samples[bad] = 0
+                channels = {k: a.copy() for k, a in channels.items()}
+                for a in channels.values():
+                    a[bad] = 0
                 flagged |= bad
                 c["nonfinite_pulses"] += int(bad.sum())
+        samples = channels.pop("")
+        aux = channels
         seq = np.asarray(batch.seq, np.int64)
         arrival = np.asarray(batch.arrival_s, np.float64)
         if self._next_seq is None:
@@ -110,12 +158,12 @@ class Ingest:
         if seq[0] == self._next_seq and (n == 1 or np.all(np.diff(seq) == 1)):
             c["pulses_accepted"] += n
             self._next_seq += n
-            block = PulseBlock(self.next_pulse, samples, arrival, flagged)
+            block = PulseBlock(self.next_pulse, samples, arrival, flagged, aux)
             self.next_pulse += n
             return [block]
-        return self._slow(seq, samples, arrival, flagged)
+        return self._slow(seq, samples, arrival, flagged, aux)
 
-    def _slow(self, seq, samples, arrival, flagged) -> list[PulseBlock]:
+    def _slow(self, seq, samples, arrival, flagged, aux) -> list[PulseBlock]:
         """Shot by shot: gaps, jumps, duplicates and late shots."""
         c = self.counters
         out: list[PulseBlock] = []
@@ -125,7 +173,15 @@ class Ingest:
             nonlocal run_start
             if run_start is not None:
                 sl = slice(run_start, end)
-                out.append(PulseBlock(self.next_pulse, samples[sl], arrival[sl], flagged[sl]))
+                out.append(
+                    PulseBlock(
+                        self.next_pulse,
+                        samples[sl],
+                        arrival[sl],
+                        flagged[sl],
+                        {k: a[sl] for k, a in aux.items()},
+                    )
+                )
                 self.next_pulse += end - run_start
                 c["pulses_accepted"] += end - run_start
                 run_start = None

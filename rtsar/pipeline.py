@@ -14,6 +14,11 @@ Every stage takes *all* the work waiting for it, up to a cap (adaptive micro-bat
 pipeline keeps up, batches are small and latency is low; when it falls behind, batches grow and
 the per-launch overheads are amortised.
 
+Correction stages (``corrections``: chirp linearization, phase-to-retro, the reference-region
+method, ...) run in the lens thread, in pulse order, on every block: those whose ``domain`` is
+"raw" before the AO lens (they see the auxiliary channels), those whose domain is "lines" between
+the lens and the CCD.  Their counters join the pipeline's.
+
 Latency of an image line: from the arrival of the last pulse that contributes to it (pulse
 j + N - 1 for line j, Psaltis & Wagner 1981: the row leaves the CCD after N shifts) to the
 publication of the strip holding it.
@@ -29,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .engine import StreamProcessor
-from .ingest import Ingest, PulseBlock
+from .ingest import Ingest, PulseBlock, concat_blocks
 from .params import Config
 from .publish import new_stream_id
 from .sources.base import Source
@@ -227,8 +232,14 @@ class Pipeline:
         start_along_track_m: float = 0.0,
         on_stats=None,
         stats_every_s: float = 1.0,
+        corrections=(),
     ):
         self.config = config
+        for c in corrections:
+            if getattr(c, "domain", None) not in ("raw", "lines"):
+                raise ValueError(f"{type(c).__name__}: a correction's domain is 'raw' or 'lines'")
+        self.raw_stages = [c for c in corrections if c.domain == "raw"]
+        self.line_stages = [c for c in corrections if c.domain == "lines"]
         self.source = source
         self.sinks = list(sinks)
         self.settings = s = settings or PipelineSettings()
@@ -293,12 +304,16 @@ class Pipeline:
                 busy += time.perf_counter() - t
                 for block in _groups(blocks, self.max_batch):
                     t = time.perf_counter()
+                    for stage in self.raw_stages:
+                        block.samples = stage.process(block.samples, block.aux, block.first_pulse)
                     if block.flagged.all():  # zero pulses (gap fill): zero lines, no launch
                         block.samples = np.zeros(
                             (len(block), self.engine.plan.bin_count), np.complex64
                         )
                     else:
                         block.samples = self.engine.lens.compress(block.samples)
+                    for stage in self.line_stages:
+                        block.samples = stage.process(block.samples, block.aux, block.first_pulse)
                     out = self._ccd_step([block]) if self.settings.stages == "fused" else block
                     busy += time.perf_counter() - t
                     if out is not None:
@@ -431,6 +446,8 @@ class Pipeline:
         """All counters: source, ingest and pipeline."""
         c = dict(self.source.counters)
         c.update(self.ingest.counters)
+        for stage in self.raw_stages + self.line_stages:
+            c.update(getattr(stage, "counters", {}))
         c.update(self.own)
         return c
 
@@ -500,17 +517,7 @@ class Pipeline:
 
 
 def _concat(blocks: list[PulseBlock]) -> PulseBlock:
-    if len(blocks) == 1:
-        return blocks[0]
-    for a, b in zip(blocks, blocks[1:], strict=False):
-        if b.first_pulse != a.first_pulse + len(a):  # ingest guarantees this
-            raise RuntimeError("pulse blocks are not consecutive")
-    return PulseBlock(
-        blocks[0].first_pulse,
-        np.concatenate([b.samples for b in blocks]),
-        np.concatenate([b.arrival_s for b in blocks]),
-        np.concatenate([b.flagged for b in blocks]),
-    )
+    return concat_blocks(blocks)
 
 
 def _groups(blocks: list[PulseBlock], most: int):
@@ -520,10 +527,7 @@ def _groups(blocks: list[PulseBlock], most: int):
         start = 0
         while start < len(b):
             take = min(len(b) - start, most - size)
-            sl = slice(start, start + take)
-            pending.append(
-                PulseBlock(b.first_pulse + start, b.samples[sl], b.arrival_s[sl], b.flagged[sl])
-            )
+            pending.append(b.slice(start, start + take))
             size += take
             start += take
             if size == most:

@@ -92,3 +92,34 @@ def test_random_link_faults_keep_every_surviving_shot_in_its_slot(rng):
     c = ing.counters
     assert c["pulses_accepted"] + c["duplicates"] + c["late_pulses"] == len(arrived)
     assert c["pulses_accepted"] + c["gap_pulses"] == len(x)
+
+
+def with_aux(seq, bad_aux_row=None):
+    b = batch(seq)
+    ref = -b.samples  # the auxiliary channel: minus the main one, so pairing errors show
+    if bad_aux_row is not None:
+        ref = ref.copy()
+        ref[bad_aux_row, 3] = np.nan
+    return ShotBatch(b.seq, b.timestamp_s, b.arrival_s, b.samples, {"ref": ref})
+
+
+def test_aux_channel_travels_with_its_pulse_through_gaps_and_duplicates():
+    ing = Ingest(S, aperture_pulses=4, max_gap_pulses=16)
+    blocks = [blk for x in (with_aux([0, 1, 4, 4, 5]), with_aux([6, 3])) for blk in ing(x)]
+    main = np.concatenate([b.samples for b in blocks])
+    ref = np.concatenate([b.aux["ref"] for b in blocks])
+    np.testing.assert_array_equal(ref, -main)  # same pulse in both channels, zeros in gaps
+    np.testing.assert_array_equal(main[:, 0].real, [1, 2, 0, 0, 5, 6, 7])
+    assert ing.counters["duplicates"] == 1 and ing.counters["late_pulses"] == 1
+
+
+def test_bad_aux_channel_zeroes_the_whole_pulse():
+    ing = Ingest(S, aperture_pulses=4, max_gap_pulses=16)
+    (blk,) = ing(with_aux([0, 1, 2], bad_aux_row=1))
+    assert ing.counters["nonfinite_pulses"] == 1
+    np.testing.assert_array_equal(blk.flagged, [False, True, False])
+    assert not blk.samples[1].any() and not blk.aux["ref"][1].any()
+    assert np.isfinite(blk.aux["ref"]).all()
+    # A later batch without the channel cannot be paired: zeroed and counted, never a crash.
+    (blk2,) = ing(batch([3, 4]))
+    assert ing.counters["wrong_length_pulses"] == 2 and blk2.flagged.all()

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -23,11 +23,16 @@ class ShotBatch:
     timestamp_s: np.ndarray  # float64[n], instrument clock (s)
     arrival_s: np.ndarray  # float64[n], host time.perf_counter() at arrival (s)
     samples: np.ndarray  # complex64[n, samples_per_shot]
+    # Auxiliary receive channels of the same shots (reference interferometer, HCN cell, second
+    # receiver, ...): name → complex64[n, samples_per_shot].  Empty for single-channel sources.
+    aux: dict = field(default_factory=dict)
 
     def __post_init__(self):
         n = len(self.seq)
         if not (len(self.timestamp_s) == len(self.arrival_s) == len(self.samples) == n):
             raise ValueError("ShotBatch fields must all have one entry per shot")
+        if any(len(a) != n for a in self.aux.values()):
+            raise ValueError("ShotBatch aux channels must have one entry per shot")
 
     def __len__(self) -> int:
         return len(self.seq)

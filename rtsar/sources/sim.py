@@ -39,12 +39,12 @@ class SimSource(Source):
         p = 0
         while p < self.total and not self._stop:
             n = min(self.chunk, self.total - p)
-            samples = self.sim.block(n)
+            samples, aux = self.sim.block_with_aux(n)
             due = pacer.wait(p + n - 1, lambda: self._stop)
             if time.perf_counter() - due > 1e-3:
                 self.counters["late_releases"] += 1
             idx = np.arange(p, p + n)
             times = idx / self.prf_hz
-            yield ShotBatch(idx, times, pacer.t0 + times, samples)
+            yield ShotBatch(idx, times, pacer.t0 + times, samples, aux)
             p += n
             self.released = p

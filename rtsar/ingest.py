@@ -14,8 +14,10 @@ belongs:
 * NaN/Inf samples or the wrong number of samples: the pulse is zeroed and flagged.
 
 Auxiliary channels (``ShotBatch.aux``: reference interferometer, HCN cell, second receiver) travel
-with their pulse: filled, zeroed and dropped together with it.  A shot whose auxiliary channel is
-bad (NaN/Inf, wrong length, missing) is zeroed in every channel and counted like a bad main channel.
+with their pulse: filled, zeroed and dropped together with it.  Their names and lengths (which may
+differ from the main channel's: an HCN channel is sampled faster) are fixed by the first batch.
+A shot whose auxiliary channel is bad (NaN/Inf, wrong length, missing) is zeroed in every channel
+and counted like a bad main channel.
 
 Nothing is silent: every case has a counter (``Ingest.counters``), reported in strip headers and
 stats.  Flagged pulses mark the image lines whose aperture contains them.
@@ -92,7 +94,7 @@ class Ingest:
         # Zero-filled pulses are read-only views of one zero row: a long gap costs no memory.
         self._zero_row = np.zeros((1, self.samples_per_shot), np.complex64)
         self.counters = dict.fromkeys(COUNTERS, 0)
-        self.aux_names: tuple[str, ...] | None = None  # fixed by the first batch
+        self.aux_lengths: dict[str, int] | None = None  # name → samples, fixed by the first batch
         self.next_pulse = 0  # stream index of the next pulse
         self._next_seq: int | None = None  # sequence number expected next
         self._filled: set[int] = set()  # recently zero-filled sequence numbers (late detection)
@@ -105,8 +107,8 @@ class Ingest:
             np.full(count, arrival),
             np.ones(count, bool),
             {
-                k: np.broadcast_to(self._zero_row, (count, self.samples_per_shot))
-                for k in self.aux_names or ()
+                k: np.broadcast_to(np.zeros((1, m), np.complex64), (count, m))
+                for k, m in (self.aux_lengths or {}).items()
             },
         )
         self.next_pulse += count
@@ -124,18 +126,21 @@ class Ingest:
         c["pulses_received"] += n
         if n == 0:
             return []
-        if self.aux_names is None:
-            self.aux_names = tuple(sorted(batch.aux))
-        channels = {"": batch.samples}
-        channels.update({k: batch.aux.get(k) for k in self.aux_names})
+        if self.aux_lengths is None:
+            self.aux_lengths = {
+                k: int(np.shape(a)[1]) if np.ndim(a) == 2 else self.samples_per_shot
+                for k, a in sorted(batch.aux.items())
+            }
+        lengths = {"": self.samples_per_shot, **self.aux_lengths}
+        channels = {k: batch.samples if k == "" else batch.aux.get(k) for k in lengths}
         flagged = np.zeros(n, bool)
         wrong = any(
-            a is None or np.ndim(a) != 2 or np.shape(a)[1] != self.samples_per_shot
-            for a in channels.values()
+            a is None or np.ndim(a) != 2 or np.shape(a)[1] != lengths[k]
+            for k, a in channels.items()
         )
         if wrong:
             c["wrong_length_pulses"] += n
-            channels = {k: np.zeros((n, self.samples_per_shot), np.complex64) for k in channels}
+            channels = {k: np.zeros((n, m), np.complex64) for k, m in lengths.items()}
             flagged[:] = True
         else:
             channels = {k: np.asarray(a, np.complex64) for k, a in channels.items()}

@@ -17,7 +17,8 @@ the per-launch overheads are amortised.
 Correction stages (``corrections``: chirp linearization, phase-to-retro, the reference-region
 method, ...) run in the lens thread, in pulse order, on every block: those whose ``domain`` is
 "raw" before the AO lens (they see the auxiliary channels), those whose domain is "lines" between
-the lens and the CCD.  Their counters join the pipeline's.
+the lens and the CCD; ``process(samples, aux) -> samples`` is called with consecutive blocks.
+Their counters join the pipeline's.
 
 Latency of an image line: from the arrival of the last pulse that contributes to it (pulse
 j + N - 1 for line j, Psaltis & Wagner 1981: the row leaves the CCD after N shifts) to the
@@ -305,7 +306,7 @@ class Pipeline:
                 for block in _groups(blocks, self.max_batch):
                     t = time.perf_counter()
                     for stage in self.raw_stages:
-                        block.samples = stage.process(block.samples, block.aux, block.first_pulse)
+                        block.samples = stage.process(block.samples, block.aux)
                     if block.flagged.all():  # zero pulses (gap fill): zero lines, no launch
                         block.samples = np.zeros(
                             (len(block), self.engine.plan.bin_count), np.complex64
@@ -313,7 +314,7 @@ class Pipeline:
                     else:
                         block.samples = self.engine.lens.compress(block.samples)
                     for stage in self.line_stages:
-                        block.samples = stage.process(block.samples, block.aux, block.first_pulse)
+                        block.samples = stage.process(block.samples, block.aux)
                     out = self._ccd_step([block]) if self.settings.stages == "fused" else block
                     busy += time.perf_counter() - t
                     if out is not None:

@@ -223,12 +223,16 @@ class UseAux:
 
     domain = "raw"
 
-    def __init__(self):
+    def __init__(self, shots):
         self.counters = {"aux_blocks": 0}
         self.next = 0
+        self.shots = shots
 
-    def process(self, samples, aux, first_pulse):
-        assert first_pulse == self.next  # blocks arrive in pulse order, none skipped
+    def process(self, samples, aux):
+        # Blocks arrive in pulse order, none skipped: the clean channel is the shots in order.
+        np.testing.assert_array_equal(
+            aux["clean"], self.shots[self.next : self.next + len(aux["clean"])]
+        )
         self.next += len(samples)
         self.counters["aux_blocks"] += 1
         return aux["clean"]
@@ -237,7 +241,7 @@ class UseAux:
 class Halve:
     domain = "lines"
 
-    def process(self, lines, aux, first_pulse):
+    def process(self, lines, aux):
         return lines * np.float32(0.5)
 
 
@@ -245,7 +249,7 @@ def test_correction_stages_see_aux_channels_in_pulse_order(tiny):
     cfg, scene, shots = tiny
     ref, _, _ = process_block(cfg, shots)
     sink = Collect()
-    stage = UseAux()
+    stage = UseAux(shots)
     Pipeline(
         cfg, AuxSource(shots), [sink], PipelineSettings(max_batch=16), corrections=[stage, Halve()]
     ).run()

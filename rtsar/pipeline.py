@@ -14,10 +14,11 @@ Every stage takes *all* the work waiting for it, up to a cap (adaptive micro-bat
 pipeline keeps up, batches are small and latency is low; when it falls behind, batches grow and
 the per-launch overheads are amortised.
 
-Correction stages (``corrections``: chirp linearization, phase-to-retro, the reference-region
-method, ...) run in the lens thread, in pulse order, on every block: those whose ``domain`` is
-"raw" before the AO lens (they see the auxiliary channels), those whose domain is "lines" between
-the lens and the CCD; ``process(samples, aux) -> samples`` is called with consecutive blocks.
+Corrections (a :class:`rtsar.corrections.CorrectionChain`: chirp linearization, the reference-
+region method, phase-to-retro, PGA) run in the lens thread, in pulse order: "raw" stages before
+the AO lens (they see the auxiliary channels), "lines" stages between the lens and the CCD.  A
+line stage may hold pulses back (PGA holds a block): the pulses' arrival times and flags wait
+with them, so latency and flags stay exact; the held pulses come out at the end of the stream.
 Their counters join the pipeline's.
 
 Latency of an image line: from the arrival of the last pulse that contributes to it (pulse
@@ -233,14 +234,11 @@ class Pipeline:
         start_along_track_m: float = 0.0,
         on_stats=None,
         stats_every_s: float = 1.0,
-        corrections=(),
+        corrections=None,
     ):
         self.config = config
-        for c in corrections:
-            if getattr(c, "domain", None) not in ("raw", "lines"):
-                raise ValueError(f"{type(c).__name__}: a correction's domain is 'raw' or 'lines'")
-        self.raw_stages = [c for c in corrections if c.domain == "raw"]
-        self.line_stages = [c for c in corrections if c.domain == "lines"]
+        self.corrections = corrections
+        self._held: deque[PulseBlock] = deque()  # pulses inside the line stages (metadata)
         self.source = source
         self.sinks = list(sinks)
         self.settings = s = settings or PipelineSettings()
@@ -305,20 +303,22 @@ class Pipeline:
                 busy += time.perf_counter() - t
                 for block in _groups(blocks, self.max_batch):
                     t = time.perf_counter()
-                    for stage in self.raw_stages:
-                        block.samples = stage.process(block.samples, block.aux)
+                    chain = self.corrections
+                    if chain:
+                        block.samples = chain.raw(block.samples, block.aux)
                     if block.flagged.all():  # zero pulses (gap fill): zero lines, no launch
                         block.samples = np.zeros(
                             (len(block), self.engine.plan.bin_count), np.complex64
                         )
                     else:
                         block.samples = self.engine.lens.compress(block.samples)
-                    for stage in self.line_stages:
-                        block.samples = stage.process(block.samples, block.aux)
-                    out = self._ccd_step([block]) if self.settings.stages == "fused" else block
+                    if chain and chain.line_stages:
+                        self._held.append(block)
+                        block = self._release(chain.lines(block.samples, block.aux))
                     busy += time.perf_counter() - t
-                    if out is not None:
-                        (self.q_image if self.settings.stages == "fused" else self.q_lines).put(out)
+                    self._forward(block)
+            if self.corrections and self.corrections.line_stages:
+                self._forward(self._release(self.corrections.flush(self.engine.plan.bin_count)))
             if self.settings.stages == "fused":
                 tail = self._ccd_flush()
                 if tail is not None:
@@ -326,6 +326,35 @@ class Pipeline:
         finally:
             self.stats.busy_s["lens" if self.settings.stages == "split" else "lens+ccd"] = busy
             (self.q_image if self.settings.stages == "fused" else self.q_lines).close()
+
+    def _forward(self, block: PulseBlock | None) -> None:
+        """Hand a block of range-compressed pulses to the CCD (its thread, or here if fused)."""
+        if block is None or not len(block):
+            return
+        if self.settings.stages == "fused":
+            out = self._ccd_step([block])
+            if out is not None:
+                self.q_image.put(out)
+        else:
+            self.q_lines.put(block)
+
+    def _release(self, lines: np.ndarray) -> PulseBlock | None:
+        """The first len(lines) held pulses, their metadata with the lines the stages released."""
+        k = len(lines)
+        if k == 0:
+            return None
+        parts, need = [], k
+        while need:
+            b = self._held[0]
+            if len(b) <= need:
+                parts.append(self._held.popleft())
+                need -= len(b)
+            else:
+                parts.append(b.slice(0, need))
+                self._held[0] = b.slice(need, len(b))
+                need = 0
+        meta = concat_blocks(parts)
+        return PulseBlock(meta.first_pulse, lines, meta.arrival_s, meta.flagged)
 
     def _ccd_stage(self) -> None:
         busy = 0.0
@@ -447,8 +476,8 @@ class Pipeline:
         """All counters: source, ingest and pipeline."""
         c = dict(self.source.counters)
         c.update(self.ingest.counters)
-        for stage in self.raw_stages + self.line_stages:
-            c.update(getattr(stage, "counters", {}))
+        if self.corrections:
+            c.update(self.corrections.counters())
         c.update(self.own)
         return c
 

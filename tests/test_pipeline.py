@@ -6,6 +6,7 @@ import time
 import numpy as np
 import pytest
 
+from rtsar.corrections import CorrectionChain
 from rtsar.engine import process_block
 from rtsar.params import preset
 from rtsar.pipeline import BoundedQueue, LatencyStats, Pipeline, PipelineSettings
@@ -251,15 +252,53 @@ def test_correction_stages_see_aux_channels_in_pulse_order(tiny):
     sink = Collect()
     stage = UseAux(shots)
     Pipeline(
-        cfg, AuxSource(shots), [sink], PipelineSettings(max_batch=16), corrections=[stage, Halve()]
+        cfg,
+        AuxSource(shots),
+        [sink],
+        PipelineSettings(max_batch=16),
+        corrections=CorrectionChain([("use_aux", stage), ("halve", Halve())]),
     ).run()
     # Halving the range lines halves the (linear) image exactly (a power of two).
     np.testing.assert_array_equal(sink.image(), ref * np.float32(0.5))
     assert stage.next == len(shots)
-    assert sink.final["counters"]["aux_blocks"] == stage.counters["aux_blocks"] > 0
+    assert sink.final["counters"]["use_aux.aux_blocks"] == stage.counters["aux_blocks"] > 0
 
 
-def test_correction_without_a_domain_is_refused(tiny):
-    cfg, _, shots = tiny
+class Delay:
+    """A line stage holding its last 5 pulses back (like PGA's block), released at flush."""
+
+    domain = "lines"
+
+    def __init__(self):
+        self.held = None
+
+    def process(self, lines, aux):
+        x = lines if self.held is None else np.concatenate([self.held, lines])
+        self.held = x[-5:]
+        return x[:-5]
+
+    def flush(self):
+        return self.held
+
+
+@pytest.mark.parametrize("stages", ["split", "fused"])
+def test_a_stage_that_holds_pulses_keeps_lines_and_flags_exact(tiny, stages):
+    cfg, scene, shots = tiny
+    lost = np.arange(200, 202)
+    keep = np.setdiff1d(np.arange(len(shots)), lost)
+    filled = shots.copy()
+    filled[lost] = 0
+    ref, _, _ = process_block(cfg, filled)
+    plain, delayed = Collect(), Collect()
+    settings = PipelineSettings(stages=stages, max_batch=16)
+    Pipeline(cfg, replay(cfg, shots[keep], seq=keep), [plain], settings).run()
+    chain = CorrectionChain([("delay", Delay())])
+    Pipeline(cfg, replay(cfg, shots[keep], seq=keep), [delayed], settings, corrections=chain).run()
+    np.testing.assert_array_equal(delayed.image(), ref)
+    flags = [s.flagged_lines for s in delayed.strips if s.flagged_lines]
+    assert flags == [s.flagged_lines for s in plain.strips if s.flagged_lines] != []
+
+
+def test_correction_without_a_domain_is_refused():
     with pytest.raises(ValueError, match="domain"):
-        Pipeline(cfg, AuxSource(shots), [], corrections=[object()])
+        CorrectionChain([("mystery", object())])

@@ -19,19 +19,22 @@
  *
  *   lens_lanes  (build with -DLANES=L)       CPUs.  One work-item per L pulses, work-groups of
  *               one item.  The line of L pulses is held "structure of arrays": element n is a
- *               pair of floatL vectors (real parts, imaginary parts), so every butterfly works
+ *               pair of realL vectors (real parts, imaginary parts), so every butterfly works
  *               on L pulses at once with plain vector instructions and a twiddle factor is a
  *               broadcast scalar.  Rows are transposed in (and out) with 8×8 shuffles when
- *               L = 8.  Needs 16·L·NFFT bytes of local memory.
+ *               L = 8.  Needs 16·L·NFFT bytes of local memory (32·L·NFFT in double).
  *   lens_group  (build with -DGROUP_SIZE=G)  GPUs.  One work-group of G items per pulse, the
- *               line in local memory as float2, barriers between stages.
+ *               line in local memory as real2, barriers between stages.
  *
  * Build options: NFFT and LOG2_NFFT (a power of two >= 2), S (<= NFFT), BIN_COUNT,
- * BIN_OFFSET (0 <= BIN_OFFSET < NFFT), SIGN1, TWO_PASS (0 or 1), SIGN2, and LANES or GROUP_SIZE.
+ * BIN_OFFSET (0 <= BIN_OFFSET < NFFT), SIGN1, TWO_PASS (0 or 1), SIGN2, LANES or GROUP_SIZE,
+ * and DOUBLE (0 or 1): with DOUBLE=1 every sample, twiddle and sum is a double (the device
+ * must support cl_khr_fp64) and the lanes kernel needs twice the local memory.
  *
- * Buffers hold complex values as float2 (x = real part, y = imaginary part): shots[pulses][S],
- * lines[pulses][BIN_COUNT], pre[S], spectrum[NFFT] (read only if TWO_PASS), post[BIN_COUNT] and
- * twiddle[NFFT] = exp(-i2πm/NFFT), computed in float64 on the host; sign +1 uses its conjugate.
+ * Buffers hold complex values as real2, i.e. float2 or double2 (x = real part, y = imaginary
+ * part): shots[pulses][S], lines[pulses][BIN_COUNT], pre[S], spectrum[NFFT] (read only if
+ * TWO_PASS), post[BIN_COUNT] and twiddle[NFFT] = exp(-i2πm/NFFT), computed in float64 on the
+ * host; sign +1 uses its conjugate.
  */
 
 #if !defined(NFFT) || !defined(LOG2_NFFT) || !defined(S) || !defined(BIN_COUNT) || \
@@ -51,6 +54,21 @@
 #define SIGN2 (-(SIGN1))
 #endif
 
+/* Sample type: float (default) or double (-DDOUBLE=1, needs cl_khr_fp64; the host checks). */
+#if defined(DOUBLE) && DOUBLE
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#define REAL double
+#define SQRT1_2 M_SQRT1_2
+#else
+#define REAL float
+#define SQRT1_2 M_SQRT1_2_F
+#endif
+#define CAT_(a, b) a##b
+#define CAT(a, b) CAT_(a, b)
+#define real REAL
+#define real2 CAT(REAL, 2)
+#define real8 CAT(REAL, 8)
+
 /* radix-8 stages, then one radix-4 or radix-2 stage when LOG2_NFFT is not a multiple of 3 */
 #define N_RADIX8 (LOG2_NFFT / 3)
 #define N_STAGES (N_RADIX8 + (LOG2_NFFT % 3 != 0))
@@ -59,16 +77,16 @@
 #define BIN_INDEX(b) ((BIN_OFFSET + (b)) & (NFFT - 1))
 
 /* exp(sign·i2πm/NFFT) from the table of exp(-i2πm/NFFT) */
-inline float2 twiddle_at(__global const float2 *twiddle, const uint m, const int sign)
+inline real2 twiddle_at(__global const real2 *twiddle, const uint m, const int sign)
 {
-    const float2 w = twiddle[m];
-    return sign > 0 ? (float2)(w.x, -w.y) : w;
+    const real2 w = twiddle[m];
+    return sign > 0 ? (real2)(w.x, -w.y) : w;
 }
 
-/* Complex product (the float2 operator * is element-wise, not a complex product). */
-inline float2 cmul(const float2 a, const float2 b)
+/* Complex product (the real2 operator * is element-wise, not a complex product). */
+inline real2 cmul(const real2 a, const real2 b)
 {
-    return (float2)(a.x * b.x - a.y * b.y, a.x * b.y + a.y * b.x);
+    return (real2)(a.x * b.x - a.y * b.y, a.x * b.y + a.y * b.x);
 }
 
 /* ========================================================================================= */
@@ -77,24 +95,22 @@ inline float2 cmul(const float2 a, const float2 b)
 #ifdef LANES
 
 #if LANES == 1
-#define floatL float
+#define realL REAL
 #define vloadL(i, p) ((p)[i])
 #define vstoreL(v, i, p) ((p)[i] = (v))
 #else
-#define CAT_(a, b) a##b
-#define CAT(a, b) CAT_(a, b)
-#define floatL CAT(float, LANES)
+#define realL CAT(REAL, LANES)
 #define vloadL CAT(vload, LANES)
 #define vstoreL CAT(vstore, LANES)
 #endif
 
 /* L complex numbers, one per pulse: real parts and imaginary parts */
 typedef struct {
-    floatL re;
-    floatL im;
+    realL re;
+    realL im;
 } cvec;
 
-inline cvec cv_make(const floatL re, const floatL im)
+inline cvec cv_make(const realL re, const realL im)
 {
     cvec c;
     c.re = re;
@@ -107,7 +123,7 @@ inline cvec cv_add(const cvec a, const cvec b) { return cv_make(a.re + b.re, a.i
 inline cvec cv_sub(const cvec a, const cvec b) { return cv_make(a.re - b.re, a.im - b.im); }
 
 /* a · w for a scalar complex w (the same for every pulse) */
-inline cvec cv_scale(const cvec a, const float2 w)
+inline cvec cv_scale(const cvec a, const real2 w)
 {
     return cv_make(a.re * w.x - a.im * w.y, a.re * w.y + a.im * w.x);
 }
@@ -121,15 +137,15 @@ inline cvec cv_mul_si(const cvec a, const int sign)
 /* a · exp(sign·iπ/4) */
 inline cvec cv_mul_w8(const cvec a, const int sign)
 {
-    return sign > 0 ? cv_make((a.re - a.im) * M_SQRT1_2_F, (a.re + a.im) * M_SQRT1_2_F)
-                    : cv_make((a.re + a.im) * M_SQRT1_2_F, (a.im - a.re) * M_SQRT1_2_F);
+    return sign > 0 ? cv_make((a.re - a.im) * SQRT1_2, (a.re + a.im) * SQRT1_2)
+                    : cv_make((a.re + a.im) * SQRT1_2, (a.im - a.re) * SQRT1_2);
 }
 
 /* a · exp(sign·i3π/4) */
 inline cvec cv_mul_w83(const cvec a, const int sign)
 {
-    return sign > 0 ? cv_make(-(a.re + a.im) * M_SQRT1_2_F, (a.re - a.im) * M_SQRT1_2_F)
-                    : cv_make((a.im - a.re) * M_SQRT1_2_F, -(a.re + a.im) * M_SQRT1_2_F);
+    return sign > 0 ? cv_make(-(a.re + a.im) * SQRT1_2, (a.re - a.im) * SQRT1_2)
+                    : cv_make((a.im - a.re) * SQRT1_2, -(a.re + a.im) * SQRT1_2);
 }
 
 inline void cv_dft2(cvec *a)
@@ -166,10 +182,10 @@ inline void cv_dft8(cvec *a, const int sign)
 
 /* One Stockham stage (see the top of the file); `mul`, when not null, multiplies the inputs
  * first (the spectrum, fused into the first stage of the second pass). */
-inline void cv_stage(__local const floatL *restrict src_re, __local const floatL *restrict src_im,
-                     __local floatL *restrict dst_re, __local floatL *restrict dst_im,
+inline void cv_stage(__local const realL *restrict src_re, __local const realL *restrict src_im,
+                     __local realL *restrict dst_re, __local realL *restrict dst_im,
                      const uint p, const uint R, const int sign,
-                     __global const float2 *twiddle, __global const float2 *mul)
+                     __global const real2 *twiddle, __global const real2 *mul)
 {
     const uint nb = NFFT / R;
     for (uint j = 0; j < nb; ++j) {
@@ -200,8 +216,8 @@ inline void cv_stage(__local const floatL *restrict src_re, __local const floatL
 }
 
 /* FFT of buffer `from` (0 or 1); the result lands in buffer from ^ (N_STAGES & 1). */
-inline void cv_fft(__local floatL (*re)[NFFT], __local floatL (*im)[NFFT], const int from,
-                   const int sign, __global const float2 *twiddle, __global const float2 *mul)
+inline void cv_fft(__local realL (*re)[NFFT], __local realL (*im)[NFFT], const int from,
+                   const int sign, __global const real2 *twiddle, __global const real2 *mul)
 {
     int s = from;
     uint p = 1;
@@ -217,18 +233,18 @@ inline void cv_fft(__local floatL (*re)[NFFT], __local floatL (*im)[NFFT], const
 }
 
 #if LANES == 8
-/* 8×8 transpose of floats, c[k].s[l] = r[l].s[k], in three levels of two-vector shuffles
+/* 8×8 transpose of reals, c[k].s[l] = r[l].s[k], in three levels of two-vector shuffles
  * (written as swizzles: PoCL lowers them to unpck/shufps/vperm2f128 on x86). */
-#define UNPACK_LO(a, b) (float8)((a).s0, (b).s0, (a).s1, (b).s1, (a).s4, (b).s4, (a).s5, (b).s5)
-#define UNPACK_HI(a, b) (float8)((a).s2, (b).s2, (a).s3, (b).s3, (a).s6, (b).s6, (a).s7, (b).s7)
-#define PAIRS_LO(a, b) (float8)((a).s0, (a).s1, (b).s0, (b).s1, (a).s4, (a).s5, (b).s4, (b).s5)
-#define PAIRS_HI(a, b) (float8)((a).s2, (a).s3, (b).s2, (b).s3, (a).s6, (a).s7, (b).s6, (b).s7)
-#define HALVES_LO(a, b) (float8)((a).s0123, (b).s0123)
-#define HALVES_HI(a, b) (float8)((a).s4567, (b).s4567)
+#define UNPACK_LO(a, b) (real8)((a).s0, (b).s0, (a).s1, (b).s1, (a).s4, (b).s4, (a).s5, (b).s5)
+#define UNPACK_HI(a, b) (real8)((a).s2, (b).s2, (a).s3, (b).s3, (a).s6, (b).s6, (a).s7, (b).s7)
+#define PAIRS_LO(a, b) (real8)((a).s0, (a).s1, (b).s0, (b).s1, (a).s4, (a).s5, (b).s4, (b).s5)
+#define PAIRS_HI(a, b) (real8)((a).s2, (a).s3, (b).s2, (b).s3, (a).s6, (a).s7, (b).s6, (b).s7)
+#define HALVES_LO(a, b) (real8)((a).s0123, (b).s0123)
+#define HALVES_HI(a, b) (real8)((a).s4567, (b).s4567)
 
-inline void transpose8(const float8 *r, float8 *c)
+inline void transpose8(const real8 *r, real8 *c)
 {
-    float8 t[8], u[8];
+    real8 t[8], u[8];
     for (int i = 0; i < 4; ++i) {
         t[2 * i] = UNPACK_LO(r[2 * i], r[2 * i + 1]);
         t[2 * i + 1] = UNPACK_HI(r[2 * i], r[2 * i + 1]);
@@ -247,34 +263,34 @@ inline void transpose8(const float8 *r, float8 *c)
 #endif
 
 __kernel __attribute__((reqd_work_group_size(1, 1, 1)))
-void lens_lanes(__global const float2 *restrict shots,    /* [pulses][S] */
-                __global float2 *restrict lines,          /* [pulses][BIN_COUNT] */
-                __global const float2 *restrict pre,      /* [S] */
-                __global const float2 *restrict spectrum, /* [NFFT], read if TWO_PASS */
-                __global const float2 *restrict post,     /* [BIN_COUNT] */
-                __global const float2 *restrict twiddle,  /* [NFFT] */
+void lens_lanes(__global const real2 *restrict shots,    /* [pulses][S] */
+                __global real2 *restrict lines,          /* [pulses][BIN_COUNT] */
+                __global const real2 *restrict pre,      /* [S] */
+                __global const real2 *restrict spectrum, /* [NFFT], read if TWO_PASS */
+                __global const real2 *restrict post,     /* [BIN_COUNT] */
+                __global const real2 *restrict twiddle,  /* [NFFT] */
                 const uint pulses)
 {
-    __local floatL re[2][NFFT], im[2][NFFT];
+    __local realL re[2][NFFT], im[2][NFFT];
     const uint first = get_group_id(0) * LANES;
     if (first >= pulses)
         return;
     const uint live = min((uint)LANES, pulses - first);
 
     /* rows of this work-item; missing pulses of a short last group repeat the last row */
-    __global const float *row[LANES];
-    __global float *out[LANES];
+    __global const real *row[LANES];
+    __global real *out[LANES];
     for (uint l = 0; l < LANES; ++l) {
         const size_t pulse = min(first + l, pulses - 1);
-        row[l] = (__global const float *)(shots + pulse * S);
-        out[l] = (__global float *)(lines + pulse * BIN_COUNT);
+        row[l] = (__global const real *)(shots + pulse * S);
+        out[l] = (__global real *)(lines + pulse * BIN_COUNT);
     }
 
     /* ---- x·pre, transposed to one vector per sample, zero padding ----------------------- */
     uint n0 = 0;
 #if LANES == 8
     for (; n0 + 4 <= S; n0 += 4) {
-        float8 r[8], c[8];
+        real8 r[8], c[8];
         for (int l = 0; l < 8; ++l)
             r[l] = vload8(0, row[l] + 2 * n0);
         transpose8(r, c);
@@ -286,7 +302,7 @@ void lens_lanes(__global const float2 *restrict shots,    /* [pulses][S] */
     }
 #endif
     for (uint n = n0; n < S; ++n) {
-        float xr[LANES], xi[LANES];
+        real xr[LANES], xi[LANES];
         for (uint l = 0; l < LANES; ++l) {
             xr[l] = row[l][2 * n];
             xi[l] = row[l][2 * n + 1];
@@ -296,8 +312,8 @@ void lens_lanes(__global const float2 *restrict shots,    /* [pulses][S] */
         im[0][n] = v.im;
     }
     for (uint n = S; n < NFFT; ++n) {
-        re[0][n] = (floatL)(0.0f);
-        im[0][n] = (floatL)(0.0f);
+        re[0][n] = (realL)(0);
+        im[0][n] = (realL)(0);
     }
 
     /* ---- the transforms ---------------------------------------------------------------- */
@@ -312,7 +328,7 @@ void lens_lanes(__global const float2 *restrict shots,    /* [pulses][S] */
     uint b0 = 0;
 #if LANES == 8
     for (; b0 + 4 <= BIN_COUNT; b0 += 4) {
-        float8 c[8], r[8];
+        real8 c[8], r[8];
         for (int q = 0; q < 4; ++q) {
             const uint k = BIN_INDEX(b0 + q);
             const cvec v = cv_scale(cv_make(re[s][k], im[s][k]), post[b0 + q]);
@@ -332,7 +348,7 @@ void lens_lanes(__global const float2 *restrict shots,    /* [pulses][S] */
     for (uint b = b0; b < BIN_COUNT; ++b) {
         const uint k = BIN_INDEX(b);
         const cvec v = cv_scale(cv_make(re[s][k], im[s][k]), post[b]);
-        float yr[LANES], yi[LANES];
+        real yr[LANES], yi[LANES];
         vstoreL(v.re, 0, yr);
         vstoreL(v.im, 0, yi);
         for (uint l = 0; l < live; ++l) {
@@ -350,46 +366,46 @@ void lens_lanes(__global const float2 *restrict shots,    /* [pulses][S] */
 #ifdef GROUP_SIZE
 
 /* a · (sign·i) */
-inline float2 mul_si(const float2 a, const int sign)
+inline real2 mul_si(const real2 a, const int sign)
 {
-    return sign > 0 ? (float2)(-a.y, a.x) : (float2)(a.y, -a.x);
+    return sign > 0 ? (real2)(-a.y, a.x) : (real2)(a.y, -a.x);
 }
 
 /* a · exp(sign·iπ/4) */
-inline float2 mul_w8(const float2 a, const int sign)
+inline real2 mul_w8(const real2 a, const int sign)
 {
-    return sign > 0 ? (float2)(a.x - a.y, a.x + a.y) * M_SQRT1_2_F
-                    : (float2)(a.x + a.y, a.y - a.x) * M_SQRT1_2_F;
+    return sign > 0 ? (real2)(a.x - a.y, a.x + a.y) * SQRT1_2
+                    : (real2)(a.x + a.y, a.y - a.x) * SQRT1_2;
 }
 
 /* a · exp(sign·i3π/4) */
-inline float2 mul_w83(const float2 a, const int sign)
+inline real2 mul_w83(const real2 a, const int sign)
 {
-    return sign > 0 ? (float2)(-a.x - a.y, a.x - a.y) * M_SQRT1_2_F
-                    : (float2)(a.y - a.x, -a.x - a.y) * M_SQRT1_2_F;
+    return sign > 0 ? (real2)(-a.x - a.y, a.x - a.y) * SQRT1_2
+                    : (real2)(a.y - a.x, -a.x - a.y) * SQRT1_2;
 }
 
-inline void dft2(float2 *a)
+inline void dft2(real2 *a)
 {
-    const float2 t = a[0] - a[1];
+    const real2 t = a[0] - a[1];
     a[0] = a[0] + a[1];
     a[1] = t;
 }
 
-inline void dft4(float2 *a, const int sign)
+inline void dft4(real2 *a, const int sign)
 {
-    const float2 t0 = a[0] + a[2], t1 = a[0] - a[2];
-    const float2 t2 = a[1] + a[3], t3 = mul_si(a[1] - a[3], sign);
+    const real2 t0 = a[0] + a[2], t1 = a[0] - a[2];
+    const real2 t2 = a[1] + a[3], t3 = mul_si(a[1] - a[3], sign);
     a[0] = t0 + t2;
     a[2] = t0 - t2;
     a[1] = t1 + t3;
     a[3] = t1 - t3;
 }
 
-inline void dft8(float2 *a, const int sign)
+inline void dft8(real2 *a, const int sign)
 {
-    float2 e[4] = {a[0], a[2], a[4], a[6]};
-    float2 o[4] = {a[1], a[3], a[5], a[7]};
+    real2 e[4] = {a[0], a[2], a[4], a[6]};
+    real2 o[4] = {a[1], a[3], a[5], a[7]};
     dft4(e, sign);
     dft4(o, sign);
     o[1] = mul_w8(o[1], sign);
@@ -402,17 +418,17 @@ inline void dft8(float2 *a, const int sign)
 }
 
 /* One Stockham stage shared by the GROUP_SIZE work-items of the group. */
-inline void stage(__local const float2 *restrict src, __local float2 *restrict dst,
+inline void stage(__local const real2 *restrict src, __local real2 *restrict dst,
                   const uint lid, const uint p, const uint R, const int sign,
-                  __global const float2 *twiddle, __global const float2 *mul)
+                  __global const real2 *twiddle, __global const real2 *mul)
 {
     const uint nb = NFFT / R;
     for (uint j = lid; j < nb; j += GROUP_SIZE) {
-        float2 a[8];
+        real2 a[8];
         const uint k = j & (p - 1);
         const uint step = k * (NFFT / (p * R));
         for (uint r = 0; r < R; ++r) {
-            float2 v = src[j + r * nb];
+            real2 v = src[j + r * nb];
             if (mul)
                 v = cmul(v, mul[j + r * nb]);
             if (p > 1 && r > 0)
@@ -432,8 +448,8 @@ inline void stage(__local const float2 *restrict src, __local float2 *restrict d
 }
 
 /* FFT of buf[from]; the result lands in buf[from ^ (N_STAGES & 1)]. */
-inline void fft(__local float2 (*buf)[NFFT], const int from, const uint lid, const int sign,
-                __global const float2 *twiddle, __global const float2 *mul)
+inline void fft(__local real2 (*buf)[NFFT], const int from, const uint lid, const int sign,
+                __global const real2 *twiddle, __global const real2 *mul)
 {
     int s = from;
     uint p = 1;
@@ -450,23 +466,23 @@ inline void fft(__local float2 (*buf)[NFFT], const int from, const uint lid, con
 }
 
 __kernel __attribute__((reqd_work_group_size(GROUP_SIZE, 1, 1)))
-void lens_group(__global const float2 *restrict shots,    /* [pulses][S] */
-                __global float2 *restrict lines,          /* [pulses][BIN_COUNT] */
-                __global const float2 *restrict pre,      /* [S] */
-                __global const float2 *restrict spectrum, /* [NFFT], read if TWO_PASS */
-                __global const float2 *restrict post,     /* [BIN_COUNT] */
-                __global const float2 *restrict twiddle,  /* [NFFT] */
+void lens_group(__global const real2 *restrict shots,    /* [pulses][S] */
+                __global real2 *restrict lines,          /* [pulses][BIN_COUNT] */
+                __global const real2 *restrict pre,      /* [S] */
+                __global const real2 *restrict spectrum, /* [NFFT], read if TWO_PASS */
+                __global const real2 *restrict post,     /* [BIN_COUNT] */
+                __global const real2 *restrict twiddle,  /* [NFFT] */
                 const uint pulses)
 {
-    __local float2 buf[2][NFFT];
+    __local real2 buf[2][NFFT];
     const uint lid = get_local_id(0);
     const uint pulse = get_group_id(0);
     if (pulse >= pulses) /* uniform over the group */
         return;
-    __global const float2 *x = shots + (size_t)pulse * S;
+    __global const real2 *x = shots + (size_t)pulse * S;
 
     for (uint n = lid; n < NFFT; n += GROUP_SIZE)
-        buf[0][n] = n < S ? cmul(x[n], pre[n]) : (float2)(0.0f, 0.0f);
+        buf[0][n] = n < S ? cmul(x[n], pre[n]) : (real2)(0, 0);
     barrier(CLK_LOCAL_MEM_FENCE);
 
     fft(buf, 0, lid, SIGN1, twiddle, 0);
@@ -476,7 +492,7 @@ void lens_group(__global const float2 *restrict shots,    /* [pulses][S] */
     s ^= N_STAGES & 1;
 #endif
 
-    __global float2 *y = lines + (size_t)pulse * BIN_COUNT;
+    __global real2 *y = lines + (size_t)pulse * BIN_COUNT;
     for (uint b = lid; b < BIN_COUNT; b += GROUP_SIZE)
         y[b] = cmul(buf[s][BIN_INDEX(b)], post[b]);
 }

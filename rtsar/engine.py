@@ -14,19 +14,25 @@ import numpy as np
 
 from .ccd import design_mask, make_correlator
 from .lens_plan import LensPlan, NumpyLens, make_plan
+from .migration import design_migration_mask
 from .params import Config
 
 LENS_BACKENDS = ("opencl", "numpy")
 
 
-def make_lens(plan: LensPlan, backend: str = "opencl", device: str | None = None):
-    """The AO lens on OpenCL (default) or NumPy's single-precision FFT."""
+def make_lens(
+    plan: LensPlan,
+    backend: str = "opencl",
+    device: str | None = None,
+    precision: str = "complex64",
+):
+    """The AO lens on OpenCL (default) or NumPy's FFT, in ``precision`` (Processor.precision)."""
     if backend == "opencl":
         from .lens import AOLens  # imported here: pyopencl is only needed for this backend
 
-        return AOLens(plan, device=device)
+        return AOLens(plan, device=device, precision=precision)
     if backend == "numpy":
-        return NumpyLens(plan)
+        return NumpyLens(plan, precision=precision)
     raise ValueError(f"lens backend must be one of {LENS_BACKENDS}, got {backend!r}")
 
 
@@ -35,11 +41,16 @@ class Lines:
     """Finished image lines and where they sit: image[line, range_bin]."""
 
     first_line: int  # index of lines[0] in the image (0 = first full aperture)
-    lines: np.ndarray  # complex64[count, range_bins]
+    lines: np.ndarray  # complex64[count, range_bins] (complex128 with that precision)
 
 
 class StreamProcessor:
-    """Range compression + azimuth correlation of a shot stream, with fixed memory."""
+    """Range compression + azimuth correlation of a shot stream, with fixed memory.
+
+    ``Processor.precision`` sets the sample type of lens and correlator (complex128 shots are
+    processed in double end to end); ``Processor.range_migration_taps`` > 0 builds the
+    range-migration correlator of rtsar.migration.
+    """
 
     def __init__(
         self,
@@ -50,11 +61,18 @@ class StreamProcessor:
     ):
         self.config = config
         self.plan = make_plan(config)
-        self.lens = make_lens(self.plan, lens_backend, device)
-        self.mask = design_mask(config, self.plan.range_m)
         p = config.processor
+        self.lens = make_lens(self.plan, lens_backend, device, p.precision)
+        if p.range_migration_taps:
+            self.mask = design_migration_mask(config, self.plan.range_m)
+        else:
+            self.mask = design_mask(config, self.plan.range_m)
         self.correlator = make_correlator(
-            p.correlator, self.mask, p.fft_length, partition_lines=p.partition_lines
+            p.correlator,
+            self.mask,
+            p.fft_length,
+            partition_lines=p.partition_lines,
+            precision=p.precision,
         )
         self.start_along_track_m = float(start_along_track_m)
         self.lines_out = 0

@@ -109,3 +109,15 @@ def test_partition_lines_is_a_power_of_two_up_to_the_aperture():
         Processor(aperture_pulses=64, range_bins=8, correlator="shift-register")
     cfg = preset("psaltis-max").with_processor(correlator="partitioned", partition_lines=32)
     assert config_from_dict(cfg.to_dict()) == cfg
+
+
+def test_precision_and_range_migration_knobs_round_trip():
+    cfg = preset("crouch-sal").with_processor(precision="complex128", range_migration_taps=4)
+    back = config_from_dict(cfg.to_dict())
+    assert back == cfg
+    assert (back.processor.precision, back.processor.range_migration_taps) == ("complex128", 4)
+    assert preset("tiny").processor.range_migration_taps == 0  # off by default
+    with pytest.raises(ValueError, match="precision must be one of"):
+        Processor(aperture_pulses=64, range_bins=8, precision="complex32")
+    with pytest.raises(ValueError, match="range_migration_taps"):
+        Processor(aperture_pulses=64, range_bins=8, range_migration_taps=-2)

@@ -134,16 +134,23 @@ def cmd_process(args) -> int:
     from .progress import Progress
 
     with open_recording(args.recording) as rec:
-        changes = {}
-        if args.correlator:
-            changes["correlator"] = args.correlator
-        if args.micro_batch is not None:
-            changes["micro_batch"] = args.micro_batch
-        cfg = rec.config.with_processor(**changes) if changes else rec.config
-        eng = StreamProcessor(cfg, args.lens, args.device, rec.start_along_track_m)
+        cfg = _processor_changes(args, rec.config)
+        eng = StreamProcessor(
+            cfg,
+            args.lens,
+            args.device,
+            rec.start_along_track_m,
+            _corrections(args, cfg, None, rec.start_along_track_m),
+            _physical(args),
+        )
         prog = Progress(rec.pulses, "process")
         parts, done = [], 0
         t0 = time.perf_counter()
+        if eng.corrections and eng.corrections.raw_stages:
+            raise ValueError(
+                "corrections that use auxiliary channels (hcn, linearize, reference_region) run "
+                "in `rtsar run --scene`; recordings hold the main channel only"
+            )
         for shots in rec.batches(cfg.processor.micro_batch):
             parts.append(eng.push(shots).lines)
             done += len(shots)
@@ -213,7 +220,61 @@ def _processor_changes(args, cfg):
     changes = {}
     if args.correlator:
         changes["correlator"] = args.correlator
+    if getattr(args, "micro_batch", None) is not None:
+        changes["micro_batch"] = args.micro_batch
+    if getattr(args, "precision", None):
+        changes["precision"] = args.precision
+    if getattr(args, "range_migration_taps", None) is not None:
+        changes["range_migration_taps"] = args.range_migration_taps
     return cfg.with_processor(**changes) if changes else cfg
+
+
+def _corrections(args, cfg, scene=None, start_along_track_m=0.0):
+    """The --correct stages as a CorrectionChain (None when none are asked for)."""
+    if not getattr(args, "correct", None):
+        return None
+    from .corrections import CorrectionChain
+
+    return CorrectionChain.from_specs(args.correct, cfg, scene, start_along_track_m)
+
+
+def _physical(args):
+    """--physical CARRIER: the paper's CCD (rtsar.physical.paper_ccd) with that carrier."""
+    if not getattr(args, "physical", None):
+        return None
+    from .physical import paper_ccd
+
+    return paper_ccd(args.physical)
+
+
+def add_processing_knobs(g) -> None:
+    """Options shared by process, run and replay: accuracy knobs and corrections."""
+    g.add_argument(
+        "--precision",
+        choices=("complex64", "complex128"),
+        help="sample type of lens and CCD (complex128: ~1e-15 instead of ~1e-7, ~2× the cost)",
+    )
+    g.add_argument(
+        "--range-migration-taps",
+        type=int,
+        metavar="T",
+        help="handle range migration with a T-tap interpolating 2-D mask (0: off; use with "
+        "range oversampling 2; ~2-5× the CCD cost)",
+    )
+    g.add_argument(
+        "--correct",
+        action="append",
+        metavar="NAME[:KEY=VALUE,...]",
+        help="phase/chirp correction in the stream, repeatable: hcn, linearize, "
+        "reference_region, pra (retro: pra:along_track_m=X,range_m=R; default the scene's "
+        "brightest point), pga (README 'Phase errors and focusing')",
+    )
+    g.add_argument(
+        "--physical",
+        choices=("range", "azimuth"),
+        help="physical mode: the paper's CCD (bias, full well, noise, 12-bit ADC, blooming) "
+        "with the coherent-detection carrier in range or in azimuth",
+    )
 
 
 def _strip_lines(args, prf_hz: float) -> None:
@@ -258,6 +319,8 @@ def cmd_run(args) -> int:
             args.delivery,
             output=args.output,
             curve_secret_key=args.curve_key,
+            corrections=_corrections(args, cfg),
+            physical=_physical(args),
         )
     from .sources.sim import SimSource
 
@@ -279,6 +342,8 @@ def cmd_run(args) -> int:
         args.output,
         args.curve_key,
         total_pulses=source.total,
+        corrections=_corrections(args, scene.config, scene, scene.start_along_track_m),
+        physical=_physical(args),
     )
 
 
@@ -303,6 +368,8 @@ def cmd_replay(args) -> int:
             args.curve_key,
             wait_subscribers=args.wait_subscribers,
             total_pulses=rec.pulses,
+            corrections=_corrections(args, cfg, None, rec.start_along_track_m),
+            physical=_physical(args),
         )
 
 
@@ -405,6 +472,7 @@ def build_parser() -> argparse.ArgumentParser:
         "partitioned = partitioned overlap-save (low latency)",
     )
     s.add_argument("--micro-batch", type=int, help="pulses per lens launch")
+    add_processing_knobs(s)
     s.set_defaults(func=cmd_process)
 
     s = sub.add_parser("quicklook", help="PNG of an image file (dB, axes in metres)")
@@ -440,6 +508,7 @@ def build_parser() -> argparse.ArgumentParser:
             help="most pulses per lens launch "
             "(default: the configuration's micro_batch; fewer when keeping up)",
         )
+        add_processing_knobs(g)
         g = s.add_argument_group("publication (ZeroMQ; wire format in README 'Strip protocol')")
         g.add_argument(
             "--endpoint",

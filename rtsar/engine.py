@@ -50,6 +50,10 @@ class StreamProcessor:
     ``Processor.precision`` sets the sample type of lens and correlator (complex128 shots are
     processed in double end to end); ``Processor.range_migration_taps`` > 0 builds the
     range-migration correlator of rtsar.migration.
+
+    ``corrections`` (an rtsar.corrections.CorrectionChain) runs its raw stages on the shots and
+    its line stages between lens and CCD; ``physical`` (rtsar.physical.PhysicalSettings) puts the
+    AO cell before the lens and the physical CCD in place of the ideal correlator.
     """
 
     def __init__(
@@ -58,6 +62,8 @@ class StreamProcessor:
         lens_backend: str = "opencl",
         device: str | None = None,
         start_along_track_m: float = 0.0,
+        corrections=None,
+        physical=None,
     ):
         self.config = config
         self.plan = make_plan(config)
@@ -67,13 +73,21 @@ class StreamProcessor:
             self.mask = design_migration_mask(config, self.plan.range_m)
         else:
             self.mask = design_mask(config, self.plan.range_m)
-        self.correlator = make_correlator(
-            p.correlator,
-            self.mask,
-            p.fft_length,
-            partition_lines=p.partition_lines,
-            precision=p.precision,
-        )
+        self.corrections = corrections
+        self.ao_cell = None
+        if physical is not None:
+            from .physical import AOCell, PhysicalCCD  # numba kernels: only when asked for
+
+            self.ao_cell = AOCell(config, physical)
+            self.correlator = PhysicalCCD(config, self.plan.range_m, physical)
+        else:
+            self.correlator = make_correlator(
+                p.correlator,
+                self.mask,
+                p.fft_length,
+                partition_lines=p.partition_lines,
+                precision=p.precision,
+            )
         self.start_along_track_m = float(start_along_track_m)
         self.lines_out = 0
         self.pulses_in = 0
@@ -95,11 +109,18 @@ class StreamProcessor:
         self.lines_out += len(lines)
         return out
 
-    def push(self, shots: np.ndarray) -> Lines:
+    def compress(self, shots: np.ndarray) -> np.ndarray:
+        """The AO lens (after the AO cell's limits in physical mode): shots → range lines."""
+        if self.ao_cell is not None:
+            shots = self.ao_cell.apply(shots)
+        return self.lens.compress(shots)
+
+    def push(self, shots: np.ndarray, aux: dict | None = None) -> Lines:
         """Process a micro-batch of shots [pulse, sample]; return the lines it completed.
 
         A pulse holding NaN or Inf is replaced by zeros (the azimuth timing is kept) and counted
-        in ``nonfinite_pulses``; it never reaches the image.
+        in ``nonfinite_pulses``; it never reaches the image.  ``aux``: the auxiliary channels of
+        the same shots, for the corrections that use them.
         """
         shots = np.asarray(shots)
         if shots.ndim == 2 and shots.size:
@@ -109,23 +130,48 @@ class StreamProcessor:
                 shots[bad] = 0
                 self.nonfinite_pulses += int(bad.sum())
         self.pulses_in += len(shots)
-        compressed = self.lens.compress(shots)
+        aux = aux or {}
+        if self.corrections:
+            shots = self.corrections.raw(shots, aux)
+        compressed = self.compress(shots)
+        if self.corrections:
+            compressed = self.corrections.lines(compressed, aux)
         return self._emit(self.correlator.push(compressed))
 
     def flush(self) -> Lines:
-        """At the end of a stream: emit the lines still held by a block correlator."""
-        return self._emit(self.correlator.flush())
+        """At the end of a stream: emit the lines still held by the corrections and the CCD."""
+        parts = []
+        if self.corrections and self.corrections.line_stages:
+            held = self.corrections.flush(self.plan.bin_count)
+            if len(held):
+                parts.append(self.correlator.push(held))
+        parts.append(self.correlator.flush())
+        return self._emit(np.concatenate(parts) if len(parts) > 1 else parts[0])
 
 
 def focus_batches(
     config: Config,
-    batches: Iterable[np.ndarray],
+    batches: Iterable,
     lens_backend: str = "opencl",
     start_along_track_m: float = 0.0,
+    corrections=None,
+    physical=None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Run micro-batches of shots through the engine, flush → (image, azimuth_m, range_m)."""
-    eng = StreamProcessor(config, lens_backend, start_along_track_m=start_along_track_m)
-    parts = [eng.push(shots).lines for shots in batches]
+    """Run micro-batches of shots through the engine, flush → (image, azimuth_m, range_m).
+
+    A batch is a shots array, or a (shots, aux) pair when corrections need auxiliary channels.
+    """
+    eng = StreamProcessor(
+        config,
+        lens_backend,
+        start_along_track_m=start_along_track_m,
+        corrections=corrections,
+        physical=physical,
+    )
+    parts = [
+        eng.push(*batch).lines if isinstance(batch, tuple) else eng.push(batch).lines
+        for batch in batches
+    ]
     parts.append(eng.flush().lines)
     image = np.concatenate(parts)
     return image, eng.azimuth_m(0, len(image)), eng.range_m
@@ -136,8 +182,15 @@ def process_block(
     shots: np.ndarray,
     lens_backend: str = "opencl",
     start_along_track_m: float = 0.0,
+    aux: dict | None = None,
+    corrections=None,
+    physical=None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Convenience: run a whole array of shots through the engine → (image, azimuth_m, range_m)."""
     b = config.processor.micro_batch
-    batches = (shots[i : i + b] for i in range(0, len(shots), b))
-    return focus_batches(config, batches, lens_backend, start_along_track_m)
+    aux = aux or {}
+    batches = (
+        (shots[i : i + b], {k: v[i : i + b] for k, v in aux.items()})
+        for i in range(0, len(shots), b)
+    )
+    return focus_batches(config, batches, lens_backend, start_along_track_m, corrections, physical)

@@ -87,12 +87,19 @@ def concat_blocks(blocks: list[PulseBlock]) -> PulseBlock:
 class Ingest:
     """Sequence, value and shape checks; call with each ShotBatch, get PulseBlocks back."""
 
-    def __init__(self, samples_per_shot: int, aperture_pulses: int, max_gap_pulses: int):
+    def __init__(
+        self,
+        samples_per_shot: int,
+        aperture_pulses: int,
+        max_gap_pulses: int,
+        dtype=np.complex64,
+    ):
         self.samples_per_shot = int(samples_per_shot)
+        self.dtype = np.dtype(dtype)  # the processor's sample type (complex128 stays double)
         self.aperture_pulses = int(aperture_pulses)
         self.max_gap_pulses = max(int(max_gap_pulses), 1)
         # Zero-filled pulses are read-only views of one zero row: a long gap costs no memory.
-        self._zero_row = np.zeros((1, self.samples_per_shot), np.complex64)
+        self._zero_row = np.zeros((1, self.samples_per_shot), self.dtype)
         self.counters = dict.fromkeys(COUNTERS, 0)
         self.aux_lengths: dict[str, int] | None = None  # name → samples, fixed by the first batch
         self.next_pulse = 0  # stream index of the next pulse
@@ -107,7 +114,7 @@ class Ingest:
             np.full(count, arrival),
             np.ones(count, bool),
             {
-                k: np.broadcast_to(np.zeros((1, m), np.complex64), (count, m))
+                k: np.broadcast_to(np.zeros((1, m), self.dtype), (count, m))
                 for k, m in (self.aux_lengths or {}).items()
             },
         )
@@ -140,13 +147,13 @@ class Ingest:
         )
         if wrong:
             c["wrong_length_pulses"] += n
-            channels = {k: np.zeros((n, m), np.complex64) for k, m in lengths.items()}
+            channels = {k: np.zeros((n, m), self.dtype) for k, m in lengths.items()}
             flagged[:] = True
         else:
-            channels = {k: np.asarray(a, np.complex64) for k, a in channels.items()}
+            channels = {k: np.asarray(a, self.dtype) for k, a in channels.items()}
             bad = np.zeros(n, bool)
             for a in channels.values():
-                bad |= ~np.isfinite(a.view(np.float32)).all(axis=1)
+                bad |= ~np.isfinite(a.view(a.real.dtype)).all(axis=1)
             if bad.any():
                 channels = {k: a.copy() for k, a in channels.items()}
                 for a in channels.values():

@@ -36,6 +36,9 @@ def format_status(d: dict, total: int | None = None) -> str:
     ):
         if c.get(key):
             problems.append(f"{label} {c[key]}")
+    for key, value in c.items():  # correction stages: what they could not do
+        if "." in key and value and ("not_" in key or "nonfinite" in key):
+            problems.append(f"{key} {value}")
     return (
         f"t={d['elapsed_s']:6.1f} s  pulses {done}{progress}  {d['pulse_rate_hz']:8.0f} Hz  "
         f"lines {c.get('lines_out', 0)}  strips {c.get('strips_published', 0)}  "
@@ -57,6 +60,8 @@ def run_stream(
     wait_subscribers: int = 0,
     total_pulses: int | None = None,
     stream=None,
+    corrections=None,
+    physical=None,
 ) -> int:
     """Run until the source ends or Ctrl-C; print status lines and a summary; return exit code."""
     stream = stream or sys.stdout
@@ -79,7 +84,9 @@ def run_stream(
     print(
         f"rtsar: {source.description}; CCD {n.aperture_pulses} x {n.range_bins}, "
         f"{n.correlator} correlator, {settings.lens_backend} lens, {settings.stages} stages, "
-        f"strips of {settings.strip_lines} lines on {endpoint} ({delivery})",
+        f"strips of {settings.strip_lines} lines on {endpoint} ({delivery})"
+        + (f"; corrections: {', '.join(corrections.names)}" if corrections else "")
+        + (f"; physical CCD, carrier in {physical.carrier}" if physical else ""),
         file=stream,
         flush=True,
     )
@@ -100,6 +107,8 @@ def run_stream(
             start_along_track_m,
             on_stats=show,
             stats_every_s=0.5 if tty else 1.0,
+            corrections=corrections,
+            physical=physical,
         )
         pipe.start()
         try:

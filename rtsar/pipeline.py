@@ -235,6 +235,7 @@ class Pipeline:
         on_stats=None,
         stats_every_s: float = 1.0,
         corrections=None,
+        physical=None,
     ):
         self.config = config
         self.corrections = corrections
@@ -242,7 +243,9 @@ class Pipeline:
         self.source = source
         self.sinks = list(sinks)
         self.settings = s = settings or PipelineSettings()
-        self.engine = StreamProcessor(config, s.lens_backend, s.device, start_along_track_m)
+        self.engine = StreamProcessor(
+            config, s.lens_backend, s.device, start_along_track_m, corrections, physical
+        )
         n = config.processor.aperture_pulses
         self.aperture = n
         self.max_batch = s.max_batch or config.processor.micro_batch
@@ -251,7 +254,7 @@ class Pipeline:
         self.q_lines = BoundedQueue(capacity, "compressed")
         self.q_image = BoundedQueue(capacity, "image lines")
         max_gap = s.max_gap_pulses or max(4 * n, int(60 * config.geometry.prf_hz))
-        self.ingest = Ingest(config.waveform.samples_per_shot, n, max_gap)
+        self.ingest = Ingest(config.waveform.samples_per_shot, n, max_gap, self.engine.lens.dtype)
         self.stats = PipelineStats()
         self.on_stats = on_stats
         self.stats_every_s = stats_every_s
@@ -308,10 +311,10 @@ class Pipeline:
                         block.samples = chain.raw(block.samples, block.aux)
                     if block.flagged.all():  # zero pulses (gap fill): zero lines, no launch
                         block.samples = np.zeros(
-                            (len(block), self.engine.plan.bin_count), np.complex64
+                            (len(block), self.engine.plan.bin_count), self.engine.lens.dtype
                         )
                     else:
-                        block.samples = self.engine.lens.compress(block.samples)
+                        block.samples = self.engine.compress(block.samples)
                     if chain and chain.line_stages:
                         self._held.append(block)
                         block = self._release(chain.lines(block.samples, block.aux))

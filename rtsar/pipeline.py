@@ -21,6 +21,12 @@ line stage may hold pulses back (PGA holds a block): the pulses' arrival times a
 with them, so latency and flags stay exact; the held pulses come out at the end of the stream.
 Their counters join the pipeline's.
 
+3D imaging (``height``: an rtsar.topo.stream.HeightStripStage): the auxiliary channel of the
+second receiver (``height_channel``) goes through its own AO lens and CCD in step with the main
+channel; the stage turns each pair of line blocks into height strips (unwrapped with overlap, so
+heights stay continuous across strips), published beside the image strips (sink method
+``height``).
+
 Latency of an image line: from the arrival of the last pulse that contributes to it (pulse
 j + N - 1 for line j, Psaltis & Wagner 1981: the row leaves the CCD after N shifts) to the
 publication of the strip holding it.
@@ -124,6 +130,16 @@ class LineBlock:
 
     def __len__(self) -> int:
         return len(self.lines)
+
+
+@dataclass
+class HeightBatch:
+    """Height strips travelling to the publisher with the image lines (no queue units)."""
+
+    strips: list
+
+    def __len__(self) -> int:
+        return 0
 
 
 @dataclass
@@ -236,9 +252,18 @@ class Pipeline:
         stats_every_s: float = 1.0,
         corrections=None,
         physical=None,
+        height=None,
+        height_channel: str = "rx1",
     ):
         self.config = config
         self.corrections = corrections
+        self.height = height
+        self.height_channel = height_channel
+        if height is not None and corrections and corrections.line_stages:
+            raise ValueError(
+                "height strips with line-domain corrections (pra, pga) are not supported: they "
+                "correct the main receiver only and would bias the interferometric phase"
+            )
         self._held: deque[PulseBlock] = deque()  # pulses inside the line stages (metadata)
         self.source = source
         self.sinks = list(sinks)
@@ -246,6 +271,13 @@ class Pipeline:
         self.engine = StreamProcessor(
             config, s.lens_backend, s.device, start_along_track_m, corrections, physical
         )
+        # The second receiver's own AO lens and CCD (same configuration) for height strips.
+        self.engine_aux = (
+            StreamProcessor(config, s.lens_backend, s.device, start_along_track_m)
+            if height is not None
+            else None
+        )
+        self._height_seq = 0
         n = config.processor.aperture_pulses
         self.aperture = n
         self.max_batch = s.max_batch or config.processor.micro_batch
@@ -315,6 +347,8 @@ class Pipeline:
                         )
                     else:
                         block.samples = self.engine.compress(block.samples)
+                    if self.engine_aux is not None:
+                        block.aux = {"lines2": self._aux_lines(block)}
                     if chain and chain.line_stages:
                         self._held.append(block)
                         block = self._release(chain.lines(block.samples, block.aux))
@@ -329,6 +363,26 @@ class Pipeline:
         finally:
             self.stats.busy_s["lens" if self.settings.stages == "split" else "lens+ccd"] = busy
             (self.q_image if self.settings.stages == "fused" else self.q_lines).close()
+
+    def _aux_lines(self, block: PulseBlock) -> np.ndarray:
+        """Range lines of the second receiver for the pulses of ``block``."""
+        raw = block.aux.get(self.height_channel)
+        if raw is None:
+            raise ValueError(
+                f"height strips need the auxiliary channel {self.height_channel!r}; the source "
+                f"delivers {sorted(block.aux) or 'none'}"
+            )
+        if block.flagged.all():
+            return np.zeros((len(block), self.engine.plan.bin_count), self.engine.lens.dtype)
+        return self.engine_aux.compress(raw)
+
+    def _heights(self, main: np.ndarray, second: np.ndarray, final: bool = False) -> None:
+        """Height strips for the main/second line pairs, queued for publication in order."""
+        strips = self.height.process(main, second)
+        if final:
+            strips += self.height.flush()
+        if strips:
+            self.q_image.put(HeightBatch(strips))
 
     def _forward(self, block: PulseBlock | None) -> None:
         """Hand a block of range-compressed pulses to the CCD (its thread, or here if fused)."""
@@ -386,10 +440,15 @@ class Pipeline:
         self._flag_pulses.extend(idx[block.flagged].tolist())
         self.own["pulses_processed"] += len(block)
         lines = self.engine.correlator.push(block.samples)
+        if self.engine_aux is not None:
+            self._heights(lines, self.engine_aux.correlator.push(block.aux["lines2"]))
         return self._line_block(lines)
 
     def _ccd_flush(self) -> LineBlock | None:
-        return self._line_block(self.engine.correlator.flush())
+        lines = self.engine.correlator.flush()
+        if self.engine_aux is not None:
+            self._heights(lines, self.engine_aux.correlator.flush(), final=True)
+        return self._line_block(lines)
 
     def _line_block(self, lines: np.ndarray) -> LineBlock | None:
         if not len(lines):
@@ -428,6 +487,9 @@ class Pipeline:
                 if not blocks and held:  # no new line for a strip's duration: send what is held
                     pending, held = self._publish(pending, held), 0
                 for b in blocks:
+                    if isinstance(b, HeightBatch):
+                        self._publish_heights(b)
+                        continue
                     pending.append(b)
                     held += len(b)
                 while held >= strip_lines:
@@ -475,6 +537,14 @@ class Pipeline:
         self.own["strips_published"] += 1
         return rest
 
+    def _publish_heights(self, batch: HeightBatch) -> None:
+        for strip in batch.strips:
+            for sink in self.sinks:
+                if hasattr(sink, "height"):
+                    sink.height(strip, self._height_seq, self)
+            self._height_seq += 1
+            self.own["height_strips_published"] = self.own.get("height_strips_published", 0) + 1
+
     def counters(self) -> dict:
         """All counters: source, ingest and pipeline."""
         c = dict(self.source.counters)
@@ -494,6 +564,8 @@ class Pipeline:
         d["latency_recent_median_ms"] = self.stats.latency.recent_percentile(50) * 1e3
         d["latency_recent_p99_ms"] = self.stats.latency.recent_percentile(99) * 1e3
         d["final"] = final
+        if self.height is not None:
+            d["height"] = {k: float(v) for k, v in self.height.stats.items()}
         for sink in self.sinks:
             (sink.end if final else sink.stats)(d, self)
         if self.on_stats is not None:

@@ -76,13 +76,49 @@ def strip_header(strip, pipeline) -> dict:
     }
 
 
+HEIGHT_FORMAT = "rtsar-height"
+HEIGHT_VERSION = 1
+
+
+def height_header(strip, seq: int, pipeline) -> dict:
+    """The JSON header of a height message (3D imaging: rtsar.topo.stream.HeightStrip).
+
+    Frames: topic ``height``, this header, heights float32 little-endian [line, bin] in metres
+    (0 where not valid), validity uint8 [line, bin] (1 = valid: coherent, unwrapped).
+    """
+    rng = pipeline.engine.range_m
+    n_lines, n_bins = strip.height_m.shape
+    return {
+        "format": HEIGHT_FORMAT,
+        "version": HEIGHT_VERSION,
+        "stream_id": pipeline.stream_id,
+        "seq": seq,
+        "first_line": strip.first_line,
+        "line_count": n_lines,
+        "range_bins": n_bins,
+        "dtype": "float32",
+        "valid_dtype": "uint8",
+        "byte_order": "little",
+        "units": "m",
+        "aligned": bool(strip.aligned),
+        "valid_fraction": float(np.mean(strip.valid)) if strip.valid.size else 0.0,
+        "azimuth_first_m": float(pipeline.engine.azimuth_m(strip.first_line, 1)[0]),
+        "azimuth_step_m": pipeline.config.geometry.along_track_step_m,
+        "range_first_m": float(rng[0]),
+        "range_step_m": float(rng[1] - rng[0]) if len(rng) > 1 else 0.0,
+        "publish_unix_s": time.time(),
+    }
+
+
 @dataclass
 class Message:
-    """A received message: topic, header and (strips) the payload as image[line, range_bin]."""
+    """A received message: topic, header and the payload: a strip's image[line, range_bin]
+    (complex), or a height message's height_m[line, range_bin] (float32) and ``valid``."""
 
     topic: str
     header: dict
     lines: np.ndarray | None = None
+    valid: np.ndarray | None = None
 
 
 def decode(frames: list[bytes]) -> Message:
@@ -96,6 +132,8 @@ def decode(frames: list[bytes]) -> Message:
         raise ValueError(f"header is not JSON: {exc}") from None
     if not isinstance(header, dict):
         raise ValueError("header is not a JSON object")
+    if topic == "height":
+        return _decode_height(header, frames)
     if topic != "strip":
         return Message(topic, header)
     if header.get("format") != STRIP_FORMAT or header.get("version") != STRIP_VERSION:
@@ -107,6 +145,19 @@ def decode(frames: list[bytes]) -> Message:
     if header.get("dtype") != "complex64" or len(payload) != shape[0] * shape[1] * 8:
         raise ValueError(f"payload of {len(payload)} bytes does not match {shape} complex64")
     return Message(topic, header, np.frombuffer(payload, "<c8").reshape(shape))
+
+
+def _decode_height(header: dict, frames: list[bytes]) -> Message:
+    if header.get("format") != HEIGHT_FORMAT or header.get("version") != HEIGHT_VERSION:
+        raise ValueError(f"not an {HEIGHT_FORMAT} v{HEIGHT_VERSION} message")
+    if len(frames) != 4:
+        raise ValueError("a height message has 4 frames")
+    shape = (int(header["line_count"]), int(header["range_bins"]))
+    h, v = bytes(frames[2]), bytes(frames[3])
+    if len(h) != shape[0] * shape[1] * 4 or len(v) != shape[0] * shape[1]:
+        raise ValueError(f"height payload does not match {shape}")
+    height = np.frombuffer(h, "<f4").reshape(shape)
+    return Message("height", header, height, np.frombuffer(v, np.uint8).reshape(shape).astype(bool))
 
 
 class ZmqPublisher:
@@ -179,9 +230,12 @@ class ZmqPublisher:
         time.sleep(0.05)
         return True
 
-    def send(self, topic: str, header: dict, payload: np.ndarray | None = None) -> None:
+    def send(self, topic: str, header: dict, payload=None) -> None:
+        """Send one message; ``payload`` a complex array (strips) or a list of typed arrays."""
         frames = [topic.encode("ascii"), json.dumps(header).encode()]
-        if payload is not None:
+        if isinstance(payload, list):
+            frames.extend(np.ascontiguousarray(a).data for a in payload)
+        elif payload is not None:
             frames.append(np.ascontiguousarray(payload, "<c8").data)
         self._poll_subscriptions()
         if self.delivery == "drop":
@@ -199,6 +253,10 @@ class ZmqPublisher:
     # ---- pipeline sink interface --------------------------------------------------------
     def strip(self, strip, pipeline) -> None:
         self.send("strip", strip_header(strip, pipeline), strip.lines)
+
+    def height(self, strip, seq: int, pipeline) -> None:
+        payload = [strip.height_m.astype("<f4"), strip.valid.astype(np.uint8)]
+        self.send("height", height_header(strip, seq, pipeline), payload)
 
     def stats(self, stats: dict, pipeline) -> None:
         self.send("stats", _stats_header(stats, pipeline))

@@ -10,6 +10,10 @@ Each knob is varied alone from the preset's defaults, on a scene whose targets s
   across the aperture and the azimuth chirp rate changes by ±0.9 % across the swath (283 rad of
   phase at the aperture edge), so the per-range-bin mask and range-migration handling matter.
 
+Scenes with injected errors (``phase errors``, ``chirp``: each correction's cost and what it
+gives back) are measured against the float64 image of the same scene simulated without the
+errors, after the best complex gain (a constant phase is not observable).
+
 Quality, per variant, against a float64 reference of the same geometry (the AO lens in
 complex128, ``compress_reference``; the azimuth correlation by complex128 FFT convolution with
 the ideal mask — per range bin, migration handled when the processor has that knob): relative RMS
@@ -61,6 +65,8 @@ class Variant:
     processor: dict = field(default_factory=dict)  # Processor field changes
     lens_backend: str = "opencl"
     default: bool = False
+    corrections: tuple = ()  # rtsar.corrections specs, e.g. ("pga",)
+    physical: str | None = None  # physical mode with the paper's CCD: carrier "range"/"azimuth"
 
 
 def instrument_variants(cfg: Config, quick: bool = False) -> list[Variant]:
@@ -88,6 +94,7 @@ def instrument_variants(cfg: Config, quick: bool = False) -> list[Variant]:
     v += [
         Variant("windows", w, {"range_window": w, "azimuth_window": w}) for w in ("hann", "taylor")
     ]
+    v += [Variant("physical CCD", f"carrier in {c}", physical=c) for c in ("range",)]
     return v + lens_variants(cfg)
 
 
@@ -105,11 +112,15 @@ def curvature_variants(cfg: Config, quick: bool = False) -> list[Variant]:
     """The knobs that only matter where the azimuth chirp changes across the swath."""
     v = [Variant("defaults", "preset", default=True)]
     v += [Variant("mask", "one for the swath", {"per_bin_mask": False})]
-    if "range_migration_taps" in Processor.__dataclass_fields__:
-        v += [
-            Variant("range migration", f"{t} taps", {"range_migration_taps": t})
-            for t in ((4, 8) if not quick else (4,))
-        ]
+    bins = 2 * cfg.processor.range_bins  # the same swath, sampled twice as finely
+    v += [
+        Variant(
+            "range migration",
+            f"{t} taps, oversampling 2",
+            {"range_migration_taps": t, "range_oversampling": 2, "range_bins": bins},
+        )
+        for t in ((4, 8) if not quick else (4,))
+    ]
     v += [Variant("precision", "complex128", {"precision": "complex128"})]
     return v + lens_variants(cfg)
 
@@ -124,6 +135,13 @@ class TradeoffScene:
     targets: list[tuple[str, float, float]]  # (label, along_track_m, slant_range_m)
     start_along_track_m: float = 0.0
     shots: np.ndarray | None = None
+    aux: dict = field(default_factory=dict)
+    effects: tuple = ()  # errors injected into the shots (the reference is simulated without)
+    extra_targets: tuple = ()  # (along_track_m, slant_range_m, amplitude): e.g. a retro
+    reference_shots: np.ndarray | None = None
+    reference_migration_taps: int = 0  # the float64 reference handles migration with this
+    min_pulses: int = 0  # at least this many shots (block stages such as PGA need room)
+    scene: object = None  # the rtsar Scene simulated (geometry for the corrections)
 
     def config_of(self, v: Variant) -> Config:
         return self.config.with_processor(**v.processor)
@@ -157,40 +175,53 @@ def _extent(scene: TradeoffScene) -> tuple[int, int]:
 
 
 def simulate(scene: TradeoffScene) -> None:
-    s = point_scene(
-        scene.config,
-        [x for _, x, _ in scene.targets],
-        [r for _, _, r in scene.targets],
-        seed=5,
-        start_along_track_m=scene.start_along_track_m,
-        pulses=_pulses(scene),
-    )
-    scene.shots = Simulator(s).block(s.pulses)
+    """The scene's shots (with its effects) and, when it has effects, the error-free shots."""
+    xs = [x for _, x, _ in scene.targets] + [t[0] for t in scene.extra_targets]
+    rs = [r for _, _, r in scene.targets] + [t[1] for t in scene.extra_targets]
+    amps = [1.0] * len(scene.targets) + [t[2] for t in scene.extra_targets]
+
+    def run(effects):
+        s = point_scene(
+            scene.config,
+            xs,
+            rs,
+            amps,
+            effects=effects,
+            seed=5,
+            start_along_track_m=scene.start_along_track_m,
+            pulses=_pulses(scene),
+        )
+        return Simulator(s).block_with_aux(s.pulses), s
+
+    (scene.shots, scene.aux), scene.scene = run(list(scene.effects))
+    scene.reference_shots = run([])[0][0] if scene.effects else scene.shots
 
 
 def _pulses(scene: TradeoffScene) -> int:
     n_max, margin = _extent(scene)
     step = scene.config.geometry.along_track_step_m
     far = max(x for _, x, _ in scene.targets) - scene.start_along_track_m
-    return int(math.ceil(far / step + 0.5 * n_max + margin)) + 1
+    return max(scene.min_pulses, int(math.ceil(far / step + 0.5 * n_max + margin)) + 1)
 
 
 # ---- reference and measurement -----------------------------------------------------------------
-def reference_image(cfg: Config, shots: np.ndarray) -> np.ndarray:
+def reference_image(cfg: Config, shots: np.ndarray, migration_taps: int = 0) -> np.ndarray:
     """Float64 image of the same geometry: compress_reference, then exact FFT correlation.
 
     g[j, r] = Σ_k line[j + k, r] · mask[k, r] (ccd.py eq. 1) is the convolution of the lines with
-    the reversed mask, evaluated with complex128 FFTs (error ~1e-15 of the peak).  With the
-    range-migration knob the reference is its own float64 NumPy reference.
+    the reversed mask, evaluated with complex128 FFTs (error ~1e-15 of the peak); always the
+    per-range-bin mask.  ``migration_taps`` > 0: range migration handled by that many taps
+    (rtsar.migration's float64 reference), for scenes where curvature matters.
     """
-    ideal = cfg.with_processor(per_bin_mask=True, precision="complex128")
+    ideal = cfg.with_processor(
+        per_bin_mask=True, precision="complex128", range_migration_taps=migration_taps
+    )
     plan = make_plan(ideal)
     lines = compress_reference(plan, shots)
-    taps = getattr(cfg.processor, "range_migration_taps", 0)
-    if taps:
-        from .migration import correlate_migration_reference  # the knob's own float64 reference
+    if migration_taps:
+        from .migration import correlate_migration_reference, design_migration_mask
 
-        return correlate_migration_reference(ideal, plan.range_m, lines)
+        return correlate_migration_reference(lines, design_migration_mask(ideal, plan.range_m))
     mask = design_mask(ideal, plan.range_m)
     n = mask.shape[0]
     full = signal.fftconvolve(lines, mask[::-1], axes=0)
@@ -220,14 +251,35 @@ def trace_latency_s(service_s, lines_per_batch, batch: int, pulses: int, n: int,
     return np.concatenate(lat) if lat else np.zeros(0)
 
 
-def run_engine(cfg: Config, shots: np.ndarray, lens_backend: str, device=None, start_m=0.0):
+def run_engine(
+    cfg: Config,
+    shots: np.ndarray,
+    lens_backend: str,
+    device=None,
+    start_m=0.0,
+    variant=None,
+    scene=None,
+):
     """One timed pass of the engine → (image, azimuth_m, range_m, service_s, lines per batch)."""
-    eng = StreamProcessor(cfg, lens_backend, device, start_along_track_m=start_m)
+    corrections = physical = None
+    aux = scene.aux if scene is not None else {}
+    if variant is not None and variant.corrections:
+        from .corrections import CorrectionChain
+
+        corrections = CorrectionChain.from_specs(
+            list(variant.corrections), cfg, scene.scene, start_m
+        )
+    if variant is not None and variant.physical:
+        from .physical import paper_ccd
+
+        physical = paper_ccd(variant.physical)
+    eng = StreamProcessor(cfg, lens_backend, device, start_m, corrections, physical)
     b = cfg.processor.micro_batch
     service, counts, parts = [], [], []
     for i in range(0, len(shots), b):
+        batch_aux = {k: v[i : i + b] for k, v in aux.items()}
         t0 = time.perf_counter()
-        out = eng.push(shots[i : i + b])
+        out = eng.push(shots[i : i + b], batch_aux)
         service.append(time.perf_counter() - t0)
         counts.append(len(out.lines))
         parts.append(out.lines)
@@ -237,14 +289,21 @@ def run_engine(cfg: Config, shots: np.ndarray, lens_backend: str, device=None, s
 
 
 def measure_cost(
-    cfg: Config, shots: np.ndarray, lens_backend: str, repeats: int = 2, device=None, start_m=0.0
+    cfg: Config,
+    shots: np.ndarray,
+    lens_backend: str,
+    repeats: int = 2,
+    device=None,
+    start_m=0.0,
+    variant=None,
+    scene=None,
 ):
     """Warm-up, then the best of ``repeats`` timed passes → (image, az, rg, Timing)."""
     warm = min(len(shots), 2 * cfg.processor.aperture_pulses + 2 * cfg.processor.micro_batch)
-    run_engine(cfg, shots[:warm], lens_backend, device)  # JIT, kernel builds, FFT plans
+    run_engine(cfg, shots[:warm], lens_backend, device, start_m, variant, scene)  # JIT, builds
     best = None
     for _ in range(repeats):
-        result = run_engine(cfg, shots, lens_backend, device, start_m)
+        result = run_engine(cfg, shots, lens_backend, device, start_m, variant, scene)
         if best is None or sum(result[3]) < sum(best[3]):
             best = result
     image, az, rg, service, counts = best
@@ -302,7 +361,18 @@ def _reports(cfg: Config, image, az, rg, targets):
     return out
 
 
-def measure_quality(cfg: Config, image, az, rg, reference, targets) -> Quality:
+def gain_fitted_error(image: np.ndarray, reference: np.ndarray) -> float:
+    """‖c·image − reference‖ / ‖reference‖ with the best complex gain c: the error that remains
+    once an unobservable constant phase (and scale) is allowed — what a phase correction can
+    restore, measured against the error-free image."""
+    a = np.asarray(image, np.complex128).ravel()
+    b = np.asarray(reference, np.complex128).ravel()
+    aa = np.vdot(a, a).real
+    c = np.vdot(a, b) / aa if aa > 0 else 0.0
+    return float(np.linalg.norm(c * a - b) / np.linalg.norm(b))
+
+
+def measure_quality(cfg: Config, image, az, rg, reference, targets, gain_fit=False) -> Quality:
     reps = _reports(cfg, image, az, rg, targets)
     refs = _reports(cfg, reference, az, rg, targets)
     rho_r = cfg.waveform.range_resolution_m
@@ -322,7 +392,7 @@ def measure_quality(cfg: Config, image, az, rg, reference, targets) -> Quality:
         phase.append(abs(np.angle(rep.peak_value / ref.peak_value)))
     centre = len(targets) // 2
     return Quality(
-        relative_rms(image, reference),
+        gain_fitted_error(image, reference) if gain_fit else relative_rms(image, reference),
         float(max(phase)),
         reps[centre].azimuth.irw_m,
         float(max(az_ratio)),
@@ -352,7 +422,53 @@ def pareto_front(rows: list[dict], keys=FRONT_KEYS):
     return rows
 
 
-def default_scenes(quick: bool = False) -> list[TradeoffScene]:
+def correction_scenes(quick: bool = False) -> list[TradeoffScene]:
+    """Crouch-size errors injected, each correction's cost and how much focus it gives back.
+
+    ``phase errors``: crouch-sal with a 512-pulse aperture, a piston error (random walk and
+    vibration, hundreds of radians over the record) and a retro-reflector 10× brighter than the
+    targets; phase-to-retro and PGA against no correction.  ``chirp``: the same geometry with a
+    1 % non-linear chirp and 10 GHz start-frequency jitter, the reference-interferometer and HCN
+    channels; linearization (and with HCN alignment) against none.  Quality is measured against
+    the float64 image of the error-free shots.
+    """
+    n = 256 if quick else 512
+    cfg = preset("crouch-sal").with_processor(aperture_pulses=n, range_bins=256, micro_batch=64)
+    rm = make_plan(cfg).range_m
+    retro = (3 * cfg.geometry.along_track_step_m, float(rm[len(rm) // 2 + 40]), 10.0)
+    phase = make_scene(
+        "phase errors",
+        cfg,
+        [
+            Variant("corrections", "none", default=True),
+            Variant("corrections", "pra", corrections=("pra",)),
+            Variant("corrections", "pga", corrections=("pga",)),
+        ],
+        f"crouch-sal, N = {n}: piston error (random walk + vibration) and a retro-reflector",
+    )
+    phase.effects = (("piston", {"random_walk_rad": 4.0, "vibration_rad": 3.0, "seed": 3}),)
+    phase.extra_targets = (retro,)
+    phase.min_pulses = 4 * n
+    chirp = make_scene(
+        "chirp",
+        cfg,
+        [
+            Variant("corrections", "none", default=True),
+            Variant("corrections", "linearize", corrections=("linearize",)),
+            Variant("corrections", "linearize + hcn", corrections=("linearize", "hcn")),
+        ],
+        f"crouch-sal, N = {n}: 1 % chirp non-linearity, 10 GHz start-frequency jitter",
+    )
+    chirp.effects = (
+        ("chirp_nonlinearity", {"poly_fraction": [0.0, 0.0, 0.015]}),
+        ("start_frequency_jitter", {"std_hz": 10e9, "seed": 4}),
+        ("reference_interferometer", {}),
+        ("hcn_cell", {}),
+    )
+    return [phase, chirp]
+
+
+def default_scenes(quick: bool = False, corrections: bool = True) -> list[TradeoffScene]:
     if quick:  # small and fast: for tests and a first look
         tiny = preset("tiny")
         return [
@@ -364,21 +480,24 @@ def default_scenes(quick: bool = False) -> list[TradeoffScene]:
             )
         ]
     jpl, crouch = preset("psaltis-jpl"), preset("crouch-sal")
-    return [
+    curvature = make_scene(
+        "curvature",
+        crouch,
+        curvature_variants(crouch),
+        "crouch-sal (2048 × 512, 0.7-cell range curvature, ±0.9 % chirp-rate change across the "
+        "swath): centre and swath-edge targets; reference with range migration (16 taps)",
+    )
+    curvature.reference_migration_taps = 16
+    scenes = [
         make_scene(
             "instrument",
             jpl,
             instrument_variants(jpl),
             "psaltis-jpl (512 × 320 CCD, 1600 Hz): centre and swath-edge targets",
         ),
-        make_scene(
-            "curvature",
-            crouch,
-            curvature_variants(crouch),
-            "crouch-sal (2048 × 512, 0.7-cell range curvature, ±0.9 % chirp-rate change "
-            "across the swath): centre and swath-edge targets",
-        ),
+        curvature,
     ]
+    return scenes + (correction_scenes() if corrections else [])
 
 
 def run_tradeoff(
@@ -398,20 +517,31 @@ def run_tradeoff(
             done += 1
             cfg = scene.config_of(v)
             key = (
+                scene.reference_migration_taps,
                 cfg.processor.aperture_pulses,
                 cfg.processor.range_window,
                 cfg.processor.azimuth_window,
                 cfg.processor.range_oversampling,
                 cfg.processor.range_bins,
-                getattr(cfg.processor, "range_migration_taps", 0),
             )
             if key not in refs:
-                refs[key] = reference_image(cfg, scene.shots)
+                refs[key] = reference_image(
+                    cfg, scene.reference_shots, scene.reference_migration_taps
+                )
             t0 = time.perf_counter()
             image, az, rg, timing = measure_cost(
-                cfg, scene.shots, v.lens_backend, repeats, device, scene.start_along_track_m
+                cfg,
+                scene.shots,
+                v.lens_backend,
+                repeats,
+                device,
+                scene.start_along_track_m,
+                v,
+                scene,
             )
-            quality = measure_quality(cfg, image, az, rg, refs[key], scene.targets)
+            quality = measure_quality(
+                cfg, image, az, rg, refs[key], scene.targets, gain_fit=bool(scene.effects)
+            )
             rows.append(
                 {
                     "scene": scene.key,
@@ -535,12 +665,17 @@ def add_arguments(parser) -> None:
         help="use the NumPy lens for every variant (no OpenCL device needed)",
     )
     parser.add_argument("--device", help="OpenCL platform/device name substring")
+    parser.add_argument(
+        "--no-corrections",
+        action="store_true",
+        help="leave out the phase-error and chirp-correction scenes",
+    )
 
 
 def run(args) -> int:
     if args.repeats < 1:
         raise ValueError("--repeats must be >= 1")
-    scenes = default_scenes(args.quick)
+    scenes = default_scenes(args.quick, not getattr(args, "no_corrections", False))
     if args.lens_numpy:
         for s in scenes:
             s.variants = [v for v in s.variants if v.knob != "lens"]

@@ -81,3 +81,13 @@ def test_report_and_plot_are_written(tiny_rows, tmp_path):
     assert md.count("\n| ") == 1 + len(rows)  # the header and one row per variant
     tradeoff.plot(rows, [scene], tmp_path / "t.png")
     assert (tmp_path / "t.png").stat().st_size > 10_000
+
+
+def test_gain_fitted_error_ignores_a_constant_phase_only():
+    rng = np.random.default_rng(1)
+    ref = rng.standard_normal((20, 8)) + 1j * rng.standard_normal((20, 8))
+    assert tradeoff.gain_fitted_error(2.5 * np.exp(0.7j) * ref, ref) < 1e-14
+    # A phase that varies (a residual phase error) is not absorbed: error ≈ rms of the phase.
+    ramp = np.exp(1j * 0.01 * np.arange(20))[:, None]
+    err = tradeoff.gain_fitted_error(ref * ramp, ref)
+    assert 0.02 < err < 0.07

@@ -242,9 +242,11 @@ def _physical(args):
     """--physical CARRIER: the paper's CCD (rtsar.physical.paper_ccd) with that carrier."""
     if not getattr(args, "physical", None):
         return None
+    from dataclasses import replace
+
     from .physical import paper_ccd
 
-    return paper_ccd(args.physical)
+    return replace(paper_ccd(args.physical), full_scale_amplitude=args.full_scale)
 
 
 def add_processing_knobs(g) -> None:
@@ -274,6 +276,14 @@ def add_processing_knobs(g) -> None:
         choices=("range", "azimuth"),
         help="physical mode: the paper's CCD (bias, full well, noise, 12-bit ADC, blooming) "
         "with the coherent-detection carrier in range or in azimuth",
+    )
+    g.add_argument(
+        "--full-scale",
+        type=float,
+        default=1.0,
+        metavar="A",
+        help="physical mode: focused-image amplitude whose charge swing fills the well above "
+        "the bias (the drive level; set it ~1.4× the brightest target's peak, default 1)",
     )
 
 

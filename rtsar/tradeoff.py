@@ -142,6 +142,7 @@ class TradeoffScene:
     reference_migration_taps: int = 0  # the float64 reference handles migration with this
     min_pulses: int = 0  # at least this many shots (block stages such as PGA need room)
     scene: object = None  # the rtsar Scene simulated (geometry for the corrections)
+    image_peak: float = 1.0  # largest |pixel| of the float64 image (physical mode's full scale)
 
     def config_of(self, v: Variant) -> Config:
         return self.config.with_processor(**v.processor)
@@ -270,9 +271,14 @@ def run_engine(
             list(variant.corrections), cfg, scene.scene, start_m
         )
     if variant is not None and variant.physical:
+        from dataclasses import replace
+
         from .physical import paper_ccd
 
-        physical = paper_ccd(variant.physical)
+        # The brightest target at half of full scale, below the largest undistorted signal of
+        # the emulated CCD (0.705, rtsar table1): no well overflows with three targets.
+        peak = scene.image_peak if scene is not None else 1.0
+        physical = replace(paper_ccd(variant.physical), full_scale_amplitude=peak / 0.5)
     eng = StreamProcessor(cfg, lens_backend, device, start_m, corrections, physical)
     b = cfg.processor.micro_batch
     service, counts, parts = [], [], []
@@ -528,6 +534,8 @@ def run_tradeoff(
                 refs[key] = reference_image(
                     cfg, scene.reference_shots, scene.reference_migration_taps
                 )
+                if v.default:
+                    scene.image_peak = float(np.abs(refs[key]).max())
             t0 = time.perf_counter()
             image, az, rg, timing = measure_cost(
                 cfg,

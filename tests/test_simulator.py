@@ -165,3 +165,21 @@ def test_targets_outside_the_swath_are_reported():
     cfg = preset("tiny")
     scene = point_scene(cfg, [0.0, 0.0], [2000.0, 20000.0])
     assert scene.targets_outside_swath() == [1]
+
+
+def test_ground_targets_keep_their_3d_position():
+    from rtsar.scene.model import scene_from_dict
+
+    d = {
+        "preset": "zhao-insal",
+        "geometry": {"platform_height_m": 1.386},
+        "targets": [
+            {"along_track_m": 0.0, "ground_range_m": 1.96, "height_m": 0.002},
+            {"along_track_m": 0.001, "slant_range_m": 2.4},
+        ],
+    }
+    t = scene_from_dict(d).targets
+    np.testing.assert_allclose(t.height_m, [0.002, 0.0])
+    # the slant-range target sits on the reference plane at the ground range it implies
+    np.testing.assert_allclose(t.ground_range_m, [1.96, (2.4**2 - 1.386**2) ** 0.5])
+    np.testing.assert_allclose(t.slant_range_m[0], (1.96**2 + (1.386 - 0.002) ** 2) ** 0.5)

@@ -178,7 +178,7 @@ def _table_list(d: dict, key: str) -> list:
 
 
 def _targets(rows: list, cfg: Config) -> Targets:
-    xs, rs, amps = [], [], []
+    xs, rs, amps, grounds, heights = [], [], [], [], []
     for i, t in enumerate(rows):
         unknown = set(t) - _TARGET_KEYS
         if unknown:
@@ -194,12 +194,17 @@ def _targets(rows: list, cfg: Config) -> Targets:
             if "height_m" in t:
                 raise ValueError(f"{where}: height_m goes with ground_range_m")
             r = _number(t, "slant_range_m", where)
+            grounds.append(None)
+            heights.append(0.0)
         else:
             h_platform = cfg.geometry.platform_height_m
             if h_platform <= 0:
                 raise ValueError(f"{where}: ground_range_m needs geometry.platform_height_m > 0")
-            r = math.hypot(_number(t, "ground_range_m", where),
-                           h_platform - _number(t, "height_m", where, 0.0))
+            ground = _number(t, "ground_range_m", where)
+            height = _number(t, "height_m", where, 0.0)
+            r = math.hypot(ground, h_platform - height)
+            grounds.append(ground)
+            heights.append(height)
         amp = _number(t, "amplitude", where, 1.0) * np.exp(1j * _number(t, "phase_rad", where, 0.0))
         values = (_number(t, "along_track_m", where), r, amp.real, amp.imag)
         if not all(math.isfinite(v) for v in values) or r <= 0:
@@ -207,7 +212,17 @@ def _targets(rows: list, cfg: Config) -> Targets:
         xs.append(values[0])
         rs.append(r)
         amps.append(amp)
-    return Targets(np.array(xs, float), np.array(rs, float), np.array(amps, np.complex128))
+    targets = Targets(np.array(xs, float), np.array(rs, float), np.array(amps, np.complex128))
+    if all(g is None for g in grounds):
+        return targets
+    # Some targets are given on the ground: keep their 3D position for off-track receivers (the
+    # others sit on the reference plane, h = 0, at the ground range their slant range implies).
+    h = cfg.geometry.platform_height_m
+    ground = [
+        math.sqrt(max(r * r - h * h, 0.0)) if g is None else g
+        for g, r in zip(grounds, rs, strict=True)
+    ]
+    return replace(targets, ground_range_m=np.array(ground), height_m=np.array(heights))
 
 
 def _scan_extent(cfg: Config, targets: Targets, start, pulses) -> tuple[float, int]:

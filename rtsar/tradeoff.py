@@ -633,7 +633,9 @@ def plot(rows: list[dict], scenes: list[TradeoffScene], path: Path) -> None:
                     xytext=(4, 3),
                     textcoords="offset points",
                 )
-            ax.set_xscale("log")
+            xs = [r[xkey] for r in sel]
+            if max(xs) > 3 * min(xs):  # a log axis only where the values span a range
+                ax.set_xscale("log")
             ax.set_yscale("log")
             ax.set_xlabel(xlabel)
             ax.set_ylabel("image error vs float64 reference (relative RMS)")

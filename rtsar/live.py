@@ -86,7 +86,9 @@ def run_stream(
         f"{n.correlator} correlator, {settings.lens_backend} lens, {settings.stages} stages, "
         f"strips of {settings.strip_lines} lines on {endpoint} ({delivery})"
         + (f"; corrections: {', '.join(corrections.names)}" if corrections else "")
-        + (f"; physical CCD, carrier in {physical.carrier}" if physical else ""),
+        + (f"; physical CCD, carrier in {physical.carrier}" if physical else "")
+        + (f"; {n.precision}" if n.precision != "complex64" else "")
+        + (f"; range migration {n.range_migration_taps} taps" if n.range_migration_taps else ""),
         file=stream,
         flush=True,
     )

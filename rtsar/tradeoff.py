@@ -39,7 +39,7 @@ import json
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -271,8 +271,6 @@ def run_engine(
             list(variant.corrections), cfg, scene.scene, start_m
         )
     if variant is not None and variant.physical:
-        from dataclasses import replace
-
         from .physical import paper_ccd
 
         # The brightest target at half of full scale, below the largest undistorted signal of
@@ -689,9 +687,7 @@ def run(args) -> int:
     if args.lens_numpy:
         for s in scenes:
             s.variants = [v for v in s.variants if v.knob != "lens"]
-            s.variants = [
-                Variant(v.knob, v.value, v.processor, "numpy", v.default) for v in s.variants
-            ]
+            s.variants = [replace(v, lens_backend="numpy") for v in s.variants]
     out = Path(args.out_dir)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()

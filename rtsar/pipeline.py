@@ -433,7 +433,7 @@ class Pipeline:
             self.q_image.close()
 
     def _ccd_step(self, blocks: list[PulseBlock]) -> LineBlock | None:
-        block = _concat(blocks)
+        block = concat_blocks(blocks)
         ring = len(self._arrival)
         idx = block.first_pulse + np.arange(len(block))
         self._arrival[idx % ring] = block.arrival_s
@@ -621,10 +621,6 @@ class Pipeline:
         return self.join()
 
 
-def _concat(blocks: list[PulseBlock]) -> PulseBlock:
-    return concat_blocks(blocks)
-
-
 def _groups(blocks: list[PulseBlock], most: int):
     """Consecutive pulse blocks regrouped into blocks of at most ``most`` pulses."""
     pending, size = [], 0
@@ -636,10 +632,10 @@ def _groups(blocks: list[PulseBlock], most: int):
             size += take
             start += take
             if size == most:
-                yield _concat(pending)
+                yield concat_blocks(pending)
                 pending, size = [], 0
     if pending:
-        yield _concat(pending)
+        yield concat_blocks(pending)
 
 
 def _slice(b: LineBlock, start: int, stop: int) -> LineBlock:

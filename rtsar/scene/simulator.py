@@ -202,11 +202,6 @@ class Simulator:
         while self._next < stop:
             yield self.shot(self._next)
 
-    @property
-    def has_aux_channels(self) -> bool:
-        """True when some effect adds auxiliary receive channels."""
-        return bool(self._aux_effects)
-
     def block(self, count: int) -> np.ndarray:
         """The next ``count`` shots as one complex64 array [pulse, sample] (main channel)."""
         return self.block_with_aux(count)[0]

@@ -7,7 +7,6 @@ the usual SAR choice; ``hann`` and ``hamming`` are the textbook raised cosines (
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import windows as _sw
 
 from .params import WINDOWS
 
@@ -21,6 +20,10 @@ def window(name: str, n: int) -> np.ndarray:
         raise ValueError("window length must be >= 1")
     if name == "rect":
         return np.ones(n)
+    # Imported here: scipy.signal takes about a second to load, and the rectangular window (and
+    # every command that never builds a taper) does without it.
+    from scipy.signal import windows as _sw
+
     if name == "hann":
         return _sw.hann(n, sym=True) if n > 2 else np.ones(n)
     if name == "hamming":

@@ -5,17 +5,13 @@ import pytest
 from conftest import crandn
 from naive import correlate_loops
 
-from rtsar.ccd import (
-    DirectCorrelator,
-    FFTCorrelator,
-    PartitionedCorrelator,
-    aperture_offsets_m,
-    correlate_reference,
-    design_mask,
-    make_correlator,
-)
-from rtsar.lens_plan import make_plan
-from rtsar.metrics import relative_rms
+from rtsar.analysis import relative_rms
+from rtsar.ccd import make_correlator
+from rtsar.ccd.base import aperture_offsets_m, correlate_reference, design_mask
+from rtsar.ccd.direct import DirectCorrelator
+from rtsar.ccd.fft import FFTCorrelator
+from rtsar.ccd.partitioned import PartitionedCorrelator
+from rtsar.lens.plan import make_plan
 from rtsar.params import preset
 
 TOL = 1e-5  # float32 accumulation of N terms: ~sqrt(N)·6e-8 ≪ 1e-5

@@ -13,20 +13,21 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from rtsar.engine import focus_batches
+from rtsar.analysis import analyse_cut, analyse_point_target
 from rtsar.focus.hcn_align import HCNAligner, align_reference
 from rtsar.focus.linearize import (
     ChirpLinearizer,
-    default_delay_s,
     linearize_reference,
     relative_frequency_hz,
     resample,
     resample_reference,
 )
-from rtsar.lens_plan import compress_reference, make_plan
-from rtsar.metrics import analyse_cut, analyse_point_target
+from rtsar.instrument import default_delay_s
+from rtsar.lens.base import compress_reference
+from rtsar.lens.plan import make_plan
 from rtsar.params import C_M_PER_S, preset
 from rtsar.scene import Simulator, point_scene
+from rtsar.stream.engine import focus_batches
 
 _C = preset("crouch-sal").with_processor(aperture_pulses=128, range_bins=512)
 # 50 µm steps instead of 10 µm: 5x fewer pulses per azimuth cell (test time), still unaliased.

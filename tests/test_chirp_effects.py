@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from rtsar.focus.hcn_align import hcn_lines
+from rtsar.instrument import hcn_lines
 from rtsar.params import C_M_PER_S, preset
 from rtsar.scene import Simulator, point_scene
 from rtsar.scene.effects import load_effects

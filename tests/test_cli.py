@@ -4,11 +4,11 @@ import h5py
 import numpy as np
 import pytest
 
-from rtsar.cli import main
-from rtsar.engine import process_block
-from rtsar.io import open_recording, read_image
-from rtsar.metrics import relative_rms
+from rtsar.analysis import relative_rms
+from rtsar.app.cli import main
 from rtsar.scene import Simulator, load_scene
+from rtsar.sinks.io import open_recording, read_image
+from rtsar.stream.engine import process_block
 
 SCENE = """
 preset = "tiny"
@@ -80,9 +80,9 @@ def test_help_explains(capsys):
 
 
 def test_nonfinite_shots_are_zeroed_counted_and_never_reach_the_image():
-    from rtsar.engine import StreamProcessor
     from rtsar.params import preset
     from rtsar.scene import point_scene
+    from rtsar.stream.engine import StreamProcessor
 
     cfg = preset("tiny")
     scene = point_scene(cfg, [0.0], [2000.0])

@@ -7,8 +7,8 @@ broadening; PSLR ≈ -13.26 dB unweighted, ≤ -30 dB with the Taylor window (n�
 import numpy as np
 import pytest
 
-from rtsar.acceptance import run_point_targets
-from rtsar.ccd import aperture_offsets_m
+from rtsar.analysis.acceptance import run_point_targets
+from rtsar.ccd.base import aperture_offsets_m
 from rtsar.params import PRESETS, preset
 from rtsar.windows import window
 

@@ -12,15 +12,18 @@ from decimal import Decimal, localcontext
 import numpy as np
 import pytest
 
-from rtsar.ccd import CORRELATORS, correlate_reference, design_mask, make_correlator
-from rtsar.engine import StreamProcessor, process_block
-from rtsar.lens_plan import NumpyLens, compress_reference, make_plan
-from rtsar.metrics import analyse_cut, analyse_point_target, relative_rms
-from rtsar.migration import correlate_migration_reference, design_migration_mask
+from rtsar.analysis import analyse_cut, analyse_point_target, relative_rms
+from rtsar.ccd import CORRELATORS, make_correlator
+from rtsar.ccd.base import correlate_reference, design_mask
+from rtsar.ccd.migration import correlate_migration_reference, design_migration_mask
+from rtsar.lens.base import compress_reference
+from rtsar.lens.numpy_lens import NumpyLens
+from rtsar.lens.plan import make_plan
 from rtsar.params import C_M_PER_S, Config, Geometry, Processor, preset
-from rtsar.pipeline import Pipeline, PipelineSettings
 from rtsar.scene import Simulator, point_scene
 from rtsar.sources.replay import ReplaySource
+from rtsar.stream.engine import StreamProcessor, process_block
+from rtsar.stream.pipeline import Pipeline, PipelineSettings
 
 try:
     import pyopencl  # noqa: F401
@@ -458,7 +461,7 @@ def test_float32_stays_within_the_documented_tolerance_of_float64_in_every_stage
     errors = {}
     lenses = [("numpy lens", lambda p: NumpyLens(plan, precision=p))]
     if LENS == "opencl":
-        from rtsar.lens import AOLens
+        from rtsar.lens.opencl import AOLens
 
         for kernel in ("lanes", "group"):
             lenses.append((kernel, lambda p, k=kernel: AOLens(plan, kernel=k, precision=p)))

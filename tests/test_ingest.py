@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from rtsar.ingest import Ingest
 from rtsar.sources.base import ShotBatch
+from rtsar.stream.ingest import Ingest
 
 S = 8
 

@@ -6,29 +6,12 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from rtsar.engine import process_block
-from rtsar.metrics import analyse_point_target
+from rtsar.analysis import analyse_point_target
+from rtsar.app.quicklook import save_height_quicklook
 from rtsar.params import preset
 from rtsar.scene.effects import load_effects
 from rtsar.scene.model import Scene, Targets
-from rtsar.scene.simulator import Simulator
-from rtsar.topo.insar import (
-    ZHAO_LOOK_ANGLE_RAD,
-    FringeRamp,
-    InsalGeometry,
-    Registration,
-    box_sum,
-    estimate_fringe_ramp,
-    estimate_registration,
-    form_interferogram,
-    height_error,
-    height_map,
-    integer_offset,
-    shift_image,
-    zhao_ambiguity_height_m,
-)
-from rtsar.topo.quicklook import save_height_quicklook
-from rtsar.topo.surfaces import (
+from rtsar.scene.relief import (
     default_spacing_m,
     penny_relief,
     ridge,
@@ -37,6 +20,23 @@ from rtsar.topo.surfaces import (
     surface_scene,
     truth_on_grid,
     zhao_config,
+)
+from rtsar.scene.simulator import Simulator
+from rtsar.stream.engine import process_block
+from rtsar.topo.insar import (
+    FringeRamp,
+    estimate_fringe_ramp,
+    form_interferogram,
+    height_error,
+    height_map,
+)
+from rtsar.topo.insar_geometry import ZHAO_LOOK_ANGLE_RAD, InsalGeometry, zhao_ambiguity_height_m
+from rtsar.topo.looks import box_sum
+from rtsar.topo.registration import (
+    Registration,
+    estimate_registration,
+    integer_offset,
+    shift_image,
 )
 
 LAMBDA = 1.55e-6

@@ -7,9 +7,10 @@ import pytest
 
 pytest.importorskip("pyopencl")
 
-from rtsar import opencl  # noqa: E402
-from rtsar.lens import KERNELS, AOLens  # noqa: E402
-from rtsar.lens_plan import LensPlan, compress_reference, make_plan, pulsed_replica  # noqa: E402
+from rtsar.lens import cl_loader as opencl  # noqa: E402
+from rtsar.lens.base import compress_reference  # noqa: E402
+from rtsar.lens.opencl import KERNELS, AOLens  # noqa: E402
+from rtsar.lens.plan import LensPlan, make_plan, pulsed_replica
 from rtsar.params import FMCWChirp, PulsedChirp, preset  # noqa: E402
 
 PRESETS = ("psaltis-max", "psaltis-jpl", "crouch-sal", "zhao-insal", "tiny")

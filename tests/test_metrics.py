@@ -25,7 +25,7 @@ from scipy.optimize import brentq, minimize_scalar
 from scipy.signal import windows as sw
 from scipy.special import sici
 
-from rtsar.metrics import (
+from rtsar.analysis import (
     CutMetrics,
     PointTargetReport,
     analyse_cut,

@@ -10,19 +10,12 @@ import numpy as np
 import pytest
 from conftest import crandn
 
-from rtsar.acceptance import SINC_IRW, acceptance_targets
-from rtsar.ccd import (
-    CORRELATORS,
-    FFTCorrelator,
-    aperture_offsets_m,
-    correlate_reference,
-    design_mask,
-    make_correlator,
-)
-from rtsar.engine import StreamProcessor, process_block
-from rtsar.lens_plan import make_plan
-from rtsar.metrics import analyse_point_target, relative_rms
-from rtsar.migration import (
+from rtsar.analysis import analyse_point_target, relative_rms
+from rtsar.analysis.acceptance import SINC_IRW, acceptance_targets
+from rtsar.ccd import CORRELATORS, make_correlator
+from rtsar.ccd.base import aperture_offsets_m, correlate_reference, design_mask
+from rtsar.ccd.fft import FFTCorrelator
+from rtsar.ccd.migration import (
     FFTMigrationCorrelator,
     MigrationCorrelator,
     MigrationMask,
@@ -32,8 +25,10 @@ from rtsar.migration import (
     migration_bins,
     shift_lines,
 )
+from rtsar.lens.plan import make_plan
 from rtsar.params import Processor, preset
 from rtsar.scene import Simulator, point_scene
+from rtsar.stream.engine import StreamProcessor, process_block
 
 TOL = {"complex64": 1e-5, "complex128": 1e-12}
 
@@ -220,7 +215,7 @@ def test_processor_knob_and_engine():
     cfg = preset("tiny").with_processor(range_migration_taps=4, correlator="direct")
     eng = StreamProcessor(cfg, lens_backend="numpy")
     assert isinstance(eng.correlator, MigrationCorrelator)
-    assert isinstance(eng.mask, MigrationMask)
+    assert isinstance(eng.correlator.mask, MigrationMask)
     eng = StreamProcessor(cfg.with_processor(correlator="fft"), lens_backend="numpy")
     assert isinstance(eng.correlator, FFTMigrationCorrelator)
     off = StreamProcessor(preset("tiny"), lens_backend="numpy")

@@ -3,15 +3,16 @@
 Truth: the injected per-pulse phase (a piston error of Crouch's size, eq. 4.12), the
 error-free focus of the same scene, and the geometry of the deramp.  The scene (a small stripmap
 SAL, speckle surface + bright points 35 dB over a cell, antenna pattern) is simulated once with
-the exact echo synthesis and shared with tools/pga_report.py.
+the exact echo synthesis and shared with the PGA report (rtsar.app.reports.pga).
 """
 
 import math
 
 import numpy as np
 import pytest
-from tools_loader import load_tool
 
+from rtsar.analysis.phase_residual import residual_rms_rad
+from rtsar.app.reports import pga as report
 from rtsar.focus.pga import (
     REASONS,
     PGASettings,
@@ -19,12 +20,11 @@ from rtsar.focus.pga import (
     deramp_cycles,
     estimate_block,
     pga_batch,
-    residual_rms_rad,
 )
-from rtsar.lens_plan import compress_reference, make_plan
+from rtsar.lens.base import compress_reference
+from rtsar.lens.plan import make_plan
 from rtsar.scene import Simulator, point_scene
 
-report = load_tool("pga_report")
 PULSES = 160
 
 

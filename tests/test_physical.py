@@ -12,13 +12,14 @@ import math
 import numpy as np
 import pytest
 
-from rtsar.ccd import correlate_reference, design_mask
-from rtsar.lens_plan import compress_reference, make_plan
-from rtsar.metrics import relative_rms
+from rtsar.analysis import relative_rms
+from rtsar.ccd.base import correlate_reference, design_mask
+from rtsar.ccd.physical import PhysicalCCD
+from rtsar.lens.base import compress_reference
+from rtsar.lens.plan import make_plan
 from rtsar.params import preset
 from rtsar.physical import (
     AOCell,
-    PhysicalCCD,
     PhysicalSettings,
     paper_ccd,
     pulses_integrated,

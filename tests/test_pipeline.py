@@ -6,13 +6,16 @@ import time
 import numpy as np
 import pytest
 
-from rtsar.corrections import CorrectionChain
-from rtsar.engine import process_block
+from rtsar.focus.chain import CorrectionChain
+from rtsar.focus.stage import CorrectionStage
 from rtsar.params import preset
-from rtsar.pipeline import BoundedQueue, LatencyStats, Pipeline, PipelineSettings
 from rtsar.scene import Simulator, point_scene
 from rtsar.sources.base import ShotBatch, Source
 from rtsar.sources.replay import ReplaySource, parse_rate
+from rtsar.stream.engine import process_block
+from rtsar.stream.pipeline import Pipeline, PipelineSettings
+from rtsar.stream.queue import BoundedQueue
+from rtsar.stream.stats import LatencyStats
 
 
 class Collect:
@@ -219,7 +222,7 @@ class AuxSource(Source):
             )
 
 
-class UseAux:
+class UseAux(CorrectionStage):
     """A raw-domain stage: replaces the main channel by the auxiliary one, checks pulse order."""
 
     domain = "raw"
@@ -238,8 +241,11 @@ class UseAux:
         self.counters["aux_blocks"] += 1
         return aux["clean"]
 
+    def counter_values(self):
+        return self.counters
 
-class Halve:
+
+class Halve(CorrectionStage):
     domain = "lines"
 
     def process(self, lines, aux):
@@ -264,7 +270,7 @@ def test_correction_stages_see_aux_channels_in_pulse_order(tiny):
     assert sink.final["counters"]["use_aux.aux_blocks"] == stage.counters["aux_blocks"] > 0
 
 
-class Delay:
+class Delay(CorrectionStage):
     """A line stage holding its last 5 pulses back (like PGA's block), released at flush."""
 
     domain = "lines"

@@ -8,7 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from rtsar.lens_plan import compress_reference, make_plan
+from rtsar.lens.base import compress_reference
+from rtsar.lens.plan import make_plan
 from rtsar.params import preset
 from rtsar.scene import Simulator, point_scene
 from rtsar.scene.effects import load_effects

@@ -10,18 +10,16 @@ import numpy as np
 import pytest
 from conftest import crandn
 
-from rtsar.ccd import (
-    CORRELATORS,
-    Correlator,
-    DirectCorrelator,
-    correlate_reference,
-    design_mask,
-    make_correlator,
-)
-from rtsar.engine import process_block
-from rtsar.lens_plan import NumpyLens, compress_reference, make_plan, precision_dtype
-from rtsar.metrics import relative_rms
+from rtsar.analysis import relative_rms
+from rtsar.ccd import CORRELATORS, make_correlator
+from rtsar.ccd.base import Correlator, correlate_reference, design_mask
+from rtsar.ccd.direct import DirectCorrelator
+from rtsar.lens.base import compress_reference
+from rtsar.lens.numpy_lens import NumpyLens
+from rtsar.lens.plan import make_plan
 from rtsar.params import PRESETS, Processor, preset
+from rtsar.samples import precision_dtype
+from rtsar.stream.engine import process_block
 
 TOL = {"complex64": 1e-5, "complex128": 1e-12}
 PRECISIONS = tuple(TOL)
@@ -51,7 +49,7 @@ def test_numpy_lens_in_each_precision(name, precision, rng):
 @pytest.mark.parametrize("name", sorted(PRESETS))
 def test_opencl_lens_in_double(name, kernel, rng):
     pytest.importorskip("pyopencl")
-    from rtsar.lens import AOLens
+    from rtsar.lens.opencl import AOLens
 
     plan = make_plan(preset(name))
     lens = AOLens(plan, kernel=kernel, precision="complex128")
@@ -71,11 +69,11 @@ def test_opencl_lens_in_double(name, kernel, rng):
 
 def test_opencl_double_refused_on_a_device_without_fp64(monkeypatch):
     pytest.importorskip("pyopencl")
-    from rtsar import lens as lens_module
+    from rtsar.lens import opencl as lens_module
 
     monkeypatch.setattr(lens_module, "supports_double", lambda device: False)
     plan = make_plan(preset("tiny"))
-    device = lens_module.opencl.default_queue().device.name.strip()
+    device = lens_module.cl_loader.default_queue().device.name.strip()
     with pytest.raises(ValueError, match="cl_khr_fp64") as info:
         lens_module.AOLens(plan, precision="complex128")
     assert device in str(info.value)
@@ -84,8 +82,8 @@ def test_opencl_double_refused_on_a_device_without_fp64(monkeypatch):
 
 def test_pocl_cpu_reports_double():
     pytest.importorskip("pyopencl")
-    from rtsar import opencl
-    from rtsar.lens import supports_double
+    from rtsar.lens import cl_loader as opencl
+    from rtsar.lens.opencl import supports_double
 
     device = opencl.default_queue().device
     if "portable computing language" in device.platform.name.lower():

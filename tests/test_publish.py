@@ -9,13 +9,15 @@ import numpy as np
 import pytest
 import zmq
 
-from rtsar.cli import main
-from rtsar.io import read_image
+from rtsar.app.cli import main
 from rtsar.params import preset
-from rtsar.pipeline import Pipeline, PipelineSettings
-from rtsar.publish import StripSubscriber, ZmqPublisher, decode, is_local_endpoint
 from rtsar.scene import Simulator, point_scene
+from rtsar.sinks.client import StripSubscriber
+from rtsar.sinks.io import read_image
+from rtsar.sinks.publish import ZmqPublisher, is_local_endpoint
+from rtsar.sinks.wire import decode
 from rtsar.sources.replay import ReplaySource
+from rtsar.stream.pipeline import Pipeline, PipelineSettings
 
 SCENE = """
 preset = "tiny"
@@ -197,8 +199,8 @@ def test_run_demo_publishes_and_records(tmp_path, capsys):
 
 
 def test_numpy_range_doppler_reference_matches_the_engine():
-    from rtsar.bench_stream import bench_shots, numpy_range_doppler
-    from rtsar.engine import process_block
+    from rtsar.app.bench_pipeline import bench_shots, numpy_range_doppler
+    from rtsar.stream.engine import process_block
 
     cfg = preset("tiny")
     shots = bench_shots(cfg, 400)

@@ -7,14 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from rtsar.ccd import correlate_reference, design_mask
+from rtsar.analysis import analyse_point_target
+from rtsar.ccd.base import correlate_reference, design_mask
 from rtsar.focus.reference_region import (
     ReferenceGeometry,
     ReferenceRegionCorrector,
     reference_region_reference,
 )
-from rtsar.lens_plan import NumpyLens, make_plan
-from rtsar.metrics import analyse_point_target
+from rtsar.lens.numpy_lens import NumpyLens
+from rtsar.lens.plan import make_plan
 from rtsar.params import preset
 from rtsar.scene import Simulator, point_scene
 

@@ -12,22 +12,23 @@ import math
 import numpy as np
 import pytest
 
+from rtsar.instrument import SAM_CHANNELS
 from rtsar.params import preset
 from rtsar.scene.effects import load_effects
 from rtsar.scene.model import Scene, Targets
 from rtsar.scene.simulator import Simulator
+from rtsar.stream.engine import focus_channels
+from rtsar.topo.looks import box_mean
 from rtsar.topo.sam3d import (
     ModulationGeometry,
-    SamPhaseStream,
     anchor_cycles,
-    box_mean,
     flat_earth_from_reference,
     flat_earth_phase_rad,
-    focus_channels,
     sam_height,
     sam_phase,
     wrapped_phase_rad,
 )
+from rtsar.topo.sam3d_stream import SamPhaseStream
 
 H0_M = 1.386  # platform height (Zhao's 2.4 m at a 54.7° look angle)
 R0_M = 2.4
@@ -330,7 +331,7 @@ def test_stream_equals_batch_over_random_micro_batches():
 
 # ---- end to end: simulator, engine, chain ---------------------------------------------------
 def test_speckled_ridge_through_the_engine_within_eq14():
-    from rtsar.topo import surfaces
+    from rtsar.scene import relief as surfaces
 
     cfg = _config()
     geo = ModulationGeometry.from_config(cfg, P_PHI_RAD)
@@ -340,7 +341,9 @@ def test_speckled_ridge_through_the_engine_within_eq14():
         cfg, surface, 16, seed=3, effects=[effect], spacing_m=surfaces.default_spacing_m(cfg, 2.0)
     )
     main, aux = Simulator(ss.scene).block_with_aux(ss.scene.pulses)
-    s0, s1, s2, az, rm = focus_channels(cfg, main, aux, "numpy", ss.scene.start_along_track_m)
+    (s0, s1, s2), az, rm = focus_channels(
+        cfg, main, aux, SAM_CHANNELS, "numpy", ss.scene.start_along_track_m
+    )
     res = sam_height(s0, s1, s2, rm, geo, looks=(5, 3))
     truth = ss.truth(az, rm)
     scored = truth.scored & res.valid

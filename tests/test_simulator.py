@@ -7,7 +7,8 @@ import textwrap
 import numpy as np
 import pytest
 
-from rtsar.lens_plan import compress_reference, make_plan
+from rtsar.lens.base import compress_reference
+from rtsar.lens.plan import make_plan
 from rtsar.params import preset
 from rtsar.scene import DEMO_SCENE, Simulator, load_scene, point_scene, scene_from_dict
 from rtsar.scene import effects as effects_pkg

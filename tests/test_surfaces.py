@@ -11,8 +11,9 @@ import math
 import numpy as np
 import pytest
 
-from rtsar.ccd import correlate_reference, design_mask
-from rtsar.lens_plan import compress_reference, make_plan
+from rtsar.ccd.base import correlate_reference, design_mask
+from rtsar.lens.base import compress_reference
+from rtsar.lens.plan import make_plan
 from rtsar.params import C_M_PER_S, Config, FMCWChirp, Geometry, Processor
 from rtsar.scene import Simulator, Targets
 from rtsar.scene.surfaces import (

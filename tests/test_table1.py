@@ -13,9 +13,9 @@ import math
 import numpy as np
 import pytest
 
+from rtsar.app import table1 as t1
 from rtsar.params import preset
 from rtsar.physical import paper_ccd
-from rtsar.physical import table1 as t1
 
 
 @pytest.fixture(scope="module")

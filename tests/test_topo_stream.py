@@ -6,11 +6,13 @@ import math
 import numpy as np
 import pytest
 
-from rtsar.engine import StreamProcessor
+from rtsar.scene.relief import default_spacing_m, ridge, surface_scene, zhao_config
 from rtsar.scene.simulator import Simulator
-from rtsar.topo.insar import InsalGeometry, Registration, estimate_registration, height_map
+from rtsar.stream.engine import StreamProcessor
+from rtsar.topo.insar import height_map
+from rtsar.topo.insar_geometry import InsalGeometry
+from rtsar.topo.registration import Registration, estimate_registration
 from rtsar.topo.stream import HeightStripStage
-from rtsar.topo.surfaces import default_spacing_m, ridge, surface_scene, zhao_config
 
 GEO = InsalGeometry(1.55e-6, 2.4 * math.cos(math.atan(math.sqrt(2))), 1.6e-3)
 
@@ -209,9 +211,10 @@ class HeightSink:
 
 
 def test_pipeline_publishes_height_strips_equal_to_the_batch_chain(ridge_lines):
-    from rtsar.pipeline import Pipeline, PipelineSettings
-    from rtsar.publish import decode, height_header
+    from rtsar.sinks.wire import decode, height_header
     from rtsar.sources.replay import ReplaySource
+    from rtsar.stream.pipeline import Pipeline, PipelineSettings
+    from rtsar.stream.strips import StreamInfo
 
     cfg = zhao_config(sample_rate_hz=640.0, aperture_pulses=48, range_bins=48)
     ss = surface_scene(
@@ -252,20 +255,11 @@ def test_pipeline_publishes_height_strips_equal_to_the_batch_chain(ridge_lines):
     assert sink.final["height"]["strips_not_aligned"] == 0
 
     # The wire format round-trips (float32 heights, validity mask).
-    class P:  # the fields height_header reads from a pipeline
-        stream_id, config = "x", cfg
-
-        class engine:  # noqa: N801
-            range_m = rg
-
-            @staticmethod
-            def azimuth_m(first, count):
-                return np.zeros(count)
-
+    info = StreamInfo("x", cfg, "test", "numpy", rg, 0.0, 0.0)  # what height_header reads
     s0 = sink.heights[1]
     frames = [
         b"height",
-        json.dumps(height_header(s0, 1, P)).encode(),
+        json.dumps(height_header(s0, 1, info)).encode(),
         s0.height_m.astype("<f4").tobytes(),
         s0.valid.astype(np.uint8).tobytes(),
     ]

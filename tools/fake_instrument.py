@@ -30,8 +30,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rtsar.io import open_recording
 from rtsar.scene import DEMO_SCENE, Scene, Simulator, load_scene
+from rtsar.sinks.io import open_recording
 from rtsar.sources.frame import SAMPLE_TYPES, SYNC, encode_frame
 
 CI16_PEAK = 8192  # --scale auto for ci16: the first block's largest |I| or |Q| maps to this

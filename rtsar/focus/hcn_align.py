@@ -15,7 +15,7 @@ sweep).  Which dip is which line is settled first by cross-correlating the whole
 absorbance with the line model over offsets up to ±``max_offset_hz`` (the comb's unequal
 spacings and strengths make a shift by one line spacing a poor match).  Crouch then shifts the
 record so its first sample always sees the same frequency; here the shot is resampled at
-τ_k = t_k - δf/K (band-limited, rtsar.focus.linearize.resample), which restores
+τ_k = t_k - δf/K (band-limited, rtsar.focus.resample.resample), which restores
 exp -i2π Δτ (f0 + K t_k) exactly (no whole-sample rounding).
 
 Line list: a *synthetic* HCN-like comb, not certified line centres.  It is a rigid-rotor P/R band
@@ -38,61 +38,18 @@ import warnings
 import numpy as np
 from scipy import fft as sp_fft
 
-from ..params import FMCWChirp
-from .linearize import (
-    DEFAULT_KAISER_BETA,
-    DEFAULT_TAPS,
+from ..instrument import (
+    DEFAULT_LINEWIDTH_HZ,
+    HCN_CHANNEL,
     channel_times_s,
+    hcn_absorbance,
+    hcn_lines,
     infer_oversampling,
-    resample,
-    zero_nonfinite_shots,
 )
-
-HCN_CHANNEL = "hcn_cell"
-
-BAND_ORIGIN_HZ = 194.32e12
-B_LOWER_HZ = 43.17e9
-B_UPPER_HZ = 42.86e9
-CELL_TEMPERATURE_K = 296.0
-MAX_J = 45
-DEFAULT_LINEWIDTH_HZ = 1.0e9  # Lorentzian FWHM, of the order of a low-pressure reference cell
-_H_OVER_K = 6.62607015e-34 / 1.380649e-23  # s·K
-
-
-def hcn_lines(lo_hz: float = -math.inf, hi_hz: float = math.inf):
-    """Synthetic HCN-like line list (module docstring): (frequency_hz, relative strength ≤ 1).
-
-    Strength ∝ |m| exp(-h B'' J''(J''+1) / kT), normalised to the strongest line of the band.
-    Only lines with lo_hz ≤ f ≤ hi_hz are returned, sorted by frequency.
-    """
-    j = np.arange(MAX_J + 1)
-    m = np.concatenate([-j[1:], j + 1])  # P(J), J ≥ 1 ; R(J), J ≥ 0
-    j_lower = np.concatenate([j[1:], j])
-    freq = BAND_ORIGIN_HZ + (B_UPPER_HZ + B_LOWER_HZ) * m + (B_UPPER_HZ - B_LOWER_HZ) * m**2
-    boltzmann = np.exp(-_H_OVER_K * B_LOWER_HZ * j_lower * (j_lower + 1) / CELL_TEMPERATURE_K)
-    strength = np.abs(m) * boltzmann
-    strength = strength / strength.max()
-    keep = (freq >= lo_hz) & (freq <= hi_hz)
-    order = np.argsort(freq[keep])
-    return freq[keep][order], strength[keep][order]
-
-
-def hcn_absorbance(
-    frequency_hz, linewidth_hz: float = DEFAULT_LINEWIDTH_HZ, peak_absorbance: float = 1.0
-) -> np.ndarray:
-    """Absorbance A(f) = a Σ_j s_j / (1 + (2(f - f_j)/γ)²) of the cell; transmission exp(-A).
-
-    γ is the Lorentzian FWHM (``linewidth_hz``), a the peak absorbance of the strongest line.
-    Lines farther than 10³ γ from every requested frequency are skipped (tails < 2.5e-7 a).
-    """
-    f = np.asarray(frequency_hz, np.float64)
-    span = 1e3 * linewidth_hz
-    lines, strength = hcn_lines(float(np.min(f)) - span, float(np.max(f)) + span)
-    out = np.zeros(f.shape)
-    for fj, sj in zip(lines, strength, strict=True):
-        out += sj / (1.0 + (2.0 * (f - fj) / linewidth_hz) ** 2)
-    return peak_absorbance * out
-
+from ..params import FMCWChirp
+from ..samples import zero_nonfinite_rows
+from .resample import DEFAULT_KAISER_BETA, DEFAULT_TAPS, resample, resample_reference
+from .stage import CorrectionStage
 
 # --------------------------------------------------------------------------------------------
 # Lorentzian dip fit
@@ -262,7 +219,7 @@ def _accept(p: np.ndarray, plan: _Plan, min_depth: float) -> np.ndarray:
     return finite & (np.abs(x0) <= 2.0) & (d >= min_depth) & (h > 0.2 * plan.h0) & (h < 5 * plan.h0)
 
 
-class HCNAligner:
+class HCNAligner(CorrectionStage):
     """Stream stage: per-shot start-frequency offsets from the HCN channel, shots shifted on them.
 
     ``stage.process(samples[P, S], aux={HCN_CHANNEL: hcn[P, q·S], ...})`` → complex64[P, S]
@@ -284,6 +241,9 @@ class HCNAligner:
     ``max_spread_hz`` (default: the linewidth) largest median absolute deviation of the per-line
     offsets; ``taps``/``kaiser_beta`` the resampler (rtsar.focus.linearize.resample).
     """
+
+    domain = "raw"
+    counter_names = ("shots_in", "shots_not_aligned", "shots_nonfinite", "samples_zeroed")
 
     def __init__(
         self,
@@ -398,8 +358,8 @@ class HCNAligner:
         hcn = np.asarray(aux[self.channel])
         if hcn.shape[0] != len(x):
             raise ValueError(f"{self.channel!r} has {hcn.shape[0]} shots, samples have {len(x)}")
-        x, bad = zero_nonfinite_shots(x)
-        self.shots_nonfinite += bad
+        x, bad = zero_nonfinite_rows(x)
+        self.shots_nonfinite += int(bad.sum())
         c = self.offsets_hz(hcn)
         u = np.arange(s)[None, :] - (c / k * fs)[:, None]
         out, outside = resample(x, u, self.taps, self.kaiser_beta)
@@ -476,11 +436,9 @@ def align_reference(
     config, shots, hcn, taps=DEFAULT_TAPS, kaiser_beta=DEFAULT_KAISER_BETA, **options
 ) -> tuple[np.ndarray, np.ndarray]:
     """Float64 reference of HCNAligner.process → (aligned shots complex128, offsets_hz)."""
-    from .linearize import resample_reference
-
     wf = config.waveform
     c = offsets_reference(config, hcn, **options)
     s = wf.samples_per_shot
     u = np.arange(s)[None, :] - (c / wf.chirp_rate_hz_per_s * wf.sample_rate_hz)[:, None]
-    x = zero_nonfinite_shots(np.asarray(shots, np.complex128))[0]
+    x = zero_nonfinite_rows(np.asarray(shots, np.complex128))[0]
     return resample_reference(x, u, taps, kaiser_beta), c

@@ -35,169 +35,29 @@ Stream stage: raw shots, between ingest and the AO lens (``ChirpLinearizer.proce
 
 from __future__ import annotations
 
-import functools
 import math
 
-import numba
 import numpy as np
-from scipy import special
 
-from ..lens_plan import make_plan
-from ..params import C_M_PER_S, FMCWChirp
-
-RI_CHANNEL = "reference_interferometer"
-DEFAULT_TAPS = 24
-DEFAULT_KAISER_BETA = 10.0
-
-
-def _fmcw(config) -> FMCWChirp:
-    wf = config.waveform
-    if not isinstance(wf, FMCWChirp):
-        raise ValueError("chirp linearization applies to FMCW waveforms (dechirp on receive)")
-    return wf
-
-
-def zero_nonfinite_shots(samples: np.ndarray) -> tuple[np.ndarray, int]:
-    """Shots holding NaN/Inf replaced by zeros (azimuth timing kept), and how many there were."""
-    x = np.asarray(samples)
-    bad = ~np.isfinite(x).all(axis=-1)
-    if bad.any():
-        x = x.copy()
-        x[bad] = 0
-    return x, int(np.count_nonzero(bad))
-
-
-def channel_times_s(config, oversampling: int = 1) -> np.ndarray:
-    """Sample times (s, from mid-chirp) of a channel sampled ``oversampling`` times faster.
-
-    Sample m of a channel with M = oversampling·S samples is at (m - M/2) / (oversampling·fs),
-    so sample q·n coincides with main-channel sample n (rtsar.scene.simulator time axis).
-    """
-    wf = _fmcw(config)
-    q = int(oversampling)
-    if q < 1:
-        raise ValueError(f"oversampling must be an integer >= 1, got {oversampling!r}")
-    m = q * wf.samples_per_shot
-    return (np.arange(m) - 0.5 * m) / (q * wf.sample_rate_hz)
-
-
-def default_delay_s(config, oversampling: int = 1) -> float:
-    """Reference-interferometer delay whose beat sits at a quarter of the channel's sample rate.
-
-    The beat frequency K τ_ri must stay inside (0, q·fs/2) for the phase to unwrap, with margin
-    for the chirp-rate excursions of a non-linear chirp: τ_ri = q·fs / (4K).
-    """
-    wf = _fmcw(config)
-    return 0.25 * oversampling * wf.sample_rate_hz / wf.chirp_rate_hz_per_s
-
-
-def infer_oversampling(config, channel: np.ndarray, name: str) -> int:
-    """The integer ratio of an auxiliary channel's length to the main shot length."""
-    s = _fmcw(config).samples_per_shot
-    m = channel.shape[-1]
-    if m % s or m < s:
-        raise ValueError(f"channel {name!r} has {m} samples per shot, not a multiple of {s}")
-    return m // s
-
-
-# --------------------------------------------------------------------------------------------
-# Windowed-sinc resampler
-# --------------------------------------------------------------------------------------------
-
-
-def _kernel(x: np.ndarray, taps: int, beta: float, i0=special.i0) -> np.ndarray:
-    """Kaiser-windowed sinc h(x) = sinc(x)·I0(β√(1-(2x/T)²))/I0(β) for |x| < T/2, else 0."""
-    half = 0.5 * taps
-    r = np.clip(1.0 - (x / half) ** 2, 0.0, None)
-    return np.where(np.abs(x) < half, np.sinc(x) * i0(beta * np.sqrt(r)) / i0(beta), 0.0)
-
-
-def _check_resampler(taps, beta):
-    if not (isinstance(taps, int) and taps >= 2 and taps % 2 == 0):
-        raise ValueError(f"taps must be an even integer >= 2, got {taps!r}")
-    if not (math.isfinite(beta) and beta >= 0):
-        raise ValueError(f"kaiser_beta must be finite and >= 0, got {beta!r}")
-
-
-_TABLE_STEPS = 4096  # kernel table points per sample: linear interpolation error < 1e-7
-
-
-@functools.lru_cache(maxsize=8)
-def _kernel_table(taps: int, beta: float) -> np.ndarray:
-    """h on x = -T/2 … T/2 in steps of 1/_TABLE_STEPS (one extra zero for the last interval)."""
-    x = np.arange(taps * _TABLE_STEPS + 2) / _TABLE_STEPS - 0.5 * taps
-    table = _kernel(x, taps, beta)
-    table.flags.writeable = False
-    return table
-
-
-@numba.njit(nogil=True, cache=True)
-def _resample_rows(x, u, table, taps, steps, out):  # pragma: no cover - compiled
-    s = x.shape[1]
-    half = taps // 2
-    for p in range(u.shape[0]):
-        for k in range(u.shape[1]):
-            uk = u[p, k]
-            if not (uk >= 0.0 and uk <= s - 1.0):
-                out[p, k] = 0.0
-                continue
-            b = int(np.floor(uk))
-            frac = uk - b
-            acc = 0.0j
-            for j in range(1 - half, half + 1):
-                n = b + j
-                if n < 0 or n >= s:
-                    continue
-                pos = (frac - j + 0.5 * taps) * steps  # table coordinate of x = u - n
-                i = int(pos)
-                acc += x[p, n] * (table[i] + (pos - i) * (table[i + 1] - table[i]))
-            out[p, k] = acc
-
-
-def resample(
-    samples: np.ndarray, index: np.ndarray, taps: int = DEFAULT_TAPS, beta=DEFAULT_KAISER_BETA
-) -> tuple[np.ndarray, np.ndarray]:
-    """Band-limited interpolation of rows of ``samples`` at fractional sample positions.
-
-    y[p, k] = Σ_n x[p, n] h(u[p, k] - n) over the ``taps`` samples n nearest u (Kaiser-windowed
-    sinc, Crouch's resampling onto uniform optical frequency); h is read from a table
-    (``_TABLE_STEPS`` points per sample, linear interpolation), the sum runs in numba.  Samples
-    beyond the record count as zero; outputs with u outside [0, S-1] are set to zero and
-    flagged (the trimmed edge of Crouch's HCN alignment).  Error for tones up to 0.36 fs: below
-    2e-5 with 24 taps, β = 10.
-
-    Returns (y complex128[P, K], outside bool[P, K]).
-    """
-    _check_resampler(taps, beta)
-    x = np.ascontiguousarray(samples)
-    if x.dtype not in (np.complex64, np.complex128):
-        x = x.astype(np.complex128)
-    u = np.ascontiguousarray(index, np.float64)
-    if x.ndim != 2 or u.ndim != 2 or len(u) != len(x):
-        raise ValueError(f"samples [P, S] and index [P, K] expected, got {x.shape}, {u.shape}")
-    out = np.empty(u.shape, np.complex128)
-    _resample_rows(x, u, _kernel_table(taps, float(beta)), taps, _TABLE_STEPS, out)
-    outside = ~((u >= 0.0) & (u <= x.shape[1] - 1.0))
-    return out, outside
-
-
-def resample_reference(samples, index, taps: int = DEFAULT_TAPS, beta=DEFAULT_KAISER_BETA):
-    """Float64 reference of ``resample``: the full sum over all input samples (a [K, S] matrix)."""
-    _check_resampler(taps, beta)
-    x = np.asarray(samples, np.complex128)
-    u = np.asarray(index, np.float64)
-    s = x.shape[-1]
-    out = np.zeros(u.shape, np.complex128)
-    n = np.arange(s)
-    for p in range(x.shape[0]):
-        ok = (u[p] >= 0.0) & (u[p] <= s - 1.0)
-        dx = u[p][:, None] - n[None, :]
-        near = np.abs(dx) < 0.5 * taps  # h is zero elsewhere: evaluate it only there
-        h = np.zeros(dx.shape)
-        h[near] = _kernel(dx[near], taps, beta, i0=np.i0)
-        out[p] = np.where(ok, h @ x[p], 0.0)
-    return out
-
+from ..instrument import (
+    RI_CHANNEL,
+    channel_times_s,
+    default_delay_s,
+    fmcw_waveform,
+    infer_oversampling,
+)
+from ..lens.plan import range_axis_m
+from ..params import C_M_PER_S
+from ..samples import zero_nonfinite_rows
+from .hcn_align import offsets_reference
+from .resample import (
+    DEFAULT_KAISER_BETA,
+    DEFAULT_TAPS,
+    check_resampler,
+    resample,
+    resample_reference,
+)
+from .stage import CorrectionStage
 
 # --------------------------------------------------------------------------------------------
 # Reference interferometer → instantaneous frequency
@@ -252,8 +112,8 @@ def linearize_reference(
     Returns (linearized shots complex128[P, S], resample instants τ_k float64[P, S] in s,
     NaN where the output was zeroed).
     """
-    wf = _fmcw(config)
-    x = zero_nonfinite_shots(np.asarray(shots, np.complex128))[0]
+    wf = fmcw_waveform(config, "chirp linearization")
+    x = zero_nonfinite_rows(np.asarray(shots, np.complex128))[0]
     ri = np.asarray(ri)
     q = infer_oversampling(config, ri, RI_CHANNEL)
     tau_ri = default_delay_s(config, q) if delay_s is None else float(delay_s)
@@ -273,8 +133,6 @@ def linearize_reference(
             nu = last if last is not None else k * t_ri
         nus[p] = nu
     if hcn is not None:
-        from .hcn_align import offsets_reference  # lazy: hcn_align imports this module
-
         hcn = np.asarray(hcn)
         t_hcn = channel_times_s(config, infer_oversampling(config, hcn, "hcn"))
         nu_hcn = np.stack([np.interp(t_hcn, t_ri, row) for row in nus])
@@ -289,7 +147,7 @@ def linearize_reference(
     return out, times
 
 
-class ChirpLinearizer:
+class ChirpLinearizer(CorrectionStage):
     """Stream stage: resample raw shots onto a linear chirp using the interferometer channel.
 
     ``stage.process(samples[P, S], aux={RI_CHANNEL: ri[P, q·S], ...})`` → complex64[P, S], one
@@ -304,6 +162,15 @@ class ChirpLinearizer:
     ``last_times_s`` holds the resample instants of the last batch (NaN where zeroed).
     """
 
+    domain = "raw"
+    counter_names = (
+        "shots_in",
+        "shots_not_linearized",
+        "shots_beat_aliased",
+        "shots_nonfinite",
+        "samples_zeroed",
+    )
+
     def __init__(
         self,
         config,
@@ -313,8 +180,8 @@ class ChirpLinearizer:
         kaiser_beta: float = DEFAULT_KAISER_BETA,
         channel: str = RI_CHANNEL,
     ):
-        wf = _fmcw(config)
-        _check_resampler(taps, kaiser_beta)
+        wf = fmcw_waveform(config, "chirp linearization")
+        check_resampler(taps, kaiser_beta)
         if delay_s is not None and not (math.isfinite(delay_s) and delay_s > 0):
             raise ValueError(f"delay_s must be finite and > 0, got {delay_s!r}")
         self.config = config
@@ -325,7 +192,7 @@ class ChirpLinearizer:
         self._t_main = channel_times_s(config, 1)
         self._k_t = self._k * self._t_main
         # Largest |τ - τ_ref| of the processor's range window: its beat must stay below fs/2.
-        edge_m = np.max(np.abs(make_plan(config).range_m - wf.reference_range_m))
+        edge_m = np.max(np.abs(range_axis_m(config) - wf.reference_range_m))
         self._max_rate_hz_per_s = 0.5 * self._fs / (2.0 * edge_m / C_M_PER_S)
         self.shots_beat_aliased = 0
         self._last_nu = None
@@ -334,6 +201,13 @@ class ChirpLinearizer:
         self.shots_nonfinite = 0
         self.samples_zeroed = 0
         self.last_times_s = np.zeros((0, self._s))
+
+    def counter_values(self) -> dict[str, int]:
+        """Its own counters, and the HCN aligner's (``hcn_`` …) when it anchors the chirp."""
+        out = super().counter_values()
+        if self.aligner is not None:
+            out.update({f"hcn_{k}": v for k, v in self.aligner.counter_values().items()})
+        return out
 
     def process(self, samples: np.ndarray, aux: dict) -> np.ndarray:
         """Linearize a micro-batch of raw shots [P, S] (complex64 out)."""
@@ -345,8 +219,8 @@ class ChirpLinearizer:
         ri = np.asarray(aux[self.channel])
         if ri.shape[0] != len(x):
             raise ValueError(f"{self.channel!r} has {ri.shape[0]} shots, samples have {len(x)}")
-        x, bad = zero_nonfinite_shots(x)
-        self.shots_nonfinite += bad
+        x, bad = zero_nonfinite_rows(x)
+        self.shots_nonfinite += int(bad.sum())
         q = infer_oversampling(self.config, ri, self.channel)
         tau_ri = default_delay_s(self.config, q) if self.delay_s is None else self.delay_s
         t_ri = channel_times_s(self.config, q) - 0.5 * tau_ri

@@ -31,8 +31,10 @@ import math
 
 import numpy as np
 
-from ..lens_plan import make_plan
+from ..lens.plan import range_axis_m
 from ..params import Config
+from ..samples import zero_nonfinite_rows
+from .stage import CorrectionStage
 
 
 def retro_phase_history_rad(
@@ -66,7 +68,7 @@ def _window(range_m: np.ndarray, retro_range_m: float, radius_m: float) -> slice
 
 
 def _settings(config, range_m, retro_range_m, search_radius_m, min_contrast):
-    range_m = make_plan(config).range_m if range_m is None else np.asarray(range_m, np.float64)
+    range_m = range_axis_m(config) if range_m is None else np.asarray(range_m, np.float64)
     if not (math.isfinite(retro_range_m) and retro_range_m > 0):
         raise ValueError("retro_range_m must be finite and > 0")
     if search_radius_m is None:  # a few resolution cells plus the retro's range migration
@@ -117,7 +119,7 @@ def phase_to_retro_reference(
     return out, eps, found
 
 
-class PhaseToRetro:
+class PhaseToRetro(CorrectionStage):
     """Phase-to-retro correction in the stream (after the AO lens, before the shifting CCD).
 
     ``process(lines)`` takes a micro-batch lines[pulse, range_bin] in pulse order and returns
@@ -125,6 +127,9 @@ class PhaseToRetro:
     Counters: ``pulses_in``, ``shots_not_corrected`` (retro not found: previous ε held),
     ``nonfinite_lines`` (zeroed).  Memory: O(1) between batches.
     """
+
+    domain = "lines"
+    counter_names = ("pulses_in", "shots_not_corrected", "nonfinite_lines")
 
     def __init__(
         self,
@@ -158,16 +163,14 @@ class PhaseToRetro:
         if not np.iscomplexobj(lines):
             raise ValueError("lines must be complex")
         count = len(lines)
-        finite = np.isfinite(lines).all(axis=1)
-        if not finite.all():
-            lines = np.where(finite[:, None], lines, 0)
-            self.nonfinite_lines += int((~finite).sum())
+        lines, bad = zero_nonfinite_rows(lines)
+        self.nonfinite_lines += int(bad.sum())
         w = lines[:, self._win].astype(np.complex128)
         power = w.real**2 + w.imag**2
         peak = np.argmax(power, axis=1) if count else np.zeros(0, int)
         rows = np.arange(count)
         peak_power = power[rows, peak]
-        found = finite & (peak_power > 0)
+        found = ~bad & (peak_power > 0)
         found &= peak_power >= self.min_contrast * np.median(power, axis=1)
         # Sum of the bins peak-1 .. peak+1 (clipped to the window).
         z = w[rows, peak].copy()

@@ -49,10 +49,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..lens_plan import NumpyLens, compress_reference, make_plan
+from ..instrument import REFERENCE_CHANNELS
+from ..lens.base import compress_reference
+from ..lens.numpy_lens import NumpyLens
+from ..lens.plan import make_plan
 from ..params import Config, FMCWChirp
+from ..phase import phasor
+from .stage import CorrectionStage
 
-CHANNELS = ("reference_rx1", "reference_rx2")
+CHANNELS = REFERENCE_CHANNELS
 WEIGHTINGS = ("power", "uniform")
 
 
@@ -201,7 +206,7 @@ def reference_region_reference(
             prev = line
     alpha, beta = solve_alpha_beta(phi[0], phi[1], lam, geometry.D_m)
     phase = target_phase_rad(alpha, beta, lam, geometry.d_m)
-    corrected = main * np.exp(-1j * np.mod(phase, 2 * math.pi))[:, None]
+    corrected = main * phasor(-phase)[:, None]
     return {
         "corrected": corrected,
         "alpha_m": alpha,
@@ -211,7 +216,7 @@ def reference_region_reference(
     }
 
 
-class ReferenceRegionCorrector:
+class ReferenceRegionCorrector(CorrectionStage):
     """The reference-region correction in the stream (before the AO lens).
 
     ``process(samples, aux)``: samples[pulse, :] (raw shots or compressed lines, any complex
@@ -220,6 +225,9 @@ class ReferenceRegionCorrector:
     hold the batch's estimates.  Counters: ``pulses_in``, ``pulses_not_estimated`` (a channel's
     step failed: held), ``nonfinite_reference`` (reference shots holding NaN/Inf).
     """
+
+    domain = "raw"
+    counter_names = ("pulses_in", "pulses_not_estimated", "nonfinite_reference")
 
     def __init__(
         self,
@@ -299,5 +307,5 @@ class ReferenceRegionCorrector:
         phase = target_phase_rad(alpha, beta, self.wavelength_m, self.geometry.d_m)
         self.last_alpha_m, self.last_beta_rad, self.last_target_phase_rad = alpha, beta, phase
         dtype = np.complex64 if samples.dtype == np.complex64 else np.complex128
-        phasor = np.exp(-1j * np.mod(phase, 2 * math.pi)).astype(dtype)
-        return samples.astype(dtype, copy=False) * phasor[:, None]
+        correction = phasor(-phase).astype(dtype)
+        return samples.astype(dtype, copy=False) * correction[:, None]

@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from ..lens_plan import next_pow2
+from ..lens.plan import next_pow2
 from ..params import Config
 from .settings import PhysicalSettings
 

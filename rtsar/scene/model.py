@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..lens.plan import range_axis_m
 from ..params import Config, Geometry, Processor, preset, waveform_from_dict
 from .effects import load_effects
 
@@ -100,9 +101,7 @@ class Scene:
 
     def targets_outside_swath(self) -> list[int]:
         """Indices of targets whose range lies outside the processor's range window."""
-        from ..lens_plan import make_plan
-
-        rm = make_plan(self.config).range_m
+        rm = range_axis_m(self.config)
         margin = self.config.waveform.range_resolution_m
         r = self.targets.slant_range_m
         return [int(i) for i in np.flatnonzero((r < rm[0] - margin) | (r > rm[-1] + margin))]

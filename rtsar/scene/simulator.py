@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..lens_plan import receive_window_open_s
+from ..lens.plan import receive_window_open_s
 from ..params import C_M_PER_S, FMCWChirp, PulsedChirp
 from .effects import load_effects
 from .effects.base import Effect, PulseContext

@@ -26,286 +26,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import optimize
 
-TWO_PI = 2.0 * math.pi
-# Zhao's side-looking angle makes his eq. 1 give 2π per 3.3 mm; see InsalGeometry.
-ZHAO_LOOK_ANGLE_RAD = math.atan(math.sqrt(2.0))
-
-
-@dataclass(frozen=True)
-class InsalGeometry:
-    """Cross-track geometry of a two-receiver interferometer and its phase-height relation.
-
-    Frame (as rtsar.scene.effects.receivers): y horizontal cross-track, z up from the reference
-    plane; main antenna (transmitter and receiver 0) at (0, H); the second phase centre at
-    (0, H) + B (cos α, sin α).  A scatterer at slant range R (from the main antenna) and height h
-    lies at ground range y = sqrt(R² - (H - h)²).  The interferogram arg(M·S*) holds
-
-        φ(R, h) = (2π p / λ) (R_rx - R_tx),   p = passes (1: one transmitter, 2: two passes)
-
-    Ambiguity height.  R_rx - R_tx ≈ -b·l̂ (l̂ the line of sight), so moving the scatterer by δ
-    changes it by -(b_⊥·δ_⊥)/R: only the baseline component B_⊥ = B |cos(θ - α)| across the line
-    of sight counts (θ the look angle from the vertical).  A pixel is a fixed slant range; there,
-    raising the scatterer by h moves it across the line of sight by h / sinθ, so
-
-        δφ = 2π p B_⊥ h / (λ R sinθ),      h_2π = λ R sinθ / (p B_⊥).
-
-    Zhao 2014 eq. 1, φ = -2π B (y0 sinΦ - z0 cosΦ)/(λ0 L0), gives at fixed y0 2π per
-    λ0 L0 / (B cosΦ) = √2 λ0 L0 / B = 3.29 mm for L0 = 2.4 m, B = 1.6 mm, λ0 = 1.55 µm, Φ = 45°.
-    With a horizontal baseline (α = 0, B_⊥ = B cosθ) the per-pixel h_2π = λ R tanθ / B takes that
-    same value at tanθ = √2 (θ = 54.7°, ZHAO_LOOK_ANGLE_RAD): our "Zhao geometry".
-    """
-
-    wavelength_m: float
-    platform_height_m: float
-    baseline_m: float
-    baseline_angle_deg: float = 0.0
-    passes: int = 1
-
-    def __post_init__(self):
-        for name in ("wavelength_m", "platform_height_m", "baseline_m"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"InsalGeometry.{name} must be finite and > 0, got {value!r}")
-        if not math.isfinite(self.baseline_angle_deg):
-            raise ValueError("InsalGeometry.baseline_angle_deg must be finite")
-        if self.passes not in (1, 2):
-            raise ValueError("InsalGeometry.passes must be 1 (one pass) or 2 (two passes)")
-
-    @classmethod
-    def from_config(cls, config, baseline_m, baseline_angle_deg=0.0, passes=1) -> InsalGeometry:
-        g = config.geometry
-        return cls(g.wavelength_m, g.platform_height_m, baseline_m, baseline_angle_deg, passes)
-
-    @property
-    def baseline_yz_m(self) -> tuple[float, float]:
-        a = math.radians(self.baseline_angle_deg)
-        return self.baseline_m * math.cos(a), self.baseline_m * math.sin(a)
-
-    def _depth(self, slant_range_m, height_m):
-        r = np.asarray(slant_range_m, np.float64)
-        depth = self.platform_height_m - np.asarray(height_m, np.float64)
-        if np.any(r <= np.abs(depth)):
-            raise ValueError("slant range must exceed the platform height above the scatterer")
-        return r, depth
-
-    def ground_range_m(self, slant_range_m, height_m=0.0) -> np.ndarray:
-        r, depth = self._depth(slant_range_m, height_m)
-        return np.sqrt(r * r - depth * depth)
-
-    def look_angle_rad(self, slant_range_m, height_m=0.0) -> np.ndarray:
-        """θ, the angle of the line of sight from the vertical."""
-        r, depth = self._depth(slant_range_m, height_m)
-        return np.arccos(depth / r)
-
-    def path_difference_m(self, slant_range_m, height_m) -> np.ndarray:
-        """R_rx - R_tx, formed as (R_rx² - R_tx²)/(R_rx + R_tx) (no cancellation)."""
-        r, depth = self._depth(slant_range_m, height_m)
-        y = np.sqrt(r * r - depth * depth)
-        by, bz = self.baseline_yz_m
-        r_rx = np.sqrt((y - by) ** 2 + (depth + bz) ** 2)
-        return (-2.0 * y * by + by * by + 2.0 * depth * bz + bz * bz) / (r_rx + r)
-
-    def phase_rad(self, slant_range_m, height_m) -> np.ndarray:
-        """φ(R, h) = 2π p (R_rx - R_tx)/λ, float64, not reduced (thousands of radians)."""
-        return (
-            TWO_PI
-            * self.passes
-            * self.path_difference_m(slant_range_m, height_m)
-            / (self.wavelength_m)
-        )
-
-    def flat_earth_phasor(self, slant_range_m) -> np.ndarray:
-        """exp(i φ(R, 0)): the reference plane's interferogram (phase reduced mod 2π first)."""
-        return np.exp(1j * np.mod(self.phase_rad(slant_range_m, 0.0), TWO_PI))
-
-    def height_sensitivity_rad_per_m(self, slant_range_m, height_m=0.0) -> np.ndarray:
-        """∂φ/∂h at fixed slant range (central difference of the exact phase, step 10 µm)."""
-        step = 1e-5
-        hi = self.phase_rad(slant_range_m, np.asarray(height_m) + step)
-        lo = self.phase_rad(slant_range_m, np.asarray(height_m) - step)
-        return (hi - lo) / (2.0 * step)
-
-    def ambiguity_height_m(self, slant_range_m) -> np.ndarray:
-        """Height per 2π of interferometric phase at a pixel, from the exact geometry."""
-        return TWO_PI / np.abs(self.height_sensitivity_rad_per_m(slant_range_m))
-
-    def perpendicular_baseline_m(self, slant_range_m) -> np.ndarray:
-        """B_⊥ = B |cos(θ - α)|, the baseline across the line of sight."""
-        theta = self.look_angle_rad(slant_range_m)
-        return self.baseline_m * np.abs(np.cos(theta - math.radians(self.baseline_angle_deg)))
-
-    def ambiguity_height_closed_form_m(self, slant_range_m) -> np.ndarray:
-        """h_2π = λ R sinθ / (p B_⊥) (class docstring; first order in B/R)."""
-        r = np.asarray(slant_range_m, np.float64)
-        theta = self.look_angle_rad(r)
-        return (
-            self.wavelength_m * r * np.sin(theta) / (self.passes * self.perpendicular_baseline_m(r))
-        )
-
-    def height_from_phase(self, slant_range_m, phase_rad, iterations: int = 4) -> np.ndarray:
-        """Invert φ(R, h) - φ(R, 0) = phase for h (Newton from h = phase/∂φ/∂h)."""
-        r = np.asarray(slant_range_m, np.float64)
-        target = np.asarray(phase_rad, np.float64)
-        r, target = np.broadcast_arrays(r, target)
-        base = self.phase_rad(r, 0.0)
-        h = target / self.height_sensitivity_rad_per_m(r)
-        for _ in range(iterations):
-            h = h - (self.phase_rad(r, h) - base - target) / self.height_sensitivity_rad_per_m(r, h)
-        return h
-
-
-def zhao_ambiguity_height_m(wavelength_m, range_m, baseline_m, side_looking_angle_rad) -> float:
-    """Zhao 2014 eq. 1 at fixed y0: 2π of φ_inf per λ0 L0 / (B cosΦ) of elevation z0."""
-    return wavelength_m * range_m / (baseline_m * math.cos(side_looking_angle_rad))
-
+from ..phase import TWO_PI, wrap
+from .insar_geometry import InsalGeometry
+from .looks import box_sum
+from .registration import Registration, estimate_registration, shift_image
+from .unwrap import unwrap_quality
 
 # ---- step II: registration ------------------------------------------------------------------
-@dataclass(frozen=True)
-class Registration:
-    """Slave line i + azimuth_px, bin j + range_px shows what the main shows at (i, j)."""
-
-    azimuth_px: float
-    range_px: float
-    coherence: float | None = None  # mean local coherence after resampling (None: not measured)
-
-
-def integer_offset(main: np.ndarray, slave: np.ndarray) -> tuple[int, int]:
-    """Peak of the cross-correlation of the two intensity images (mean removed, zero padded)."""
-    a = np.abs(np.asarray(main, np.complex128)) ** 2
-    b = np.abs(np.asarray(slave, np.complex128)) ** 2
-    if a.shape != b.shape or a.ndim != 2:
-        raise ValueError(f"images must be 2-D and of one shape, got {a.shape} and {b.shape}")
-    shape = (2 * a.shape[0], 2 * a.shape[1])
-    spec = np.conj(np.fft.fft2(a - a.mean(), shape)) * np.fft.fft2(b - b.mean(), shape)
-    c = np.fft.ifft2(spec).real  # c[d] = Σ_i a[i] b[i + d]
-    i, j = np.unravel_index(int(np.argmax(c)), c.shape)
-    return (
-        int(i - shape[0]) if i >= shape[0] // 2 else int(i),
-        int(j - shape[1]) if j >= shape[1] // 2 else int(j),
-    )
-
-
-def _sinc_taps(frac: float, taps: int) -> np.ndarray:
-    """Lanczos-windowed sinc for x(n + frac), support t = -taps/2 + 1 … taps/2, unit DC gain."""
-    t = np.arange(-taps // 2 + 1, taps // 2 + 1) - frac
-    h = np.sinc(t) * np.sinc(t / (taps / 2))
-    return h / h.sum()
-
-
-def shift_image(image: np.ndarray, azimuth_px: float, range_px: float, taps: int = 16):
-    """out[i, j] = image[i + azimuth_px, j + range_px] → (complex128 out, valid bool).
-
-    Crouch ch. 6 ("Image Registration": Fourier-based shifting).  Range: Fourier shift of each
-    line (zero padded to twice its length, so nothing wraps in).
-    Azimuth: the integer part by indexing, the fraction by a ``taps``-point windowed sinc (a local
-    operation, so a block of lines gives the same rows as the whole image ``taps``/2 lines away
-    from the block's ends).  Rows and columns whose sample point falls outside the image are
-    zero and not valid.
-    """
-    x = np.asarray(image, np.complex128)
-    rows, cols = x.shape
-    valid = np.ones(x.shape, bool)
-    if range_px:
-        n = 1 << (2 * cols - 1).bit_length()
-        ramp = np.exp(1j * np.mod(TWO_PI * np.fft.fftfreq(n) * range_px, TWO_PI))
-        x = np.fft.ifft(np.fft.fft(x, n, axis=1) * ramp, axis=1)[:, :cols]
-    j = np.arange(cols) + range_px
-    valid &= ((j >= 0) & (j <= cols - 1))[None, :]
-    whole = math.floor(azimuth_px)
-    frac = azimuth_px - whole
-    if abs(frac) < 1e-9:
-        offsets, h = np.array([whole]), np.ones(1)
-    else:
-        h = _sinc_taps(frac, taps)
-        offsets = whole + np.arange(-taps // 2 + 1, taps // 2 + 1)
-    # Near the first and last lines the kernel loses taps: the rest is renormalised to unit
-    # gain, and the line stays valid while both neighbours of the sample point are inside.
-    i = np.arange(rows)
-    out = np.zeros_like(x)
-    norm = np.zeros(rows)
-    for hk, off in zip(h, offsets, strict=True):
-        inside = (i + off >= 0) & (i + off <= rows - 1)
-        out[inside] += hk * x[i[inside] + off]
-        norm += np.where(inside, hk, 0.0)
-    ok = (i + whole >= 0) & (i + whole + (1 if len(h) > 1 else 0) <= rows - 1)
-    out[ok] /= norm[ok, None]
-    valid &= ok[:, None]
-    out[~valid] = 0
-    return out, valid
-
-
-def box_sum(x: np.ndarray, looks: tuple[int, int]) -> np.ndarray:
-    """Σ of x over a looks[0] × looks[1] window centred on each pixel (zero outside the array).
-
-    A sum of shifted slices in a fixed order per pixel, so a block of lines gives bit-identical
-    rows to the whole image wherever the window fits in the block.
-    """
-    out = x
-    for axis, n in enumerate(looks):
-        if n < 1 or n % 2 == 0:
-            raise ValueError(f"looks must be odd and >= 1, got {looks}")
-        half = n // 2
-        padded = np.zeros_like(out)
-        size = out.shape[axis]
-        for d in range(-half, half + 1):
-            lo, hi = max(0, -d), min(size, size - d)
-            if hi <= lo:
-                continue
-            dst = [slice(None)] * out.ndim
-            src = [slice(None)] * out.ndim
-            dst[axis], src[axis] = slice(lo, hi), slice(lo + d, hi + d)
-            padded[tuple(dst)] += out[tuple(src)]
-        out = padded
-    return out
-
-
-def mean_coherence(main, slave, valid, window=(5, 5)) -> float:
-    """Σ|Σ_w M S*| / Σ sqrt(Σ_w|M|² Σ_w|S|²) over valid pixels (slow fringes do not bias it)."""
-    v = valid.astype(np.float64)
-    cross = np.abs(box_sum(main * np.conj(slave) * v, window))
-    power = np.sqrt(
-        box_sum(np.abs(main) ** 2 * v, window) * box_sum(np.abs(slave) ** 2 * v, window)
-    )
-    den = float(power[valid].sum())
-    return float(cross[valid].sum() / den) if den > 0 else 0.0
-
-
-def estimate_registration(
-    main, slave, subpixel: str = "both", window=(5, 5), taps: int = 16
-) -> Registration:
-    """Zhao step II: pixel offset (intensity correlation), then sub-pixel by coherence.
-
-    ``subpixel``: "none" (Zhao's pixel-level registration), "range" or "both" axes refined, each
-    by a bounded Brent search of ±0.6 pixel about the integer offset, two sweeps.
-    """
-    if subpixel not in ("none", "range", "both"):
-        raise ValueError("subpixel must be 'none', 'range' or 'both'")
-    m = np.asarray(main, np.complex128)
-    s = np.asarray(slave, np.complex128)
-    d = [float(v) for v in integer_offset(m, s)]
-
-    def score(da, dr):
-        shifted, ok = shift_image(s, da, dr, taps)
-        return mean_coherence(m, shifted, ok, window)
-
-    axes = {"none": (), "range": (1,), "both": (1, 0)}[subpixel]
-    for _ in range(2 if len(axes) > 1 else 1):
-        for axis in axes:
-            centre = d[axis]
-
-            def cost(v, axis=axis):
-                trial = list(d)
-                trial[axis] = v
-                return -score(*trial)
-
-            res = optimize.minimize_scalar(
-                cost,
-                bounds=(centre - 0.6, centre + 0.6),
-                method="bounded",
-                options={"xatol": 1e-3},
-            )
-            d[axis] = float(res.x)
-    return Registration(d[0], d[1], score(d[0], d[1]))
 
 
 # ---- steps III-V: interferogram, flat earth, multilook, coherence, mask ------------------------
@@ -335,7 +62,7 @@ def _dominant_phase(x: np.ndarray, bins: int = 72) -> float:
     smooth = counts + np.roll(counts, 1) + np.roll(counts, -1)
     k = int(np.argmax(smooth))
     centre = 0.5 * (edges[k] + edges[k + 1])
-    near = phase[np.abs(np.angle(np.exp(1j * (phase - centre)))) < 3 * TWO_PI / bins]
+    near = phase[np.abs(wrap(phase - centre)) < 3 * TWO_PI / bins]
     return float(np.angle(np.sum(np.exp(1j * near)))) if near.size else centre
 
 
@@ -363,7 +90,7 @@ def estimate_fringe_ramp(
         p = np.angle(x)
         f = []
         for axis in (0, 1):
-            step = np.angle(np.exp(1j * np.diff(p, axis=axis)))
+            step = wrap(np.diff(p, axis=axis))
             pair = ok[1:] & ok[:-1] if axis == 0 else ok[:, 1:] & ok[:, :-1]
             f.append(float(np.mean(step[pair])) / TWO_PI if pair.any() else 0.0)
     elif method == "peak":
@@ -457,15 +184,6 @@ def form_interferogram(
 
 
 # ---- step VI: unwrap, phase → height ------------------------------------------------------
-def unwrap_phase(wrapped, mask, method: str = "mcf", weights=None) -> np.ndarray:
-    """2-D unwrapping through rtsar.topo.unwrap (contract: masked pixels → 0.0, never NaN)."""
-    from .unwrap import unwrap
-
-    if method == "skimage":  # the peer takes no weights
-        weights = None
-    return unwrap(np.asarray(wrapped, np.float64), method=method, mask=mask, weights=weights)
-
-
 def absolute_cycle_shift(unwrapped, mask) -> float:
     """The multiple of 2π that puts the median unwrapped phase of ``mask`` in [-π, π)."""
     if not mask.any():
@@ -530,7 +248,7 @@ def height_map(
         raise ValueError("flat_earth must be 'geometry' or 'fringes'")
     ifg = form_interferogram(m, s, reg, fe, looks, coherence_min, intensity_floor)
     wrapped = np.where(ifg.valid, ifg.wrapped_rad, 0.0)
-    unw = unwrap_phase(wrapped, ifg.valid, method, ifg.coherence)
+    unw = unwrap_quality(wrapped, ifg.valid, method, ifg.coherence)
     ref = ifg.valid if reference_mask is None else (ifg.valid & reference_mask)
     unw = np.where(ifg.valid, unw + absolute_cycle_shift(unw, ref), 0.0)
     h = np.where(ifg.valid, geometry.height_from_phase(r[None, :], unw), 0.0)

@@ -37,9 +37,10 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import ndimage
 
-from ..engine import process_block
+from ..phase import TWO_PI, wrap
+from .looks import box_mean
+from .unwrap import unwrap_quality
 
-TWO_PI = 2.0 * math.pi
 HEIGHT_MODELS = ("eq13", "exact")
 MAX_COHERENCE = 1.25  # see _classify
 
@@ -136,7 +137,7 @@ def flat_earth_phase_rad(range_m, geometry: ModulationGeometry) -> tuple[np.ndar
     valid = np.isfinite(r) & (r > geometry.platform_height_m)
     phi = np.arccos(geometry.platform_height_m / np.where(valid, r, np.inf))
     cycles = phi / geometry.angular_period_rad + geometry.mask_phase_rad / TWO_PI
-    return np.where(valid, _wrap(TWO_PI * np.mod(cycles, 1.0)), 0.0), valid
+    return np.where(valid, wrap(TWO_PI * np.mod(cycles, 1.0)), 0.0), valid
 
 
 def flat_earth_from_reference(
@@ -186,51 +187,6 @@ def height_exact_m(unwrapped_rad, range_m, geometry: ModulationGeometry) -> np.n
 
 
 # ---- helpers --------------------------------------------------------------------------------
-def _wrap(phase_rad):
-    return np.mod(np.asarray(phase_rad) + math.pi, TWO_PI) - math.pi
-
-
-def box_mean(x: np.ndarray, looks: tuple[int, int]) -> np.ndarray:
-    """Mean over a centred window of looks = (azimuth, range) pixels (odd sizes), cut at the edges.
-
-    At an image edge the mean is over the window's pixels inside the image (no padding values).
-    """
-    la, lr = (int(v) for v in looks)
-    if la < 1 or lr < 1 or la % 2 == 0 or lr % 2 == 0:
-        raise ValueError(f"looks must be odd positive integers, got {looks!r}")
-    x = np.asarray(x)
-    out = x
-    for axis, size in ((0, la), (1, lr)):
-        if size == 1:
-            continue
-        ones = np.ones(out.shape[axis])
-        kernel = np.ones(size)
-        total = ndimage.convolve1d(out.real, kernel, axis=axis, mode="constant")
-        if np.iscomplexobj(out):
-            total = total + 1j * ndimage.convolve1d(out.imag, kernel, axis=axis, mode="constant")
-        count = np.convolve(ones, kernel, mode="same")
-        shape = [1] * out.ndim
-        shape[axis] = -1
-        out = total / count.reshape(shape)
-    return out
-
-
-def unwrap_2d(wrapped_rad, valid, weights=None, method: str = "mcf") -> np.ndarray:
-    """2-D unwrapping, eq. 8's unwrap[], through the shared rtsar.topo.unwrap.unwrap.
-
-    method: "mcf" (Costantini minimum-cost flow, weighted by ``weights``), "ls" (weighted least
-    squares) or "skimage" (the peer; takes no weights).  Float64, 0 at invalid pixels.
-    """
-    from .unwrap import unwrap
-
-    valid = np.asarray(valid, bool)
-    out = unwrap(
-        np.asarray(wrapped_rad, np.float64),
-        method=method,
-        mask=valid,
-        weights=None if method == "skimage" else weights,
-    )
-    return np.where(valid, out, 0.0)
 
 
 def anchor_cycles(unwrapped_rad, wrapped_rad, valid, reference_mask=None) -> np.ndarray:
@@ -257,7 +213,7 @@ def anchor_cycles(unwrapped_rad, wrapped_rad, valid, reference_mask=None) -> np.
 
 
 # ---- the whole chain ------------------------------------------------------------------------
-def _check_thresholds(dark_floor, min_coherence, noise_power) -> None:
+def check_thresholds(dark_floor, min_coherence, noise_power) -> None:
     if not (math.isfinite(noise_power) and noise_power >= 0):
         raise ValueError("noise_power must be finite and >= 0")
     if dark_floor is not None and not (math.isfinite(dark_floor) and dark_floor >= 0):
@@ -266,7 +222,7 @@ def _check_thresholds(dark_floor, min_coherence, noise_power) -> None:
         raise ValueError("min_coherence must lie in [0, 1]")
 
 
-def _classify(z_ml, power_ml, noise_power, fe_valid, depth_b, dark_floor, min_coherence):
+def classify(z_ml, power_ml, noise_power, fe_valid, depth_b, dark_floor, min_coherence):
     """Coherence γ and the masks (geometric, dark, incoherent, valid) of averaged pixels.
 
     Dark: signal power <|S0|²> - N0 at or below the floor.  Incoherent: γ = |<z>| / (|b|
@@ -283,7 +239,7 @@ def _classify(z_ml, power_ml, noise_power, fe_valid, depth_b, dark_floor, min_co
     return coherence, geometric, dark, incoherent, valid
 
 
-def _flat_earth(flat_earth, range_m, geometry):
+def resolve_flat_earth(flat_earth, range_m, geometry):
     if isinstance(flat_earth, str):
         if flat_earth != "geometry":
             raise ValueError("flat_earth must be 'geometry' or a (phase, valid) pair")
@@ -335,7 +291,7 @@ def sam_phase(
     min_coherence   pixels whose modulation coherence γ is below it are masked and counted
     noise_power     N0, the noise power of a pixel of S0 (module docstring; 0: ignore noise)
     """
-    _check_thresholds(dark_floor, min_coherence, noise_power)
+    check_thresholds(dark_floor, min_coherence, noise_power)
     if not (math.isfinite(dark_fraction) and dark_fraction >= 0):
         raise ValueError("dark_fraction must be finite and >= 0")
     z = modulation_phasor(s0, s1, s2, geometry.mask_offset_a, noise_power)
@@ -344,7 +300,7 @@ def sam_phase(
     range_m = np.asarray(range_m, np.float64)
     if range_m.shape != (z.shape[1],):
         raise ValueError(f"range_m must have {z.shape[1]} entries, got shape {range_m.shape}")
-    fe_phase, fe_valid = _flat_earth(flat_earth, range_m, geometry)
+    fe_phase, fe_valid = resolve_flat_earth(flat_earth, range_m, geometry)
     fe_phase = np.broadcast_to(fe_phase, z.shape)
     fe_valid = np.broadcast_to(fe_valid, z.shape)
     sign_b = math.copysign(1.0, geometry.mask_depth_b)
@@ -352,7 +308,7 @@ def sam_phase(
     power_ml = box_mean(np.abs(np.asarray(s0, np.complex128)) ** 2, looks)
     if dark_floor is None:
         dark_floor = dark_fraction * float(np.percentile(power_ml - noise_power, 99))
-    coherence, geometric, dark, incoherent, valid = _classify(
+    coherence, geometric, dark, incoherent, valid = classify(
         z_ml, power_ml, noise_power, fe_valid, geometry.mask_depth_b, dark_floor, min_coherence
     )
     return SamPhase(
@@ -404,7 +360,7 @@ def sam_height(
     if height_model not in HEIGHT_MODELS:
         raise ValueError(f"height_model must be one of {HEIGHT_MODELS}, got {height_model!r}")
     ph = sam_phase(s0, s1, s2, range_m, geometry, **phase_options)
-    unwrapped = unwrap_2d(ph.wrapped_rad, ph.valid, ph.coherence, unwrap_method)
+    unwrapped = unwrap_quality(ph.wrapped_rad, ph.valid, unwrap_method, ph.coherence)
     unwrapped = anchor_cycles(unwrapped, ph.wrapped_rad, ph.valid, reference_mask)
     if height_model == "eq13":
         height = height_eq13_m(unwrapped, geometry)
@@ -421,127 +377,5 @@ def sam_height(
 
 
 # ---- in the stream ----------------------------------------------------------------------
-@dataclass
-class SamLines:
-    """Finished lines of ``SamPhaseStream``: the ``SamPhase`` fields of lines first_line..."""
-
-    first_line: int
-    wrapped_rad: np.ndarray  # [lines, range]
-    coherence: np.ndarray
-    valid: np.ndarray
 
 
-class SamPhaseStream:
-    """Eqs. 5-7 and the looks on image strips as the CCD finishes them (after the azimuth stage).
-
-    ``push(s0, s1, s2)`` takes the next lines of the three focused channels [lines, range] and
-    returns the lines whose azimuth look window is complete, (looks[0] - 1)/2 lines behind;
-    ``flush()`` returns the rest.  The result equals ``sam_phase`` on the whole image given the
-    same ``dark_floor`` (absolute: a percentile would need the future), ``noise_power`` and a
-    flat-earth phase that depends on range only.  Memory: looks[0] - 1 lines of phasor and
-    intensity.  Counters: lines_in, lines_out, masked_dark, masked_incoherent, masked_geometry.
-    """
-
-    def __init__(
-        self,
-        geometry: ModulationGeometry,
-        range_m,
-        dark_floor: float,
-        flat_earth: str | tuple[np.ndarray, np.ndarray] = "geometry",
-        looks: tuple[int, int] = (5, 3),
-        min_coherence: float = 0.3,
-        noise_power: float = 0.0,
-    ):
-        if dark_floor is None:
-            raise ValueError("the stream needs an absolute dark_floor")
-        _check_thresholds(dark_floor, min_coherence, noise_power)
-        self.noise_power = float(noise_power)
-        box_mean(np.zeros((1, 1)), looks)  # validates looks
-        self.geometry = geometry
-        self.range_m = np.asarray(range_m, np.float64)
-        phase, valid = _flat_earth(flat_earth, self.range_m, geometry)
-        if phase.size != self.range_m.size or valid.size != self.range_m.size:
-            raise ValueError("the stream's flat-earth phase must depend on range only")
-        sign_b = math.copysign(1.0, geometry.mask_depth_b)
-        self._derotate = sign_b * np.exp(-1j * phase.reshape(-1))
-        self._fe_valid = valid.reshape(-1)
-        self.dark_floor = float(dark_floor)
-        self.min_coherence = float(min_coherence)
-        self.looks = (int(looks[0]), int(looks[1]))
-        self._half = (self.looks[0] - 1) // 2
-        bins = self.range_m.size
-        self._z = np.zeros((0, bins), np.complex128)  # range-averaged rows not yet released
-        self._p = np.zeros((0, bins))
-        self._first_held = 0  # line index of self._z[0]
-        self.lines_in = self.lines_out = 0
-        self.masked_dark = self.masked_incoherent = self.masked_geometry = 0
-
-    def push(self, s0, s1, s2) -> SamLines:
-        z = modulation_phasor(s0, s1, s2, self.geometry.mask_offset_a, self.noise_power)
-        if z.ndim != 2 or z.shape[1] != self.range_m.size:
-            raise ValueError(f"lines must be [lines, {self.range_m.size}], got {z.shape}")
-        la, lr = self.looks
-        rows_z = box_mean(z * self._derotate, (1, lr))
-        rows_p = box_mean(np.abs(np.asarray(s0, np.complex128)) ** 2, (1, lr))
-        self._z = np.concatenate([self._z, rows_z])
-        self._p = np.concatenate([self._p, rows_p])
-        self.lines_in += len(z)
-        return self._release(self.lines_in - self._half)
-
-    def flush(self) -> SamLines:
-        """Release the last lines (their look windows cut at the end of the image)."""
-        return self._release(self.lines_in)
-
-    def _release(self, stop: int) -> SamLines:
-        start = self.lines_out
-        count = max(0, stop - start)
-        bins = self.range_m.size
-        z_ml = np.zeros((count, bins), np.complex128)
-        p_ml = np.zeros((count, bins))
-        for k, j in enumerate(range(start, start + count)):
-            lo = max(0, j - self._half) - self._first_held
-            hi = min(self.lines_in, j + self._half + 1) - self._first_held
-            z_ml[k] = self._z[lo:hi].sum(axis=0) / (hi - lo)
-            p_ml[k] = self._p[lo:hi].sum(axis=0) / (hi - lo)
-        coherence, geometric, dark, incoherent, valid = _classify(
-            z_ml,
-            p_ml,
-            self.noise_power,
-            np.broadcast_to(self._fe_valid, z_ml.shape),
-            self.geometry.mask_depth_b,
-            self.dark_floor,
-            self.min_coherence,
-        )
-        self.masked_dark += int(dark.sum())
-        self.masked_incoherent += int(incoherent.sum())
-        self.masked_geometry += int(geometric.sum())
-        self.lines_out += count
-        keep_from = max(0, self.lines_out - self._half) - self._first_held
-        self._z, self._p = self._z[keep_from:], self._p[keep_from:]
-        self._first_held += keep_from
-        return SamLines(
-            start,
-            np.where(valid, np.angle(z_ml), 0.0),
-            np.where(valid, coherence, 0.0),
-            valid,
-        )
-
-
-# ---- image formation ------------------------------------------------------------------------
-def focus_channels(
-    config, main, aux: dict, lens_backend: str = "numpy", start_along_track_m: float = 0.0
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Focus S0 (main channel) and S1, S2 (aux "sam_s1", "sam_s2") with the engine.
-
-    Returns (s0, s1, s2, azimuth_m, range_m); each image[azimuth, range].
-    """
-    from ..scene.effects.sam3d import CHANNELS
-
-    missing = [c for c in CHANNELS if c not in aux]
-    if missing:
-        raise ValueError(f"auxiliary channels {missing} missing: name amplitude_modulation_3d")
-    images = []
-    for shots in (main, aux[CHANNELS[0]], aux[CHANNELS[1]]):
-        image, azimuth_m, range_m = process_block(config, shots, lens_backend, start_along_track_m)
-        images.append(image)
-    return images[0], images[1], images[2], azimuth_m, range_m

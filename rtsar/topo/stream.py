@@ -26,15 +26,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .insar import (
-    TWO_PI,
-    InsalGeometry,
-    Registration,
-    absolute_cycle_shift,
-    estimate_registration,
-    form_interferogram,
-    unwrap_phase,
-)
+from ..phase import TWO_PI
+from .insar import absolute_cycle_shift, form_interferogram
+from .insar_geometry import InsalGeometry
+from .registration import Registration, estimate_registration
+from .unwrap import unwrap_quality
 
 
 @dataclass(frozen=True)
@@ -203,7 +199,7 @@ class HeightStripStage:
         valid = ifg.valid[dom]
         wrapped = np.where(valid, ifg.wrapped_rad[dom], 0.0)
         coherence = ifg.coherence[dom]
-        unw = unwrap_phase(wrapped, valid, self.method, coherence) if u1 - u0 > 1 else wrapped
+        unw = unwrap_quality(wrapped, valid, self.method, coherence) if u1 - u0 > 1 else wrapped
         aligned = False
         if self._prev_unw is not None:
             n = start - u0

@@ -2,7 +2,7 @@
 
 Ghiglia & Pritt 1998, ch. 5 (minimum-norm methods); Ghiglia & Romero 1994, JOSA A 11(1).  The
 unwrapped phase φ minimises ``Σ U_row (φ[i+1,j] − φ[i,j] − Δ_row)² + Σ U_col (φ[i,j+1] − φ[i,j] −
-Δ_col)²`` over the wrapped gradients Δ (``rtsar.topo.unwrap.wrapped_gradients``).  With D the
+Δ_col)²`` over the wrapped gradients Δ (``rtsar.topo.phase.wrapped_gradients``).  With D the
 forward-difference operator, the normal equations are ``Dᵀ U D φ = Dᵀ U Δ``: a discrete Poisson
 equation with Neumann boundaries.  Unweighted (U = 1) it is diagonal in the DCT-II basis with
 eigenvalues ``(2 − 2 cos(π p / M)) + (2 − 2 cos(π q / N))``, which gives the direct solver;
@@ -20,7 +20,8 @@ import warnings
 import numpy as np
 from scipy import fft, ndimage
 
-from rtsar.topo.unwrap import TWO_PI, wrap, wrapped_gradients
+from ..phase import TWO_PI, wrap
+from .phase import wrapped_gradients
 
 
 def solve_poisson_dct(rhs: np.ndarray) -> np.ndarray:

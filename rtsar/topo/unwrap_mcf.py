@@ -2,7 +2,7 @@
 
 Costantini, "A novel phase unwrapping method based on network programming", IEEE TGRS 36(3), 1998.
 Unknowns: an integer number of cycles ``k`` added to every wrapped gradient (row and column
-gradients of ``rtsar.topo.unwrap.wrapped_gradients``).  The corrected field ``Δ + 2πk`` must be
+gradients of ``rtsar.topo.phase.wrapped_gradients``).  The corrected field ``Δ + 2πk`` must be
 irrotational: around every elementary loop the corrections cancel the residue,
 ``k_col[i,j] + k_row[i,j+1] − k_col[i+1,j] − k_row[i,j] = −r[i,j]``.  Each gradient sits between two
 loops (or one loop and the outside of the grid), so these constraints are flow conservation on the
@@ -25,7 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from rtsar.topo.unwrap import TWO_PI, residues, wrapped_gradients
+from ..phase import TWO_PI
+from .phase import residues, wrapped_gradients
 
 COST_SCALE = 100  # integer cost of a full-weight gradient; OR-tools needs integer costs
 

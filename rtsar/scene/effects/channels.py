@@ -17,8 +17,15 @@ import math
 
 import numpy as np
 
-from ...focus.hcn_align import DEFAULT_LINEWIDTH_HZ, HCN_CHANNEL, hcn_absorbance, hcn_lines
-from ...focus.linearize import RI_CHANNEL, channel_times_s, default_delay_s
+from ...instrument import (
+    DEFAULT_LINEWIDTH_HZ,
+    HCN_CHANNEL,
+    RI_CHANNEL,
+    channel_times_s,
+    default_delay_s,
+    hcn_absorbance,
+    hcn_lines,
+)
 from ...params import FMCWChirp
 from .base import Effect, PulseContext
 
@@ -57,7 +64,7 @@ class ReferenceInterferometer(Effect):
     Its unwrapped phase is ≈ -τ_ri f(t) (Crouch: "a fiber delay serves as a length reference").
 
     ``delay_s`` τ_ri (default: beat at a quarter of the channel's sample rate,
-    rtsar.focus.linearize.default_delay_s); ``oversampling`` q; ``snr_db`` complex white noise
+    rtsar.instrument.default_delay_s); ``oversampling`` q; ``snr_db`` complex white noise
     of variance 10^(-snr_db/10) on the unit-amplitude beat (omitted: noise-free).
     """
 

@@ -43,11 +43,12 @@ import math
 
 import numpy as np
 
+from ...instrument import REFERENCE_CHANNELS
 from ...params import FMCWChirp
 from .base import Effect
 from .platform import PulseProcess, _non_negative, check_seed
 
-CHANNELS = ("reference_rx1", "reference_rx2")
+CHANNELS = REFERENCE_CHANNELS
 _BEAM_REACH = 1.5  # scatterers within ±1.5 F of the beam centre (field below e^-9 beyond)
 
 
@@ -176,8 +177,8 @@ class ReferenceRegion(Effect):
         a, b = self.alpha_m(pulses), self.beta_rad(pulses)
         return {
             "target": 2 * a + self.d_m * b,
-            "reference_rx1": 2 * a - self.D_m * b,
-            "reference_rx2": 2 * a - 2 * self.D_m * b,
+            CHANNELS[0]: 2 * a - self.D_m * b,
+            CHANNELS[1]: 2 * a - 2 * self.D_m * b,
         }
 
     def target_phase_rad(self, pulses) -> np.ndarray:
@@ -234,8 +235,8 @@ class ReferenceRegion(Effect):
         errors = self.path_errors_m(ctx.pulse)
         out = {}
         for name, half_path, gain in (
-            ("reference_rx1", 0.5 * (r + h), a * w),
-            ("reference_rx2", r, a * w * w),
+            (CHANNELS[0], 0.5 * (r + h), a * w),
+            (CHANNELS[1], r, a * w * w),
         ):
             s = ctx.echo(half_path, gain, self.lo_range_m) * self._phasor(float(errors[name]))
             if self.noise_sigma is not None:

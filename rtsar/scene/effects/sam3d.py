@@ -30,9 +30,10 @@ import math
 
 import numpy as np
 
+from ...instrument import SAM_CHANNELS
 from .base import Effect
 
-CHANNELS = ("sam_s1", "sam_s2")  # auxiliary channel names: cosine mask, sine mask
+CHANNELS = SAM_CHANNELS  # auxiliary channel names: cosine mask, sine mask
 
 
 class AmplitudeModulation3D(Effect):

@@ -1,0 +1,190 @@
+"""Point-target acceptance: focus targets at the swath centre and edges, compare with theory.
+
+Shared by the test suite and ``tools/focus_report.py``.  Theory, per axis:
+
+* range: resolution ρR = c/2B (Psaltis eq. 6, Crouch eq. 3.6);
+* azimuth: ρA = λR/(2L), L = N·d the synthetic aperture (Crouch eq. 4.8; = L_illum/N, Psaltis
+  eq. 7, for the Psaltis presets);
+* the -3 dB impulse response width of an unweighted aperture is 0.886·ρ (the half-power width of
+  a sinc); a taper broadens it by the factor ``theoretical_irw_factor`` of its weights, and the
+  two-way antenna pattern, when simulated, is part of the azimuth weights.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..ccd.base import aperture_offsets_m
+from ..lens.plan import range_axis_m
+from ..params import Config
+from ..scene import Simulator, point_scene
+from ..stream.engine import focus_batches
+from ..windows import window
+from .point_target import analyse_point_target
+from .theory import theoretical_irw_factor, theoretical_pslr_db
+
+SINC_IRW = 0.8859  # half-power width of sinc(x)² in units of its first-null distance
+
+
+@dataclass(frozen=True)
+class TargetResult:
+    label: str
+    true_azimuth_m: float
+    true_range_m: float
+    azimuth_error_cells: float  # |measured - true| / ρA
+    range_error_cells: float  # |measured - true| / ρR
+    azimuth_irw_m: float
+    azimuth_irw_theory_m: float
+    range_irw_m: float
+    range_irw_theory_m: float
+    azimuth_pslr_db: float
+    range_pslr_db: float
+    azimuth_pslr_theory_db: float
+    range_pslr_theory_db: float
+    azimuth_islr_db: float
+    range_islr_db: float
+
+    @property
+    def azimuth_irw_ratio(self) -> float:
+        return self.azimuth_irw_m / self.azimuth_irw_theory_m
+
+    @property
+    def range_irw_ratio(self) -> float:
+        return self.range_irw_m / self.range_irw_theory_m
+
+
+def acceptance_targets(cfg: Config) -> list[tuple[str, float, float]]:
+    """(label, along_track_m, slant_range_m): centre and near both swath edges, off-grid."""
+    rm = range_axis_m(cfg)
+    dr = rm[1] - rm[0]
+    n = len(rm)
+    edge = max(10, n // 16)  # bins between an edge target and the swath edge (room for sidelobes)
+    step = cfg.geometry.along_track_step_m
+    return [
+        ("near edge", 0.31 * step, rm[edge] + 0.27 * dr),
+        ("centre", 0.0, rm[n // 2] + 0.41 * dr),
+        ("far edge", -0.17 * step, rm[n - 1 - edge] - 0.36 * dr),
+    ]
+
+
+def _range_weights(cfg: Config) -> np.ndarray:
+    wf = cfg.waveform
+    n = wf.pulse_samples if wf.kind == "pulsed" else wf.samples_per_shot
+    return window(cfg.processor.range_window, n)
+
+
+def azimuth_weights(cfg: Config, slant_range_m: float, antenna: bool) -> np.ndarray:
+    w = window(cfg.processor.azimuth_window, cfg.processor.aperture_pulses)
+    if antenna:
+        g = cfg.geometry
+        w = (
+            w
+            * np.sinc(g.antenna_length_m / g.wavelength_m * aperture_offsets_m(cfg) / slant_range_m)
+            ** 2
+        )
+    return w
+
+
+def _focus_one(
+    cfg: Config, x: float, r: float, effects: list, lens_backend: str, margin_lines: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One isolated target, with margin_lines image lines either side of it."""
+    n, step = cfg.processor.aperture_pulses, cfg.geometry.along_track_step_m
+    start = x - (0.5 * (n - 1) + margin_lines) * step
+    scene = point_scene(
+        cfg,
+        [x],
+        [r],
+        effects=effects,
+        seed=11,
+        start_along_track_m=start,
+        pulses=n + 2 * margin_lines,
+    )
+    sim = Simulator(scene)
+    b = cfg.processor.micro_batch
+    batches = (sim.block(b) for _ in range(0, scene.pulses, b))
+    return focus_batches(cfg, batches, lens_backend, scene.start_along_track_m)
+
+
+def run_point_targets(
+    cfg: Config,
+    lens_backend: str = "opencl",
+    antenna: bool = False,
+    noise_snr_db: float | None = None,
+) -> list[TargetResult]:
+    """Focus each acceptance target alone with the streaming engine and measure it."""
+    effects = []
+    if antenna:
+        effects.append(("antenna_pattern", {}))
+    if noise_snr_db is not None:
+        effects.append(("noise", {"snr_db": noise_snr_db}))
+    rho_r = cfg.waveform.range_resolution_m
+    rw = _range_weights(cfg)
+    step = cfg.geometry.along_track_step_m
+    results = []
+    for label, x, r in acceptance_targets(cfg):
+        rho_a = cfg.azimuth_resolution_m(r)
+        aw = azimuth_weights(cfg, r, antenna)
+        az_irw = SINC_IRW * rho_a * theoretical_irw_factor(aw)
+        # Room for ±12 IRW of sidelobes in azimuth (the ISLR extent is ±10 IRW).
+        chip = max(64, int(np.ceil(12 * az_irw / step)))
+        image, az, rg = _focus_one(cfg, x, r, effects, lens_backend, chip + 8)
+        rep = analyse_point_target(
+            image,
+            az,
+            rg,
+            near_azimuth_m=x,
+            near_range_m=r,
+            search_radius_m=(3 * rho_a, 3 * rho_r),
+            chip=chip,
+        )
+        results.append(
+            TargetResult(
+                label,
+                x,
+                r,
+                abs(rep.azimuth_m - x) / rho_a,
+                abs(rep.range_m - r) / rho_r,
+                rep.azimuth.irw_m,
+                az_irw,
+                rep.range.irw_m,
+                SINC_IRW * rho_r * theoretical_irw_factor(rw),
+                rep.azimuth.pslr_db,
+                rep.range.pslr_db,
+                theoretical_pslr_db(aw),
+                theoretical_pslr_db(rw),
+                rep.azimuth.islr_db,
+                rep.range.islr_db,
+            )
+        )
+    return results
+
+
+def markdown_table(rows: list[tuple[str, str, TargetResult]]) -> str:
+    """rows: (preset, windows, result) → a Markdown table of measured vs theory."""
+    head = (
+        "| preset | windows | target | az. error [cells] | rg. error [cells] | "
+        "az. IRW meas / theory | ratio | rg. IRW meas / theory | ratio | "
+        "az. PSLR meas / theory [dB] | rg. PSLR meas / theory [dB] | az. / rg. ISLR [dB] |"
+    )
+    lines = [head, "|" + "---|" * 12]
+
+    def fmt_len(v):
+        for unit, s in (("km", 1e3), ("m", 1.0), ("mm", 1e-3), ("µm", 1e-6)):
+            if abs(v) >= s or unit == "µm":
+                return f"{v / s:.4g} {unit}"
+        return f"{v:g}"  # pragma: no cover
+
+    for preset_name, windows, t in rows:
+        lines.append(
+            f"| {preset_name} | {windows} | {t.label} | {t.azimuth_error_cells:.3f} | "
+            f"{t.range_error_cells:.3f} | {fmt_len(t.azimuth_irw_m)} / "
+            f"{fmt_len(t.azimuth_irw_theory_m)} | {t.azimuth_irw_ratio:.3f} | "
+            f"{fmt_len(t.range_irw_m)} / {fmt_len(t.range_irw_theory_m)} | "
+            f"{t.range_irw_ratio:.3f} | {t.azimuth_pslr_db:.1f} / {t.azimuth_pslr_theory_db:.1f} | "
+            f"{t.range_pslr_db:.1f} / {t.range_pslr_theory_db:.1f} | "
+            f"{t.azimuth_islr_db:.1f} / {t.range_islr_db:.1f} |"
+        )
+    return "\n".join(lines)

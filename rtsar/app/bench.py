@@ -1,0 +1,222 @@
+"""``rtsar bench``: throughput of the AO lens and of the correlators, measured in one run.
+
+Not a test.  Machines are shared and noisy, so every figure is reported beside its comparison
+measured in the same run (ratios), at the psaltis-max geometry (1200 range bins, N = 512) unless
+the caller asks for another preset.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+
+import numpy as np
+
+from ..analysis.timing import rate_per_s
+from ..ccd.base import design_mask
+from ..ccd.direct import DirectCorrelator
+from ..ccd.fft import FFTCorrelator
+from ..ccd.partitioned import PartitionedCorrelator
+from ..lens.cl_loader import device_info
+from ..lens.numpy_lens import NumpyLens
+from ..lens.opencl import AOLens
+from ..lens.plan import make_plan
+from ..params import preset
+from .bench_pipeline import bench_pipeline
+
+
+def bench_lens(cfg, batches=(16, 64, 256), seconds=1.0, device=None, rounds=3) -> list[dict]:
+    """Pulses/s of the OpenCL lens and of the same plan on NumPy's and SciPy's FFT (complex64).
+
+    The three backends alternate for ``rounds`` rounds and each keeps its best round, so a
+    neighbour's load on the shared machine penalises none of them in particular.
+    """
+    plan = make_plan(cfg)
+    rng = np.random.default_rng(0)
+    backends = {
+        "opencl": AOLens(plan, device=device),
+        "numpy": NumpyLens(plan),
+        "scipy": NumpyLens(plan, library="scipy"),
+    }
+    nfft = plan.nfft
+    rows = []
+    for b in batches:
+        shape = (b, plan.samples_per_shot)
+        shots = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(np.complex64)
+        calls = {name: lens.compress for name, lens in backends.items()}
+        # A single bare forward FFT of the batch: less work than the lens plan (two transforms
+        # for the matched filter, plus window, filter, gather), shown as the floor of NumPy.
+        calls["numpy_one_fft"] = lambda s: np.fft.fft(s, nfft, axis=-1)
+        best = dict.fromkeys(calls, 0.0)
+        for _ in range(rounds):
+            for name, call in calls.items():
+                rate = rate_per_s(lambda s=shots, f=call: f(s), b, seconds / rounds)
+                best[name] = max(best[name], rate)
+        rows.append(
+            {
+                "stage": "lens",
+                "batch": b,
+                "opencl_pulses_per_s": best["opencl"],
+                "numpy_fft_pulses_per_s": best["numpy"],
+                "scipy_fft_pulses_per_s": best["scipy"],
+                "numpy_one_fft_pulses_per_s": best["numpy_one_fft"],
+                "opencl_over_numpy": best["opencl"] / best["numpy"],
+                "opencl_over_scipy": best["opencl"] / best["scipy"],
+                "opencl_over_numpy_one_fft": best["opencl"] / best["numpy_one_fft"],
+            }
+        )
+    return rows
+
+
+def bench_correlators(cfg, batch=64, seconds=1.0, pushes=400) -> list[dict]:
+    """Pulses/s of the three correlators, pushes of ``batch`` lines, measured in one run.
+
+    The partitioned correlator (blocks of ``cfg.processor.partition_lines`` = L) is also fed the
+    way a low-latency stream feeds it, one block per push: its pulses/s then, and the time of
+    such a push (what it adds to a line's latency), median and 99th percentile of ``pushes``.
+    """
+    plan = make_plan(cfg)
+    mask = design_mask(cfg, plan.range_m)
+    block = min(cfg.processor.partition_lines, mask.shape[0])
+    rng = np.random.default_rng(1)
+    shape = (max(batch, block), plan.bin_count)
+    lines = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(np.complex64)
+    corrs = {
+        "direct": DirectCorrelator(mask),
+        "fft": FFTCorrelator(mask),
+        "partitioned": PartitionedCorrelator(mask, block),
+    }
+    rates = {}
+    for name, corr in corrs.items():
+        rates[name] = rate_per_s(lambda c=corr, x=lines[:batch]: c.push(x), batch, seconds)
+    streaming = corrs["partitioned"]
+    one_block = lines[:block]
+    block_rate = rate_per_s(lambda: streaming.push(one_block), block, seconds)
+    times = np.empty(pushes)
+    for i in range(pushes):
+        t0 = time.perf_counter()
+        streaming.push(one_block)
+        times[i] = time.perf_counter() - t0
+    return [
+        {
+            "stage": "correlator",
+            "batch": batch,
+            "direct_pulses_per_s": rates["direct"],
+            "fft_pulses_per_s": rates["fft"],
+            "fft_over_direct": rates["fft"] / rates["direct"],
+            "partitioned_pulses_per_s": rates["partitioned"],
+            "partitioned_over_fft": rates["partitioned"] / rates["fft"],
+            "partition_lines": block,
+            "partitioned_one_block_pulses_per_s": block_rate,
+            "partitioned_push_median_ms": 1e3 * float(np.median(times)),
+            "partitioned_push_p99_ms": 1e3 * float(np.percentile(times, 99)),
+            "aperture_pulses": mask.shape[0],
+            "range_bins": mask.shape[1],
+        }
+    ]
+
+
+def add_arguments(parser) -> None:
+    """Options of ``rtsar bench``."""
+    parser.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    parser.add_argument(
+        "--seconds", type=float, default=1.0, help="time per measurement (default 1 s)"
+    )
+    parser.add_argument(
+        "--preset",
+        help="measure at this preset only (default: lens and correlators at psaltis-max; "
+        "the live pipeline at psaltis-max and psaltis-jpl)",
+    )
+    parser.add_argument(
+        "--real-seconds",
+        type=float,
+        default=10.0,
+        help="length of each real-rate pipeline run (default 10 s)",
+    )
+    parser.add_argument("--device", help="OpenCL platform/device name substring")
+
+
+def run_bench(args) -> int:
+    name = getattr(args, "preset", None) or "psaltis-max"  # lens and correlators alone
+    cfg = preset(name)
+    out = sys.stdout
+    seconds = args.seconds
+    print(
+        f"rtsar bench: preset {name} (samples/shot {cfg.waveform.samples_per_shot}, "
+        f"{cfg.processor.range_bins} range bins, N = {cfg.processor.aperture_pulses}, "
+        f"PRF {cfg.geometry.prf_hz:g} Hz); OpenCL: {device_info(args.device)}",
+        file=out,
+    )
+    lens_rows = bench_lens(cfg, seconds=seconds, device=args.device)
+    print("\nAO lens (range compression), pulses/s", file=out)
+    print(
+        "(NumPy/SciPy: the same plan in complex64; 1 FFT: one bare np.fft.fft of the batch)",
+        file=out,
+    )
+    print(
+        f"{'batch':>6} {'OpenCL':>10} {'NumPy':>10} {'SciPy':>10} {'1 FFT':>10} "
+        f"{'CL/NumPy':>9} {'CL/SciPy':>9} {'CL/1 FFT':>9}",
+        file=out,
+    )
+    for r in lens_rows:
+        print(
+            f"{r['batch']:6d} {r['opencl_pulses_per_s']:10,.0f} "
+            f"{r['numpy_fft_pulses_per_s']:10,.0f} {r['scipy_fft_pulses_per_s']:10,.0f} "
+            f"{r['numpy_one_fft_pulses_per_s']:10,.0f} {r['opencl_over_numpy']:9.2f} "
+            f"{r['opencl_over_scipy']:9.2f} {r['opencl_over_numpy_one_fft']:9.2f}",
+            file=out,
+        )
+    corr_rows = bench_correlators(cfg, seconds=seconds)
+    print("\nShifting CCD (azimuth correlation), pulses/s", file=out)
+    for r in corr_rows:
+        print(
+            f"batch {r['batch']}: direct {r['direct_pulses_per_s']:,.0f}, "
+            f"fft {r['fft_pulses_per_s']:,.0f}, fft/direct {r['fft_over_direct']:.1f}x "
+            f"({r['aperture_pulses']} x {r['range_bins']})",
+            file=out,
+        )
+    prf = cfg.geometry.prf_hz
+    best = max(corr_rows[0]["fft_pulses_per_s"], corr_rows[0]["direct_pulses_per_s"])
+    lens_best = max(r["opencl_pulses_per_s"] for r in lens_rows)
+    print(
+        f"\nreal-time factors at PRF {prf:g} Hz: lens {lens_best / prf:.2f}x, "
+        f"best correlator {best / prf:.2f}x",
+        file=out,
+    )
+    pipeline_rows = []
+    names = (
+        [getattr(args, "preset", None)]
+        if getattr(args, "preset", None)
+        else ["psaltis-max", "psaltis-jpl"]
+    )
+    print(
+        "\nLive pipeline end to end (simulated shots from memory, strips published on a "
+        "loopback ZeroMQ socket)",
+        file=out,
+    )
+    for pname in names:
+        pipeline_rows.append(
+            bench_pipeline(
+                pname,
+                preset(pname),
+                seconds=max(2.0, 2 * seconds),
+                real_seconds=args.real_seconds,
+                log=lambda m: print(m, file=out, flush=True),
+            )
+        )
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(
+                {
+                    "preset": name,
+                    "device": device_info(args.device),
+                    "lens": lens_rows,
+                    "correlator": corr_rows,
+                    "pipeline": pipeline_rows,
+                },
+                f,
+                indent=2,
+            )
+        print(f"wrote {args.json}", file=out)
+    return 0

@@ -1,0 +1,268 @@
+"""Streaming benchmark (``rtsar bench``): the whole pipeline, end to end, in one run.
+
+Not a test.  For a preset it measures, on the same simulated shots held in memory:
+
+* real-time factor: the pipeline fed as fast as it takes shots (replay ``max``), pulses/s ÷ PRF;
+* at the real PRF, the source behaving as an instrument (dropped when the pipeline is full):
+  dropped pulses and the latency from the arrival of the last pulse of a line to the
+  publication of its strip (median, p99), and the achieved PRF of the paced source;
+* throughput against the micro-batch cap;
+* a plain NumPy batch range-Doppler processor (FFT matched filter in range, FFT fast convolution
+  in azimuth over the whole block) on the same shots, as a ratio;
+* the CCD stage's rate inside the pipeline (its busy time) as a fraction of the same correlator
+  pushed alone.
+
+Strips go to a ZeroMQ publisher on a loopback port with no subscriber (publication is part of
+the measured path), or, with ``stalled_subscriber``, with a subscriber that never reads.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import zmq
+
+from ..analysis.timing import rate_per_s
+from ..ccd import make_correlator
+from ..ccd.base import design_mask
+from ..lens.plan import make_plan
+from ..params import Config
+from ..scene import Simulator, point_scene
+from ..sinks.publish import ZmqPublisher
+from ..sources.replay import ReplaySource
+from ..stream.pipeline import Pipeline, PipelineSettings
+
+
+class Cyclic:
+    """A block of shots repeated to any length (pulse p reads shot p mod len)."""
+
+    def __init__(self, shots: np.ndarray, total: int):
+        self.shots, self.total = shots, int(total)
+
+    def __len__(self) -> int:
+        return self.total
+
+    def __getitem__(self, sl: slice) -> np.ndarray:
+        start, stop, _ = sl.indices(self.total)
+        n = len(self.shots)
+        a, b = start % n, start % n + (stop - start)
+        if b <= n:
+            return self.shots[a:b]
+        return self.shots[np.arange(start, stop) % n]
+
+
+def bench_shots(cfg: Config, pulses: int = 4096, seed: int = 0) -> np.ndarray:
+    """Shots of a few point targets spread over the swath (what the pipeline sees in a scan)."""
+    plan = make_plan(cfg)
+    rm = plan.range_m
+    rng = np.random.default_rng(seed)
+    ranges = rng.uniform(rm[len(rm) // 8], rm[-len(rm) // 8], 6)
+    d = cfg.geometry.along_track_step_m
+    along = rng.uniform(0, pulses * d, 6)
+    scene = point_scene(cfg, along, ranges, pulses=pulses, start_along_track_m=0.0)
+    return Simulator(scene).block(pulses)
+
+
+def _source(cfg, shots, total, rate, batch, live):
+    seq = np.arange(total)
+    prf = cfg.geometry.prf_hz
+    return ReplaySource(Cyclic(shots, total), seq, seq / prf, prf, rate, batch, "bench", live)
+
+
+def stream_run(
+    cfg: Config,
+    shots: np.ndarray,
+    seconds: float,
+    rate: str,
+    settings: PipelineSettings,
+    endpoint_ctx=None,
+    stalled_subscriber: bool = False,
+) -> dict:
+    """One pipeline run on ``shots`` (repeated) for about ``seconds`` of source time."""
+    prf = cfg.geometry.prf_hz
+    live = rate != "max"
+    total = int(seconds * prf) if live else int(seconds * prf * 3)
+    batch = settings.max_batch or cfg.processor.micro_batch
+    src = _source(cfg, shots, total, rate, batch, live)
+    pub = ZmqPublisher("tcp://127.0.0.1:*", "drop", context=endpoint_ctx)
+    sub = None
+    if stalled_subscriber:
+        sub = zmq.Context.instance().socket(zmq.SUB)
+        sub.setsockopt(zmq.SUBSCRIBE, b"")
+        sub.connect(pub.endpoint)
+        pub.wait_for_subscribers(1, timeout_s=10)
+    pipe = Pipeline(cfg, src, [pub], settings)
+    if not live:  # bound the run by time, not by pulses
+        timer = _stop_after(src, seconds)
+    t0 = time.perf_counter()
+    stats = pipe.run()
+    wall = time.perf_counter() - t0
+    if not live:
+        timer.cancel()
+    pub.close()
+    if sub is not None:
+        sub.close(0)
+    d = stats.as_dict()
+    c = d["counters"]
+    done = c["pulses_processed"]
+    out = {
+        "rate": rate,
+        "stages": settings.stages,
+        "correlator": cfg.processor.correlator,
+        "max_batch": batch,
+        "strip_lines": settings.strip_lines,
+        "pulses": done,
+        "wall_s": wall,
+        "pulses_per_s": done / wall,
+        "real_time_factor": done / wall / prf,
+        "dropped_pulses": c["dropped_pulses"],
+        "gap_pulses": c["gap_pulses"],
+        "latency_median_ms": d["latency_median_ms"],
+        "latency_p99_ms": d["latency_p99_ms"],
+        "latency_max_ms": d["latency_max_ms"],
+        "stage_busy_s": d["stage_busy_s"],
+        "strips": c["strips_published"],
+    }
+    if live:
+        out["achieved_prf_hz"] = src.achieved_rate_hz()
+        out["prf_error"] = out["achieved_prf_hz"] / prf - 1
+    ccd_busy = d["stage_busy_s"].get("ccd")
+    if ccd_busy:
+        out["ccd_stage_pulses_per_s"] = done / ccd_busy
+    return out
+
+
+def _stop_after(source, seconds: float):
+    import threading
+
+    t = threading.Timer(seconds, source.close)
+    t.daemon = True
+    t.start()
+    return t
+
+
+def isolated_correlator_rate(cfg: Config, batch: int, seconds: float = 1.0) -> float:
+    """Pulses/s of the configured correlator alone, pushed ``batch`` lines at a time."""
+    plan = make_plan(cfg)
+    p = cfg.processor
+    corr = make_correlator(
+        p.correlator,
+        design_mask(cfg, plan.range_m),
+        p.fft_length,
+        partition_lines=p.partition_lines,
+    )
+    rng = np.random.default_rng(2)
+    shape = (batch, plan.bin_count)
+    lines = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(np.complex64)
+    return rate_per_s(lambda: corr.push(lines), batch, seconds)
+
+
+def numpy_range_doppler(cfg: Config, shots: np.ndarray) -> np.ndarray:
+    """Plain NumPy batch processor: range matched filter by FFT, then azimuth fast convolution
+    with the same per-range-bin mask over the whole block (range-Doppler, no migration
+    correction).  complex64 FFTs; image[line, range_bin] for lines with a full aperture."""
+    plan = make_plan(cfg)
+    nfft = plan.nfft
+
+    def dft(a, sign):  # unnormalised, like the plan's transforms
+        return np.fft.fft(a, nfft, axis=1) if sign < 0 else np.fft.ifft(a, nfft, axis=1) * nfft
+
+    x = dft(np.asarray(shots, np.complex64) * plan.pre.astype(np.complex64), plan.sign1)
+    if plan.two_pass:
+        x = dft(x * plan.spectrum.astype(np.complex64), plan.sign2)
+    bins = (plan.bin_start + np.arange(plan.bin_count)) % nfft
+    lines = (x[:, bins] * plan.post.astype(np.complex64)).astype(np.complex64)
+    mask = design_mask(cfg, plan.range_m).astype(np.complex64)
+    n, p = mask.shape[0], len(lines)
+    m = 1 << int(np.ceil(np.log2(p + n - 1)))
+    a = np.fft.fft(lines, m, axis=0)
+    a *= np.fft.fft(mask[::-1], m, axis=0)
+    return np.fft.ifft(a, axis=0)[n - 1 : p].astype(np.complex64)
+
+
+def bench_numpy_range_doppler(cfg: Config, shots: np.ndarray, repeats: int = 2) -> float:
+    """Best pulses/s of :func:`numpy_range_doppler` on ``shots``."""
+    best = 0.0
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        numpy_range_doppler(cfg, shots)
+        best = max(best, len(shots) / (time.perf_counter() - t0))
+    return best
+
+
+__all__ = [
+    "Cyclic",
+    "bench_numpy_range_doppler",
+    "bench_shots",
+    "isolated_correlator_rate",
+    "numpy_range_doppler",
+    "stream_run",
+]
+
+
+def bench_pipeline(name: str, cfg: Config, seconds: float, real_seconds: float, log=print) -> dict:
+    """The streaming figures of one preset, all measured in this call (see module docstring)."""
+    shots = bench_shots(cfg, 2048)
+    result = {"preset": name, "prf_hz": cfg.geometry.prf_hz, "runs": []}
+
+    def run(label, c, rate, secs, **kw):
+        stalled = kw.pop("stalled_subscriber", False)
+        r = stream_run(c, shots, secs, rate, PipelineSettings(**kw), stalled_subscriber=stalled)
+        r["label"] = label
+        result["runs"].append(r)
+        log(
+            f"  {label:34} {r['real_time_factor']:6.2f}x RT  dropped {r['dropped_pulses']:5d}  "
+            f"latency median {r['latency_median_ms']:8.2f} ms  p99 {r['latency_p99_ms']:8.2f} ms"
+            + (f"  PRF error {100 * r['prf_error']:+.3f} %" if "prf_error" in r else "")
+        )
+        return r
+
+    log(
+        f"{name}: PRF {cfg.geometry.prf_hz:g} Hz, CCD {cfg.processor.aperture_pulses} x "
+        f"{cfg.processor.range_bins}, {cfg.waveform.samples_per_shot} samples/shot"
+    )
+    # Warm-up (OpenCL build, numba cache, FFT plans), not recorded.
+    stream_run(cfg.with_processor(correlator="partitioned"), shots, 0.5, "max", PipelineSettings())
+    for kind in ("partitioned", "fft"):
+        c = cfg.with_processor(correlator=kind)
+        top = run(f"{kind}: max rate", c, "max", seconds)
+        run(f"{kind}: real rate ({real_seconds:g} s)", c, "real", real_seconds)
+        iso = isolated_correlator_rate(c, top["max_batch"], seconds=min(seconds, 1.0))
+        top["isolated_correlator_pulses_per_s"] = iso
+        if "ccd_stage_pulses_per_s" in top:
+            top["ccd_stage_over_isolated"] = top["ccd_stage_pulses_per_s"] / iso
+    part = cfg.with_processor(correlator="partitioned")
+    run("partitioned: max rate, fused stages", part, "max", seconds, stages="fused")
+    base = result["runs"][0]
+    # A stalled subscriber (connected, never reads) against no subscriber, back to back.
+    none = run("partitioned: max rate (repeat)", part, "max", seconds)
+    stalled = run(
+        "partitioned: max rate, stalled sub.", part, "max", seconds, stalled_subscriber=True
+    )
+    result["stalled_subscriber_over_none"] = stalled["pulses_per_s"] / none["pulses_per_s"]
+    for mb in (8, 16, 256):
+        run(f"partitioned: max rate, max batch {mb}", part, "max", seconds, max_batch=mb)
+    rd = bench_numpy_range_doppler(cfg, np.concatenate([shots] * 2))
+    result["numpy_range_doppler_pulses_per_s"] = rd
+    result["pipeline_over_numpy_range_doppler"] = {
+        r["label"]: r["pulses_per_s"] / rd for r in result["runs"] if r["rate"] == "max"
+    }
+    log(
+        f"  plain NumPy batch range-Doppler (4096 pulses): {rd:,.0f} pulses/s = "
+        f"{rd / cfg.geometry.prf_hz:.2f}x RT; pipeline (partitioned) / NumPy = "
+        f"{base['pulses_per_s'] / rd:.2f}"
+    )
+    for r in result["runs"][:3:2]:
+        if "ccd_stage_over_isolated" in r:
+            log(
+                f"  {r['correlator']} CCD stage in the pipeline: "
+                f"{r['ccd_stage_pulses_per_s']:,.0f} pulses/s = "
+                f"{r['ccd_stage_over_isolated']:.2f} of the same correlator alone "
+                f"({r['isolated_correlator_pulses_per_s']:,.0f})"
+            )
+    log(
+        f"  throughput with a stalled subscriber / with none: "
+        f"{result['stalled_subscriber_over_none']:.2f}"
+    )
+    return result

@@ -1,0 +1,227 @@
+"""Commands on files: ``presets``, ``simulate``, ``process``, ``quicklook``."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from ...lens import range_axis_m
+from ...params import PRESETS, preset
+from ...scene import Simulator, load_scene
+from ...sinks.io import RecordingWriter, open_recording, read_image, write_image
+from ...stream.engine import StreamProcessor
+from ..progress import Progress
+from ..quicklook import save_quicklook
+from .options import (
+    add_correlator_option,
+    add_lens_options,
+    add_processing_knobs,
+    correction_chain,
+    die,
+    physical_ccd,
+    processor_changes,
+    warn_outside_swath,
+)
+
+
+def cmd_presets(args) -> int:
+    rows = []
+    for name in PRESETS:
+        c = preset(name)
+        rm = range_axis_m(c)
+        rows.append(
+            {
+                "preset": name,
+                "waveform": c.waveform.kind,
+                "slant_range_m": c.geometry.slant_range_m,
+                "swath_m": [float(rm[0]), float(rm[-1])],
+                "range_resolution_m": c.waveform.range_resolution_m,
+                "azimuth_resolution_m": c.azimuth_resolution_m(),
+                "aperture_pulses": c.processor.aperture_pulses,
+                "range_bins": c.processor.range_bins,
+                "samples_per_shot": c.waveform.samples_per_shot,
+                "prf_hz": c.geometry.prf_hz,
+                "illuminated_length_m": c.geometry.illuminated_length_m,
+                "synthetic_aperture_m": c.synthetic_aperture_m,
+                "range_curvature_m": c.range_curvature_m,
+            }
+        )
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    print(
+        f"{'preset':12} {'kind':6} {'swath (slant range)':>23} {'rho_R':>10} {'rho_A':>10} "
+        f"{'N':>5} {'bins':>5} {'samples':>7} {'PRF Hz':>8} {'L illum.':>10} {'aperture':>10} "
+        f"{'curvature':>10}"
+    )
+    for r in rows:
+        swath = f"{r['swath_m'][0]:.6g}–{r['swath_m'][1]:.6g}"
+        print(
+            f"{r['preset']:12} {r['waveform']:6} {swath:>23} {r['range_resolution_m']:10.4g} "
+            f"{r['azimuth_resolution_m']:10.4g} {r['aperture_pulses']:5d} {r['range_bins']:5d} "
+            f"{r['samples_per_shot']:7d} {r['prf_hz']:8g} {r['illuminated_length_m']:10.4g} "
+            f"{r['synthetic_aperture_m']:10.4g} {r['range_curvature_m']:10.3g}"
+        )
+    print("(lengths in metres; rho_A = λR/2L unweighted, Crouch eq. 4.8)")
+    return 0
+
+
+def cmd_simulate(args) -> int:
+    scene = load_scene(args.scene)
+    if args.pulses is not None:
+        if args.pulses < 1:
+            return die(f"--pulses must be >= 1, got {args.pulses}")
+        scene = replace(scene, pulses=args.pulses)
+    warn_outside_swath(scene)
+    sim = Simulator(scene)
+    prog = Progress(scene.pulses, "simulate")
+    batch = scene.config.processor.micro_batch
+    t0 = time.perf_counter()
+    with RecordingWriter(args.output, scene.config, scene.to_dict(), chunk_pulses=batch) as rec:
+        done = 0
+        while done < scene.pulses:
+            shots = list(sim.shots(batch))
+            rec.write(
+                [s.samples for s in shots],
+                [s.index for s in shots],
+                [s.time_s for s in shots],
+                [s.along_track_m for s in shots],
+            )
+            done += len(shots)
+            prog.update(done)
+    dt = time.perf_counter() - t0
+    prog.done(done)
+    effects = ", ".join(n for n, _ in scene.effects) or "none"
+    print(
+        f"wrote {args.output}: {done} shots × {sim.samples_per_shot} samples, "
+        f"{len(scene.targets)} targets, effects: {effects}; {1e6 * dt / max(done, 1):.1f} µs/shot"
+    )
+    return 0
+
+
+def cmd_process(args) -> int:
+    with open_recording(args.recording) as rec:
+        cfg = processor_changes(args, rec.config)
+        eng = StreamProcessor(
+            cfg,
+            args.lens,
+            args.device,
+            rec.start_along_track_m,
+            correction_chain(args, cfg, None, rec.start_along_track_m),
+            physical_ccd(args),
+        )
+        prog = Progress(rec.pulses, "process")
+        parts, done = [], 0
+        t0 = time.perf_counter()
+        if eng.corrections and eng.corrections.raw_stages:
+            raise ValueError(
+                "corrections that use auxiliary channels (hcn, linearize, reference_region) run "
+                "in `rtsar run --scene`; recordings hold the main channel only"
+            )
+        for shots in rec.batches(cfg.processor.micro_batch):
+            parts.append(eng.push(shots).lines)
+            done += len(shots)
+            prog.update(done)
+        parts.append(eng.flush().lines)
+        dt = time.perf_counter() - t0
+        prog.done(done)
+    image = np.concatenate(parts)
+    if eng.nonfinite_pulses:
+        print(
+            f"warning: {eng.nonfinite_pulses} of {done} shots held NaN/Inf and were zeroed",
+            file=sys.stderr,
+        )
+    if len(image) == 0:
+        return die(
+            f"{args.recording} holds {rec.pulses} shots, fewer than the aperture of "
+            f"{cfg.processor.aperture_pulses}: no full-aperture line to write"
+        )
+    write_image(
+        args.output,
+        image,
+        eng.azimuth_m(0, len(image)),
+        eng.range_m,
+        cfg,
+        source=str(args.recording),
+        lens=args.lens,
+        correlator=cfg.processor.correlator,
+        nonfinite_pulses=eng.nonfinite_pulses,
+    )
+    print(
+        f"wrote {args.output}: image {image.shape[0]} azimuth × {image.shape[1]} range, "
+        f"{done / dt:,.0f} pulses/s ({args.lens} lens, {cfg.processor.correlator} correlator)"
+    )
+    return 0
+
+
+def cmd_quicklook(args) -> int:
+    image, az, rg, attrs = read_image(args.image)
+    save_quicklook(
+        args.output,
+        image,
+        az,
+        rg,
+        dynamic_range_db=args.dynamic_range_db,
+        title=Path(args.image).name,
+    )
+    print(f"wrote {args.output}")
+    return 0
+
+
+def add_parsers(sub) -> None:
+    s = sub.add_parser(
+        "presets",
+        help="list instrument presets and their theoretical figures",
+        description="The instrument presets of the papers with their swath (slant-range window), "
+        "resolutions, CCD size, samples per shot, PRF and range curvature.",
+    )
+    s.add_argument("--json", action="store_true", help="machine-readable output")
+    s.set_defaults(func=cmd_presets)
+
+    s = sub.add_parser(
+        "simulate",
+        help="simulate the raw shots of a scene into a recording",
+        description="Simulate a TOML scene (format: README 'Scene files') shot by "
+        "shot with the exact range history; writes an HDF5 recording.",
+    )
+    s.add_argument("scene", help="scene file (.toml)")
+    s.add_argument("-o", "--output", required=True, help="recording to write (.h5)")
+    s.add_argument("--pulses", type=int, help="override the scene's number of shots")
+    s.set_defaults(func=cmd_simulate)
+
+    s = sub.add_parser(
+        "process",
+        help="focus a recording through the streaming engine",
+        description="Run a recording through the streaming engine as fast as "
+        "possible; writes image[azimuth, range] with axes in metres.",
+    )
+    s.add_argument("recording", help="recording from `rtsar simulate` (.h5)")
+    s.add_argument("-o", "--output", required=True, help="image file to write (.h5)")
+    add_lens_options(s)
+    add_correlator_option(s)
+    s.add_argument(
+        "--micro-batch", type=int, help="pulses per lens launch (default: the configuration's)"
+    )
+    add_processing_knobs(s)
+    s.set_defaults(func=cmd_process)
+
+    s = sub.add_parser(
+        "quicklook",
+        help="PNG of an image file (dB, axes in metres)",
+        description="Write a PNG of an image file: |image| in dB relative to its peak, slant "
+        "range across, along track down, axes in metres.",
+    )
+    s.add_argument("image", help="image file from `rtsar process` (.h5)")
+    s.add_argument("-o", "--output", required=True, help="PNG to write")
+    s.add_argument(
+        "--dynamic-range-db",
+        type=float,
+        default=50.0,
+        help="dB below the peak shown as black (default 50)",
+    )
+    s.set_defaults(func=cmd_quicklook)

@@ -1,0 +1,209 @@
+"""Options shared by several commands, declared once, with their choices from the library.
+
+Also the small translations from options to library objects that several commands share
+(processor changes, the correction chain, the physical CCD, strip length).
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import replace
+
+from ...focus.chain import ORDER as CORRECTIONS
+from ...focus.chain import CorrectionChain
+from ...lens import LENS_BACKENDS, range_axis_m
+from ...params import PRECISIONS, Processor
+from ...physical import CARRIERS, paper_ccd
+from ...scene.correction_context import correction_context
+from ...sinks.publish import DEFAULT_ENDPOINT, DELIVERIES
+from ...stream.pipeline import STAGE_LAYOUTS, PipelineSettings
+
+
+def die(msg: str) -> int:
+    """Report a usage or input error in one line; exit status 2."""
+    print(f"rtsar: error: {msg}", file=sys.stderr)
+    return 2
+
+
+# ---- option groups ---------------------------------------------------------------------------
+def add_lens_options(g) -> None:
+    """--lens and --device (process, run, replay)."""
+    g.add_argument(
+        "--lens",
+        default=LENS_BACKENDS[0],
+        choices=LENS_BACKENDS,
+        help="AO lens backend: opencl (default; PoCL CPU unless RTSAR_OPENCL_DEVICE) or numpy",
+    )
+    g.add_argument("--device", help="OpenCL platform/device name substring")
+
+
+def add_correlator_option(g) -> None:
+    g.add_argument(
+        "--correlator",
+        choices=Processor.CORRELATORS,
+        help="direct: CCD shift register, one line per pulse; fft: overlap-save blocks (fast, "
+        "one block of latency); partitioned: partitioned overlap-save (low latency, fast) "
+        "(default: the configuration's)",
+    )
+
+
+def add_processing_knobs(g) -> None:
+    """Accuracy knobs and corrections (process, run, replay)."""
+    g.add_argument(
+        "--precision",
+        choices=PRECISIONS,
+        help="sample type of lens and CCD (complex128: ~1e-15 instead of ~1e-7, ~2× the cost; "
+        "default: the configuration's)",
+    )
+    g.add_argument(
+        "--range-migration-taps",
+        type=int,
+        metavar="T",
+        help="handle range migration with a T-tap interpolating 2-D mask (0: off; use with "
+        "range oversampling 2; ~2-5× the CCD cost)",
+    )
+    g.add_argument(
+        "--correct",
+        action="append",
+        metavar="NAME[:KEY=VALUE,...]",
+        help=f"phase/chirp correction in the stream, repeatable: {', '.join(CORRECTIONS)} "
+        "(pra: pra:along_track_m=X,range_m=R; default the scene's brightest point; README "
+        "'Phase errors and focusing')",
+    )
+    g.add_argument(
+        "--physical",
+        choices=CARRIERS,
+        help="physical mode: the paper's CCD (bias, full well, noise, 12-bit ADC, blooming) "
+        "with the coherent-detection carrier in range or in azimuth",
+    )
+    g.add_argument(
+        "--full-scale",
+        type=float,
+        default=1.0,
+        metavar="A",
+        help="physical mode: focused-image amplitude whose charge swing fills the well above "
+        "the bias (the drive level; set it ~1.4× the brightest target's peak, default 1)",
+    )
+
+
+def add_pipeline_options(s, delivery: str) -> None:
+    """The live pipeline's options (run, replay): processing, publication, the image file."""
+    g = s.add_argument_group("processing")
+    add_lens_options(g)
+    add_correlator_option(g)
+    g.add_argument(
+        "--stages",
+        choices=STAGE_LAYOUTS,
+        default=STAGE_LAYOUTS[0],
+        help="split: lens and CCD in their own threads (default); fused: one",
+    )
+    g.add_argument(
+        "--max-batch",
+        type=int,
+        help="most pulses per lens launch "
+        "(default: the configuration's micro_batch; fewer when keeping up)",
+    )
+    add_processing_knobs(g)
+    g = s.add_argument_group("publication (ZeroMQ; wire format in README 'Strip protocol')")
+    g.add_argument(
+        "--endpoint",
+        default=DEFAULT_ENDPOINT,
+        help=f"where to publish strips (default {DEFAULT_ENDPOINT}, loopback)",
+    )
+    g.add_argument(
+        "--delivery",
+        choices=DELIVERIES,
+        default=delivery,
+        help="drop: a slow subscriber loses strips, the pipeline never waits; "
+        f"lossless: the pipeline waits for the slowest subscriber (default {delivery})",
+    )
+    g.add_argument("--strip-lines", type=int, default=16, help="lines per strip (default 16)")
+    g.add_argument("--strip-ms", type=float, help="strip length in ms at the PRF instead")
+    g.add_argument(
+        "--curve-key",
+        metavar="SECRET_KEY_FILE",
+        help="encrypt with ZeroMQ CURVE (key pair from `rtsar keygen`)",
+    )
+    s.add_argument(
+        "-o",
+        "--output",
+        help="also write the focused image here, losslessly (.h5; also on Ctrl-C)",
+    )
+
+
+def add_subscriber_options(s) -> None:
+    """The publisher to connect to (subscribe, view)."""
+    s.add_argument(
+        "endpoint",
+        nargs="?",
+        default=DEFAULT_ENDPOINT,
+        help=f"publisher (default {DEFAULT_ENDPOINT})",
+    )
+    s.add_argument(
+        "--curve-server-key",
+        metavar="PUBLIC_KEY_FILE",
+        help="the publisher's public key when it uses CURVE",
+    )
+
+
+# ---- options → library objects ---------------------------------------------------------------
+def processor_changes(args, cfg):
+    """The configuration with the processor knobs given on the command line."""
+    changes = {}
+    if args.correlator:
+        changes["correlator"] = args.correlator
+    if getattr(args, "micro_batch", None) is not None:
+        changes["micro_batch"] = args.micro_batch
+    if getattr(args, "precision", None):
+        changes["precision"] = args.precision
+    if getattr(args, "range_migration_taps", None) is not None:
+        changes["range_migration_taps"] = args.range_migration_taps
+    return cfg.with_processor(**changes) if changes else cfg
+
+
+def correction_chain(args, cfg, scene=None, start_along_track_m=0.0):
+    """The --correct stages as a CorrectionChain (None when none are asked for); ``scene``
+    supplies the defaults and geometry the corrections read from it."""
+    if not getattr(args, "correct", None):
+        return None
+    context = correction_context(scene, start_along_track_m)
+    return CorrectionChain.from_specs(args.correct, cfg, context)
+
+
+def physical_ccd(args):
+    """--physical CARRIER: the paper's CCD (rtsar.physical.paper_ccd) with that carrier."""
+    if not getattr(args, "physical", None):
+        return None
+    return replace(paper_ccd(args.physical), full_scale_amplitude=args.full_scale)
+
+
+def pipeline_settings(args) -> PipelineSettings:
+    return PipelineSettings(
+        lens_backend=args.lens,
+        device=args.device,
+        stages=args.stages,
+        strip_lines=args.strip_lines,
+        max_batch=args.max_batch or 0,
+    )
+
+
+def strip_lines(args, prf_hz: float) -> None:
+    """--strip-ms → lines at the PRF (at least one)."""
+    if args.strip_ms is not None:
+        if args.strip_ms <= 0:
+            raise ValueError(f"--strip-ms must be > 0, got {args.strip_ms}")
+        args.strip_lines = max(1, round(args.strip_ms * 1e-3 * prf_hz))
+    if args.strip_lines < 1:
+        raise ValueError(f"--strip-lines must be >= 1, got {args.strip_lines}")
+
+
+def warn_outside_swath(scene) -> None:
+    """Say which targets of a scene lie outside the range window (they will not be imaged)."""
+    outside = scene.targets_outside_swath()
+    if outside:
+        rm = range_axis_m(scene.config)
+        print(
+            f"warning: {len(outside)} of {len(scene.targets)} targets (indices {outside[:10]}) "
+            f"lie outside the range window {rm[0]:.6g}–{rm[-1]:.6g} m and will not be imaged",
+            file=sys.stderr,
+        )

@@ -1,0 +1,230 @@
+"""Streaming commands: ``run``, ``replay``, ``subscribe``, ``view``, ``keygen``."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import zmq.auth
+
+from ...params import preset
+from ...scene import DEMO_SCENE, load_scene
+from ...sinks.io import open_recording
+from ...sinks.publish import DEFAULT_ENDPOINT
+from ...sources.replay import ReplaySource
+from ...sources.serial import SerialSource
+from ...sources.sim import SimSource
+from ..live import run_stream
+from ..subscribe import subscribe
+from ..view import view
+from .options import (
+    add_pipeline_options,
+    add_subscriber_options,
+    correction_chain,
+    die,
+    physical_ccd,
+    pipeline_settings,
+    processor_changes,
+    strip_lines,
+    warn_outside_swath,
+)
+
+
+def cmd_run(args) -> int:
+    if args.duration is not None and args.duration <= 0:
+        return die(f"--duration must be > 0 seconds, got {args.duration}")
+    if args.serial:
+        if args.scene:
+            cfg = load_scene(args.scene).config
+        else:
+            cfg = preset(args.preset) if args.preset else load_scene(DEMO_SCENE).config
+        cfg = processor_changes(args, cfg)
+        strip_lines(args, cfg.geometry.prf_hz)
+        source = SerialSource(
+            args.serial,
+            cfg.waveform.samples_per_shot,
+            baudrate=args.baudrate,
+            idle_timeout_s=args.duration,
+        )
+        return run_stream(
+            cfg,
+            source,
+            pipeline_settings(args),
+            args.endpoint,
+            args.delivery,
+            output=args.output,
+            curve_secret_key=args.curve_key,
+            corrections=correction_chain(args, cfg),
+            physical=physical_ccd(args),
+        )
+
+    if args.preset:
+        return die("--preset applies to --serial; a scene file carries its own configuration")
+    scene = load_scene(args.scene or DEMO_SCENE)
+    scene = replace(scene, config=processor_changes(args, scene.config))
+    warn_outside_swath(scene)
+    strip_lines(args, scene.config.geometry.prf_hz)
+    pulses = None if args.duration is None else int(args.duration * scene.config.geometry.prf_hz)
+    source = SimSource(scene, pulses)
+    return run_stream(
+        scene.config,
+        source,
+        pipeline_settings(args),
+        args.endpoint,
+        args.delivery,
+        scene.start_along_track_m,
+        args.output,
+        args.curve_key,
+        total_pulses=source.total,
+        corrections=correction_chain(args, scene.config, scene, scene.start_along_track_m),
+        physical=physical_ccd(args),
+    )
+
+
+def cmd_replay(args) -> int:
+    with open_recording(args.recording) as rec:
+        cfg = processor_changes(args, rec.config)
+        strip_lines(args, cfg.geometry.prf_hz)
+        batch = args.max_batch or cfg.processor.micro_batch
+        source = ReplaySource.from_recording(rec, args.rate, batch)
+        return run_stream(
+            cfg,
+            source,
+            pipeline_settings(args),
+            args.endpoint,
+            args.delivery,
+            rec.start_along_track_m,
+            args.output,
+            args.curve_key,
+            wait_subscribers=args.wait_subscribers,
+            total_pulses=rec.pulses,
+            corrections=correction_chain(args, cfg, None, rec.start_along_track_m),
+            physical=physical_ccd(args),
+        )
+
+
+def cmd_subscribe(args) -> int:
+    if args.timeout is not None and args.timeout <= 0:
+        return die(f"--timeout must be > 0 seconds, got {args.timeout}")
+    return subscribe(args.endpoint, args.output, args.curve_server_key, args.timeout)
+
+
+def cmd_view(args) -> int:
+    if args.lines < 1:
+        return die(f"--lines must be >= 1, got {args.lines}")
+    return view(
+        args.endpoint,
+        args.png,
+        args.lines,
+        args.dynamic_range_db,
+        args.curve_server_key,
+        args.timeout,
+    )
+
+
+def cmd_keygen(args) -> int:
+    Path(args.directory).mkdir(parents=True, exist_ok=True)
+    public, secret = zmq.auth.create_certificates(args.directory, args.name)
+    print(
+        f"wrote {public} (give to subscribers: --curve-server-key)\n"
+        f"wrote {secret} (keep private: run/replay --curve-key)"
+    )
+    return 0
+
+
+def add_parsers(sub) -> None:
+    s = sub.add_parser(
+        "run",
+        help="live processing: the demo scene (default), a scene, or a serial instrument",
+        description="Stream shots live through the pipeline (ingest checks, AO lens, shifting "
+        "CCD) and publish image strips over ZeroMQ. Without arguments: the built-in demo scene "
+        f"simulated at its PRF, published on {DEFAULT_ENDPOINT}. Watch it with "
+        "`rtsar view` or record it with `rtsar subscribe -o live.h5`.",
+    )
+    src = s.add_argument_group("source")
+    src.add_argument(
+        "--scene",
+        help="scene file to simulate live (default: the demo scene); "
+        "with --serial: the configuration to process with",
+    )
+    src.add_argument(
+        "--serial",
+        metavar="URL",
+        help="read framed shots from an instrument: a "
+        "serial port, a pty, or socket://HOST:PORT (frame format: README)",
+    )
+    src.add_argument("--preset", help="with --serial: processing configuration preset")
+    src.add_argument(
+        "--baudrate", type=int, default=3_000_000, help="serial line rate (default 3000000)"
+    )
+    src.add_argument(
+        "--duration", type=float, help="stop after this many seconds (serial: of silence)"
+    )
+    add_pipeline_options(s, "drop")
+    s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser(
+        "replay",
+        help="replay a recording through the pipeline at real rate, a factor, or max",
+        description="Replay a recording (from `rtsar simulate`) on an absolute schedule "
+        "(start + n/PRF: no drift) and publish strips like `rtsar run`. Lossless by default: "
+        "the replay waits for the slowest subscriber. Use --wait-subscribers 1 when a "
+        "`rtsar subscribe` must see the stream from its first strip.",
+    )
+    s.add_argument("recording", help="recording (.h5)")
+    s.add_argument(
+        "--rate",
+        default="real",
+        help="real (recorded PRF, default), max (as fast as possible) or a factor",
+    )
+    s.add_argument(
+        "--wait-subscribers",
+        type=int,
+        default=0,
+        metavar="N",
+        help="wait until N subscribers are connected before starting (default 0)",
+    )
+    add_pipeline_options(s, "lossless")
+    s.set_defaults(func=cmd_replay)
+
+    s = sub.add_parser(
+        "subscribe",
+        help="record published strips into an image file",
+        description="Receive strips from a publisher and write them, as they come, into an "
+        "image file (same layout as `rtsar process`). Stops at the stream's end message, on "
+        "Ctrl-C or after --timeout seconds of silence. Missed strips are zero lines, counted "
+        "and listed in the file.",
+    )
+    add_subscriber_options(s)
+    s.add_argument("-o", "--output", required=True, help="image file to write (.h5)")
+    s.add_argument("--timeout", type=float, help="stop after this many seconds of silence")
+    s.set_defaults(func=cmd_subscribe)
+
+    s = sub.add_parser(
+        "view",
+        help="live waterfall of published strips (or a PNG snapshot)",
+        description="Show the newest image lines as a scrolling waterfall (dB re peak). "
+        "Needs a display; --png FILE waits for --lines lines and writes a snapshot instead. "
+        "A viewer that cannot keep up skips strips; it never slows the processor.",
+    )
+    add_subscriber_options(s)
+    s.add_argument("--png", metavar="FILE", help="write a snapshot PNG and exit")
+    s.add_argument("--lines", type=int, default=1024, help="lines shown (default 1024)")
+    s.add_argument("--dynamic-range-db", type=float, default=50.0, help="dB shown (default 50)")
+    s.add_argument(
+        "--timeout",
+        type=float,
+        default=30.0,
+        help="--png: give up after this many seconds of silence (default 30)",
+    )
+    s.set_defaults(func=cmd_view)
+
+    s = sub.add_parser(
+        "keygen",
+        help="make a CURVE key pair for encrypted publication",
+        description="Write a ZeroMQ CURVE key pair: NAME.key (public: give it to subscribers, "
+        "--curve-server-key) and NAME.key_secret (keep it: run/replay --curve-key).",
+    )
+    s.add_argument("directory", help="folder to write NAME.key and NAME.key_secret into")
+    s.add_argument("--name", default="rtsar", help="file name stem (default rtsar)")
+    s.set_defaults(func=cmd_keygen)

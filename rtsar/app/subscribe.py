@@ -1,0 +1,67 @@
+"""``rtsar subscribe``: receive published strips and write them into an image file."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+from ..sinks.client import StripSubscriber
+from ..sinks.record import StripRecorder
+
+
+def subscribe(
+    endpoint: str,
+    output: str,
+    curve_server_key=None,
+    timeout_s: float | None = None,
+    stream=None,
+) -> int:
+    """Write every strip received into ``output`` until the stream's end message, Ctrl-C, or
+    ``timeout_s`` without a message.  Missed strips become zero lines, counted and listed."""
+    stream = stream or sys.stderr
+    sub = StripSubscriber(endpoint, curve_server_key, hwm_messages=0)
+    rec = StripRecorder(output, endpoint)
+    final = None
+    interrupted = False
+    print(f"subscribe: listening on {endpoint}; writing {output} (Ctrl-C to stop)", file=stream)
+    last = time.perf_counter()
+    try:
+        while True:
+            msg = sub.recv(timeout_s)
+            if msg is None:
+                print(f"subscribe: no message for {timeout_s:g} s, stopping", file=stream)
+                break
+            if msg.topic == "strip":
+                rec.add_strip(msg.header, msg.lines)
+            elif msg.topic == "end" and rec.writer is not None:
+                if msg.header.get("stream_id") == rec.stream_id:
+                    final = msg.header.get("counters")
+                    break
+            now = time.perf_counter()
+            if now - last > 2.0:
+                last = now
+                print(
+                    f"subscribe: {sub.counters['strips']} strips, {rec.next_line - rec.first_line}"
+                    f" lines, missed strips {sub.counters['missed_strips']}",
+                    file=stream,
+                )
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        lines = rec.finish(
+            final,
+            missed_strips=sub.counters["missed_strips"],
+            complete=final is not None,
+        )
+        sub.close()
+    if rec.writer is None:
+        print("subscribe: no strip received; nothing written", file=stream)
+        return 130 if interrupted else 1
+    print(
+        f"wrote {output}: {lines} lines from line {rec.first_line}; strips received "
+        f"{sub.counters['strips']}, missed {sub.counters['missed_strips']} "
+        f"({rec.missing_lines} zero lines), bad messages {sub.counters['bad_messages']}"
+        + ("" if final is not None else "; the stream's end was not seen"),
+        file=stream,
+    )
+    return 130 if interrupted else 0

@@ -1,0 +1,102 @@
+"""The Pareto front of each scene and the tradeoff's Markdown table and plot."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..quicklook import file_pyplot
+from .scenes import TradeoffScene
+
+# ---- the sweep ---------------------------------------------------------------------------------
+FRONT_KEYS = ("us_per_pulse", "latency_p50_ms", "image_error", "az_irw_m", "az_pslr_db")
+
+
+def pareto_front(rows: list[dict], keys=FRONT_KEYS):
+    """Marks rows[i]["front"]: no other row of its scene is ≤ on every key and < on one."""
+    for a in rows:
+        a["front"] = not any(
+            b is not a
+            and b["scene"] == a["scene"]
+            and all(b[k] <= a[k] for k in keys)
+            and any(b[k] < a[k] for k in keys)
+            for b in rows
+        )
+    return rows
+
+
+
+def markdown(rows: list[dict], scenes: list[TradeoffScene]) -> str:
+    out = []
+    for scene in scenes:
+        out.append(f"**{scene.key}**: {scene.description}\n")
+        out.append(
+            "| knob | value | pulses/s | × RT | latency p50 / p99 [ms] | image error | "
+            "peak phase [mrad] | az. IRW [m] | az. / rg. IRW ratio | az. / rg. PSLR [dB] | "
+            "az. / rg. ISLR [dB] | pos. error [cells] | front |"
+        )
+        out.append("|" + "---|" * 13)
+        for r in (r for r in rows if r["scene"] == scene.key):
+            name = f"**{r['value']}**" if r["default"] else r["value"]
+            out.append(
+                f"| {r['knob']} | {name} | {r['pulses_per_s']:,.0f} | "
+                f"{r['realtime_factor']:.1f} | {r['latency_p50_ms']:.1f} / "
+                f"{r['latency_p99_ms']:.1f}{'' if r['keeps_up'] else ' (falls behind)'} | "
+                f"{r['image_error']:.1e} | {1e3 * r['peak_phase_error_rad']:.2f} | "
+                f"{r['az_irw_m']:.4g} | {r['az_irw_ratio']:.3f} / {r['rg_irw_ratio']:.3f} | "
+                f"{r['az_pslr_db']:.1f} / {r['rg_pslr_db']:.1f} | "
+                f"{r['az_islr_db']:.1f} / {r['rg_islr_db']:.1f} | "
+                f"{r['position_error_cells']:.3f} | {'●' if r['front'] else ''} |"
+            )
+        out.append("")
+    return "\n".join(out)
+
+
+def plot(rows: list[dict], scenes: list[TradeoffScene], path: Path) -> None:
+    """Pareto plot: image error against µs per pulse and against median latency, per scene."""
+    plt = file_pyplot()
+    fig, axes = plt.subplots(len(scenes), 2, figsize=(12, 4.8 * len(scenes)), squeeze=False)
+    knobs = sorted({r["knob"] for r in rows})
+    colours = {k: plt.cm.tab10(i % 10) for i, k in enumerate(knobs)}
+    for row_axes, scene in zip(axes, scenes, strict=True):
+        sel = [r for r in rows if r["scene"] == scene.key]
+        for ax, xkey, xlabel in zip(
+            row_axes,
+            ("us_per_pulse", "latency_p50_ms"),
+            ("cost [µs per pulse]", "median line latency at the PRF [ms]"),
+            strict=True,
+        ):
+            for r in sel:
+                ax.scatter(
+                    r[xkey],
+                    r["image_error"],
+                    s=140 if r["default"] else 50,
+                    marker="*" if r["default"] else "o",
+                    color=colours[r["knob"]],
+                    edgecolors="black" if r["front"] else "none",
+                    linewidths=1.2,
+                    zorder=3,
+                )
+                ax.annotate(
+                    f"{r['value']}",
+                    (r[xkey], r["image_error"]),
+                    fontsize=7,
+                    xytext=(4, 3),
+                    textcoords="offset points",
+                )
+            xs = [r[xkey] for r in sel]
+            if max(xs) > 3 * min(xs):  # a log axis only where the values span a range
+                ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_xlabel(xlabel)
+            ax.set_ylabel("image error vs float64 reference (relative RMS)")
+            ax.set_title(f"{scene.key}: black outline = Pareto front, ★ = defaults", fontsize=9)
+            ax.grid(True, which="both", alpha=0.3)
+        handles = [
+            plt.Line2D([], [], marker="o", ls="", color=colours[k], label=k)
+            for k in knobs
+            if any(r["knob"] == k for r in sel)
+        ]
+        row_axes[1].legend(handles=handles, fontsize=7, loc="best")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,136 @@
+"""``rtsar view``: the newest published lines as a live waterfall, or a PNG snapshot."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+
+from ..sinks.client import StripSubscriber
+from .quicklook import save_quicklook, to_db
+
+
+class Waterfall:
+    """The last ``lines`` image lines, newest at the bottom, in dB re the running peak."""
+
+    def __init__(self, lines: int):
+        self.lines = int(lines)
+        self.image: np.ndarray | None = None
+        self.azimuth_m: np.ndarray | None = None
+        self.range_m: np.ndarray | None = None
+        self.filled = 0
+
+    def add(self, header: dict, lines: np.ndarray) -> None:
+        nr = lines.shape[1]
+        if self.image is None or self.image.shape[1] != nr:
+            self.image = np.zeros((self.lines, nr), np.complex64)
+            self.azimuth_m = np.full(self.lines, np.nan)
+            self.range_m = header["range_first_m"] + header["range_step_m"] * np.arange(nr)
+            self.filled = 0
+        k = min(len(lines), self.lines)
+        az = header["azimuth_first_m"] + header["azimuth_step_m"] * np.arange(len(lines))
+        self.image = np.roll(self.image, -k, axis=0)
+        self.azimuth_m = np.roll(self.azimuth_m, -k)
+        self.image[-k:] = lines[-k:]
+        self.azimuth_m[-k:] = az[-k:]
+        self.filled = min(self.lines, self.filled + k)
+
+
+def view(
+    endpoint: str,
+    png: str | None = None,
+    lines: int = 1024,
+    dynamic_range_db: float = 50.0,
+    curve_server_key=None,
+    timeout_s: float = 30.0,
+    stream=None,
+) -> int:
+    """Live waterfall window, or with ``png`` a snapshot once ``lines`` lines have arrived."""
+    stream = stream or sys.stderr
+    sub = StripSubscriber(endpoint, curve_server_key, hwm_messages=64)
+    fall = Waterfall(lines)
+    try:
+        if png:
+            return _snapshot(sub, fall, png, dynamic_range_db, timeout_s, stream)
+        return _window(sub, fall, dynamic_range_db, stream)
+    finally:
+        sub.close()
+
+
+def _snapshot(sub, fall, png, dynamic_range_db, timeout_s, stream) -> int:
+    print(f"view: waiting for {fall.lines} lines from {sub.endpoint} …", file=stream)
+    try:
+        while fall.filled < fall.lines:
+            msg = sub.recv(timeout_s)
+            if msg is None:
+                print(f"view: no message for {timeout_s:g} s", file=stream)
+                break
+            if msg.topic == "strip":
+                fall.add(msg.header, msg.lines)
+            elif msg.topic == "end":
+                break
+    except KeyboardInterrupt:
+        pass
+    if fall.filled == 0:
+        print("view: no lines received; no snapshot written", file=stream)
+        return 1
+    k = fall.filled
+    save_quicklook(
+        png,
+        fall.image[-k:],
+        fall.azimuth_m[-k:],
+        fall.range_m,
+        dynamic_range_db,
+        title=f"{sub.endpoint}: last {k} lines",
+    )
+    print(f"wrote {png}: {k} lines", file=stream)
+    return 0
+
+
+def _window(sub, fall, dynamic_range_db, stream) -> int:
+    import matplotlib
+    import matplotlib.pyplot as plt
+
+    if matplotlib.get_backend().lower() in ("agg", "pdf", "svg", "ps", "cairo", "template"):
+        raise RuntimeError(
+            f"no interactive display for matplotlib (backend {matplotlib.get_backend()}); "
+            "use `rtsar view ENDPOINT --png FILE` for a snapshot"
+        )
+    fig, ax = plt.subplots(figsize=(9, 7))
+    art = None
+    print(f"view: {sub.endpoint} (close the window or Ctrl-C to stop)", file=stream)
+    try:
+        while plt.fignum_exists(fig.number):
+            msg = sub.recv(0.05)
+            if msg is not None and msg.topic == "strip":
+                fall.add(msg.header, msg.lines)
+                while (m := sub.recv(0)) is not None:  # catch up: draw only the newest state
+                    if m.topic == "strip":
+                        fall.add(m.header, m.lines)
+            if fall.filled:
+                db = to_db(fall.image, dynamic_range_db)
+                if art is None:
+                    rm = fall.range_m
+                    art = ax.imshow(
+                        db,
+                        cmap="gray",
+                        vmin=-dynamic_range_db,
+                        vmax=0,
+                        aspect="auto",
+                        interpolation="nearest",
+                        extent=[rm[0], rm[-1], fall.lines, 0],
+                    )
+                    ax.set_xlabel("slant range [m]")
+                    ax.set_ylabel("lines ago")
+                    fig.colorbar(art, ax=ax, label="dB re peak")
+                else:
+                    art.set_data(db)
+                valid = fall.azimuth_m[~np.isnan(fall.azimuth_m)]
+                ax.set_title(
+                    f"along track {valid[0]:.1f} … {valid[-1]:.1f} m; "
+                    f"missed strips {sub.counters['missed_strips']}"
+                )
+            plt.pause(0.05)
+    except KeyboardInterrupt:
+        pass
+    return 0

@@ -1,0 +1,97 @@
+"""The shifting CCD with mask: azimuth compression (Psaltis & Wagner 1981, eq. 5).
+
+``base`` (the Correlator interface, the mask design and the float64 reference), one module per
+implementation (``direct``: the numba shift register; ``fft``: overlap-save blocks;
+``partitioned``: partitioned overlap-save; ``migration``: range-migration taps across range
+bins; ``physical``: the paper's intensity-detecting CCD), and here the two factories.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..params import Config, Processor
+from .base import Correlator, aperture_offsets_m, correlate_reference, design_mask
+from .direct import DirectCorrelator
+from .fft import FFTCorrelator
+from .migration import (
+    FFTMigrationCorrelator,
+    MigrationCorrelator,
+    MigrationMask,
+    design_migration_mask,
+)
+from .partitioned import PartitionedCorrelator
+
+__all__ = [
+    "CORRELATORS",
+    "Correlator",
+    "DirectCorrelator",
+    "FFTCorrelator",
+    "PartitionedCorrelator",
+    "aperture_offsets_m",
+    "correlate_reference",
+    "design_mask",
+    "make_ccd",
+    "make_correlator",
+]
+
+CORRELATORS = Processor.CORRELATORS
+
+
+def make_correlator(
+    kind: str,
+    mask: np.ndarray | MigrationMask,
+    fft_length: int | None = None,
+    *,
+    partition_lines: int = 16,
+    precision: str = "complex64",
+) -> Correlator:
+    """The correlator named by ``Processor.correlator`` (one of CORRELATORS).
+
+    ``mask`` is a 2-D mask[k, r] (design_mask) or a rtsar.ccd.migration.MigrationMask (from
+    design_migration_mask, ``Processor.range_migration_taps`` > 0): then, for "fft", one
+    overlap-save correlator that filters each block with every range tap
+    (rtsar.ccd.migration.FFTMigrationCorrelator), and for the other kinds one correlator per range
+    tap, summed (rtsar.ccd.migration.MigrationCorrelator).
+    """
+    if kind not in CORRELATORS:
+        raise ValueError(f"correlator must be one of {CORRELATORS}, got {kind!r}")
+    if isinstance(mask, MigrationMask):
+        if kind == "fft":
+            return FFTMigrationCorrelator(mask, fft_length, precision)
+        taps = [
+            make_correlator(
+                kind, m, fft_length, partition_lines=partition_lines, precision=precision
+            )
+            for m in mask.tap_masks()
+        ]
+        return MigrationCorrelator(mask, taps)
+    if kind == "direct":
+        return DirectCorrelator(mask, precision)
+    if kind == "fft":
+        return FFTCorrelator(mask, fft_length, precision)
+    return PartitionedCorrelator(mask, partition_lines, precision)
+
+
+def make_ccd(config: Config, range_m: np.ndarray, physical=None) -> Correlator:
+    """The shifting CCD a configuration asks for: the ideal correlator of
+    ``Processor.correlator`` with the per-bin mask (or the range-migration mask when
+    ``Processor.range_migration_taps`` > 0), or, with ``physical`` (a
+    rtsar.physical.PhysicalSettings), the paper's intensity-detecting CCD."""
+    if physical is not None:
+        # Imported here: its numba kernels load only when physical mode is asked for.
+        from .physical import PhysicalCCD
+
+        return PhysicalCCD(config, range_m, physical)
+    p = config.processor
+    if p.range_migration_taps:
+        mask = design_migration_mask(config, range_m)
+    else:
+        mask = design_mask(config, range_m)
+    return make_correlator(
+        p.correlator,
+        mask,
+        p.fft_length,
+        partition_lines=p.partition_lines,
+        precision=p.precision,
+    )

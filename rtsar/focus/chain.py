@@ -1,0 +1,197 @@
+"""Phase-error and chirp corrections in the stream, chosen by name, in the order that works.
+
+Crouch (2012, ch. 4-5) calls SAL images "worthless" before phase correction; the INO phase-error
+patent advises the reference-region correction first and autofocus for the residual.  The stages:
+
+======================  ======  ===========================================================
+name                    where   what (module)
+======================  ======  ===========================================================
+``hcn``                 raw     start-frequency alignment on the HCN cell (focus.hcn_align)
+``linearize``           raw     chirp linearization on the reference interferometer
+                                (focus.linearize; with ``hcn`` both in one resampling)
+``reference_region``    raw     α/β from the reference region (patent eqs. 5-11,
+                                focus.reference_region)
+``pra``                 lines   phase-to-retro (Crouch; focus.pra)
+``pga``                 lines   phase gradient autofocus (Crouch eqs. 4.14-4.17; focus.pga)
+======================  ======  ===========================================================
+
+"raw" stages run on the shots between ingest and the AO lens and see the auxiliary channels;
+"lines" stages run on range-compressed pulses between the lens and the shifting CCD.  All keep
+pulse order; PGA holds a block of pulses (its latency, ``latency_pulses``) and gives them back at
+``flush``.  Every stage implements rtsar.focus.stage.CorrectionStage; ``CorrectionChain.counters``
+reports each stage's counters prefixed with its name, so they appear in the stats beside the
+pipeline's.  What a stage needs to know of the scene comes in a :class:`CorrectionContext`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..params import Config
+from .hcn_align import HCNAligner
+from .linearize import ChirpLinearizer
+from .pga import PGASettings, PGAStage
+from .pra import PhaseToRetro
+from .reference_region import ReferenceGeometry, ReferenceRegionCorrector
+from .stage import DOMAINS, CorrectionStage
+
+ORDER = ("hcn", "linearize", "reference_region", "pra", "pga")
+_PGA_INTEGERS = {
+    "block_pulses",
+    "hop_pulses",
+    "initial_window_bins",
+    "min_window_bins",
+    "max_iterations",
+    "max_range_bins",
+    "segments",
+    "min_pulses",
+}
+
+
+@dataclass(frozen=True)
+class CorrectionContext:
+    """What the corrections need beyond the configuration, from the scene or the instrument.
+
+    ``start_along_track_m``: platform position of pulse 0; ``retro_m``: (along-track, slant
+    range) of the retro-reflector, the default of ``pra``; ``ri_delay_s``: the reference
+    interferometer's delay (``linearize``; default: the channel's quarter-rate beat);
+    ``reference_geometry``: the INO patent's d, D and region (``reference_region`` needs it).
+    rtsar.scene.correction_context derives one from a scene.
+    """
+
+    start_along_track_m: float = 0.0
+    retro_m: tuple[float, float] | None = None
+    ri_delay_s: float | None = None
+    reference_geometry: ReferenceGeometry | None = None
+
+
+def parse_spec(text: str) -> tuple[str, dict]:
+    """``"name"`` or ``"name:key=value,key=value"`` (numbers as floats) → (name, params)."""
+    name, _, rest = text.partition(":")
+    name = name.strip().replace("-", "_")
+    if name not in ORDER:
+        raise ValueError(f"unknown correction {name!r}; choose from {', '.join(ORDER)}")
+    params = {}
+    for item in filter(None, (s.strip() for s in rest.split(","))):
+        key, eq, value = item.partition("=")
+        if not eq:
+            raise ValueError(f"correction {name}: expected key=value, got {item!r}")
+        try:
+            params[key.strip()] = float(value)
+        except ValueError:
+            params[key.strip()] = value.strip()
+    return name, params
+
+
+def make_stage(
+    name: str,
+    config: Config,
+    params: dict,
+    context: CorrectionContext | None = None,
+    with_hcn: bool = False,
+) -> CorrectionStage:
+    """One correction stage (see the table above); ``context`` supplies geometry where needed."""
+    params = dict(params)
+    context = context or CorrectionContext()
+    if name == "hcn":
+        return HCNAligner(config, **params)
+    if name == "linearize":
+        if context.ri_delay_s is not None:
+            params.setdefault("delay_s", context.ri_delay_s)
+        aligner = HCNAligner(config) if with_hcn else None
+        return ChirpLinearizer(config, aligner=aligner, **params)
+    if name == "reference_region":
+        if context.reference_geometry is None:
+            raise ValueError(
+                "the reference_region correction needs the patent geometry (d, D, the region): "
+                "use a scene with the reference_region effect"
+            )
+        return ReferenceRegionCorrector(config, context.reference_geometry, **params)
+    if name == "pra":
+        if "along_track_m" not in params or "range_m" not in params:
+            if context.retro_m is None:
+                raise ValueError("pra needs the retro-reflector: pra:along_track_m=X,range_m=R")
+            params.setdefault("along_track_m", context.retro_m[0])
+            params.setdefault("range_m", context.retro_m[1])
+        x, r = params.pop("along_track_m"), params.pop("range_m")
+        return PhaseToRetro(config, x, r, context.start_along_track_m, **params)
+    if name == "pga":
+        ints = {k: int(v) if k in _PGA_INTEGERS else v for k, v in params.items()}
+        return PGAStage(config, PGASettings(**ints))
+    raise ValueError(f"unknown correction {name!r}")  # pragma: no cover - parse_spec checks
+
+
+class CorrectionChain:
+    """The chosen stages in ORDER: ``raw`` before the lens, ``lines`` after it, ``flush`` at end."""
+
+    def __init__(self, named_stages: list[tuple[str, CorrectionStage]]):
+        """(name, stage) pairs, run in the given order (``from_specs`` sorts them by ORDER)."""
+        self.named = list(named_stages)
+        bad = [
+            n
+            for n, s in self.named
+            if not isinstance(s, CorrectionStage) or getattr(type(s), "domain", None) not in DOMAINS
+        ]
+        if bad:
+            raise ValueError(
+                f"corrections {bad}: a stage is a CorrectionStage whose domain is 'raw' or 'lines'"
+            )
+        self.raw_stages = [s for _, s in self.named if s.domain == "raw"]
+        self.line_stages = [s for _, s in self.named if s.domain == "lines"]
+
+    @classmethod
+    def from_specs(cls, specs, config: Config, context: CorrectionContext | None = None):
+        """Build from ``["pga", "pra:along_track_m=0,range_m=1.5", ...]``."""
+        parsed = [parse_spec(s) if isinstance(s, str) else s for s in specs]
+        names = [n for n, _ in parsed]
+        dup = {n for n in names if names.count(n) > 1}
+        if dup:
+            raise ValueError(f"correction named twice: {sorted(dup)}")
+        both = "hcn" in names and "linearize" in names  # one resampling does both
+        stages = [
+            (n, make_stage(n, config, p, context, with_hcn=both))
+            for n, p in sorted(parsed, key=lambda np_: ORDER.index(np_[0]))
+            if not (both and n == "hcn")
+        ]
+        return cls(stages)
+
+    def __bool__(self) -> bool:
+        return bool(self.named)
+
+    @property
+    def names(self) -> list[str]:
+        return [n for n, _ in self.named]
+
+    @property
+    def latency_pulses(self) -> int:
+        return int(sum(s.latency_pulses for _, s in self.named))
+
+    def raw(self, samples: np.ndarray, aux: dict) -> np.ndarray:
+        for stage in self.raw_stages:
+            out = stage.process(samples, aux)
+            if len(out) != len(samples):
+                raise RuntimeError(f"{type(stage).__name__} changed the pulse count")
+            samples = out
+        return samples
+
+    def lines(self, lines: np.ndarray, aux: dict) -> np.ndarray:
+        """Range-compressed pulses through the line stages (a stage may hold some back)."""
+        for stage in self.line_stages:
+            lines = stage.process(lines, aux)
+        return lines
+
+    def flush(self, bins: int) -> np.ndarray:
+        """The pulses the line stages still hold, through the stages after them."""
+        carry = np.zeros((0, bins), np.complex64)
+        for stage in self.line_stages:
+            parts = [stage.process(carry, {})] if len(carry) else []
+            parts.append(stage.flush())
+            parts = [p for p in parts if p is not None and len(p)]
+            carry = np.concatenate(parts) if parts else np.zeros((0, bins), np.complex64)
+        return carry
+
+    def counters(self) -> dict:
+        """Every stage's counters, prefixed with its name (``pga.pulses_in``, …)."""
+        return {f"{n}.{k}": int(v) for n, s in self.named for k, v in s.counter_values().items()}

@@ -1,0 +1,291 @@
+"""The AO lens in OpenCL: batched range compression of radar / lidar pulses.
+
+In the acousto-optic processor the lens performs a Fourier transform of the light diffracted by
+the AO cell that holds the received pulse (Psaltis & Wagner 1981, 'Description of the
+processor').  Here the lens is the chain described by a :class:`rtsar.lens.plan.LensPlan`,
+
+    x·pre → DFT(sign1, nfft) → [·spectrum → DFT(sign2, nfft)] → bins → ·post,
+
+evaluated for a batch of pulses in one kernel launch (``kernels/lens.cl``), in single precision
+(``precision="complex64"``, the default) or double (``"complex128"``: the kernel built with
+``-DDOUBLE=1``, on devices that support cl_khr_fp64).
+:func:`rtsar.lens.base.compress_reference` is the float64 NumPy reference it is tested against:
+measured relative RMS error (tests/test_lens.py, tests/test_precision.py) about 1e-7 in single
+precision (tolerance 1e-5) and about 1e-16 in double (tolerance 1e-12) on every preset.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pyopencl as cl
+
+from ..samples import precision_dtype
+from . import cl_loader
+from .plan import LensPlan
+
+__all__ = ["KERNELS", "AOLens", "supports_double"]
+
+KERNELS = ("lanes", "group")
+_MAX_LANES = 8
+# In double, 8 lanes would be double8 vectors (512 bits): PoCL's CPU target builds them with
+# "changes the ABI" warnings and then fails to create the kernel, so double stops at double4.
+_MAX_LANES_DOUBLE = 4
+_MAX_GROUP = 256
+
+
+def supports_double(device: cl.Device) -> bool:
+    """True when the OpenCL device computes in double precision (cl_khr_fp64 or OpenCL 3 fp64)."""
+    try:
+        if int(device.double_fp_config):
+            return True
+    except (cl.LogicError, cl.RuntimeError, AttributeError):  # pragma: no cover - driver quirks
+        pass
+    return "cl_khr_fp64" in device.extensions.split()
+
+
+class AOLens:
+    """Range compressor (the "AO lens") for one :class:`~rtsar.lens.plan.LensPlan`.
+
+    The lens of the optical processor Fourier-transforms the pulse held by the AO cell
+    (Psaltis & Wagner 1981, 'Description of the processor'); this class applies the same
+    transform, with the matched filter or window of the plan, to batches of digitised pulses.
+
+    Parameters
+    ----------
+    plan : LensPlan
+        What to compute (from :func:`rtsar.lens.plan.make_plan`).
+    context : pyopencl.Context, optional
+        Context to work in.  A queue on its first device is created unless ``queue`` is given.
+    queue : pyopencl.CommandQueue, optional
+        In-order queue to enqueue on (its context is used).
+    device : pyopencl.Device or str, optional
+        Device, or substring of its platform / device name, when neither ``context`` nor
+        ``queue`` is given; default: ``RTSAR_OPENCL_DEVICE`` or PoCL's CPU device (see
+        :mod:`rtsar.lens.cl_loader`).  Instances on the same device share one context and queue.
+    kernel : {"lanes", "group"}, optional
+        ``"lanes"``: one work-item transforms 8 pulses at once in SIMD vectors (fast on CPUs);
+        ``"group"``: one work-group per pulse (for GPUs).  Default: by device type.
+    lanes : int, optional
+        Pulses per work-item of the ``"lanes"`` kernel (1, 2, 4 or 8; default 8, fewer if
+        the device's local memory is too small; at most 4 in double).
+    precision : {"complex64", "complex128"}, optional
+        Sample type of the input, the arithmetic and the output (``Processor.precision``).
+        ``"complex128"`` needs a device with double support (PoCL's CPU device has it);
+        otherwise a ValueError names the device.  Relative RMS error against the float64
+        reference: ~1e-7 (complex64), ~1e-16 (complex128).
+
+    Notes
+    -----
+    ``compress`` may be called with any batch size; device buffers are kept between calls and
+    grown when a larger batch arrives (on CPU devices the kernel reads the input array in
+    place).  Calls on one instance are serialised by a lock; the
+    blocking copy of the result releases the GIL while the device works.
+    """
+
+    def __init__(
+        self,
+        plan: LensPlan,
+        context: cl.Context | None = None,
+        queue: cl.CommandQueue | None = None,
+        device: cl.Device | str | None = None,
+        kernel: str | None = None,
+        lanes: int | None = None,
+        precision: str = "complex64",
+    ):
+        if not isinstance(plan, LensPlan):
+            raise TypeError(f"plan must be a LensPlan, got {type(plan).__name__}")
+        nfft, S = int(plan.nfft), int(plan.samples_per_shot)
+        if nfft < 2 or nfft & (nfft - 1):
+            raise ValueError(f"plan.nfft must be a power of two >= 2, got {nfft}")
+        if not 1 <= S <= nfft:
+            raise ValueError(f"plan.samples_per_shot must be in 1..nfft={nfft}, got {S}")
+        if plan.bin_count < 1:
+            raise ValueError("plan.bin_count must be >= 1")
+        self.plan = plan
+        self.precision = precision
+        self.dtype = precision_dtype(precision)
+        double = self.dtype == np.complex128
+
+        if queue is None:
+            if context is None:
+                queue = cl_loader.default_queue(device)
+            else:
+                queue = cl.CommandQueue(context)
+        self.queue = queue
+        self.context = queue.context
+        self.device = queue.device
+
+        if kernel is None:
+            kernel = "lanes" if self.device.type & cl.device_type.CPU else "group"
+        if kernel not in KERNELS:
+            raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
+        self.kernel_name = kernel
+        if double and not supports_double(self.device):
+            raise ValueError(
+                f"precision 'complex128' needs an OpenCL device with double precision "
+                f"(cl_khr_fp64); {self.device.platform.name.strip()} / "
+                f"{self.device.name.strip()} has none: use precision 'complex64' or choose "
+                f"another device ({cl_loader.ENV_DEVICE})"
+            )
+
+        local = int(self.device.local_mem_size)
+        real_bytes = self.dtype().real.itemsize  # 4 or 8
+        defines = {
+            "NFFT": nfft,
+            "LOG2_NFFT": nfft.bit_length() - 1,
+            "S": S,
+            "BIN_COUNT": int(plan.bin_count),
+            "BIN_OFFSET": int(plan.bin_start) % nfft,
+            "SIGN1": 1 if plan.sign1 > 0 else -1,
+            "SIGN2": 1 if plan.sign2 > 0 else -1,
+            "TWO_PASS": int(plan.two_pass),
+            "DOUBLE": int(double),
+        }
+        if kernel == "lanes":
+            most = _MAX_LANES_DOUBLE if double else _MAX_LANES
+            if lanes is None:
+                lanes = most
+                while lanes > 1 and 4 * real_bytes * lanes * nfft > local:
+                    lanes //= 2
+            if lanes not in (1, 2, 4, 8) or lanes > most:
+                raise ValueError(
+                    f"lanes must be 1, 2, 4 or 8 (at most {most} in {precision}), got {lanes}"
+                )
+            need = 4 * real_bytes * lanes * nfft
+            self.lanes, self.group_size = lanes, 1
+            defines["LANES"] = lanes
+        else:
+            group = min(_MAX_GROUP, max(1, nfft // 8), int(self.device.max_work_group_size))
+            need = 4 * real_bytes * nfft
+            self.lanes, self.group_size = 1, group
+            defines["GROUP_SIZE"] = group
+        if need > local:
+            raise ValueError(
+                f"nfft={nfft} needs {need} bytes of local memory per work-group; "
+                f"{self.device.name.strip()} has {local}"
+            )
+        self.program = cl_loader.build_program(self.context, "lens.cl", defines)
+        self._kernel = cl.Kernel(self.program, f"lens_{kernel}")  # own instance: args are state
+
+        mf = cl.mem_flags
+        twiddle = np.exp(-2j * np.pi * np.arange(nfft) / nfft)  # float64, cast below
+        spectrum = plan.spectrum if plan.two_pass else np.zeros(1)
+
+        def constant(a):
+            return cl.Buffer(
+                self.context,
+                mf.READ_ONLY | mf.COPY_HOST_PTR,
+                hostbuf=np.ascontiguousarray(a, dtype=self.dtype),
+            )
+
+        self._constants = [
+            constant(plan.pre),
+            constant(spectrum),
+            constant(plan.post),
+            constant(twiddle),
+        ]
+        # CPU devices read the caller's array in place (USE_HOST_PTR): one command less per
+        # call, which is a good part of a small batch's time with PoCL.
+        self._zero_copy = bool(
+            self.device.type & cl.device_type.CPU and self.device.host_unified_memory
+        )
+        self._capacity = 0
+        self._shots_buf = self._lines_buf = None
+        self._lock = threading.Lock()
+
+    def __repr__(self) -> str:
+        p = self.plan
+        return (
+            f"AOLens(S={p.samples_per_shot}, nfft={p.nfft}, bins={p.bin_count}, "
+            f"two_pass={p.two_pass}, kernel={self.kernel_name!r}, "
+            f"precision={self.precision!r}, "
+            f"device={self.device.name.strip()!r})"
+        )
+
+    def _check(self, shots) -> np.ndarray:
+        x = np.asarray(shots)
+        S = self.plan.samples_per_shot
+        if x.ndim != 2 or x.shape[1] != S:
+            raise ValueError(f"shots must be a 2-D array [pulses, {S}], got shape {x.shape}")
+        if x.dtype not in (np.complex64, np.complex128):
+            raise ValueError(f"shots must be complex64 or complex128 (cast), got {x.dtype}")
+        return np.ascontiguousarray(x, dtype=self.dtype)
+
+    def _ensure(self, pulses: int) -> None:
+        if pulses <= self._capacity:
+            return
+        capacity = max(pulses, 2 * self._capacity)
+        size = self.dtype().itemsize
+        mf = cl.mem_flags
+        if not self._zero_copy:
+            self._shots_buf = cl.Buffer(
+                self.context, mf.READ_ONLY, capacity * self.plan.samples_per_shot * size
+            )
+        self._lines_buf = cl.Buffer(
+            self.context, mf.WRITE_ONLY, capacity * self.plan.bin_count * size
+        )
+        self._capacity = capacity
+
+    def compress(self, shots: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Range-compress a batch of pulses.
+
+        Parameters
+        ----------
+        shots : ndarray, complex64 or complex128 [pulses, samples_per_shot]
+            Received samples, one pulse per row (cast to the lens precision).
+        out : ndarray [pulses, bin_count] of the lens precision, optional
+            C-contiguous array to write the result into.
+
+        Returns
+        -------
+        ndarray [pulses, bin_count], complex64 (or complex128 with that precision)
+            The compressed lines; column b is bin ``plan.bin_start + b`` (range ``plan.range_m``).
+
+        Raises
+        ------
+        ValueError
+            Wrong shape or dtype of ``shots`` or ``out``.
+        """
+        x = self._check(shots)
+        pulses, bins = x.shape[0], self.plan.bin_count
+        if out is None:
+            out = np.empty((pulses, bins), self.dtype)
+        elif (
+            not isinstance(out, np.ndarray)
+            or out.shape != (pulses, bins)
+            or out.dtype != self.dtype
+            or not out.flags.c_contiguous
+        ):
+            raise ValueError(
+                f"out must be a C-contiguous {self.precision} array of shape {(pulses, bins)}"
+            )
+        if pulses == 0:
+            return out
+        if pulses >= 2**31:
+            raise ValueError("too many pulses in one batch")
+        groups = -(-pulses // self.lanes)
+        with self._lock:
+            self._ensure(pulses)
+            if self._zero_copy:
+                shots_buf = cl.Buffer(
+                    self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=x
+                )
+            else:
+                shots_buf = self._shots_buf
+                cl.enqueue_copy(self.queue, shots_buf, x, is_blocking=False)
+            self._kernel(
+                self.queue,
+                (groups * self.group_size,),
+                (self.group_size,),
+                shots_buf,
+                self._lines_buf,
+                *self._constants,
+                np.uint32(pulses),
+            )
+            # blocking: x stays referenced until the kernel is done; the GIL is released
+            cl.enqueue_copy(self.queue, out, self._lines_buf, is_blocking=True)
+        return out
+
+    __call__ = compress

@@ -1,0 +1,78 @@
+"""The subscriber side of the strip protocol: a SUB socket that decodes and counts messages."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import zmq
+import zmq.auth
+
+from .publish import DEFAULT_ENDPOINT
+from .wire import Message, decode
+
+
+class StripSubscriber:
+    """Client: connect a SUB socket and receive :class:`Message` s.
+
+    ``curve_server_key``: the publisher's public-key file when it uses CURVE.
+    Counts ``strips``, ``missed_strips`` (gaps in seq) and ``bad_messages`` (undecodable).
+    """
+
+    def __init__(
+        self,
+        endpoint: str = DEFAULT_ENDPOINT,
+        curve_server_key: str | Path | None = None,
+        hwm_messages: int = 0,
+        context: zmq.Context | None = None,
+    ):
+        ctx = context or zmq.Context.instance()
+        self.socket = s = ctx.socket(zmq.SUB)
+        s.setsockopt(zmq.LINGER, 0)
+        s.setsockopt(zmq.RCVHWM, int(hwm_messages))
+        if curve_server_key is not None:
+            server_public, _ = zmq.auth.load_certificate(str(curve_server_key))
+            s.curve_publickey, s.curve_secretkey = zmq.curve_keypair()
+            s.curve_serverkey = server_public
+        s.setsockopt(zmq.SUBSCRIBE, b"")
+        try:
+            s.connect(endpoint)
+        except zmq.ZMQError as exc:
+            s.close(0)
+            raise ValueError(f"cannot connect to {endpoint}: {exc}") from None
+        self.endpoint = endpoint
+        self.counters = {"strips": 0, "missed_strips": 0, "bad_messages": 0}
+        self.stream_id: str | None = None
+        self._next_seq: int | None = None
+
+    def recv(self, timeout_s: float | None = None) -> Message | None:
+        """Next valid message, or None after ``timeout_s`` without one."""
+        deadline = None if timeout_s is None else time.perf_counter() + timeout_s
+        while True:
+            left = None if deadline is None else max(0.0, deadline - time.perf_counter())
+            wait = 100 if left is None else min(100, int(left * 1000))
+            if not self.socket.poll(wait):
+                if left is not None and left <= 0:
+                    return None
+                continue
+            try:
+                msg = decode(self.socket.recv_multipart())
+            except ValueError:
+                self.counters["bad_messages"] += 1
+                continue
+            if msg.topic == "strip":
+                self._count(msg.header)
+            return msg
+
+    def _count(self, header: dict) -> None:
+        if header.get("stream_id") != self.stream_id:
+            self.stream_id = header.get("stream_id")
+            self._next_seq = None
+        seq = int(header["seq"])
+        if self._next_seq is not None and seq > self._next_seq:
+            self.counters["missed_strips"] += seq - self._next_seq
+        self._next_seq = seq + 1
+        self.counters["strips"] += 1
+
+    def close(self) -> None:
+        self.socket.close(0)

@@ -1,0 +1,210 @@
+"""Recording and image files (HDF5).  Layouts are documented in README.md ("File formats").
+
+Recording (``rtsar simulate``):  /shots complex64 [pulse, sample], /pulse_index int64 [pulse],
+/time_s float64 [pulse], /along_track_m float64 [pulse]; attributes format="rtsar-recording",
+format_version, config (JSON of the effective configuration), scene (JSON), rtsar_version.
+
+Image (``rtsar process``):  /image complex64 [azimuth, range], /azimuth_m, /range_m float64;
+attributes format="rtsar-image", format_version, config (JSON), source, lens, correlator,
+nonfinite_pulses (shots zeroed because they held NaN/Inf).
+Complex values are HDF5 compounds of two floats named r and i (h5py's convention).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from .. import __version__
+from ..params import Config, config_from_dict
+
+RECORDING_FORMAT = "rtsar-recording"
+IMAGE_FORMAT = "rtsar-image"
+FORMAT_VERSION = 1
+
+
+class RecordingWriter:
+    """Append shots to a new recording file; use as a context manager."""
+
+    def __init__(
+        self, path: str | Path, config: Config, scene: dict | None = None, chunk_pulses: int = 64
+    ):
+        self.path = Path(path)
+        self._f = h5py.File(self.path, "w")
+        s = config.waveform.samples_per_shot
+        chunk = max(1, min(chunk_pulses, 1024))
+        self._shots = self._f.create_dataset(
+            "shots", (0, s), np.complex64, maxshape=(None, s), chunks=(chunk, s)
+        )
+        self._meta = {
+            name: self._f.create_dataset(name, (0,), dtype, maxshape=(None,), chunks=(4096,))
+            for name, dtype in (
+                ("pulse_index", np.int64),
+                ("time_s", np.float64),
+                ("along_track_m", np.float64),
+            )
+        }
+        a = self._f.attrs
+        a["format"] = RECORDING_FORMAT
+        a["format_version"] = FORMAT_VERSION
+        a["config"] = json.dumps(config.to_dict())
+        a["scene"] = json.dumps(scene or {})
+        a["rtsar_version"] = __version__
+        self.pulses = 0
+
+    def write(self, samples: np.ndarray, pulse_index, time_s, along_track_m) -> None:
+        samples = np.atleast_2d(samples)
+        n = len(samples)
+        end = self.pulses + n
+        self._shots.resize(end, axis=0)
+        self._shots[self.pulses : end] = samples
+        for name, values in (
+            ("pulse_index", pulse_index),
+            ("time_s", time_s),
+            ("along_track_m", along_track_m),
+        ):
+            ds = self._meta[name]
+            ds.resize(end, axis=0)
+            ds[self.pulses : end] = np.atleast_1d(values)
+        self.pulses = end
+
+    def close(self) -> None:
+        if self._f.id.valid:
+            self._f.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+@dataclass
+class Recording:
+    path: Path
+    config: Config
+    scene: dict
+    pulses: int
+    start_along_track_m: float
+    _file: h5py.File
+
+    def batches(self, size: int) -> Iterator[np.ndarray]:
+        """Shots in blocks of ``size`` pulses (the last block may be shorter)."""
+        shots = self._file["shots"]
+        for i in range(0, self.pulses, size):
+            yield shots[i : i + size]
+
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def _open(path: str | Path, fmt: str) -> h5py.File:
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"{path}: no such file")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise ValueError(f"{path}: not an HDF5 file ({exc})") from None
+    found = f.attrs.get("format")
+    if found != fmt:
+        f.close()
+        raise ValueError(f"{path}: expected an {fmt} file, found format={found!r}")
+    if int(f.attrs.get("format_version", -1)) > FORMAT_VERSION:
+        f.close()
+        raise ValueError(f"{path}: format_version newer than this rtsar understands")
+    return f
+
+
+def open_recording(path: str | Path) -> Recording:
+    f = _open(path, RECORDING_FORMAT)
+    cfg = config_from_dict(json.loads(f.attrs["config"]))
+    pulses = f["shots"].shape[0]
+    start = float(f["along_track_m"][0]) if pulses else 0.0
+    if pulses > 1:
+        # Shot 0's position and the step define the image's azimuth axis; a recording whose
+        # positions do not follow the configured step is refused rather than mis-labelled.
+        steps = np.diff(f["along_track_m"][: min(pulses, 4096)])
+        if not np.allclose(steps, cfg.geometry.along_track_step_m, rtol=1e-6, atol=0):
+            f.close()
+            raise ValueError(f"{path}: along_track_m does not advance by the configured step")
+    return Recording(Path(path), cfg, json.loads(f.attrs.get("scene", "{}")), pulses, start, f)
+
+
+def write_image(
+    path: str | Path,
+    image: np.ndarray,
+    azimuth_m: np.ndarray,
+    range_m: np.ndarray,
+    config: Config,
+    **attrs,
+) -> None:
+    with h5py.File(path, "w") as f:
+        f.create_dataset("image", data=np.asarray(image, np.complex64))
+        f.create_dataset("azimuth_m", data=np.asarray(azimuth_m, np.float64))
+        f.create_dataset("range_m", data=np.asarray(range_m, np.float64))
+        f.attrs["format"] = IMAGE_FORMAT
+        f.attrs["format_version"] = FORMAT_VERSION
+        f.attrs["config"] = json.dumps(config.to_dict())
+        f.attrs["rtsar_version"] = __version__
+        for k, v in attrs.items():
+            f.attrs[k] = v
+
+
+def read_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    with _open(path, IMAGE_FORMAT) as f:
+        return (f["image"][...], f["azimuth_m"][...], f["range_m"][...], dict(f.attrs))
+
+
+class ImageWriter:
+    """Write an image file line block by line block (streams of any length, bounded memory).
+
+    Same layout as :func:`write_image`; ``close(**attrs)`` adds the final attributes.
+    """
+
+    def __init__(
+        self, path: str | Path, config: Config, range_m: np.ndarray, chunk_lines: int = 64, **attrs
+    ):
+        self.path = Path(path)
+        self._f = h5py.File(self.path, "w")
+        nr = len(range_m)
+        self._image = self._f.create_dataset(
+            "image", (0, nr), np.complex64, maxshape=(None, nr), chunks=(chunk_lines, nr)
+        )
+        self._azimuth = self._f.create_dataset(
+            "azimuth_m", (0,), np.float64, maxshape=(None,), chunks=(4096,)
+        )
+        self._f.create_dataset("range_m", data=np.asarray(range_m, np.float64))
+        a = self._f.attrs
+        a["format"] = IMAGE_FORMAT
+        a["format_version"] = FORMAT_VERSION
+        a["config"] = json.dumps(config.to_dict())
+        a["rtsar_version"] = __version__
+        for k, v in attrs.items():
+            a[k] = v
+        self.lines = 0
+
+    def write(self, lines: np.ndarray, azimuth_m: np.ndarray) -> None:
+        end = self.lines + len(lines)
+        self._image.resize(end, axis=0)
+        self._image[self.lines : end] = lines
+        self._azimuth.resize(end, axis=0)
+        self._azimuth[self.lines : end] = azimuth_m
+        self.lines = end
+
+    def close(self, **attrs) -> None:
+        if self._f.id.valid:
+            for k, v in attrs.items():
+                self._f.attrs[k] = v
+            self._f.close()

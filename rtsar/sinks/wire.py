@@ -1,0 +1,147 @@
+"""The strip protocol on the wire: topics, JSON headers and payloads (README "Strip protocol").
+
+Every message is multipart,
+
+    frame 0  topic, ASCII: b"strip", b"stats", b"end" or b"height"
+    frame 1  header, UTF-8 JSON object (fields in ``strip_header`` / the README)
+    frame 2  payload (strip only): complex64 little-endian, C order [line_count, range_bins]
+             (height: float32 heights [line, bin], then frame 3: uint8 validity)
+
+``decode`` is the inverse of the headers and payloads built here; the publisher
+(rtsar.sinks.publish) and the subscriber client (rtsar.sinks.client) share this module.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..stream.strips import StreamInfo, Strip
+
+STRIP_FORMAT = "rtsar-strip"
+STRIP_VERSION = 1
+HEIGHT_FORMAT = "rtsar-height"
+HEIGHT_VERSION = 1
+STATS_FORMAT = "rtsar-stats"
+
+
+def strip_header(strip: Strip, info: StreamInfo) -> dict:
+    """The JSON header of a strip message (every field is described in README.md)."""
+    rng = info.range_m
+    n_lines, n_bins = strip.lines.shape
+    return {
+        "format": STRIP_FORMAT,
+        "version": STRIP_VERSION,
+        "stream_id": info.stream_id,
+        "seq": strip.seq,
+        "first_line": strip.first_line,
+        "line_count": n_lines,
+        "range_bins": n_bins,
+        "dtype": "complex64",
+        "byte_order": "little",
+        "azimuth_first_m": float(strip.azimuth_m[0]),
+        "azimuth_step_m": info.azimuth_step_m,
+        "range_first_m": float(rng[0]),
+        "range_step_m": float(rng[1] - rng[0]) if len(rng) > 1 else 0.0,
+        "first_pulse_arrival_unix_s": info.unix_s(strip.first_arrival_s),
+        "last_pulse_arrival_unix_s": info.unix_s(strip.last_arrival_s),
+        "publish_unix_s": time.time(),
+        "flagged_lines": [list(r) for r in strip.flagged_lines],
+        "counters": strip.counters,
+        "config": info.config_dict,
+    }
+
+
+def height_header(strip, seq: int, info: StreamInfo) -> dict:
+    """The JSON header of a height message (3D imaging: rtsar.topo.stream.HeightStrip).
+
+    Frames: topic ``height``, this header, heights float32 little-endian [line, bin] in metres
+    (0 where not valid), validity uint8 [line, bin] (1 = valid: coherent, unwrapped).
+    """
+    rng = info.range_m
+    n_lines, n_bins = strip.height_m.shape
+    return {
+        "format": HEIGHT_FORMAT,
+        "version": HEIGHT_VERSION,
+        "stream_id": info.stream_id,
+        "seq": seq,
+        "first_line": strip.first_line,
+        "line_count": n_lines,
+        "range_bins": n_bins,
+        "dtype": "float32",
+        "valid_dtype": "uint8",
+        "byte_order": "little",
+        "units": "m",
+        "aligned": bool(strip.aligned),
+        "valid_fraction": float(np.mean(strip.valid)) if strip.valid.size else 0.0,
+        "azimuth_first_m": float(info.azimuth_m(strip.first_line, 1)[0]),
+        "azimuth_step_m": info.azimuth_step_m,
+        "range_first_m": float(rng[0]),
+        "range_step_m": float(rng[1] - rng[0]) if len(rng) > 1 else 0.0,
+        "publish_unix_s": time.time(),
+    }
+
+
+def stats_header(stats: dict, info: StreamInfo) -> dict:
+    """The JSON header of a ``stats`` or ``end`` message: the stats dictionary and the run's id."""
+    return {
+        "format": STATS_FORMAT,
+        "version": STRIP_VERSION,
+        "stream_id": info.stream_id,
+        "publish_unix_s": time.time(),
+        "source": info.source,
+        **stats,
+    }
+
+
+@dataclass
+class Message:
+    """A received message: topic, header and the payload: a strip's image[line, range_bin]
+    (complex), or a height message's height_m[line, range_bin] (float32) and ``valid``."""
+
+    topic: str
+    header: dict
+    lines: np.ndarray | None = None
+    valid: np.ndarray | None = None
+
+
+def decode(frames: list[bytes]) -> Message:
+    """Parse one multipart message; ValueError on anything that is not a valid rtsar message."""
+    if len(frames) < 2:
+        raise ValueError(f"expected at least 2 frames, got {len(frames)}")
+    topic = bytes(frames[0]).decode("ascii", "replace")
+    try:
+        header = json.loads(bytes(frames[1]))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"header is not JSON: {exc}") from None
+    if not isinstance(header, dict):
+        raise ValueError("header is not a JSON object")
+    if topic == "height":
+        return _decode_height(header, frames)
+    if topic != "strip":
+        return Message(topic, header)
+    if header.get("format") != STRIP_FORMAT or header.get("version") != STRIP_VERSION:
+        raise ValueError(f"not an {STRIP_FORMAT} v{STRIP_VERSION} strip")
+    if len(frames) != 3:
+        raise ValueError("a strip has 3 frames")
+    shape = (int(header["line_count"]), int(header["range_bins"]))
+    payload = bytes(frames[2])
+    if header.get("dtype") != "complex64" or len(payload) != shape[0] * shape[1] * 8:
+        raise ValueError(f"payload of {len(payload)} bytes does not match {shape} complex64")
+    return Message(topic, header, np.frombuffer(payload, "<c8").reshape(shape))
+
+
+def _decode_height(header: dict, frames: list[bytes]) -> Message:
+    if header.get("format") != HEIGHT_FORMAT or header.get("version") != HEIGHT_VERSION:
+        raise ValueError(f"not an {HEIGHT_FORMAT} v{HEIGHT_VERSION} message")
+    if len(frames) != 4:
+        raise ValueError("a height message has 4 frames")
+    shape = (int(header["line_count"]), int(header["range_bins"]))
+    h, v = bytes(frames[2]), bytes(frames[3])
+    if len(h) != shape[0] * shape[1] * 4 or len(v) != shape[0] * shape[1]:
+        raise ValueError(f"height payload does not match {shape}")
+    height = np.frombuffer(h, "<f4").reshape(shape)
+    return Message("height", header, height, np.frombuffer(v, np.uint8).reshape(shape).astype(bool))

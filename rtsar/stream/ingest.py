@@ -1,0 +1,231 @@
+"""Ingest checks: turn what a source delivers into a gap-free, in-order pulse stream.
+
+The azimuth correlator assumes pulse p was taken at x_p = x_0 + p·d (Psaltis & Wagner 1981: the
+CCD shifts one row per pulse), so the position of every pulse in the stream must be kept even when
+the link loses, repeats or reorders shots.  The instrument's sequence number says where a shot
+belongs:
+
+* a gap (sequence jumps ahead by g ≤ ``max_gap_pulses``): g zero pulses are inserted, flagged
+  (they cost no memory, and the AO lens skips them: a zero pulse compresses to a zero line);
+* a larger jump either way (instrument restarted): a *discontinuity* — N zero pulses are inserted
+  (they clear the CCD so no line mixes the two sides) and the count restarts from the new number;
+  azimuth positions after it are relative to the restart;
+* a duplicate (sequence seen before) or a late shot (its slot was already zero-filled): dropped;
+* NaN/Inf samples or the wrong number of samples: the pulse is zeroed and flagged.
+
+Auxiliary channels (``ShotBatch.aux``: reference interferometer, HCN cell, second receiver) travel
+with their pulse: filled, zeroed and dropped together with it.  Their names and lengths (which may
+differ from the main channel's: an HCN channel is sampled faster) are fixed by the first batch.
+A shot whose auxiliary channel is bad (NaN/Inf, wrong length, missing) is zeroed in every channel
+and counted like a bad main channel.
+
+Nothing is silent: every case has a counter (``Ingest.counters``), reported in strip headers and
+stats.  Flagged pulses mark the image lines whose aperture contains them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..samples import nonfinite_rows
+from ..sources.base import ShotBatch
+
+COUNTERS = (
+    "pulses_received",  # shots delivered by the source
+    "pulses_accepted",  # shots that entered the stream with their own samples
+    "gap_pulses",  # zero pulses inserted for missing sequence numbers
+    "gaps",  # sequence jumps filled
+    "discontinuities",  # jumps larger than max_gap_pulses (either way)
+    "duplicates",  # shots whose sequence number was already in the stream
+    "late_pulses",  # shots arriving after their slot was zero-filled
+    "nonfinite_pulses",  # shots holding NaN/Inf, zeroed
+    "wrong_length_pulses",  # shots with the wrong sample count (or a missing channel), zeroed
+)
+
+
+@dataclass
+class PulseBlock:
+    """Consecutive pulses of the stream: pulse index first_pulse .. first_pulse + n - 1."""
+
+    first_pulse: int
+    samples: np.ndarray  # complex64[n, samples_per_shot] (or [n, range_bins] after the lens)
+    arrival_s: np.ndarray  # float64[n], perf_counter time the shot arrived (fill: next arrival)
+    flagged: np.ndarray  # bool[n], zero-filled or zeroed pulses
+    aux: dict = field(default_factory=dict)  # name → complex64[n, samples_per_shot]
+
+    def __len__(self) -> int:
+        return len(self.samples)
+
+    def slice(self, start: int, stop: int) -> PulseBlock:
+        sl = slice(start, stop)
+        return PulseBlock(
+            self.first_pulse + start,
+            self.samples[sl],
+            self.arrival_s[sl],
+            self.flagged[sl],
+            {k: v[sl] for k, v in self.aux.items()},
+        )
+
+
+def concat_blocks(blocks: list[PulseBlock]) -> PulseBlock:
+    """Consecutive pulse blocks as one (raises if they are not consecutive)."""
+    if len(blocks) == 1:
+        return blocks[0]
+    for a, b in zip(blocks, blocks[1:], strict=False):
+        if b.first_pulse != a.first_pulse + len(a):  # ingest guarantees this
+            raise RuntimeError("pulse blocks are not consecutive")
+    return PulseBlock(
+        blocks[0].first_pulse,
+        np.concatenate([b.samples for b in blocks]),
+        np.concatenate([b.arrival_s for b in blocks]),
+        np.concatenate([b.flagged for b in blocks]),
+        {k: np.concatenate([b.aux[k] for b in blocks]) for k in blocks[0].aux},
+    )
+
+
+class Ingest:
+    """Sequence, value and shape checks; call with each ShotBatch, get PulseBlocks back."""
+
+    def __init__(
+        self,
+        samples_per_shot: int,
+        aperture_pulses: int,
+        max_gap_pulses: int,
+        dtype=np.complex64,
+    ):
+        self.samples_per_shot = int(samples_per_shot)
+        self.dtype = np.dtype(dtype)  # the processor's sample type (complex128 stays double)
+        self.aperture_pulses = int(aperture_pulses)
+        self.max_gap_pulses = max(int(max_gap_pulses), 1)
+        # Zero-filled pulses are read-only views of one zero row: a long gap costs no memory.
+        self._zero_row = np.zeros((1, self.samples_per_shot), self.dtype)
+        self.counters = dict.fromkeys(COUNTERS, 0)
+        self.aux_lengths: dict[str, int] | None = None  # name → samples, fixed by the first batch
+        self.next_pulse = 0  # stream index of the next pulse
+        self._next_seq: int | None = None  # sequence number expected next
+        self._filled: set[int] = set()  # recently zero-filled sequence numbers (late detection)
+        self._recent_low = 0  # sequence numbers below this are forgotten
+
+    def _zeros(self, count: int, arrival: float) -> PulseBlock:
+        block = PulseBlock(
+            self.next_pulse,
+            np.broadcast_to(self._zero_row, (count, self.samples_per_shot)),
+            np.full(count, arrival),
+            np.ones(count, bool),
+            {
+                k: np.broadcast_to(np.zeros((1, m), self.dtype), (count, m))
+                for k, m in (self.aux_lengths or {}).items()
+            },
+        )
+        self.next_pulse += count
+        return block
+
+    def _forget_old(self) -> None:
+        low = self._next_seq - self.max_gap_pulses
+        if low > self._recent_low + self.max_gap_pulses:  # amortised clean-up
+            self._filled = {s for s in self._filled if s >= low}
+            self._recent_low = low
+
+    def __call__(self, batch: ShotBatch) -> list[PulseBlock]:
+        n = len(batch)
+        c = self.counters
+        c["pulses_received"] += n
+        if n == 0:
+            return []
+        if self.aux_lengths is None:
+            self.aux_lengths = {
+                k: int(np.shape(a)[1]) if np.ndim(a) == 2 else self.samples_per_shot
+                for k, a in sorted(batch.aux.items())
+            }
+        lengths = {"": self.samples_per_shot, **self.aux_lengths}
+        channels = {k: batch.samples if k == "" else batch.aux.get(k) for k in lengths}
+        flagged = np.zeros(n, bool)
+        wrong = any(
+            a is None or np.ndim(a) != 2 or np.shape(a)[1] != lengths[k]
+            for k, a in channels.items()
+        )
+        if wrong:
+            c["wrong_length_pulses"] += n
+            channels = {k: np.zeros((n, m), self.dtype) for k, m in lengths.items()}
+            flagged[:] = True
+        else:
+            channels = {k: np.asarray(a, self.dtype) for k, a in channels.items()}
+            bad = np.zeros(n, bool)
+            for a in channels.values():
+                bad |= nonfinite_rows(a)
+            if bad.any():
+                channels = {k: a.copy() for k, a in channels.items()}
+                for a in channels.values():
+                    a[bad] = 0
+                flagged |= bad
+                c["nonfinite_pulses"] += int(bad.sum())
+        samples = channels.pop("")
+        aux = channels
+        seq = np.asarray(batch.seq, np.int64)
+        arrival = np.asarray(batch.arrival_s, np.float64)
+        if self._next_seq is None:
+            self._next_seq = int(seq[0])
+        # Fast path: the batch continues the stream exactly (the normal case).
+        if seq[0] == self._next_seq and (n == 1 or np.all(np.diff(seq) == 1)):
+            c["pulses_accepted"] += n
+            self._next_seq += n
+            block = PulseBlock(self.next_pulse, samples, arrival, flagged, aux)
+            self.next_pulse += n
+            return [block]
+        return self._slow(seq, samples, arrival, flagged, aux)
+
+    def _slow(self, seq, samples, arrival, flagged, aux) -> list[PulseBlock]:
+        """Shot by shot: gaps, jumps, duplicates and late shots."""
+        c = self.counters
+        out: list[PulseBlock] = []
+        run_start = None  # start of the current run of in-order shots within this batch
+
+        def close_run(end):
+            nonlocal run_start
+            if run_start is not None:
+                sl = slice(run_start, end)
+                out.append(
+                    PulseBlock(
+                        self.next_pulse,
+                        samples[sl],
+                        arrival[sl],
+                        flagged[sl],
+                        {k: a[sl] for k, a in aux.items()},
+                    )
+                )
+                self.next_pulse += end - run_start
+                c["pulses_accepted"] += end - run_start
+                run_start = None
+
+        for i, s in enumerate(seq.tolist()):
+            jump = s - self._next_seq
+            if jump == 0:
+                if run_start is None:
+                    run_start = i
+                self._next_seq += 1
+                continue
+            close_run(i)
+            if 0 < jump <= self.max_gap_pulses:
+                c["gaps"] += 1
+                c["gap_pulses"] += jump
+                self._filled.update(range(self._next_seq, s))
+                out.append(self._zeros(jump, arrival[i]))
+            elif -self.max_gap_pulses <= jump < 0:
+                if s in self._filled:
+                    c["late_pulses"] += 1
+                    self._filled.discard(s)
+                else:
+                    c["duplicates"] += 1
+                continue
+            else:
+                c["discontinuities"] += 1
+                c["gap_pulses"] += self.aperture_pulses
+                self._filled.clear()
+                out.append(self._zeros(self.aperture_pulses, arrival[i]))
+            self._next_seq = s + 1
+            run_start = i
+        close_run(len(seq))
+        self._forget_old()
+        return out

@@ -1,0 +1,409 @@
+"""The streaming pipeline: source → ingest → AO lens → shifting CCD → strips → publishers.
+
+Each stage is a thread; stages are joined by bounded queues whose capacity is counted in
+pulses (or lines), so memory is bounded whatever the source does.  The heavy work releases the
+GIL (OpenCL waits in pyopencl, numba ``nogil`` kernels, SciPy's FFT), so threads overlap.
+``stages="fused"`` runs lens and CCD in one thread instead (one queue hop less; the benchmark
+measures both).
+
+Back-pressure: a live source (simulator, serial instrument) never waits: when the first queue
+is full its shots are dropped and counted, and ingest zero-fills their slots so azimuth timing
+holds.  A replay waits.  Downstream stages always wait for each other (nothing is lost inside).
+
+Every stage takes *all* the work waiting for it, up to a cap (adaptive micro-batching): when the
+pipeline keeps up, batches are small and latency is low; when it falls behind, batches grow and
+the per-launch overheads are amortised.
+
+Corrections (a :class:`rtsar.focus.chain.CorrectionChain`: chirp linearization, the reference-
+region method, phase-to-retro, PGA) run in the lens thread, in pulse order: "raw" stages before
+the AO lens (they see the auxiliary channels), "lines" stages between the lens and the CCD.  A
+line stage may hold pulses back (PGA holds a block): the pulses' arrival times and flags wait
+with them, so latency and flags stay exact; the held pulses come out at the end of the stream.
+Their counters join the pipeline's.
+
+3D imaging (``height``: an rtsar.topo.stream.HeightStripStage): the auxiliary channel of the
+second receiver (``height_channel``) goes through its own AO lens and CCD in step with the main
+channel (rtsar.stream.height); the stage turns each pair of line blocks into height strips
+(unwrapped with overlap, so heights stay continuous across strips), published beside the image
+strips (sink method ``height``).
+
+Latency of an image line: from the arrival of the last pulse that contributes to it (pulse
+j + N - 1 for line j, Psaltis & Wagner 1981: the row leaves the CCD after N shifts) to the
+publication of the strip holding it.
+
+This module holds the threads and their wiring only; the pieces are: rtsar.stream.queue (bounded
+queues), ingest (sequence checks), engine (lens and CCD), hold (metadata of held pulses), timing
+(arrivals and flags of lines), height (the second receiver), strips (strips, sinks) and stats.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+import uuid
+from dataclasses import dataclass
+
+from ..instrument import SECOND_RECEIVER
+from ..params import Config
+from ..sources.base import Source
+from .engine import Lines, StreamProcessor
+from .height import HeightBatch, HeightChannel
+from .hold import HeldPulses
+from .ingest import Ingest, PulseBlock, concat_blocks
+from .queue import BoundedQueue
+from .stats import PipelineStats
+from .strips import LineBlock, StreamInfo, StripAssembler, StripSink
+from .timing import LineTiming
+
+STAGE_LAYOUTS = ("split", "fused")
+OWN_COUNTERS = (
+    "dropped_pulses",
+    "pulses_processed",
+    "lines_out",
+    "flagged_lines",
+    "strips_published",
+)
+
+
+@dataclass
+class PipelineSettings:
+    """How the pipeline runs (the processing itself is the Config)."""
+
+    lens_backend: str = "opencl"
+    device: str | None = None
+    stages: str = "split"  # "split": lens and CCD in their own threads; "fused": one thread
+    strip_lines: int = 16  # lines per published strip
+    queue_pulses: int = 0  # capacity of each queue (0: 8 apertures of pulses)
+    max_batch: int = 0  # most pulses per lens launch / CCD push (0: config micro_batch)
+    max_gap_pulses: int = 0  # longer sequence jumps are discontinuities (0: 60 s of pulses)
+
+    def __post_init__(self):
+        if self.stages not in STAGE_LAYOUTS:
+            raise ValueError(f"stages must be one of {STAGE_LAYOUTS}, got {self.stages!r}")
+        if self.strip_lines < 1:
+            raise ValueError("strip_lines must be >= 1")
+
+
+class Pipeline:
+    """Run ``source`` through the engine and hand strips to ``sinks`` (publishers, recorders).
+
+    A sink implements rtsar.stream.strips.StripSink (``strip``, ``height``, ``stats``, ``end``;
+    each receives the run's StreamInfo, never the pipeline).  ``run()`` blocks until the source
+    ends or ``stop()``; Ctrl-C in ``run()`` stops the source, drains the pipeline and flushes the
+    CCD, so every pulse that arrived is focused and published.
+    """
+
+    def __init__(
+        self,
+        config: Config,
+        source: Source,
+        sinks: list[StripSink],
+        settings: PipelineSettings | None = None,
+        start_along_track_m: float = 0.0,
+        on_stats=None,
+        stats_every_s: float = 1.0,
+        corrections=None,
+        physical=None,
+        height=None,
+        height_channel: str = SECOND_RECEIVER,
+        stream_id: str | None = None,
+    ):
+        self.config = config
+        self.corrections = corrections
+        if height is not None and corrections and corrections.line_stages:
+            raise ValueError(
+                "height strips with line-domain corrections (pra, pga) are not supported: they "
+                "correct the main receiver only and would bias the interferometric phase"
+            )
+        self.source = source
+        self.sinks = list(sinks)
+        self.settings = s = settings or PipelineSettings()
+        self.engine = StreamProcessor(
+            config, s.lens_backend, s.device, start_along_track_m, corrections, physical
+        )
+        self.height = (
+            None
+            if height is None
+            else HeightChannel(
+                config, height, height_channel, s.lens_backend, s.device, start_along_track_m
+            )
+        )
+        self._held = HeldPulses()  # pulses inside the line stages (metadata)
+        self._holding = bool(corrections and corrections.line_stages)
+        n = config.processor.aperture_pulses
+        self.max_batch = s.max_batch or config.processor.micro_batch
+        capacity = s.queue_pulses or 8 * n
+        self.q_shots = BoundedQueue(capacity, "shots")
+        self.q_lines = BoundedQueue(capacity, "compressed")
+        self.q_image = BoundedQueue(capacity, "image lines")
+        max_gap = s.max_gap_pulses or max(4 * n, int(60 * config.geometry.prf_hz))
+        self.ingest = Ingest(config.waveform.samples_per_shot, n, max_gap, self.engine.dtype)
+        block = config.processor.fft_length or 2 * n
+        self.timing = LineTiming(n, 4 * (n + block + capacity + self.max_batch))
+        self.stats = PipelineStats()
+        self.on_stats = on_stats
+        self.stats_every_s = stats_every_s
+        self.own = dict.fromkeys(OWN_COUNTERS, 0)  # source and ingest keep theirs
+        self._errors: list[BaseException] = []
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._height_seq = 0
+        self.info = StreamInfo(
+            stream_id=stream_id or new_stream_id(),
+            config=config,
+            source=source.description,
+            lens_backend=s.lens_backend,
+            range_m=self.engine.range_m,
+            start_along_track_m=float(start_along_track_m),
+            # perf_counter times (latency) + this offset = UNIX times (headers).
+            clock_offset_s=time.time() - time.perf_counter(),
+        )
+        self.strips = StripAssembler(self.info)
+
+    @property
+    def stream_id(self) -> str:
+        return self.info.stream_id
+
+    # ---- stages ---------------------------------------------------------------------------
+    def _source_stage(self) -> None:
+        live = self.source.live
+        try:
+            for batch in self.source:
+                if self._stop.is_set():
+                    break
+                if not self.q_shots.put(batch, block=not live):
+                    self.own["dropped_pulses"] += len(batch)
+        finally:
+            self.q_shots.close()
+
+    def _lens_stage(self) -> None:
+        busy = 0.0
+        try:
+            while True:
+                batches = self.q_shots.get_batch(self.max_batch)
+                if batches is None:
+                    break
+                t = time.perf_counter()
+                blocks = [b for batch in batches for b in self.ingest(batch)]
+                busy += time.perf_counter() - t
+                for block in _groups(blocks, self.max_batch):
+                    t = time.perf_counter()
+                    out = self._range(block)
+                    busy += time.perf_counter() - t
+                    self._forward(out)
+            if self._holding:
+                self._forward(self._held.release(self.engine.flush_range()))
+            if self.settings.stages == "fused":
+                self._put_image(self._ccd_flush())
+        finally:
+            self.stats.busy_s["lens" if self.settings.stages == "split" else "lens+ccd"] = busy
+            (self.q_image if self.settings.stages == "fused" else self.q_lines).close()
+
+    def _range(self, block: PulseBlock) -> PulseBlock | None:
+        """Range half of the engine on one block; the pulses it releases, with their metadata."""
+        zero = bool(block.flagged.all())  # zero pulses (gap fill): zero lines, no launch
+        lines = self.engine.range_stage(block.samples, block.aux, zero)
+        aux = {} if self.height is None else {"lines2": self.height.compress(block)}
+        if self._holding:  # a line stage may hold pulses: their metadata waits with them
+            self._held.hold(
+                PulseBlock(block.first_pulse, block.samples[:, :0], block.arrival_s, block.flagged)
+            )
+            return self._held.release(lines)
+        return PulseBlock(block.first_pulse, lines, block.arrival_s, block.flagged, aux)
+
+    def _forward(self, block: PulseBlock | None) -> None:
+        """Hand a block of range-compressed pulses to the CCD (its thread, or here if fused)."""
+        if block is None or not len(block):
+            return
+        if self.settings.stages == "fused":
+            self._put_image(self._ccd_step([block]))
+        else:
+            self.q_lines.put(block)
+
+    def _put_image(self, block: LineBlock | None) -> None:
+        if block is not None:
+            self.q_image.put(block)
+
+    def _ccd_stage(self) -> None:
+        busy = 0.0
+        try:
+            while True:
+                blocks = self.q_lines.get_batch(self.max_batch)
+                if blocks is None:
+                    break
+                t = time.perf_counter()
+                out = self._ccd_step(blocks)
+                busy += time.perf_counter() - t
+                self._put_image(out)
+            self._put_image(self._ccd_flush())
+        finally:
+            self.stats.busy_s["ccd"] = busy
+            self.q_image.close()
+
+    def _ccd_step(self, blocks: list[PulseBlock]) -> LineBlock | None:
+        block = concat_blocks(blocks)
+        self.timing.record(block)
+        self.own["pulses_processed"] += len(block)
+        out = self.engine.azimuth_stage(block.samples)
+        if self.height is not None:
+            self._put_heights(self.height.correlate(out.lines, block.aux["lines2"]))
+        return self._line_block(out)
+
+    def _ccd_flush(self) -> LineBlock | None:
+        out = self.engine.flush_azimuth()
+        if self.height is not None:
+            self._put_heights(self.height.flush(out.lines))
+        return self._line_block(out)
+
+    def _put_heights(self, batch: HeightBatch | None) -> None:
+        """Height strips, queued for publication in order with the image lines."""
+        if batch is not None:
+            self.q_image.put(batch)
+
+    def _line_block(self, out: Lines) -> LineBlock | None:
+        block = self.timing.lines(out.first_line, out.lines)
+        if block is not None:
+            self.own["lines_out"] += len(block)
+            self.own["flagged_lines"] += int(block.flagged.sum())
+        return block
+
+    def _strip_stage(self) -> None:
+        last_stats = time.perf_counter()
+        strip_lines = self.settings.strip_lines
+        prf = self.config.geometry.prf_hz
+        strip_period_s = min(max(strip_lines / prf, 1e-3), self.stats_every_s / 4)
+        strips = self.strips
+        try:
+            while True:
+                blocks = self.q_image.get_batch(8 * strip_lines, timeout=strip_period_s)
+                if blocks is None:
+                    break
+                if not blocks and strips.held:  # no new line for a strip's time: send what is held
+                    self._publish(strips.held)
+                for b in blocks:
+                    if isinstance(b, HeightBatch):
+                        self._publish_heights(b)
+                    else:
+                        strips.add(b)
+                while strips.held >= strip_lines:
+                    self._publish(strip_lines)
+                now = time.perf_counter()
+                if now - last_stats >= self.stats_every_s:
+                    last_stats = now
+                    self._send_stats()
+            while strips.held:
+                self._publish(min(strips.held, strip_lines))
+        finally:
+            self._send_stats(final=True)
+
+    def _publish(self, count: int) -> None:
+        """Publish the first ``count`` pending lines as one strip."""
+        strip, last_arrival_s = self.strips.take(count, self.counters())
+        for sink in self.sinks:
+            sink.strip(strip, self.info)
+        self.stats.latency.add(time.perf_counter() - last_arrival_s)
+        self.own["strips_published"] += 1
+
+    def _publish_heights(self, batch: HeightBatch) -> None:
+        for strip in batch.strips:
+            for sink in self.sinks:
+                sink.height(strip, self._height_seq, self.info)
+            self._height_seq += 1
+            self.own["height_strips_published"] = self.own.get("height_strips_published", 0) + 1
+
+    def counters(self) -> dict:
+        """All counters: source, ingest, corrections and pipeline."""
+        c = dict(self.source.counters)
+        c.update(self.ingest.counters)
+        if self.corrections:
+            c.update(self.corrections.counters())
+        c.update(self.own)
+        return c
+
+    def _send_stats(self, final: bool = False) -> None:
+        self.stats.elapsed_s = time.perf_counter() - self.stats.started_s
+        self.stats.counters = self.counters()
+        d = self.stats.as_dict()
+        d["queue_fill"] = {
+            q.name: q.size / q.capacity for q in (self.q_shots, self.q_lines, self.q_image)
+        }
+        d["latency_recent_median_ms"] = self.stats.latency.recent_percentile(50) * 1e3
+        d["latency_recent_p99_ms"] = self.stats.latency.recent_percentile(99) * 1e3
+        d["final"] = final
+        if self.height is not None:
+            d["height"] = {k: float(v) for k, v in self.height.stage.stats.items()}
+        for sink in self.sinks:
+            (sink.end if final else sink.stats)(d, self.info)
+        if self.on_stats is not None:
+            self.on_stats(d)
+
+    # ---- control ----------------------------------------------------------------------------
+    def _guard(self, target):
+        def run():
+            try:
+                target()
+            except BaseException as exc:  # a stage failed: stop everything, report in run()
+                self._errors.append(exc)
+                self._stop.set()
+                self.source.close()
+                for q in (self.q_shots, self.q_lines, self.q_image):
+                    q.close()
+
+        return run
+
+    def start(self) -> None:
+        self.stats.started_s = time.perf_counter()
+        stages = [self._source_stage, self._lens_stage, self._strip_stage]
+        if self.settings.stages == "split":
+            stages.insert(2, self._ccd_stage)
+        for target in stages:
+            t = threading.Thread(
+                target=self._guard(target), name=f"rtsar-{target.__name__[1:]}", daemon=True
+            )
+            self._threads.append(t)
+            t.start()
+
+    def stop(self) -> None:
+        """Stop the source; what is in flight is still processed and published."""
+        self.source.close()
+
+    def join(self) -> PipelineStats:
+        try:
+            for t in self._threads:
+                while t.is_alive():
+                    t.join(0.1)
+        except KeyboardInterrupt:
+            self.stop()
+            for t in self._threads:
+                t.join()
+            raise
+        finally:
+            if self._errors:
+                raise self._errors[0]
+        return self.stats
+
+    def run(self) -> PipelineStats:
+        self.start()
+        return self.join()
+
+
+def _groups(blocks: list[PulseBlock], most: int):
+    """Consecutive pulse blocks regrouped into blocks of at most ``most`` pulses."""
+    pending, size = [], 0
+    for b in blocks:
+        start = 0
+        while start < len(b):
+            take = min(len(b) - start, most - size)
+            pending.append(b.slice(start, start + take))
+            size += take
+            start += take
+            if size == most:
+                yield concat_blocks(pending)
+                pending, size = [], 0
+    if pending:
+        yield concat_blocks(pending)
+
+
+def new_stream_id() -> str:
+    """A random hex id for a run (a new id tells subscribers the publisher restarted)."""
+    return uuid.uuid4().hex[:16]

@@ -1,0 +1,71 @@
+"""What a run did: counters, the latency distribution in bounded memory, stage busy time.
+
+Latency of an image line: from the arrival of the last pulse that contributes to it (pulse
+j + N - 1 for line j, Psaltis & Wagner 1981: the row leaves the CCD after N shifts) to the
+publication of the strip holding it.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+class LatencyStats:
+    """Latency distribution in bounded memory: a log-spaced histogram (0.5 % wide bins)."""
+
+    BINS_PER_DECADE = 460
+    LOW_S = 1e-6
+
+    def __init__(self):
+        self.counts = np.zeros(9 * self.BINS_PER_DECADE + 2, np.int64)  # 1 µs … 1e3 s
+        self.recent: deque[float] = deque(maxlen=4000)
+        self.total = 0
+        self.max_s = 0.0
+
+    def add(self, latency_s: np.ndarray) -> None:
+        latency_s = np.asarray(latency_s, np.float64)
+        if not latency_s.size:
+            return
+        decades = np.log10(np.maximum(latency_s, self.LOW_S) / self.LOW_S)
+        k = np.floor(decades * self.BINS_PER_DECADE)
+        np.add.at(self.counts, np.clip(k.astype(np.int64) + 1, 0, len(self.counts) - 1), 1)
+        self.recent.extend(latency_s[-self.recent.maxlen :].tolist())
+        self.total += latency_s.size
+        self.max_s = max(self.max_s, float(latency_s.max()))
+
+    def percentile(self, q: float) -> float:
+        """q-th percentile (s), to the histogram's 0.5 %; NaN when empty."""
+        if self.total == 0:
+            return float("nan")
+        k = int(np.searchsorted(np.cumsum(self.counts), q / 100 * self.total, "left"))
+        return self.LOW_S * 10 ** ((k - 0.5) / self.BINS_PER_DECADE)
+
+    def recent_percentile(self, q: float) -> float:
+        return float(np.percentile(self.recent, q)) if self.recent else float("nan")
+
+
+@dataclass
+class PipelineStats:
+    """What a run did: counters, latency, timing.  ``as_dict`` is what the stats topic carries."""
+
+    counters: dict = field(default_factory=dict)
+    latency: LatencyStats = field(default_factory=LatencyStats)
+    started_s: float = 0.0
+    elapsed_s: float = 0.0
+    busy_s: dict = field(default_factory=dict)  # seconds of work per stage
+
+    def as_dict(self) -> dict:
+        d = {k: int(v) for k, v in self.counters.items()}
+        lat = self.latency
+        return {
+            "counters": d,
+            "elapsed_s": self.elapsed_s,
+            "pulse_rate_hz": d.get("pulses_processed", 0) / max(self.elapsed_s, 1e-9),
+            "latency_median_ms": lat.percentile(50) * 1e3,
+            "latency_p99_ms": lat.percentile(99) * 1e3,
+            "latency_max_ms": lat.max_s * 1e3,
+            "stage_busy_s": dict(self.busy_s),
+        }

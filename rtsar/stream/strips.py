@@ -1,0 +1,158 @@
+"""Strips: runs of finished image lines, the unit of publication; what sinks are told.
+
+A sink (publisher, image recorder, test collector) receives each :class:`Strip` and the run's
+:class:`StreamInfo` (identity, configuration, axes, clock) — never the pipeline itself — through
+the four methods of :class:`StripSink`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..ccd.base import line_azimuth_m
+from ..params import Config
+
+
+@dataclass
+class LineBlock:
+    """Finished image lines with the times and flags of the pulses that made them."""
+
+    first_line: int
+    lines: np.ndarray  # complex64[n, range_bins]
+    first_arrival_s: np.ndarray  # float64[n], arrival of pulse j (first contributing)
+    last_arrival_s: np.ndarray  # float64[n], arrival of pulse j + N - 1 (last contributing)
+    flagged: np.ndarray  # bool[n], aperture holds a zero-filled / zeroed pulse
+
+    def __len__(self) -> int:
+        return len(self.lines)
+
+    def slice(self, start: int, stop: int) -> LineBlock:
+        return LineBlock(
+            self.first_line + start,
+            self.lines[start:stop],
+            self.first_arrival_s[start:stop],
+            self.last_arrival_s[start:stop],
+            self.flagged[start:stop],
+        )
+
+
+@dataclass
+class Strip:
+    """A run of consecutive image lines, the unit of publication."""
+
+    seq: int
+    first_line: int
+    lines: np.ndarray  # complex64[n, range_bins]
+    azimuth_m: np.ndarray  # float64[n]
+    first_arrival_s: float  # perf_counter time, first pulse contributing to the first line
+    last_arrival_s: float  # perf_counter time, last pulse contributing to the last line
+    flagged_lines: list[tuple[int, int]]  # [(first_line, count)] runs of flagged lines
+    counters: dict = field(default_factory=dict)  # every counter of the run when it was sent
+
+
+@dataclass(frozen=True)
+class StreamInfo:
+    """What a sink knows of the run: identity, configuration, axes and clock."""
+
+    stream_id: str  # random hex id of this run
+    config: Config
+    source: str  # the source's description
+    lens_backend: str
+    range_m: np.ndarray  # slant range of each column
+    start_along_track_m: float  # platform position of pulse 0
+    clock_offset_s: float  # perf_counter time + this = UNIX time
+    config_dict: dict = field(default_factory=dict)  # config.to_dict(), formed once
+
+    def __post_init__(self):
+        if not self.config_dict:
+            object.__setattr__(self, "config_dict", self.config.to_dict())
+
+    @property
+    def azimuth_step_m(self) -> float:
+        return self.config.geometry.along_track_step_m
+
+    def azimuth_m(self, first_line: int, count: int) -> np.ndarray:
+        """Along-track position of image lines (the centre of each line's aperture)."""
+        return line_azimuth_m(self.config, self.start_along_track_m, first_line, count)
+
+    def unix_s(self, perf_s: float) -> float:
+        """A perf_counter time as UNIX time."""
+        return float(perf_s) + self.clock_offset_s
+
+
+class StripSink:
+    """What the pipeline hands its output to; every method is a no-op unless overridden.
+
+    ``strip``: a strip of image lines; ``height``: a height strip (3D imaging,
+    rtsar.topo.stream.HeightStrip, with its own sequence number); ``stats``: the periodic stats
+    dictionary (README "Strip protocol"); ``end``: the final stats, once.
+    """
+
+    def strip(self, strip: Strip, info: StreamInfo) -> None:
+        pass
+
+    def height(self, strip, seq: int, info: StreamInfo) -> None:
+        pass
+
+    def stats(self, stats: dict, info: StreamInfo) -> None:
+        pass
+
+    def end(self, stats: dict, info: StreamInfo) -> None:
+        pass
+
+
+class StripAssembler:
+    """Collects line blocks in order and cuts them into strips of any length."""
+
+    def __init__(self, info: StreamInfo):
+        self.info = info
+        self._pending: list[LineBlock] = []
+        self.held = 0  # lines pending
+        self.seq = 0  # the next strip's number
+
+    def add(self, block: LineBlock) -> None:
+        self._pending.append(block)
+        self.held += len(block)
+
+    def take(self, count: int, counters: dict) -> tuple[Strip, np.ndarray]:
+        """The first ``count`` pending lines as one strip, and the arrival of the last pulse of
+        each of its lines (the latency reference)."""
+        parts, rest, need = [], [], count
+        for b in self._pending:
+            if need == 0:
+                rest.append(b)
+            elif len(b) <= need:
+                parts.append(b)
+                need -= len(b)
+            else:
+                parts.append(b.slice(0, need))
+                rest.append(b.slice(need, len(b)))
+                need = 0
+        self._pending = rest
+        self.held -= count
+        first = parts[0].first_line
+        lines = parts[0].lines if len(parts) == 1 else np.concatenate([p.lines for p in parts])
+        flagged = np.concatenate([p.flagged for p in parts])
+        strip = Strip(
+            seq=self.seq,
+            first_line=first,
+            lines=lines,
+            azimuth_m=self.info.azimuth_m(first, len(lines)),
+            first_arrival_s=float(parts[0].first_arrival_s[0]),
+            last_arrival_s=float(parts[-1].last_arrival_s[-1]),
+            flagged_lines=flag_runs(first, flagged),
+            counters=counters,
+        )
+        self.seq += 1
+        return strip, np.concatenate([p.last_arrival_s for p in parts])
+
+
+def flag_runs(first: int, flagged: np.ndarray) -> list[tuple[int, int]]:
+    """Runs of True in ``flagged`` as (first_line, count) pairs."""
+    if not flagged.any():
+        return []
+    f = np.concatenate([[False], flagged, [False]]).astype(np.int8)
+    edges = np.flatnonzero(np.diff(f))
+    return [(first + int(a), int(b - a)) for a, b in zip(edges[::2], edges[1::2], strict=True)]

@@ -1,0 +1,214 @@
+"""The package's layout rules (README "Layout"), checked on the source with ``ast``.
+
+Floors from the bottom up; a module imports only from its own floor or below.  No import cycle,
+counting the imports inside functions too.  Only the application floor parses arguments, prints
+or draws.  Sinks see the stream's strips, not the pipeline.  No module over 500 lines.  Every
+package is installed by ``pip install .``.
+"""
+
+import ast
+import sys
+from pathlib import Path
+
+import pytest
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "rtsar"
+
+FLOORS = [
+    {"rtsar", "rtsar.params", "rtsar.windows", "rtsar.instrument", "rtsar.phase", "rtsar.samples"},
+    {"rtsar.lens"},
+    {"rtsar.physical"},
+    {"rtsar.ccd"},
+    {"rtsar.focus"},
+    {"rtsar.topo"},
+    {"rtsar.scene"},
+    {"rtsar.sources"},
+    {"rtsar.stream"},
+    {"rtsar.sinks"},
+    {"rtsar.analysis"},
+    {"rtsar.app", "rtsar.__main__"},
+]
+
+# Imports inside functions, each with its reason: the cost of loading what few runs need.
+# An import placed in a function to dodge an import cycle does not belong here.
+LAZY_ALLOWED = {
+    ("rtsar.lens.base", "rtsar.lens.opencl"): "pyopencl loads slowly; the NumPy lens needs none",
+    ("rtsar.ccd", "rtsar.ccd.physical"): "the physical CCD's numba kernels, physical mode only",
+}
+MAX_LINES = 500
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def modules() -> dict[str, Path]:
+    return {module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+
+
+MODULES = modules()
+
+
+def floor(name: str) -> int:
+    if name == "rtsar":
+        return 0
+    for rank, members in enumerate(FLOORS):
+        if any(name == m or name.startswith(m + ".") for m in members - {"rtsar"}):
+            return rank
+    raise AssertionError(f"{name} belongs to no floor: add it to FLOORS (and the README)")
+
+
+def resolve(importer: str, is_package: bool, node: ast.ImportFrom) -> list[str]:
+    """The rtsar modules a ``from … import …`` statement loads."""
+    if node.level:
+        base = importer.split(".")
+        if not is_package:
+            base = base[:-1]
+        base = base[: len(base) - (node.level - 1)]
+        target = ".".join(base + ([node.module] if node.module else []))
+    else:
+        target = node.module or ""
+    if not target.startswith("rtsar"):
+        return []
+    out = []
+    for alias in node.names:
+        sub = f"{target}.{alias.name}"
+        out.append(sub if sub in MODULES else target)
+    return out
+
+
+def imports(name: str) -> list[tuple[str, bool, int]]:
+    """(imported rtsar module, inside a function?, line) for every import in ``name``."""
+    path = MODULES[name]
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    is_package = path.name == "__init__.py"
+    found = []
+
+    def visit(node, in_function):
+        for child in ast.iter_child_nodes(node):
+            inner = in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef))
+            if isinstance(child, ast.ImportFrom):
+                targets = resolve(name, is_package, child)
+                found.extend((t, in_function, child.lineno) for t in targets)
+            elif isinstance(child, ast.Import):
+                found.extend(
+                    (a.name, in_function, child.lineno)
+                    for a in child.names
+                    if a.name.startswith("rtsar")
+                )
+            visit(child, inner)
+
+    visit(tree, False)
+    return found
+
+
+GRAPH = {name: imports(name) for name in MODULES}
+
+
+def test_every_module_sits_on_a_floor():
+    for name in MODULES:
+        floor(name)
+
+
+def test_no_module_imports_a_floor_above_its_own():
+    upward = [
+        f"{name}:{line} imports {target} (floor {floor(target)} > {floor(name)})"
+        for name, edges in GRAPH.items()
+        for target, _, line in edges
+        if floor(target) > floor(name)
+    ]
+    assert not upward, "\n".join(upward)
+
+
+def test_no_import_cycles():
+    state: dict[str, int] = {}  # 1: on the current path, 2: done
+    stack: list[str] = []
+    cycles = []
+
+    def walk(name):
+        state[name] = 1
+        stack.append(name)
+        for target, _, _ in GRAPH.get(name, []):
+            if target not in MODULES or target == name:
+                continue
+            if state.get(target) == 1:
+                cycles.append(" → ".join(stack[stack.index(target) :] + [target]))
+            elif target not in state:
+                walk(target)
+        stack.pop()
+        state[name] = 2
+
+    for name in MODULES:
+        if name not in state:
+            walk(name)
+    assert not cycles, "\n".join(cycles)
+
+
+def test_imports_inside_functions_are_only_the_listed_ones():
+    lazy = {
+        (name, target): line
+        for name, edges in GRAPH.items()
+        for target, inside, line in edges
+        if inside
+    }
+    unlisted = [f"{n}:{line} imports {t} inside a function" for (n, t), line in lazy.items()]
+    unlisted = [u for u, key in zip(unlisted, lazy, strict=True) if key not in LAZY_ALLOWED]
+    assert not unlisted, "\n".join(unlisted)
+
+
+def _uses(name: str) -> set[str]:
+    """Which of argparse, matplotlib and print() a module uses."""
+    tree = ast.parse(MODULES[name].read_text(encoding="utf-8"))
+    used = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            used |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            used.add(node.module.split(".")[0])
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name):
+            if node.func.id == "print":
+                used.add("print")
+    return used & {"argparse", "matplotlib", "print"}
+
+
+def test_only_the_application_floor_parses_prints_or_draws():
+    bad = {
+        name: sorted(_uses(name))
+        for name in MODULES
+        if floor(name) < floor("rtsar.app") and _uses(name)
+    }
+    assert not bad, bad
+
+
+def test_sinks_see_strips_not_the_pipeline():
+    bad = [
+        f"{name} imports {target}"
+        for name, edges in GRAPH.items()
+        if name.startswith("rtsar.sinks")
+        for target, _, _ in edges
+        if target.startswith("rtsar.stream") and target != "rtsar.stream.strips"
+    ]
+    assert not bad, bad
+
+
+@pytest.mark.parametrize("name", sorted(MODULES))
+def test_module_size(name):
+    lines = MODULES[name].read_text(encoding="utf-8").count("\n")
+    assert lines <= MAX_LINES, f"{name} has {lines} lines: split it (STYLE habit 8)"
+
+
+def test_pyproject_installs_every_package():
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    listed = set(config["tool"]["setuptools"]["packages"])
+    found = {module_name(p.parent) for p in PACKAGE.rglob("__init__.py")}
+    assert found - listed == set(), f"packages missing from pyproject.toml: {found - listed}"
+    assert (ROOT / "kernels" / "lens.cl").is_file() and "rtsar.kernels" in listed

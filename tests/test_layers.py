@@ -212,3 +212,38 @@ def test_pyproject_installs_every_package():
     found = {module_name(p.parent) for p in PACKAGE.rglob("__init__.py")}
     assert found - listed == set(), f"packages missing from pyproject.toml: {found - listed}"
     assert (ROOT / "kernels" / "lens.cl").is_file() and "rtsar.kernels" in listed
+
+
+def test_readme_layout_names_every_module():
+    """README "Layout" lists every top-level module and package and, per package, its modules."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    block = text.split("## Layout", 1)[1].split("```", 2)[1]
+    entries: dict[str, str] = {}
+    current = None
+    for line in block.splitlines():
+        head = line.split()[0] if line.strip() else ""
+        if head.startswith("rtsar/"):
+            current = head
+            entries[current] = line
+        elif current:
+            entries[current] += " " + line
+    words = {w.strip(",():;") for v in entries.values() for w in v.replace("/", "/ ").split()}
+    missing = []
+    for child in sorted(PACKAGE.iterdir()):
+        if child.name.startswith(("_", ".")) or child.suffix not in (".py", ""):
+            continue
+        if child.is_dir():
+            key = f"rtsar/{child.name}/"
+            if key not in entries:
+                missing.append(key)
+                continue
+            listed = {w.strip(",():;/") for w in entries[key].split()}
+            for sub in sorted(child.iterdir()):
+                name = sub.stem if sub.suffix == ".py" else sub.name
+                if name.startswith("_") or (sub.is_dir() and not (sub / "__init__.py").exists()):
+                    continue
+                if name not in listed and f"{name}/" not in entries[key]:
+                    missing.append(f"{key}{name}")
+        elif f"rtsar/{child.name}" not in words and f"rtsar/{child.name}" not in block:
+            missing.append(f"rtsar/{child.name}")
+    assert not missing, f"README layout does not name: {missing}"

@@ -81,7 +81,6 @@ def infer_oversampling(config, channel: np.ndarray, name: str) -> int:
     return m // s
 
 
-
 # ---- the HCN reference cell ---------------------------------------------------------------
 BAND_ORIGIN_HZ = 194.32e12
 B_LOWER_HZ = 43.17e9

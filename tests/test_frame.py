@@ -257,3 +257,37 @@ def test_fuzz_small():
     assert stats.frames > 0
     for name in ("header_crc_errors", "payload_crc_errors", "bad_headers", "bytes_skipped"):
         assert stats.counters[name] > 0, name
+
+
+def _false_header(samples: int, channels: int = 1) -> bytes:
+    """A sync word and a CRC-valid header announcing a payload that never follows."""
+    import struct
+    import zlib
+
+    header = struct.pack("<BBHIQQ", 1, 1, channels, samples, 7, 0)
+    return b"\x1a\xcf\xfc\x1d" + header + struct.pack("<I", zlib.crc32(header))
+
+
+def test_a_false_header_of_another_shape_holds_nothing():
+    # A CRC-valid header announcing 60 MiB, then intact frames: a parser that knows the stream's
+    # shot refuses the header at once, and the frames behind it come out in the same call.
+    shots = [encode_frame(k, k, np.full(16, k, np.complex64)) for k in range(5)]
+    p = FrameParser(samples_per_shot=16, max_channels=4)
+    got = p.feed(_false_header(2_000_000, 4) + b"".join(shots))
+    assert [f.sequence for f in got] == list(range(5))
+    assert p.counters["wrong_length"] == 1 and p.buffered == 0
+
+
+def test_frames_behind_a_header_whose_payload_never_came_are_recovered_at_the_end():
+    # A header of an allowed shape (4 channels) whose payload is cut by the link holds up to one
+    # such frame of bytes, here two intact one-channel frames; when the link ends, finish()
+    # gives up on the cut frame and returns the intact frames behind it.
+    shots = [encode_frame(k, k, np.full(16, k, np.complex64)) for k in range(3)]
+    p = FrameParser(samples_per_shot=16, max_channels=4)
+    got = p.feed(_false_header(16, 4) + shots[1] + shots[2])
+    assert got == [] and p.buffered > 0
+    got = p.finish()
+    assert [f.sequence for f in got] == [1, 2]
+    assert p.counters["truncated_frames"] == 1 and p.buffered == 0
+    c = p.counters
+    assert c["bytes_fed"] == sum(f.nbytes for f in got) + c["bytes_skipped"]

@@ -24,6 +24,7 @@ from rtsar.scene import Simulator, point_scene
 from rtsar.sources.replay import ReplaySource
 from rtsar.stream.engine import StreamProcessor, process_block
 from rtsar.stream.pipeline import Pipeline, PipelineSettings
+from rtsar.stream.strips import StripSink
 
 try:
     import pyopencl  # noqa: F401
@@ -404,7 +405,7 @@ def test_nan_and_inf_are_rejected_counted_and_never_published():
     zeroed[rejected] = 0
     ref, _, _ = process_block(cfg, zeroed, LENS)
 
-    class Collect:
+    class Collect(StripSink):
         def __init__(self):
             self.strips, self.final = [], None
 

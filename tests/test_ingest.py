@@ -18,7 +18,7 @@ def batch(seq, samples=None):
 
 def stream(ing, batches):
     """Feed batches; return (samples, flagged, first_pulse of each block) of the whole output."""
-    blocks = [b for x in batches for b in ing(x)]
+    blocks = [b for x in batches for b in ing(x)] + ing.flush()
     for a, b in zip(blocks, blocks[1:], strict=False):
         assert b.first_pulse == a.first_pulse + len(a)  # consecutive, whatever came in
     return (
@@ -123,3 +123,57 @@ def test_bad_aux_channel_zeroes_the_whole_pulse():
     # A later batch without the channel cannot be paired: zeroed and counted, never a crash.
     (blk2,) = ing(batch([3, 4]))
     assert ing.counters["wrong_length_pulses"] == 2 and blk2.flagged.all()
+
+
+def accounted(ing):
+    c = ing.counters
+    held = 0 if ing._candidate is None else 1
+    lost = c["duplicates"] + c["late_pulses"] + c["stray_pulses"]
+    return c["pulses_received"] == c["pulses_accepted"] + lost + held
+
+
+def test_one_frame_far_ahead_is_a_stray_not_an_outage():
+    # One shot numbered a minute ahead in a run: before, ingest filled the whole jump with zero
+    # pulses and then dropped the run's next shots as duplicates.
+    ing = Ingest(S, aperture_pulses=4, max_gap_pulses=4)
+    x, f = stream(ing, [batch([0, 1, 2]), batch([600_000]), batch(range(3, 10))])
+    np.testing.assert_array_equal(x[:, 0].real, np.arange(1, 11))  # every intact shot, in place
+    assert not f.any()
+    c = ing.counters
+    assert c["stray_pulses"] == 1 and c["gap_pulses"] == 0 and c["discontinuities"] == 0
+    assert accounted(ing)
+
+
+def test_a_counter_reset_is_a_restart_at_once_and_loses_nothing():
+    ing = Ingest(S, aperture_pulses=4, max_gap_pulses=16)
+    x, f = stream(ing, [batch(range(1000, 1010)), batch(range(0, 5))])
+    assert ing.counters["discontinuities"] == 1 and ing.counters["duplicates"] == 0
+    assert len(x) == 10 + 4 + 5  # N = 4 zero pulses clear the CCD between the two runs
+    np.testing.assert_array_equal(x[-5:, 0].real, np.arange(1, 6))
+    np.testing.assert_array_equal(f, [0] * 10 + [1] * 4 + [0] * 5)
+    assert accounted(ing)
+
+
+def test_zero_fill_is_bounded_by_the_gap_bound():
+    # A run resuming 50 pulses later with a bound of 8: a restart (N zeros), not 50 zeros.
+    ing = Ingest(S, aperture_pulses=4, max_gap_pulses=8)
+    x, _ = stream(ing, [batch(range(0, 10)), batch(range(60, 70))])
+    assert ing.counters["gap_pulses"] == 4 and ing.counters["discontinuities"] == 1
+    assert len(x) == 10 + 4 + 10 and accounted(ing)
+
+
+def test_a_stray_old_frame_does_not_restart_the_count():
+    ing = Ingest(S, aperture_pulses=4, max_gap_pulses=4, memory_pulses=16)
+    x, f = stream(ing, [batch(range(100, 140)), batch([3]), batch(range(140, 150))])
+    np.testing.assert_array_equal(x[:, 0].real, np.arange(101, 151))
+    assert ing.counters["stray_pulses"] == 1 and ing.counters["discontinuities"] == 0
+    assert accounted(ing)
+
+
+def test_a_held_candidate_at_the_end_of_a_stream_is_kept():
+    ing = Ingest(S, aperture_pulses=4, max_gap_pulses=4)
+    blocks = ing(batch([0, 1, 500]))
+    assert ing._candidate is not None and accounted(ing)
+    blocks += ing.flush()
+    assert sum(len(b) for b in blocks) == 2 + 4 + 1 and ing.counters["discontinuities"] == 1
+    assert accounted(ing)

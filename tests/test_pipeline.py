@@ -16,9 +16,10 @@ from rtsar.stream.engine import process_block
 from rtsar.stream.pipeline import Pipeline, PipelineSettings
 from rtsar.stream.queue import BoundedQueue
 from rtsar.stream.stats import LatencyStats
+from rtsar.stream.strips import StripSink
 
 
-class Collect:
+class Collect(StripSink):
     """In-process sink keeping every strip."""
 
     def __init__(self):
@@ -129,7 +130,8 @@ class StuckSink(Collect):
 
 def test_live_overload_drops_are_counted_and_timing_kept(tiny):
     cfg, _, shots = tiny
-    settings = PipelineSettings(queue_pulses=64, strip_lines=4)
+    # A gap bound above the 50 batches of the flood: every dropped slot is zero-filled.
+    settings = PipelineSettings(queue_pulses=64, strip_lines=4, max_gap_pulses=51 * 32)
     source = Flood(shots[:32])
     sink = StuckSink(source.done)
     Pipeline(cfg, source, [sink], settings).run()
@@ -308,3 +310,19 @@ def test_a_stage_that_holds_pulses_keeps_lines_and_flags_exact(tiny, stages):
 def test_correction_without_a_domain_is_refused():
     with pytest.raises(ValueError, match="domain"):
         CorrectionChain([("mystery", object())])
+
+
+def test_an_overload_beyond_the_gap_bound_is_a_counted_restart(tiny):
+    cfg, _, shots = tiny
+    n = cfg.processor.aperture_pulses
+    settings = PipelineSettings(queue_pulses=64, strip_lines=4)  # the bound: one aperture
+    source = Flood(shots[:32])
+    sink = StuckSink(source.done)
+    Pipeline(cfg, source, [sink], settings).run()
+    c = sink.final["counters"]
+    assert c["dropped_pulses"] > n
+    # No more zero pulses than one aperture per restart, whatever was dropped; every shot that
+    # arrived is still in the stream.
+    assert c["discontinuities"] >= 1 and c["gap_pulses"] <= n * c["discontinuities"] + n
+    assert c["pulses_received"] == 51 * 32 - c["dropped_pulses"] == c["pulses_accepted"]
+    assert c["pulses_processed"] == c["pulses_accepted"] + c["gap_pulses"]

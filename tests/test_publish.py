@@ -74,10 +74,10 @@ def tiny_shots():
     return cfg, Simulator(scene).block(scene.pulses)
 
 
-def run_pipeline(cfg, shots, publisher, repeat=1):
+def run_pipeline(cfg, shots, publisher, repeat=1, rate="max"):
     shots = np.concatenate([shots] * repeat)
     seq = np.arange(len(shots))
-    src = ReplaySource(shots, seq, seq / cfg.geometry.prf_hz, cfg.geometry.prf_hz, "max", 64)
+    src = ReplaySource(shots, seq, seq / cfg.geometry.prf_hz, cfg.geometry.prf_hz, rate, 64)
     t = time.perf_counter()
     Pipeline(cfg, src, [publisher], PipelineSettings(strip_lines=4)).run()
     return time.perf_counter() - t
@@ -208,3 +208,71 @@ def test_numpy_range_doppler_reference_matches_the_engine():
     got = numpy_range_doppler(cfg, shots)
     assert got.shape == expect.shape
     assert np.abs(got - expect).max() <= 1e-5 * np.abs(expect).max()
+
+
+def test_a_stalled_subscriber_cannot_freeze_lossless_delivery(tiny_shots):
+    """Lossless delivery with one subscriber that never reads: the run ends within the stall
+    bound, the stall is counted, and a subscriber that keeps up receives every strip."""
+    cfg, shots = tiny_shots
+    pub = ZmqPublisher("tcp://127.0.0.1:*", "lossless", hwm_messages=100, stall_timeout_s=0.5)
+    stalled = zmq.Context.instance().socket(zmq.SUB)
+    stalled.setsockopt(zmq.RCVHWM, 20)
+    stalled.setsockopt(zmq.RCVBUF, 4096)
+    stalled.setsockopt(zmq.SUBSCRIBE, b"")
+    stalled.connect(pub.endpoint)
+    reader = StripSubscriber(pub.endpoint)
+    assert pub.wait_for_subscribers(2, timeout_s=10)
+    got = []
+
+    def read():
+        while (m := reader.recv(5.0)) is not None:
+            got.append(m)
+            if m.topic == "end":
+                return
+
+    t_read = threading.Thread(target=read)
+    t_read.start()
+    result = []
+    # Shots at 4× the PRF: 500 strips/s, which the reading subscriber keeps up with.
+    t_run = threading.Thread(
+        target=lambda: result.append(run_pipeline(cfg, shots, pub, 4, rate=4.0))
+    )
+    t_run.start()
+    t_run.join(60)  # before: blocked for ever on the subscriber that never reads
+    t_read.join(10)
+    assert not t_run.is_alive() and result
+    assert pub.subscriber_stalls >= 1 and pub.counters()["messages_missed_by_stalled"] > 0
+    strips = [m for m in got if m.topic == "strip"]
+    assert got and got[-1].topic == "end"
+    assert [m.header["seq"] for m in strips] == list(range(pub.sent["strip"]))  # nothing lost
+    assert got[-1].header["counters"]["subscriber_stalls"] == pub.subscriber_stalls
+    stalled.close(0)
+    reader.close()
+    pub.close()
+
+
+def test_a_subscriber_that_left_is_not_counted():
+    pub = ZmqPublisher("tcp://127.0.0.1:*", "lossless")
+    gone = StripSubscriber(pub.endpoint)
+    assert pub.wait_for_subscribers(1, timeout_s=10)
+    gone.close()
+    time.sleep(0.2)  # its unsubscription travels
+    assert not pub.wait_for_subscribers(1, timeout_s=0.5) and pub.subscribers == 0
+    pub.close()
+
+
+def test_hurry_ends_a_lossless_wait_at_once():
+    pub = ZmqPublisher("tcp://127.0.0.1:*", "lossless", hwm_messages=2, stall_timeout_s=30)
+    stalled = zmq.Context.instance().socket(zmq.SUB)
+    stalled.setsockopt(zmq.RCVHWM, 2)
+    stalled.setsockopt(zmq.RCVBUF, 1024)
+    stalled.setsockopt(zmq.SUBSCRIBE, b"")
+    stalled.connect(pub.endpoint)
+    assert pub.wait_for_subscribers(1, timeout_s=10)
+    threading.Timer(0.3, pub.hurry).start()
+    t0 = time.perf_counter()
+    for _ in range(2000):  # fills every buffer on the way, then would wait 30 s
+        pub.send("stats", {"x": "y" * 1000})
+    assert time.perf_counter() - t0 < 3.0 and pub.subscriber_stalls == 1
+    stalled.close(0)
+    pub.close()

@@ -40,7 +40,9 @@ def test_loop_batches_channels_and_wrong_lengths(rng):
     np.testing.assert_allclose(np.concatenate([b.timestamp_s for b in batches]), 1e-6 * seq)
     assert all(b.samples.dtype == np.complex64 and b.samples.shape[1] == 16 for b in batches)
     assert src.counters["wrong_length"] == 2
-    assert src.counters["frames_ok"] == 12
+    # The short frame and the one without channel 1 are refused at their header (never
+    # buffered, never decoded).
+    assert src.counters["frames_ok"] == 10
     assert src.counters["header_crc_errors"] >= 1
     assert src.stop_reason.startswith("no bytes")
     assert not src.port.is_open
@@ -129,6 +131,7 @@ def test_fake_instrument_over_tcp_with_corruption():
         cfg.waveform.samples_per_shot,
         batch_frames=32,
         idle_timeout_s=5.0,
+        reconnect=False,
     )
     batches, seq = _collect(src)
     thread.join(5.0)
@@ -144,7 +147,8 @@ def test_fake_instrument_over_tcp_with_corruption():
     c = src.counters
     assert c["header_crc_errors"] + c["payload_crc_errors"] == summary.corrupted
     assert c["frames_ok"] == len(intact)
-    assert src.stop_reason.startswith("link closed")  # the instrument hung up
+    assert src.failure.startswith("instrument link lost")  # the instrument hung up: said so
+    assert src.counters["link_drops"] == 1
 
 
 def test_emit_drops_duplicates_and_keeps_the_schedule(rng):
@@ -203,3 +207,33 @@ def test_fake_instrument_on_a_pty():
     want = np.rint(x.real) + 1j * np.rint(x.imag)
     np.testing.assert_array_equal(np.concatenate([b.samples for b in got]), want)
     assert result["summary"].sent == 200
+
+
+def test_a_lost_socket_is_reported_and_reopened():
+    """The instrument hangs up after 150 shots and serves again: the source says so, reconnects
+    and gets the second connection's shots; nothing is silent."""
+    fake = load_tool("fake_instrument")
+    cfg, shots = _tiny_shots(300)
+    server = fake.listen("127.0.0.1:0")
+    port = server.getsockname()[1]
+
+    def serve():
+        with server:
+            fake.serve_tcp(server, [shots[:150]], 5000.0, start_delay_s=0.1)
+            fake.serve_tcp(server, [shots[150:]], 5000.0, start_delay_s=0.3, first_seq=150)
+
+    thread = threading.Thread(target=serve)
+    thread.start()
+    messages = []
+    src = SerialSource(
+        f"socket://127.0.0.1:{port}", cfg.waveform.samples_per_shot, idle_timeout_s=1.0
+    )
+    src.notify = messages.append
+    batches, seq = _collect(src)
+    thread.join(5.0)
+    assert src.counters["link_drops"] == 2 and src.counters["reconnects"] == 1
+    assert any("lost" in m for m in messages) and any("reopened" in m for m in messages)
+    # What arrived on both connections (the first frames of a connection may be discarded by
+    # pyserial when it opens): in order, from both halves.
+    assert np.all(np.diff(seq) > 0) and seq.min() < 150 <= seq.max()
+    assert src.failure is not None  # the link was down when the source gave up

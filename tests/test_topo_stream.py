@@ -9,6 +9,7 @@ import pytest
 from rtsar.scene.relief import default_spacing_m, ridge, surface_scene, zhao_config
 from rtsar.scene.simulator import Simulator
 from rtsar.stream.engine import StreamProcessor
+from rtsar.stream.strips import StripSink
 from rtsar.topo.insar import height_map
 from rtsar.topo.insar_geometry import InsalGeometry
 from rtsar.topo.registration import Registration, estimate_registration
@@ -190,7 +191,7 @@ def test_memory_is_bounded_and_misuse_is_refused(rng):
         HeightStripStage(GEO, np.arange(cols) + 2.4).process(np.ones((2, 3)), np.ones((2, 3)))
 
 
-class HeightSink:
+class HeightSink(StripSink):
     """In-process sink keeping image and height strips."""
 
     def __init__(self):

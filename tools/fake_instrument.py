@@ -72,10 +72,12 @@ def emit_frames(
     seed: int = 0,
     start_delay_s: float = 0.0,
     stop: threading.Event | None = None,
+    first_seq: int = 0,
 ) -> EmitSummary:
     """Write one frame per shot with ``write`` on the schedule t0 + n/prf_hz; return the tally.
 
-    ``shots`` yields blocks [pulse, sample]; ``scale`` multiplies the samples before encoding.
+    ``shots`` yields blocks [pulse, sample]; ``scale`` multiplies the samples before encoding;
+    shot n carries the sequence number ``first_seq`` + n.
     Ends early (``summary.stopped``) when ``stop`` is set or ``write`` raises OSError (the
     reader went away).
     """
@@ -94,18 +96,19 @@ def emit_frames(
         for block in shots:
             for samples in np.atleast_2d(block):
                 u_drop, u_corrupt, u_dup = rng.random(3)
-                frame = encode_frame(n, round(n * 1e9 / prf_hz), samples * scale, sample_type)
+                seq = first_seq + n
+                frame = encode_frame(seq, round(seq * 1e9 / prf_hz), samples * scale, sample_type)
                 due = t0 + n * period
                 n += 1
                 out.shots = n
                 if u_drop < drop:
                     out.dropped += 1
-                    out.dropped_seqs.append(n - 1)
+                    out.dropped_seqs.append(seq)
                     continue
                 if u_corrupt < corrupt:
                     frame = _flip_bytes(frame, rng)
                     out.corrupted += 1
-                    out.corrupted_seqs.append(n - 1)
+                    out.corrupted_seqs.append(seq)
                 wait = due - time.perf_counter()
                 if wait > 0 and stop.wait(wait):
                     out.stopped = "stopped"

@@ -96,9 +96,7 @@ def evaluate(spectrum: np.ndarray, t: float) -> complex:
     return complex(synthesis_vector(n, t) @ spectrum) / n
 
 
-def refine_max(
-    spectrum: np.ndarray, t_lo: float, t_hi: float, t_guess: float, xatol: float = 1e-9
-):
+def refine_max(spectrum: np.ndarray, t_lo: float, t_hi: float, t_guess: float, xatol: float = 1e-9):
     """Maximise ``|x(t)|**2`` on ``[t_lo, t_hi]``; return ``(t, x(t))`` (no worse than guess)."""
     value_guess = evaluate(spectrum, t_guess)
     if t_hi <= t_lo:

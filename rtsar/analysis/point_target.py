@@ -199,9 +199,7 @@ def _refine_peak_2d(spectrum_2d: np.ndarray, a_guess: float, r_guess: float, fac
     na, nr = spectrum_2d.shape
 
     def value_at(a, r):
-        return complex(
-            synthesis_vector(na, a) @ spectrum_2d @ synthesis_vector(nr, r) / (na * nr)
-        )
+        return complex(synthesis_vector(na, a) @ spectrum_2d @ synthesis_vector(nr, r) / (na * nr))
 
     v_guess = value_at(a_guess, r_guess)
     scale = abs(v_guess) ** 2

@@ -10,41 +10,77 @@ import sys
 import time
 
 from ..params import Config
-from ..sinks.publish import ZmqPublisher
+from ..sinks.publish import STALL_TIMEOUT_S, ZmqPublisher
 from ..sinks.record import ImageFileSink
 from ..stream.pipeline import Pipeline, PipelineSettings
+from . import signals
+
+# Counters that describe normal work; every other counter that is not zero is shown, so nothing
+# that went wrong is hidden from the status line.
+_NORMAL = {
+    "pulses_received",
+    "pulses_accepted",
+    "pulses_processed",
+    "lines_out",
+    "strips_published",
+    "height_strips_published",
+    "frames_ok",
+    "bytes_fed",
+}
+_NORMAL_SUFFIXES = (
+    ".pulses_in",
+    ".pulses_out",
+    ".shots_in",
+    ".blocks_estimated",
+    ".blocks_converged",
+    ".reasons.converged",  # the PGA outcomes whose estimate is used
+    ".reasons.window_floor",
+    ".reasons.max_iterations",
+)
+_LABELS = {
+    "dropped_pulses": "dropped",
+    "gap_pulses": "gap-filled",
+    "duplicates": "dup",
+    "late_pulses": "late",
+    "stray_pulses": "stray",
+    "nonfinite_pulses": "NaN/Inf",
+    "wrong_length_pulses": "bad length",
+    "discontinuities": "restarts",
+    "header_crc_errors": "header CRC errors",
+    "payload_crc_errors": "payload CRC errors",
+    "bad_headers": "bad headers",
+    "wrong_length": "wrong-shape frames",
+    "truncated_frames": "cut frames",
+    "bytes_skipped": "bytes skipped",
+    "link_drops": "link lost",
+    "reconnects": "reconnected",
+    "late_releases": "late releases",
+    "subscriber_stalls": "stalled subscribers cut off",
+    "messages_missed_by_stalled": "messages missed by them",
+    "flagged_lines": "flagged lines",
+}
+
+
+def problems(counters: dict) -> list[str]:
+    """Every counter that is not zero and says something went wrong or was done about it."""
+    out = []
+    for key, value in counters.items():
+        if not value or key in _NORMAL or key.endswith(_NORMAL_SUFFIXES):
+            continue
+        out.append(f"{_LABELS.get(key, key)} {value}")
+    return out
 
 
 def format_status(d: dict, total: int | None = None) -> str:
     c = d["counters"]
     done = c.get("pulses_processed", 0)
     progress = f"/{total}" if total else ""
-    problems = []
-    for key, label in (
-        ("dropped_pulses", "dropped"),
-        ("gap_pulses", "gap-filled"),
-        ("duplicates", "dup"),
-        ("late_pulses", "late"),
-        ("nonfinite_pulses", "NaN/Inf"),
-        ("wrong_length_pulses", "bad length"),
-        ("discontinuities", "jumps"),
-        ("header_crc_errors", "header CRC errors"),
-        ("payload_crc_errors", "payload CRC errors"),
-        ("bad_headers", "bad headers"),
-        ("wrong_length", "wrong-length frames"),
-        ("late_releases", "late releases"),
-    ):
-        if c.get(key):
-            problems.append(f"{label} {c[key]}")
-    for key, value in c.items():  # correction stages: what they could not do
-        if "." in key and value and ("not_" in key or "nonfinite" in key):
-            problems.append(f"{key} {value}")
+    bad = problems(c)
     return (
         f"t={d['elapsed_s']:6.1f} s  pulses {done}{progress}  {d['pulse_rate_hz']:8.0f} Hz  "
         f"lines {c.get('lines_out', 0)}  strips {c.get('strips_published', 0)}  "
         f"latency median {d['latency_recent_median_ms']:6.2f} ms p99 "
-        f"{d['latency_recent_p99_ms']:6.2f} ms  "
-        + ("  ".join(problems) if problems else "no drops/gaps")
+        f"{d['latency_recent_p99_ms']:6.2f} ms  " + ("  ".join(bad) if bad else "no drops/gaps")
     )
 
 
@@ -62,19 +98,37 @@ def run_stream(
     stream=None,
     corrections=None,
     physical=None,
+    stall_timeout_s: float = STALL_TIMEOUT_S,
+    curve_clients=None,
 ) -> int:
-    """Run until the source ends or Ctrl-C; print status lines and a summary; return exit code."""
+    """Run until the source ends, Ctrl-C or a signal; print status lines and a summary.
+
+    Exit status: 0 when the stream ended cleanly, 1 when the source failed (an instrument link
+    lost for good) or nothing could be written to ``output``, 128 + the signal number when
+    interrupted (130 for Ctrl-C).
+    """
     stream = stream or sys.stdout
+    err = sys.stderr
+
+    def say(message: str) -> None:  # a message on its own line, the status line goes on after
+        stream.write(("\n" if tty else "") + message + "\n")
+        stream.flush()
+
+    tty = hasattr(stream, "isatty") and stream.isatty()
+    source.notify = say
     publisher = ZmqPublisher(
         endpoint,
         delivery,
         curve_secret_key=curve_secret_key,
-        warn=lambda message: print(message, file=sys.stderr),
+        warn=lambda message: print(message, file=err),
+        stall_timeout_s=stall_timeout_s,
+        curve_clients=curve_clients,
     )
     sinks: list = [publisher]
+    recorder = None
     if output:
-        sinks.append(ImageFileSink(output, source.description))
-    tty = hasattr(stream, "isatty") and stream.isatty()
+        recorder = ImageFileSink(output, source.description)
+        sinks.append(recorder)
     last = [0.0]
 
     def show(d: dict) -> None:
@@ -97,7 +151,7 @@ def run_stream(
         file=stream,
         flush=True,
     )
-    interrupted = False
+    interrupted = None
     try:
         if wait_subscribers:
             print(
@@ -120,12 +174,12 @@ def run_stream(
         pipe.start()
         try:
             stats = pipe.join()
-        except KeyboardInterrupt:
-            interrupted = True
-            stream.write("\ninterrupted: the pulses already received are being finished\n")
+        except KeyboardInterrupt as exc:
+            interrupted = exc
+            say(f"{signals.describe(exc)}: the pulses already received were finished")
             stats = pipe.join()
-    except KeyboardInterrupt:  # while waiting for subscribers: nothing was processed
-        return 130
+    except KeyboardInterrupt as exc:  # while waiting for subscribers: nothing was processed
+        return signals.exit_status(exc)
     finally:
         publisher.close()
     if tty:
@@ -140,6 +194,26 @@ def run_stream(
         f"flagged lines {c['flagged_lines']}",
         file=stream,
     )
-    if output:
-        print(f"wrote {output}: {sinks[1].lines} lines", file=stream)
-    return 130 if interrupted else 0
+    bad = problems(c)
+    if bad:
+        print("counted: " + ", ".join(bad), file=stream)
+    status = 0
+    if recorder is not None:
+        if recorder.lines:
+            print(f"wrote {output}: {recorder.lines} lines", file=stream)
+        else:
+            print(
+                f"rtsar: no image written to {output}: no line was focused"
+                + (
+                    f" ({c['wrong_length']} frames of another shape than the configuration's "
+                    f"{config.waveform.samples_per_shot} samples per shot: check --preset/--scene)"
+                    if c.get("wrong_length")
+                    else ""
+                ),
+                file=err,
+            )
+            status = 1
+    if source.failure:
+        print(f"rtsar: the stream did not end cleanly: {source.failure}", file=err)
+        status = 1
+    return signals.exit_status(interrupted) if interrupted is not None else status

@@ -19,8 +19,6 @@ DEFAULT_TAPS = 24
 DEFAULT_KAISER_BETA = 10.0
 
 
-
-
 def _kernel(x: np.ndarray, taps: int, beta: float, i0=special.i0) -> np.ndarray:
     """Kaiser-windowed sinc h(x) = sinc(x)·I0(β√(1-(2x/T)²))/I0(β) for |x| < T/2, else 0."""
     half = 0.5 * taps

@@ -171,5 +171,3 @@ def make_plan(cfg: Config) -> LensPlan:
 def dft(x: np.ndarray, sign: int, n: int, fft=np.fft) -> np.ndarray:
     """Unnormalised DFT along the last axis with exponent sign ±1 (fft: numpy.fft or scipy.fft)."""
     return fft.fft(x, n, axis=-1) if sign < 0 else fft.ifft(x, n, axis=-1) * n
-
-

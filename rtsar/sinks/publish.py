@@ -5,7 +5,11 @@ for its subscriber).  Delivery ``"drop"`` (live default): a subscriber that does
 loses whole strips at its high-water mark, on its own connection only, and the pipeline never
 waits; subscribers see the loss as a gap in ``seq`` and count it.  Delivery ``"lossless"``
 (replay default; XPUB_NODROP): the publisher waits for the slowest subscriber, which
-back-pressures the pipeline (a replay slows down; a live source drops pulses, counted).
+back-pressures the pipeline (a replay slows down; a live source drops pulses, counted) — but
+never for ever: a subscriber that has not taken a message for ``stall_timeout_s`` is cut off
+(counted in ``subscriber_stalls``; delivery drops for it, and only for it, at its high-water
+mark), and lossless delivery resumes as soon as it reads again or leaves.  ``hurry`` (Ctrl-C, a
+signal, the end of ``--duration``) shortens the wait so that a run always ends promptly.
 """
 
 from __future__ import annotations
@@ -23,12 +27,38 @@ from ..stream.strips import StreamInfo, Strip, StripSink
 from .wire import height_header, stats_header, strip_header
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
+STALL_TIMEOUT_S = 2.0  # the longest a lossless send waits for a subscriber that reads nothing
 DELIVERIES = ("drop", "lossless")
 _LOOPBACK = {"127.0.0.1", "localhost", "::1", "[::1]"}
 
 
 def _warn(message: str) -> None:
     warnings.warn(message, UserWarning, stacklevel=3)
+
+
+def load_secret_key(path: str | Path) -> tuple[bytes, bytes]:
+    """(public, secret) CURVE keys of a secret-key file made by ``rtsar keygen``."""
+    try:
+        public, secret = zmq.auth.load_certificate(str(path))
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{path}: not a CURVE key file ({exc})") from None
+    if secret is None:
+        raise ValueError(f"{path}: not a secret-key file (the .key_secret one)")
+    return public, secret
+
+
+def authenticator(context: zmq.Context, clients: str | Path):
+    """ZeroMQ's ZAP handler (pyzmq's ThreadAuthenticator) accepting only the CURVE clients whose
+    public keys are in the folder ``clients``."""
+    from zmq.auth.thread import ThreadAuthenticator
+
+    folder = Path(clients)
+    if not folder.is_dir() or not any(folder.glob("*.key")):
+        raise ValueError(f"{folder}: no folder of client public keys (*.key from rtsar keygen)")
+    auth = ThreadAuthenticator(context)
+    auth.start()
+    auth.configure_curve(domain="*", location=str(folder))
+    return auth
 
 
 def is_local_endpoint(endpoint: str) -> bool:
@@ -47,7 +77,10 @@ class ZmqPublisher(StripSink):
 
     ``curve_secret_key``: a secret-key file made by ``rtsar keygen`` (ZeroMQ CURVE: clients
     need the matching public key); without it, binding beyond loopback warns (``warn``: a
-    callable taking the message; default ``warnings.warn``).
+    callable taking the message; default ``warnings.warn``).  ``curve_clients``: a folder of
+    the public keys of the clients allowed to subscribe (ZeroMQ's ZAP, pyzmq's
+    ThreadAuthenticator); without it any client holding the server key may subscribe.
+    ``stall_timeout_s``: the longest a lossless send waits for a subscriber that reads nothing.
     """
 
     def __init__(
@@ -59,24 +92,40 @@ class ZmqPublisher(StripSink):
         curve_secret_key: str | Path | None = None,
         context: zmq.Context | None = None,
         warn=None,
+        stall_timeout_s: float = STALL_TIMEOUT_S,
+        curve_clients: str | Path | None = None,
     ):
         if delivery not in DELIVERIES:
             raise ValueError(f"delivery must be one of {DELIVERIES}, got {delivery!r}")
+        if not stall_timeout_s > 0:
+            raise ValueError(f"stall_timeout_s must be > 0, got {stall_timeout_s!r}")
+        if curve_clients is not None and curve_secret_key is None:
+            raise ValueError("authenticating clients (curve_clients) needs a CURVE secret key")
         self.endpoint = endpoint
         self.delivery = delivery
+        self.stall_timeout_s = float(stall_timeout_s)
         self.subscribers = 0
         self.sent = {"strip": 0, "stats": 0, "end": 0}
+        self.subscriber_stalls = 0  # times a subscriber that read nothing was cut off
+        self.dropped_for_stalled = 0  # messages sent while one was cut off (it missed them)
+        self._cut_off = False  # lossless, but a stalled subscriber is cut off
+        self._probe_s = 0.0  # when to try lossless delivery again
+        self._hurry = False
+        self._hurry_s = 0.0
+        self._auth = None
         ctx = context or zmq.Context.instance()
         self.socket = s = ctx.socket(zmq.XPUB)
         s.setsockopt(zmq.SNDHWM, int(hwm_messages))
         s.setsockopt(zmq.LINGER, int(linger_ms))
-        s.setsockopt(zmq.XPUB_VERBOSE, 1)  # every subscription reaches us (subscriber count)
+        # Every subscription and every unsubscription (also a subscriber that leaves) reaches us:
+        # the subscriber count is right for --wait-subscribers.
+        s.setsockopt(zmq.XPUB_VERBOSER, 1)
         if delivery == "lossless":
             s.setsockopt(zmq.XPUB_NODROP, 1)
         if curve_secret_key is not None:
-            public, secret = zmq.auth.load_certificate(str(curve_secret_key))
-            if secret is None:
-                raise ValueError(f"{curve_secret_key}: not a secret-key file")
+            public, secret = load_secret_key(curve_secret_key)
+            if curve_clients is not None:
+                self._auth = authenticator(ctx, curve_clients)
             s.curve_secretkey, s.curve_publickey, s.curve_server = secret, public, True
         elif not is_local_endpoint(endpoint):
             (warn or _warn)(
@@ -87,22 +136,35 @@ class ZmqPublisher(StripSink):
             s.bind(endpoint)
         except zmq.ZMQError as exc:
             s.close(0)
+            if self._auth is not None:
+                self._auth.stop()
             raise ValueError(f"cannot bind {endpoint}: {exc}") from None
         self.endpoint = s.getsockopt_string(zmq.LAST_ENDPOINT)  # resolves a port given as *
         self._closed = False
 
     def _poll_subscriptions(self, timeout_ms: int = 0) -> None:
-        while self.socket.poll(timeout_ms, zmq.POLLIN):
-            msg = self.socket.recv()
+        """Count the (un)subscriptions that have arrived, waiting up to ``timeout_ms`` for one.
+
+        With a timeout the socket takes in every pending command first (a subscriber that left
+        is one); without, the count may lag by a millisecond (ZeroMQ throttles that work on
+        non-blocking calls) and costs nothing on the send path.
+        """
+        if timeout_ms:
+            self.socket.poll(timeout_ms, zmq.POLLIN)
+        while True:
+            try:
+                msg = self.socket.recv(zmq.NOBLOCK)
+            except zmq.Again:
+                return
             if msg[:1] == b"\x01":
                 self.subscribers += 1
             elif msg[:1] == b"\x00":
                 self.subscribers = max(0, self.subscribers - 1)
-            timeout_ms = 0
 
     def wait_for_subscribers(self, count: int, timeout_s: float | None = None, stop=None) -> bool:
         """Block until ``count`` subscriptions have arrived (True) or the timeout (False)."""
         deadline = None if timeout_s is None else time.perf_counter() + timeout_s
+        self._poll_subscriptions(10)  # who has come and gone since the last look
         while self.subscribers < count:
             if stop is not None and stop():
                 return False
@@ -124,14 +186,54 @@ class ZmqPublisher(StripSink):
         if self.delivery == "drop":
             self.socket.send_multipart(frames, zmq.NOBLOCK)  # XPUB drops at HWM, never blocks
         else:
-            while True:  # lossless: wait for the slowest subscriber
-                try:
-                    self.socket.send_multipart(frames, zmq.NOBLOCK)
-                    break
-                except zmq.Again:
-                    self.socket.poll(100, zmq.POLLOUT)
-                    self._poll_subscriptions()
+            self._send_lossless(frames)
         self.sent[topic] = self.sent.get(topic, 0) + 1
+
+    def _send_lossless(self, frames) -> None:
+        """Wait for the slowest subscriber, at most ``stall_timeout_s`` (less when hurrying)."""
+        s = self.socket
+        now = time.perf_counter()
+        if self._cut_off:
+            if now < self._probe_s:  # a stalled subscriber is cut off: it misses this one
+                s.send_multipart(frames, zmq.NOBLOCK)
+                self.dropped_for_stalled += 1
+                return
+            s.setsockopt(zmq.XPUB_NODROP, 1)  # has it read or left? then lossless again
+            self._cut_off = False
+        deadline = now + self.stall_timeout_s
+        while True:
+            try:
+                s.send_multipart(frames, zmq.NOBLOCK)
+                return
+            except zmq.Again:
+                if self._hurry:  # set by another thread, maybe during this wait
+                    deadline = min(deadline, max(now, self._hurry_s) + 0.2)
+                left = deadline - time.perf_counter()
+                if left <= 0:
+                    break
+                s.poll(int(min(100, 1000 * left)) + 1, zmq.POLLOUT)
+                self._poll_subscriptions()
+        # A subscriber has taken nothing for the whole wait: cut it off (drop at its high-water
+        # mark, only for it) and try lossless delivery again in a second.
+        s.setsockopt(zmq.XPUB_NODROP, 0)
+        if not self._cut_off:
+            self.subscriber_stalls += 1
+        self._cut_off = True
+        self._probe_s = time.perf_counter() + 1.0
+        s.send_multipart(frames, zmq.NOBLOCK)
+        self.dropped_for_stalled += 1
+
+    def hurry(self) -> None:
+        """The run is ending (Ctrl-C, a signal, --duration): wait for a stalled subscriber no
+        longer than 0.2 s, and linger at most as long when closing."""
+        self._hurry_s = time.perf_counter()
+        self._hurry = True
+
+    def counters(self) -> dict:
+        return {
+            "subscriber_stalls": self.subscriber_stalls,
+            "messages_missed_by_stalled": self.dropped_for_stalled,
+        }
 
     # ---- pipeline sink interface --------------------------------------------------------
     def strip(self, strip: Strip, info: StreamInfo) -> None:
@@ -150,4 +252,8 @@ class ZmqPublisher(StripSink):
     def close(self) -> None:
         if not self._closed:
             self._closed = True
+            if self._cut_off or self._hurry:  # do not wait on a subscriber that reads nothing
+                self.socket.setsockopt(zmq.LINGER, 200)
             self.socket.close()
+            if self._auth is not None:
+                self._auth.stop()

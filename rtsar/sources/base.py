@@ -44,6 +44,9 @@ class Source(ABC):
     ``live`` sources (simulator at its PRF, serial instrument) cannot be paused: when the
     pipeline is full their shots are dropped and counted.  Non-live sources (replay) block.
     ``counters`` holds the source's own tallies (e.g. frames with a bad CRC); ``close`` stops it.
+    ``failure`` is None while the source works and after a clean end, else why it ended (a
+    link lost for good); ``notify``, when set, receives one-line messages about the link as
+    they happen (the application prints them).
     """
 
     live: bool = True
@@ -52,6 +55,12 @@ class Source(ABC):
     def __init__(self):
         self.counters: dict[str, int] = {}
         self._stop = False
+        self.failure: str | None = None
+        self.notify = None
+
+    def _say(self, message: str) -> None:
+        if self.notify is not None:
+            self.notify(message)
 
     @abstractmethod
     def __iter__(self) -> Iterator[ShotBatch]:

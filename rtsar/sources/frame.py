@@ -30,12 +30,18 @@ Frames may follow each other with or without bytes in between.  The receiver's r
 * it looks for the sync word anywhere in the stream; a frame is accepted only when both CRCs
   pass, the version is 1, the sample type is known, both counts are >= 1 and P does not exceed the
   receiver's limit (64 MiB by default);
+* a receiver that knows its stream (``samples_per_shot``, ``min_channels`` … ``max_channels``)
+  rejects a CRC-valid header announcing any other shape at once, before buffering a byte of its
+  payload (counted in ``wrong_length``): no header, true or false, can make it wait for more
+  than one frame of the configured stream;
 * after a failed check it resumes the search at the byte after the rejected sync word, so a sync
   word that turns up by chance inside the data costs one header CRC and nothing more;
 * it never skips ahead by a length it read from a header whose CRC has not passed.
 
 :class:`FrameParser` implements these rules on a stream fed in pieces of any size; it keeps at most
-one frame's worth of bytes between calls.  :func:`encode_frame` is the sender's side.
+one frame's worth of bytes between calls; :meth:`FrameParser.finish` gives up, when the link
+ends, on a frame whose payload never came and recovers the frames behind it.
+:func:`encode_frame` is the sender's side.
 """
 
 from __future__ import annotations
@@ -64,6 +70,8 @@ COUNTERS = (
     "header_crc_errors",  # sync words followed by a header with a wrong CRC
     "payload_crc_errors",  # frames whose header passed but whose payload CRC did not
     "bad_headers",  # CRC-valid headers with an unknown version/sample type or bad lengths
+    "wrong_length",  # CRC-valid headers of another shape than the configured stream's
+    "truncated_frames",  # frames whose payload had not arrived when the link ended
     "bytes_skipped",  # bytes dropped while searching for a valid frame
     "bytes_fed",  # all bytes given to feed()
 )
@@ -141,10 +149,27 @@ class FrameParser:
     sync word is in sight), so a stream of garbage does not grow it.
     """
 
-    def __init__(self, max_payload_bytes: int = MAX_PAYLOAD_BYTES):
+    def __init__(
+        self,
+        max_payload_bytes: int = MAX_PAYLOAD_BYTES,
+        samples_per_shot: int | None = None,
+        max_channels: int | None = None,
+        min_channels: int = 1,
+    ):
         if not max_payload_bytes >= 1:
             raise ValueError(f"max_payload_bytes must be >= 1, got {max_payload_bytes!r}")
-        self.max_payload_bytes = int(max_payload_bytes)
+        for name, v in (("samples_per_shot", samples_per_shot), ("max_channels", max_channels)):
+            if v is not None and not v >= 1:
+                raise ValueError(f"{name} must be >= 1 or None, got {v!r}")
+        self.samples_per_shot = samples_per_shot
+        self.max_channels = max_channels
+        self.min_channels = int(min_channels)
+        most = max_payload_bytes
+        if samples_per_shot is not None:  # the largest frame the configured stream can send
+            most = min(
+                most, (max_channels or 2**16 - 1) * samples_per_shot * max(SAMPLE_BYTES.values())
+            )
+        self.max_payload_bytes = int(most)
         self.counters: dict[str, int] = dict.fromkeys(COUNTERS, 0)
         self._buf = bytearray()
 
@@ -186,8 +211,18 @@ class FrameParser:
                 version, code, channels, count, sequence, timestamp = HEADER.unpack_from(buf, start)
                 kind = _BY_CODE.get(code)
                 nbytes = channels * count * (kind[1] if kind else 0)
-                if version != VERSION or nbytes == 0 or nbytes > self.max_payload_bytes:
+                if version != VERSION or nbytes == 0:
                     c["bad_headers"] += 1
+                    skipped += 1
+                    pos = i + 1
+                    continue
+                if (
+                    nbytes > self.max_payload_bytes
+                    or (self.samples_per_shot is not None and count != self.samples_per_shot)
+                    or (self.max_channels is not None and channels > self.max_channels)
+                    or channels < self.min_channels
+                ):
+                    c["wrong_length" if self.samples_per_shot else "bad_headers"] += 1
                     skipped += 1
                     pos = i + 1
                     continue
@@ -215,4 +250,19 @@ class FrameParser:
         del buf[:pos]
         c["bytes_skipped"] += skipped
         c["frames_ok"] += len(frames)
+        return frames
+
+    def finish(self) -> list[Frame]:
+        """At the end of the link: give up on a frame whose payload never came (counted in
+        ``truncated_frames``) and return the intact frames found in the bytes behind it; the
+        rest of the buffer is counted as skipped.  The parser is empty afterwards."""
+        frames: list[Frame] = []
+        while self._buf:
+            before = len(self._buf)
+            frames += self.feed(b"")
+            if len(self._buf) == before:  # waiting for bytes that will not come
+                if len(self._buf) >= PREFIX_BYTES and self._buf.startswith(SYNC):
+                    self.counters["truncated_frames"] += 1
+                del self._buf[:1]
+                self.counters["bytes_skipped"] += 1
         return frames

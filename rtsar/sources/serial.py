@@ -12,6 +12,13 @@ and sockets ignore the baud rate.
 Opening a port discards what had already arrived (pyserial flushes the input; for socket:// it
 reads and drops what is waiting), so the first frames an instrument sends the moment a
 connection opens may be lost; the parser finds the next sync word as usual.
+
+A lost link is never silent: it is counted (``link_drops``) and announced (``notify``).  With
+``reconnect`` (the default for ``socket://``) the source reopens the link with a growing pause
+(0.1 s doubling to 5 s, counted in ``reconnects``) and goes on; without it the source ends and
+``failure`` says why, so the command can exit with an error.  The parser knows the configured
+shot (``samples_per_shot``, at most ``max_channels`` channels): a frame of another shape is
+rejected before its payload is buffered (``wrong_length``).
 """
 
 from __future__ import annotations
@@ -29,6 +36,8 @@ from .base import ShotBatch, Source
 from .frame import MAX_PAYLOAD_BYTES, Frame, FrameParser
 
 _READ_BYTES = 1 << 18  # most bytes taken in one read
+_BACKOFF_S = (0.1, 5.0)  # first and longest pause between reconnection attempts
+MAX_CHANNELS = 64  # most channels a frame of the configured stream may carry
 
 
 class SerialSource(Source):
@@ -36,8 +45,8 @@ class SerialSource(Source):
 
     A batch is yielded as soon as a read completes at least one frame (at most ``batch_frames``
     per batch); ``arrival_s`` is the perf_counter time at which that read returned.  Frames
-    without ``samples_per_shot`` samples or without the channel are counted in
-    ``counters["wrong_length"]`` and not yielded; the parser's counters
+    without ``samples_per_shot`` samples or without the channel are refused by the parser at
+    their header and counted in ``counters["wrong_length"]``; the parser's counters
     (``rtsar.sources.frame.COUNTERS``) are mirrored in ``counters``.
 
     Iteration ends when ``close()`` is called (within ``poll_s``), when the link goes away (the
@@ -57,6 +66,8 @@ class SerialSource(Source):
         channel: int = 0,
         poll_s: float = 0.05,
         max_payload_bytes: int = MAX_PAYLOAD_BYTES,
+        reconnect: bool | None = None,
+        max_channels: int = MAX_CHANNELS,
     ):
         super().__init__()
         if not samples_per_shot >= 1:
@@ -75,18 +86,25 @@ class SerialSource(Source):
         self.idle_timeout_s = idle_timeout_s
         self.channel = int(channel)
         self.poll_s = float(poll_s)
-        self.parser = FrameParser(max_payload_bytes)
-        self.counters = dict(self.parser.counters, wrong_length=0)
+        self.parser = FrameParser(
+            max_payload_bytes, self.samples_per_shot, max(max_channels, channel + 1), channel + 1
+        )
+        self.counters = dict(self.parser.counters, link_drops=0, reconnects=0)
         self.description = f"serial instrument at {url}"
         self.stop_reason: str | None = None
+        self.reconnect = url.startswith("socket://") if reconnect is None else bool(reconnect)
+        self.baudrate = baudrate
         self._lock = threading.Lock()
         self._reading = False
         try:
-            # Non-blocking reads: waiting is done by select() on the descriptor where there is
-            # one, so a read returns whatever has arrived instead of waiting to fill a size.
-            self.port = serial.serial_for_url(url, baudrate=baudrate, timeout=0)
+            self._open()
         except (serial.SerialException, OSError, ValueError) as exc:
             raise ValueError(f"cannot open instrument port {url!r}: {exc}") from None
+
+    def _open(self) -> None:
+        # Non-blocking reads: waiting is done by select() on the descriptor where there is
+        # one, so a read returns whatever has arrived instead of waiting to fill a size.
+        self.port = serial.serial_for_url(self.url, baudrate=self.baudrate, timeout=0)
         try:
             self._fd: int | None = self.port.fileno()
         except (AttributeError, OSError, io.UnsupportedOperation):
@@ -102,19 +120,37 @@ class SerialSource(Source):
         return port.read(_READ_BYTES) if ready else b""
 
     def _batches(self, frames: list[Frame], arrival_s: float) -> Iterator[ShotBatch]:
-        keep = [
-            f
-            for f in frames
-            if f.samples.shape[1] == self.samples_per_shot and f.samples.shape[0] > self.channel
-        ]
-        self.counters["wrong_length"] += len(frames) - len(keep)
-        for k in range(0, len(keep), self.batch_frames):
-            part = keep[k : k + self.batch_frames]
+        self.counters.update(self.parser.counters)  # the parser refused other shapes
+        for k in range(0, len(frames), self.batch_frames):
+            part = frames[k : k + self.batch_frames]
             # u64 counters keep their bits in int64 (2**63 and above read as negative numbers).
             seq = np.array([f.sequence for f in part], np.uint64).view(np.int64)
             stamp_ns = np.array([f.timestamp_ns for f in part], np.uint64)
             samples = np.stack([f.samples[self.channel] for f in part])
             yield ShotBatch(seq, stamp_ns / 1e9, np.full(len(part), arrival_s), samples)
+
+    def _reopen(self, last_byte: float) -> bool:
+        """Reopen the link, pausing longer after each failure; False when the source is closed
+        or the idle timeout passes first."""
+        pause = _BACKOFF_S[0]
+        while True:
+            with self._lock:
+                if self._stop:
+                    return False
+            idle = time.perf_counter() - last_byte
+            if self.idle_timeout_s is not None and idle > self.idle_timeout_s:
+                self.stop_reason = f"no bytes for {self.idle_timeout_s:g} s (link down)"
+                return False
+            try:
+                with self._lock:
+                    self._open()
+            except (serial.SerialException, OSError, ValueError):
+                time.sleep(pause)
+                pause = min(2 * pause, _BACKOFF_S[1])
+                continue
+            self.counters["reconnects"] += 1
+            self._say(f"instrument link to {self.url} reopened")
+            return True
 
     def __iter__(self) -> Iterator[ShotBatch]:
         last_byte = time.perf_counter()
@@ -128,21 +164,40 @@ class SerialSource(Source):
                 try:
                     data = self._read()
                 except (serial.SerialException, OSError) as exc:
-                    self.stop_reason = f"link closed: {exc}"
-                    break
+                    data = None
+                    lost = str(exc) or type(exc).__name__
                 finally:
                     with self._lock:
                         self._reading = False
                 now = time.perf_counter()
+                if data is None:  # the link went away: the frames behind a cut one, then …
+                    yield from self._batches(self.parser.finish(), now)
+                    self.counters["link_drops"] += 1
+                    with self._lock:
+                        stopping = self._stop
+                        self.port.close()
+                    if stopping:
+                        self.stop_reason = "closed"
+                        break
+                    if not self.reconnect:
+                        self.stop_reason = self.failure = f"instrument link lost: {lost}"
+                        self._say(self.failure)
+                        break
+                    self._say(f"instrument link lost ({lost}); reconnecting")
+                    if not self._reopen(last_byte):
+                        self.failure = self.failure or (
+                            None if self._stop else f"instrument link lost: {lost}"
+                        )
+                        break
+                    continue
                 if not data:
                     if self.idle_timeout_s is not None and now - last_byte > self.idle_timeout_s:
                         self.stop_reason = f"no bytes for {self.idle_timeout_s:g} s"
                         break
                     continue
                 last_byte = now
-                frames = self.parser.feed(data)
-                self.counters.update(self.parser.counters)
-                yield from self._batches(frames, now)
+                yield from self._batches(self.parser.feed(data), now)
+            yield from self._batches(self.parser.finish(), time.perf_counter())
         finally:
             with self._lock:
                 self.port.close()

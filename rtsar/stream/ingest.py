@@ -5,13 +5,23 @@ CCD shifts one row per pulse), so the position of every pulse in the stream must
 the link loses, repeats or reorders shots.  The instrument's sequence number says where a shot
 belongs:
 
-* a gap (sequence jumps ahead by g ≤ ``max_gap_pulses``): g zero pulses are inserted, flagged
-  (they cost no memory, and the AO lens skips them: a zero pulse compresses to a zero line);
-* a larger jump either way (instrument restarted): a *discontinuity* — N zero pulses are inserted
-  (they clear the CCD so no line mixes the two sides) and the count restarts from the new number;
-  azimuth positions after it are relative to the restart;
-* a duplicate (sequence seen before) or a late shot (its slot was already zero-filled): dropped;
+* a gap (sequence jumps ahead by g ≤ ``max_gap_pulses``, by default one aperture N): g zero
+  pulses are inserted, flagged (they cost no memory, and the AO lens skips them: a zero pulse
+  compresses to a zero line), so zero-filling is bounded whatever number a frame carries;
+* a duplicate (a number of the current run seen within the last ``memory_pulses``) or a late
+  shot (its slot was already zero-filled): dropped and counted;
+* any other jump, forward beyond the bound or backward (an instrument restart, a counter reset):
+  the shot is held as a *candidate* until the next shot says what it was.  If the next shot
+  continues from it (number + 1), it is a *discontinuity*: N zero pulses are inserted (they
+  clear the CCD so no line mixes the two sides), the held shot follows and the count restarts
+  from its number (azimuth positions after it are relative to the restart).  Otherwise it was
+  a stray shot (a number out of thin air): dropped and counted in ``stray_pulses``, and the
+  stream goes on untouched.  At the end of a stream (:meth:`Ingest.flush`) a held candidate is
+  taken as a discontinuity, so no shot is lost;
 * NaN/Inf samples or the wrong number of samples: the pulse is zeroed and flagged.
+
+Every shot received is accounted for: ``pulses_received`` = ``pulses_accepted`` + ``duplicates``
++ ``late_pulses`` + ``stray_pulses`` (+ 1 while a candidate is held).
 
 Auxiliary channels (``ShotBatch.aux``: reference interferometer, HCN cell, second receiver) travel
 with their pulse: filled, zeroed and dropped together with it.  Their names and lengths (which may
@@ -37,9 +47,10 @@ COUNTERS = (
     "pulses_accepted",  # shots that entered the stream with their own samples
     "gap_pulses",  # zero pulses inserted for missing sequence numbers
     "gaps",  # sequence jumps filled
-    "discontinuities",  # jumps larger than max_gap_pulses (either way)
+    "discontinuities",  # restarts of the count (jumps beyond max_gap_pulses, confirmed)
     "duplicates",  # shots whose sequence number was already in the stream
     "late_pulses",  # shots arriving after their slot was zero-filled
+    "stray_pulses",  # shots whose number fitted neither the run nor a restart, dropped
     "nonfinite_pulses",  # shots holding NaN/Inf, zeroed
     "wrong_length_pulses",  # shots with the wrong sample count (or a missing channel), zeroed
 )
@@ -85,8 +96,25 @@ def concat_blocks(blocks: list[PulseBlock]) -> PulseBlock:
     )
 
 
+@dataclass
+class _Candidate:
+    """A shot whose number would restart the count, held until the next shot confirms it."""
+
+    seq: int
+    samples: np.ndarray  # [1, samples_per_shot]
+    arrival_s: np.ndarray  # [1]
+    flagged: np.ndarray  # [1]
+    aux: dict
+
+
 class Ingest:
-    """Sequence, value and shape checks; call with each ShotBatch, get PulseBlocks back."""
+    """Sequence, value and shape checks; call with each ShotBatch, get PulseBlocks back.
+
+    ``max_gap_pulses``: the longest run of missing numbers that is zero-filled (one aperture is
+    the usual choice); ``memory_pulses``: how far back duplicates and late shots are recognised
+    (default 4 × the larger of the aperture and the gap bound).  Call :meth:`flush` at the end
+    of a stream.
+    """
 
     def __init__(
         self,
@@ -94,19 +122,25 @@ class Ingest:
         aperture_pulses: int,
         max_gap_pulses: int,
         dtype=np.complex64,
+        memory_pulses: int | None = None,
     ):
         self.samples_per_shot = int(samples_per_shot)
         self.dtype = np.dtype(dtype)  # the processor's sample type (complex128 stays double)
         self.aperture_pulses = int(aperture_pulses)
         self.max_gap_pulses = max(int(max_gap_pulses), 1)
+        self.memory_pulses = int(
+            memory_pulses or 4 * max(self.aperture_pulses, self.max_gap_pulses)
+        )
         # Zero-filled pulses are read-only views of one zero row: a long gap costs no memory.
         self._zero_row = np.zeros((1, self.samples_per_shot), self.dtype)
         self.counters = dict.fromkeys(COUNTERS, 0)
         self.aux_lengths: dict[str, int] | None = None  # name → samples, fixed by the first batch
         self.next_pulse = 0  # stream index of the next pulse
         self._next_seq: int | None = None  # sequence number expected next
+        self._run_start = 0  # first sequence number of the current run (since the last restart)
         self._filled: set[int] = set()  # recently zero-filled sequence numbers (late detection)
         self._recent_low = 0  # sequence numbers below this are forgotten
+        self._candidate: _Candidate | None = None
 
     def _zeros(self, count: int, arrival: float) -> PulseBlock:
         block = PulseBlock(
@@ -123,8 +157,8 @@ class Ingest:
         return block
 
     def _forget_old(self) -> None:
-        low = self._next_seq - self.max_gap_pulses
-        if low > self._recent_low + self.max_gap_pulses:  # amortised clean-up
+        low = self._next_seq - self.memory_pulses
+        if low > self._recent_low + self.memory_pulses:  # amortised clean-up
             self._filled = {s for s in self._filled if s >= low}
             self._recent_low = low
 
@@ -166,9 +200,10 @@ class Ingest:
         seq = np.asarray(batch.seq, np.int64)
         arrival = np.asarray(batch.arrival_s, np.float64)
         if self._next_seq is None:
-            self._next_seq = int(seq[0])
+            self._next_seq = self._run_start = self._recent_low = int(seq[0])
         # Fast path: the batch continues the stream exactly (the normal case).
-        if seq[0] == self._next_seq and (n == 1 or np.all(np.diff(seq) == 1)):
+        contiguous = n == 1 or np.all(np.diff(seq) == 1)
+        if self._candidate is None and seq[0] == self._next_seq and contiguous:
             c["pulses_accepted"] += n
             self._next_seq += n
             block = PulseBlock(self.next_pulse, samples, arrival, flagged, aux)
@@ -176,8 +211,29 @@ class Ingest:
             return [block]
         return self._slow(seq, samples, arrival, flagged, aux)
 
+    def _restart(self, cand: _Candidate) -> list[PulseBlock]:
+        """A confirmed restart: N zero pulses clear the CCD, then the held shot opens the run."""
+        c = self.counters
+        c["discontinuities"] += 1
+        c["gap_pulses"] += self.aperture_pulses
+        c["pulses_accepted"] += 1
+        self._filled.clear()
+        out = [self._zeros(self.aperture_pulses, float(cand.arrival_s[0]))]
+        out.append(
+            PulseBlock(self.next_pulse, cand.samples, cand.arrival_s, cand.flagged, cand.aux)
+        )
+        self.next_pulse += 1
+        self._next_seq = cand.seq + 1
+        self._run_start = self._recent_low = cand.seq
+        return out
+
+    def flush(self) -> list[PulseBlock]:
+        """At the end of a stream: a held candidate is taken as a restart (nothing is lost)."""
+        cand, self._candidate = self._candidate, None
+        return self._restart(cand) if cand is not None else []
+
     def _slow(self, seq, samples, arrival, flagged, aux) -> list[PulseBlock]:
-        """Shot by shot: gaps, jumps, duplicates and late shots."""
+        """Shot by shot: gaps, duplicates, late shots, candidates for a restart."""
         c = self.counters
         out: list[PulseBlock] = []
         run_start = None  # start of the current run of in-order shots within this batch
@@ -200,6 +256,13 @@ class Ingest:
                 run_start = None
 
         for i, s in enumerate(seq.tolist()):
+            cand = self._candidate
+            if cand is not None:
+                self._candidate = None
+                if s == cand.seq + 1:  # the instrument goes on from the new number: a restart
+                    out.extend(self._restart(cand))
+                else:  # neither: the held shot was a stray
+                    c["stray_pulses"] += 1
             jump = s - self._next_seq
             if jump == 0:
                 if run_start is None:
@@ -207,25 +270,25 @@ class Ingest:
                 self._next_seq += 1
                 continue
             close_run(i)
+            known = max(self._run_start, self._next_seq - self.memory_pulses)
             if 0 < jump <= self.max_gap_pulses:
                 c["gaps"] += 1
                 c["gap_pulses"] += jump
                 self._filled.update(range(self._next_seq, s))
                 out.append(self._zeros(jump, arrival[i]))
-            elif -self.max_gap_pulses <= jump < 0:
+                self._next_seq = s + 1
+                run_start = i
+            elif jump < 0 and s >= known:
                 if s in self._filled:
                     c["late_pulses"] += 1
                     self._filled.discard(s)
                 else:
                     c["duplicates"] += 1
-                continue
-            else:
-                c["discontinuities"] += 1
-                c["gap_pulses"] += self.aperture_pulses
-                self._filled.clear()
-                out.append(self._zeros(self.aperture_pulses, arrival[i]))
-            self._next_seq = s + 1
-            run_start = i
+            else:  # beyond the gap bound, or back before what is remembered: hold it
+                sl = slice(i, i + 1)
+                self._candidate = _Candidate(
+                    s, samples[sl], arrival[sl], flagged[sl], {k: a[sl] for k, a in aux.items()}
+                )
         close_run(len(seq))
         self._forget_old()
         return out

@@ -75,7 +75,8 @@ class PipelineSettings:
     strip_lines: int = 16  # lines per published strip
     queue_pulses: int = 0  # capacity of each queue (0: 8 apertures of pulses)
     max_batch: int = 0  # most pulses per lens launch / CCD push (0: config micro_batch)
-    max_gap_pulses: int = 0  # longer sequence jumps are discontinuities (0: 60 s of pulses)
+    max_gap_pulses: int = 0  # longest zero-filled gap; beyond it a restart (0: one aperture)
+    deadline: bool = False  # the run has a deadline: once the source ends, nobody is waited on
 
     def __post_init__(self):
         if self.stages not in STAGE_LAYOUTS:
@@ -136,7 +137,7 @@ class Pipeline:
         self.q_shots = BoundedQueue(capacity, "shots")
         self.q_lines = BoundedQueue(capacity, "compressed")
         self.q_image = BoundedQueue(capacity, "image lines")
-        max_gap = s.max_gap_pulses or max(4 * n, int(60 * config.geometry.prf_hz))
+        max_gap = s.max_gap_pulses or n
         self.ingest = Ingest(config.waveform.samples_per_shot, n, max_gap, self.engine.dtype)
         block = config.processor.fft_length or 2 * n
         self.timing = LineTiming(n, 4 * (n + block + capacity + self.max_batch))
@@ -175,22 +176,31 @@ class Pipeline:
                     self.own["dropped_pulses"] += len(batch)
         finally:
             self.q_shots.close()
+            if self.settings.deadline:
+                self._hurry_sinks()
+
+    def _hurry_sinks(self) -> None:
+        for sink in self.sinks:
+            sink.hurry()
 
     def _lens_stage(self) -> None:
         busy = 0.0
         try:
             while True:
                 batches = self.q_shots.get_batch(self.max_batch)
-                if batches is None:
-                    break
                 t = time.perf_counter()
-                blocks = [b for batch in batches for b in self.ingest(batch)]
+                if batches is None:  # the source ended: a held restart candidate goes in
+                    blocks = self.ingest.flush()
+                else:
+                    blocks = [b for batch in batches for b in self.ingest(batch)]
                 busy += time.perf_counter() - t
                 for block in _groups(blocks, self.max_batch):
                     t = time.perf_counter()
                     out = self._range(block)
                     busy += time.perf_counter() - t
                     self._forward(out)
+                if batches is None:
+                    break
             if self._holding:
                 self._forward(self._held.release(self.engine.flush_range()))
             if self.settings.stages == "fused":
@@ -312,11 +322,13 @@ class Pipeline:
             self.own["height_strips_published"] = self.own.get("height_strips_published", 0) + 1
 
     def counters(self) -> dict:
-        """All counters: source, ingest, corrections and pipeline."""
+        """All counters: source, ingest, corrections, sinks and pipeline."""
         c = dict(self.source.counters)
         c.update(self.ingest.counters)
         if self.corrections:
             c.update(self.corrections.counters())
+        for sink in self.sinks:
+            c.update(sink.counters())
         c.update(self.own)
         return c
 
@@ -364,23 +376,36 @@ class Pipeline:
             t.start()
 
     def stop(self) -> None:
-        """Stop the source; what is in flight is still processed and published."""
+        """Stop the source; what is in flight is still processed and published, promptly: the
+        sinks stop waiting on stalled subscribers."""
         self.source.close()
+        self._hurry_sinks()
 
     def join(self) -> PipelineStats:
+        """Wait for the run to end.  Ctrl-C (or a signal raised as KeyboardInterrupt) stops the
+        source, finishes what arrived, then raises; a second one while finishing is ignored, a
+        third gives up on finishing."""
         try:
-            for t in self._threads:
-                while t.is_alive():
-                    t.join(0.1)
+            self._wait()
         except KeyboardInterrupt:
             self.stop()
-            for t in self._threads:
-                t.join()
+            for more in range(3):
+                try:
+                    self._wait()
+                    break
+                except KeyboardInterrupt:
+                    if more == 2:
+                        raise
             raise
         finally:
             if self._errors:
                 raise self._errors[0]
         return self.stats
+
+    def _wait(self) -> None:
+        for t in self._threads:
+            while t.is_alive():
+                t.join(0.1)
 
     def run(self) -> PipelineStats:
         self.start()

@@ -87,7 +87,8 @@ class StripSink:
 
     ``strip``: a strip of image lines; ``height``: a height strip (3D imaging,
     rtsar.topo.stream.HeightStrip, with its own sequence number); ``stats``: the periodic stats
-    dictionary (README "Strip protocol"); ``end``: the final stats, once.
+    dictionary (README "Strip protocol"); ``end``: the final stats, once; ``counters``: the
+    sink's own counters, reported with the run's; ``hurry``: the run is being stopped.
     """
 
     def strip(self, strip: Strip, info: StreamInfo) -> None:
@@ -101,6 +102,13 @@ class StripSink:
 
     def end(self, stats: dict, info: StreamInfo) -> None:
         pass
+
+    def counters(self) -> dict[str, int]:
+        """What the sink counts (e.g. a publisher's stalled subscribers), merged into the run's."""
+        return {}
+
+    def hurry(self) -> None:
+        """The run must end soon (Ctrl-C, a signal, a deadline): stop waiting on anyone."""
 
 
 class StripAssembler:

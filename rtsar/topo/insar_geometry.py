@@ -18,7 +18,6 @@ ZHAO_LOOK_ANGLE_RAD = math.atan(math.sqrt(2.0))
 
 
 @dataclass(frozen=True)
-
 class InsalGeometry:
     """Cross-track geometry of a two-receiver interferometer and its phase-height relation.
 

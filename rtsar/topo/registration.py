@@ -18,7 +18,6 @@ from .looks import box_sum
 
 
 @dataclass(frozen=True)
-
 class Registration:
     """Slave line i + azimuth_px, bin j + range_px shows what the main shows at (i, j)."""
 

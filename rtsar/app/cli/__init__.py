@@ -11,6 +11,7 @@ import argparse
 import sys
 
 from ...sinks.publish import DEFAULT_ENDPOINT
+from .. import signals
 from . import files, measure, streaming
 from .options import die
 
@@ -52,13 +53,14 @@ def main(argv=None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 0
+    signals.install()
     try:
         return args.func(args)
     except (ValueError, OSError, RuntimeError) as exc:
         return die(str(exc))
-    except KeyboardInterrupt:
-        print("\nrtsar: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        print(f"\nrtsar: {signals.describe(exc)}", file=sys.stderr)
+        return signals.exit_status(exc)
 
 
 if __name__ == "__main__":

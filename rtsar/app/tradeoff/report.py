@@ -24,7 +24,6 @@ def pareto_front(rows: list[dict], keys=FRONT_KEYS):
     return rows
 
 
-
 def markdown(rows: list[dict], scenes: list[TradeoffScene]) -> str:
     out = []
     for scene in scenes:

@@ -51,9 +51,7 @@ class PGAStage(CorrectionStage):
     ):
         self.config = config
         self.settings = settings or PGASettings()
-        self.range_m = (
-            range_axis_m(config) if range_m is None else np.asarray(range_m, np.float64)
-        )
+        self.range_m = range_axis_m(config) if range_m is None else np.asarray(range_m, np.float64)
         self.block, self.hop, _ = self.settings.resolved(config.processor.aperture_pulses)
         self.bins = self.range_m.size
         # The block being filled plus the hop before it: the last block at flush may start up
@@ -163,4 +161,3 @@ class PGAStage(CorrectionStage):
         if outs:
             return np.concatenate(outs)
         return np.zeros((0, self.bins), np.complex64)
-

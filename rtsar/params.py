@@ -14,12 +14,21 @@ Conventions (used everywhere in rtsar)
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 
 C_M_PER_S = 299_792_458.0
 
 WINDOWS = ("rect", "hann", "hamming", "taylor")
 PRECISIONS = ("complex64", "complex128")
+
+# Size guards: a configuration beyond these is refused with its name and the limit, before any
+# buffer is allocated (a typo of a few digits must not ask for tens of GiB).
+MAX_SAMPLES_PER_SHOT = 1 << 22  # 4 Mi complex samples, 32 MiB per shot
+MAX_APERTURE_PULSES = 1 << 16
+MAX_RANGE_BINS = 1 << 16
+MAX_MICRO_BATCH = 1 << 16
+MAX_FFT_LENGTH = 1 << 20
+MAX_RANGE_OVERSAMPLING = 64
 
 
 def _positive(obj, *names):
@@ -29,6 +38,14 @@ def _positive(obj, *names):
             raise ValueError(
                 f"{type(obj).__name__}.{name} must be a finite number > 0, got {value!r}"
             )
+
+
+def _shot_size(wf) -> None:
+    if wf.samples_per_shot > MAX_SAMPLES_PER_SHOT:
+        raise ValueError(
+            f"{type(wf).__name__}: {wf.samples_per_shot} samples per shot (sample_rate_hz × "
+            f"duration) exceed the limit of {MAX_SAMPLES_PER_SHOT}"
+        )
 
 
 @dataclass(frozen=True)
@@ -54,6 +71,7 @@ class PulsedChirp:
             )
         if self.pulse_samples >= self.samples_per_shot:
             raise ValueError("pulse_duration_s must be shorter than receive_window_s")
+        _shot_size(self)
 
     @property
     def chirp_rate_hz_per_s(self) -> float:
@@ -94,6 +112,7 @@ class FMCWChirp:
             raise ValueError(
                 "FMCW shot must hold at least 8 samples (sample_rate_hz * chirp_duration_s)"
             )
+        _shot_size(self)
 
     @property
     def chirp_rate_hz_per_s(self) -> float:
@@ -226,6 +245,21 @@ class Processor:
                 raise ValueError(f"Processor.{name} must be an integer >= 1, got {value!r}")
         if self.aperture_pulses < 2:
             raise ValueError("Processor.aperture_pulses must be >= 2")
+        for name, most in (
+            ("aperture_pulses", MAX_APERTURE_PULSES),
+            ("range_bins", MAX_RANGE_BINS),
+            ("micro_batch", MAX_MICRO_BATCH),
+            ("range_oversampling", MAX_RANGE_OVERSAMPLING),
+        ):
+            if getattr(self, name) > most:
+                raise ValueError(f"Processor.{name} = {getattr(self, name)} exceeds {most}")
+        if self.fft_length is not None and (
+            not isinstance(self.fft_length, int) or self.fft_length > MAX_FFT_LENGTH
+        ):
+            raise ValueError(
+                f"Processor.fft_length must be an integer <= {MAX_FFT_LENGTH}, got "
+                f"{self.fft_length!r}"
+            )
         if self.range_oversampling & (self.range_oversampling - 1):
             raise ValueError("Processor.range_oversampling must be a power of two")
         for name in ("range_window", "azimuth_window"):
@@ -319,132 +353,42 @@ class Config:
         return replace(self, processor=replace(self.processor, **changes))
 
 
+def _build(cls, section: str, d) -> object:
+    """``cls(**d)`` with ValueError naming the section for a missing or unknown key."""
+    if not isinstance(d, dict):
+        raise ValueError(f"{section} must be a table of settings, got {type(d).__name__}")
+    names = {f.name for f in fields(cls) if f.init}
+    unknown = sorted(set(d) - names)
+    if unknown:
+        raise ValueError(f"unknown key(s) {unknown} in {section} (known: {sorted(names)})")
+    try:
+        return cls(**d)
+    except TypeError as exc:  # a missing key
+        raise ValueError(f"{section}: {exc}") from None
+
+
 def waveform_from_dict(d: dict) -> Waveform:
+    if not isinstance(d, dict):
+        raise ValueError(f"waveform must be a table of settings, got {type(d).__name__}")
     d = dict(d)
     kind = d.pop("kind", None)
     if kind == "pulsed":
-        return PulsedChirp(**d)
+        return _build(PulsedChirp, "waveform (pulsed)", d)
     if kind == "fmcw":
-        return FMCWChirp(**d)
+        return _build(FMCWChirp, "waveform (fmcw)", d)
     raise ValueError(f"waveform.kind must be 'pulsed' or 'fmcw', got {kind!r}")
 
 
 def config_from_dict(d: dict) -> Config:
-    """Inverse of Config.to_dict (unknown keys raise TypeError naming them)."""
-    proc = dict(d["processor"])
-    return Config(waveform_from_dict(d["waveform"]), Geometry(**d["geometry"]), Processor(**proc))
-
-
-# ---- presets -------------------------------------------------------------------------------
-def _psaltis_jpl() -> Config:
-    # Experimental processor of Psaltis & Wagner (Table 1): 40 MHz chirp, 10 µs AO aperture,
-    # 512 x 320 CCD, L ≈ 15 km illuminated.  L-band (JPL), 20 km slant range, 250 m/s.
-    # D = 2·step (Nyquist in azimuth, Crouch eq. 4.10) makes ρA = λR/(2Nd) = L/N (Psaltis eq. 7).
+    """Inverse of Config.to_dict; ValueError naming the key for anything else."""
+    if not isinstance(d, dict):
+        raise ValueError(f"a configuration is a table of settings, got {type(d).__name__}")
+    missing = [k for k in ("waveform", "geometry", "processor") if k not in d]
+    unknown = sorted(set(d) - {"waveform", "geometry", "processor"})
+    if missing or unknown:
+        raise ValueError(f"configuration: missing {missing}, unknown {unknown}")
     return Config(
-        PulsedChirp(
-            bandwidth_hz=40e6, pulse_duration_s=3.2e-6, sample_rate_hz=48e6, receive_window_s=10e-6
-        ),
-        Geometry(
-            wavelength_m=0.235,
-            slant_range_m=20e3,
-            along_track_step_m=0.15625,
-            prf_hz=1600.0,
-            antenna_length_m=0.3125,
-        ),
-        Processor(aperture_pulses=512, range_bins=320),
+        waveform_from_dict(d["waveform"]),
+        _build(Geometry, "geometry", d["geometry"]),
+        _build(Processor, "processor", d["processor"]),
     )
-
-
-def _psaltis_max() -> Config:
-    # "Maximum possible" column of Table 1: 1200 range cells, ρR < 1 m, ρA ~ 15 m, N = 512.
-    # X-band, 15 km, PRF 10 kHz, 300 m/s; D = 2·step so ρA = L/N ≈ 15.3 m.
-    return Config(
-        PulsedChirp(
-            bandwidth_hz=200e6, pulse_duration_s=2e-6, sample_rate_hz=240e6, receive_window_s=7.5e-6
-        ),
-        Geometry(
-            wavelength_m=0.03125,
-            slant_range_m=15e3,
-            along_track_step_m=0.03,
-            prf_hz=10e3,
-            antenna_length_m=0.06,
-        ),
-        Processor(aperture_pulses=512, range_bins=1200),
-    )
-
-
-def _crouch_sal() -> Config:
-    # Crouch (2012) stripmap SAL: 1.55 µm, 3 THz over 300 ms, 10 µm steps, 2048 shots in the
-    # aperture, ≈1.5 m range, 10 µm fibre aperture.  The LO is delayed to 1.5 m so the beat
-    # band is 3.4 kHz wide: 1024 complex samples per shot, a 51 mm unambiguous range window.
-    return Config(
-        FMCWChirp(
-            bandwidth_hz=3e12,
-            chirp_duration_s=0.3,
-            sample_rate_hz=1024 / 0.3,
-            reference_range_m=1.5,
-        ),
-        Geometry(
-            wavelength_m=1.55e-6,
-            slant_range_m=1.5,
-            along_track_step_m=10e-6,
-            prf_hz=2.0,
-            antenna_length_m=10e-6,
-        ),
-        Processor(aperture_pulses=2048, range_bins=512),
-    )
-
-
-def _zhao_insal() -> Config:
-    # Zhao et al. (2014): 1550 nm, 2.4 m, 8 mm synthetic aperture (233 µm azimuth resolution),
-    # 100 ms of chirp giving 170 µm range resolution (B ≈ 0.88 THz), 0.4 mm real apertures.
-    return Config(
-        FMCWChirp(
-            bandwidth_hz=0.8817e12,
-            chirp_duration_s=0.1,
-            sample_rate_hz=2560.0,
-            reference_range_m=2.4,
-        ),
-        Geometry(
-            wavelength_m=1.55e-6,
-            slant_range_m=2.4,
-            along_track_step_m=50e-6,
-            prf_hz=5.0,
-            antenna_length_m=0.4e-3,
-        ),
-        Processor(aperture_pulses=160, range_bins=256),
-    )
-
-
-def _tiny() -> Config:
-    # A small, fast variant of psaltis-jpl for tests and quick looks.
-    return Config(
-        PulsedChirp(
-            bandwidth_hz=40e6, pulse_duration_s=2.0e-6, sample_rate_hz=48e6, receive_window_s=4.0e-6
-        ),
-        Geometry(
-            wavelength_m=0.235,
-            slant_range_m=2e3,
-            along_track_step_m=0.5,
-            prf_hz=500.0,
-            antenna_length_m=1.0,
-        ),
-        Processor(aperture_pulses=64, range_bins=64, micro_batch=16),
-    )
-
-
-PRESETS = {
-    "psaltis-jpl": _psaltis_jpl,
-    "psaltis-max": _psaltis_max,
-    "crouch-sal": _crouch_sal,
-    "zhao-insal": _zhao_insal,
-    "tiny": _tiny,
-}
-
-
-def preset(name: str) -> Config:
-    """Return the named preset (see PRESETS); raises ValueError listing the names."""
-    try:
-        return PRESETS[name]()
-    except KeyError:
-        raise ValueError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}") from None

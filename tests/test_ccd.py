@@ -12,7 +12,7 @@ from rtsar.ccd.direct import DirectCorrelator
 from rtsar.ccd.fft import FFTCorrelator
 from rtsar.ccd.partitioned import PartitionedCorrelator
 from rtsar.lens.plan import make_plan
-from rtsar.params import preset
+from rtsar.presets import preset
 
 TOL = 1e-5  # float32 accumulation of N terms: ~sqrt(N)·6e-8 ≪ 1e-5
 

@@ -25,7 +25,8 @@ from rtsar.focus.linearize import (
 from rtsar.instrument import default_delay_s
 from rtsar.lens.base import compress_reference
 from rtsar.lens.plan import make_plan
-from rtsar.params import C_M_PER_S, preset
+from rtsar.params import C_M_PER_S
+from rtsar.presets import preset
 from rtsar.scene import Simulator, point_scene
 from rtsar.stream.engine import focus_batches
 

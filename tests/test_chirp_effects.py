@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from rtsar.instrument import hcn_lines
-from rtsar.params import C_M_PER_S, preset
+from rtsar.params import C_M_PER_S
+from rtsar.presets import preset
 from rtsar.scene import Simulator, point_scene
 from rtsar.scene.effects import load_effects
 

@@ -80,7 +80,7 @@ def test_help_explains(capsys):
 
 
 def test_nonfinite_shots_are_zeroed_counted_and_never_reach_the_image():
-    from rtsar.params import preset
+    from rtsar.presets import preset
     from rtsar.scene import point_scene
     from rtsar.stream.engine import StreamProcessor
 

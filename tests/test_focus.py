@@ -9,7 +9,7 @@ import pytest
 
 from rtsar.analysis.acceptance import run_point_targets
 from rtsar.ccd.base import aperture_offsets_m
-from rtsar.params import PRESETS, preset
+from rtsar.presets import PRESETS, preset
 from rtsar.windows import window
 
 RECT_PSLR_DB = -13.26

@@ -19,7 +19,8 @@ from rtsar.ccd.migration import correlate_migration_reference, design_migration_
 from rtsar.lens.base import compress_reference
 from rtsar.lens.numpy_lens import NumpyLens
 from rtsar.lens.plan import make_plan
-from rtsar.params import C_M_PER_S, Config, Geometry, Processor, preset
+from rtsar.params import C_M_PER_S, Config, Geometry, Processor
+from rtsar.presets import preset
 from rtsar.scene import Simulator, point_scene
 from rtsar.sources.replay import ReplaySource
 from rtsar.stream.engine import StreamProcessor, process_block

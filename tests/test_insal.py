@@ -8,7 +8,7 @@ from scipy import ndimage
 
 from rtsar.analysis import analyse_point_target
 from rtsar.app.quicklook import save_height_quicklook
-from rtsar.params import preset
+from rtsar.presets import preset
 from rtsar.scene.effects import load_effects
 from rtsar.scene.model import Scene, Targets
 from rtsar.scene.relief import (

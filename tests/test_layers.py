@@ -21,7 +21,15 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "rtsar"
 
 FLOORS = [
-    {"rtsar", "rtsar.params", "rtsar.windows", "rtsar.instrument", "rtsar.phase", "rtsar.samples"},
+    {
+        "rtsar",
+        "rtsar.params",
+        "rtsar.presets",
+        "rtsar.windows",
+        "rtsar.instrument",
+        "rtsar.phase",
+        "rtsar.samples",
+    },
     {"rtsar.lens"},
     {"rtsar.physical"},
     {"rtsar.ccd"},

@@ -11,7 +11,8 @@ from rtsar.lens import cl_loader as opencl  # noqa: E402
 from rtsar.lens.base import compress_reference  # noqa: E402
 from rtsar.lens.opencl import KERNELS, AOLens  # noqa: E402
 from rtsar.lens.plan import LensPlan, make_plan, pulsed_replica
-from rtsar.params import FMCWChirp, PulsedChirp, preset  # noqa: E402
+from rtsar.params import FMCWChirp, PulsedChirp
+from rtsar.presets import preset  # noqa: E402
 
 PRESETS = ("psaltis-max", "psaltis-jpl", "crouch-sal", "zhao-insal", "tiny")
 TOL = 1e-5

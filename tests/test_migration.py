@@ -26,7 +26,8 @@ from rtsar.ccd.migration import (
     shift_lines,
 )
 from rtsar.lens.plan import make_plan
-from rtsar.params import Processor, preset
+from rtsar.params import Processor
+from rtsar.presets import preset
 from rtsar.scene import Simulator, point_scene
 from rtsar.stream.engine import StreamProcessor, process_block
 

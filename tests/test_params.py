@@ -6,15 +6,14 @@ import pytest
 
 from rtsar.params import (
     C_M_PER_S,
-    PRESETS,
     Config,
     FMCWChirp,
     Geometry,
     Processor,
     PulsedChirp,
     config_from_dict,
-    preset,
 )
+from rtsar.presets import PRESETS, preset
 
 
 @pytest.mark.parametrize("name", sorted(PRESETS))

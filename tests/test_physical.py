@@ -17,7 +17,6 @@ from rtsar.ccd.base import correlate_reference, design_mask
 from rtsar.ccd.physical import PhysicalCCD
 from rtsar.lens.base import compress_reference
 from rtsar.lens.plan import make_plan
-from rtsar.params import preset
 from rtsar.physical import (
     AOCell,
     PhysicalSettings,
@@ -38,6 +37,7 @@ from rtsar.physical.settings import (
     ShotNoise,
     TimeAperture,
 )
+from rtsar.presets import preset
 from rtsar.scene import Simulator, point_scene
 
 TAPS = np.array([-3, 4, 11, 8, 11, 4, -3]) / 32.0  # the readout filter the docstring specifies

@@ -8,7 +8,7 @@ import pytest
 
 from rtsar.focus.chain import CorrectionChain
 from rtsar.focus.stage import CorrectionStage
-from rtsar.params import preset
+from rtsar.presets import preset
 from rtsar.scene import Simulator, point_scene
 from rtsar.sources.base import ShotBatch, Source
 from rtsar.sources.replay import ReplaySource, parse_rate

@@ -10,7 +10,7 @@ import pytest
 
 from rtsar.lens.base import compress_reference
 from rtsar.lens.plan import make_plan
-from rtsar.params import preset
+from rtsar.presets import preset
 from rtsar.scene import Simulator, point_scene
 from rtsar.scene.effects import load_effects
 from rtsar.scene.effects.platform import PulseProcess

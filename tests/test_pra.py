@@ -9,7 +9,7 @@ from rtsar.ccd.base import correlate_reference, design_mask
 from rtsar.focus.pra import PhaseToRetro, phase_to_retro_reference
 from rtsar.lens.numpy_lens import NumpyLens
 from rtsar.lens.plan import make_plan
-from rtsar.params import preset
+from rtsar.presets import preset
 from rtsar.scene import Simulator, point_scene
 
 

@@ -17,7 +17,8 @@ from rtsar.ccd.direct import DirectCorrelator
 from rtsar.lens.base import compress_reference
 from rtsar.lens.numpy_lens import NumpyLens
 from rtsar.lens.plan import make_plan
-from rtsar.params import PRESETS, Processor, preset
+from rtsar.params import Processor
+from rtsar.presets import PRESETS, preset
 from rtsar.samples import precision_dtype
 from rtsar.stream.engine import process_block
 

@@ -10,7 +10,7 @@ import pytest
 import zmq
 
 from rtsar.app.cli import main
-from rtsar.params import preset
+from rtsar.presets import preset
 from rtsar.scene import Simulator, point_scene
 from rtsar.sinks.client import StripSubscriber
 from rtsar.sinks.io import read_image
@@ -121,20 +121,28 @@ def test_messages_carry_the_documented_header_and_payload(tiny_shots):
     assert sum(m.header["line_count"] for m in strips) == msgs[-1].header["counters"]["lines_out"]
 
 
+GOOD_HEADER = {
+    "format": "rtsar-strip",
+    "version": 1,
+    "stream_id": "abc",
+    "seq": 0,
+    "first_line": 0,
+    "line_count": 2,
+    "range_bins": 3,
+    "dtype": "complex64",
+    "byte_order": "little",
+    "azimuth_first_m": 0.0,
+    "azimuth_step_m": 1.0,
+    "range_first_m": 100.0,
+    "range_step_m": 3.0,
+    "flagged_lines": [],
+    "counters": {},
+    "config": {},
+}
+
+
 def test_decode_rejects_malformed_messages():
-    good = [
-        b"strip",
-        json.dumps(
-            {
-                "format": "rtsar-strip",
-                "version": 1,
-                "line_count": 2,
-                "range_bins": 3,
-                "dtype": "complex64",
-            }
-        ).encode(),
-        bytes(48),
-    ]
+    good = [b"strip", json.dumps(GOOD_HEADER).encode(), bytes(48)]
     assert decode(good).lines.shape == (2, 3)
     for bad in (
         [b"strip"],
@@ -276,3 +284,38 @@ def test_hurry_ends_a_lossless_wait_at_once():
     assert time.perf_counter() - t0 < 3.0 and pub.subscriber_stalls == 1
     stalled.close(0)
     pub.close()
+
+
+def test_keygen_keeps_the_secret_private_and_refuses_to_overwrite(tmp_path):
+    assert main(["keygen", str(tmp_path)]) == 0
+    secret = tmp_path / "rtsar.key_secret"
+    assert secret.stat().st_mode & 0o777 == 0o600
+    before = secret.read_bytes()
+    assert main(["keygen", str(tmp_path)]) == 2 and secret.read_bytes() == before
+    assert main(["keygen", str(tmp_path), "--force"]) == 0 and secret.read_bytes() != before
+
+
+def test_a_publisher_with_client_keys_admits_only_those_clients(tmp_path):
+    server, known, stranger = (tmp_path / d for d in ("server", "known", "stranger"))
+    for d in (server, known, stranger):
+        assert main(["keygen", str(d)]) == 0
+    allowed = tmp_path / "allowed"
+    allowed.mkdir()
+    (allowed / "known.key").write_bytes((known / "rtsar.key").read_bytes())
+    pub = ZmqPublisher(
+        "tcp://127.0.0.1:*",
+        "drop",
+        curve_secret_key=server / "rtsar.key_secret",
+        curve_clients=allowed,
+    )
+    ok = StripSubscriber(pub.endpoint, server / "rtsar.key", known / "rtsar.key_secret")
+    no = StripSubscriber(pub.endpoint, server / "rtsar.key", stranger / "rtsar.key_secret")
+    anon = StripSubscriber(pub.endpoint, server / "rtsar.key")  # an ephemeral key pair
+    assert pub.wait_for_subscribers(1, timeout_s=10)
+    time.sleep(0.3)
+    pub.send("stats", {"hello": 1})
+    assert ok.recv(5.0).header == {"hello": 1}
+    assert no.recv(0.3) is None and anon.recv(0.3) is None
+    assert pub.subscribers == 1
+    for s in (ok, no, anon, pub):
+        s.close()

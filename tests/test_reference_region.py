@@ -16,7 +16,7 @@ from rtsar.focus.reference_region import (
 )
 from rtsar.lens.numpy_lens import NumpyLens
 from rtsar.lens.plan import make_plan
-from rtsar.params import preset
+from rtsar.presets import preset
 from rtsar.scene import Simulator, point_scene
 
 CFG = preset("zhao-insal").with_processor(aperture_pulses=96, range_bins=32, range_window="taylor")

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from rtsar.instrument import SAM_CHANNELS
-from rtsar.params import preset
+from rtsar.presets import preset
 from rtsar.scene.effects import load_effects
 from rtsar.scene.model import Scene, Targets
 from rtsar.scene.simulator import Simulator

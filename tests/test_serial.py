@@ -10,7 +10,7 @@ import pytest
 from conftest import crandn
 from tools_loader import load_tool
 
-from rtsar.params import preset
+from rtsar.presets import preset
 from rtsar.scene import point_scene
 from rtsar.sources.frame import FrameParser, encode_frame
 from rtsar.sources.serial import SerialSource

@@ -9,7 +9,7 @@ import pytest
 
 from rtsar.lens.base import compress_reference
 from rtsar.lens.plan import make_plan
-from rtsar.params import preset
+from rtsar.presets import preset
 from rtsar.scene import DEMO_SCENE, Simulator, load_scene, point_scene, scene_from_dict
 from rtsar.scene import effects as effects_pkg
 from rtsar.scene.effects.base import Effect
@@ -112,7 +112,7 @@ def test_unnamed_effect_is_never_called(monkeypatch):
 def test_unnamed_effect_is_not_even_imported():
     code = textwrap.dedent("""
         import sys
-        from rtsar.params import preset
+        from rtsar.presets import preset
         from rtsar.scene import Simulator, point_scene
         list(Simulator(point_scene(preset("tiny"), [0.0], [2000.0], pulses=5)).shots())
         print(sorted(m for m in sys.modules if m.startswith("rtsar.scene.effects.")))

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from rtsar.app import table1 as t1
-from rtsar.params import preset
 from rtsar.physical import paper_ccd
+from rtsar.presets import preset
 
 
 @pytest.fixture(scope="module")

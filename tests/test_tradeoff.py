@@ -8,7 +8,7 @@ from rtsar.app import tradeoff
 from rtsar.ccd.base import correlate_reference, design_mask
 from rtsar.lens.base import compress_reference
 from rtsar.lens.plan import make_plan
-from rtsar.params import preset
+from rtsar.presets import preset
 
 
 def test_trace_latency_by_hand():

@@ -22,7 +22,7 @@ from ..lens.cl_loader import device_info
 from ..lens.numpy_lens import NumpyLens
 from ..lens.opencl import AOLens
 from ..lens.plan import make_plan
-from ..params import preset
+from ..presets import preset
 from .bench_pipeline import bench_pipeline
 
 

@@ -14,12 +14,13 @@ def subscribe(
     output: str,
     curve_server_key=None,
     timeout_s: float | None = None,
+    curve_client_key=None,
     stream=None,
 ) -> int:
     """Write every strip received into ``output`` until the stream's end message, Ctrl-C, or
     ``timeout_s`` without a message.  Missed strips become zero lines, counted and listed."""
     stream = stream or sys.stderr
-    sub = StripSubscriber(endpoint, curve_server_key, hwm_messages=0)
+    sub = StripSubscriber(endpoint, curve_server_key, curve_client_key, hwm_messages=0)
     rec = StripRecorder(output, endpoint)
     final = None
     interrupted = False

@@ -38,10 +38,11 @@ from ..ccd.direct import DirectCorrelator
 from ..ccd.physical import PhysicalCCD
 from ..lens.numpy_lens import NumpyLens
 from ..lens.plan import make_plan, range_axis_m
-from ..params import Config, preset
+from ..params import Config
 from ..physical.aocell import AOCell
 from ..physical.carrier import pulses_integrated, range_cells
 from ..physical.settings import PhysicalSettings, paper_ccd
+from ..presets import preset
 from ..scene import Simulator, point_scene
 
 # Psaltis & Wagner 1981, Table 1, as printed.

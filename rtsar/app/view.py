@@ -44,10 +44,11 @@ def view(
     curve_server_key=None,
     timeout_s: float = 30.0,
     stream=None,
+    curve_client_key=None,
 ) -> int:
     """Live waterfall window, or with ``png`` a snapshot once ``lines`` lines have arrived."""
     stream = stream or sys.stderr
-    sub = StripSubscriber(endpoint, curve_server_key, hwm_messages=64)
+    sub = StripSubscriber(endpoint, curve_server_key, curve_client_key, hwm_messages=64)
     fall = Waterfall(lines)
     try:
         if png:

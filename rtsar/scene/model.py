@@ -35,7 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from ..lens.plan import range_axis_m
-from ..params import Config, Geometry, Processor, preset, waveform_from_dict
+from ..params import Config, Geometry, Processor, waveform_from_dict
+from ..presets import preset
 from .effects import load_effects
 
 if sys.version_info >= (3, 11):
@@ -64,6 +65,8 @@ _TARGET_KEYS = {
     "phase_rad",
 }
 DEMO_SCENE = Path(__file__).with_name("scenes") / "demo.toml"
+MAX_PULSES = 1_000_000_000
+MAX_TARGETS = 100_000
 
 
 @dataclass(frozen=True, eq=False)
@@ -177,6 +180,11 @@ def _table_list(d: dict, key: str) -> list:
 
 
 def _targets(rows: list, cfg: Config) -> Targets:
+    if len(rows) > MAX_TARGETS:
+        raise ValueError(
+            f"scene: {len(rows)} targets exceed {MAX_TARGETS} (each costs a phase per sample per "
+            "pulse; build extended scenes with rtsar.scene.surfaces)"
+        )
     xs, rs, amps, grounds, heights = [], [], [], [], []
     for i, t in enumerate(rows):
         unknown = set(t) - _TARGET_KEYS
@@ -240,6 +248,8 @@ def _scan_extent(cfg: Config, targets: Targets, start, pulses) -> tuple[float, i
         pulses = int(math.ceil((hi + margin_m - start) / step)) + 1
     if not (isinstance(pulses, int) and pulses >= 1):
         raise ValueError(f"scene: pulses must be an integer >= 1, got {pulses!r}")
+    if pulses > MAX_PULSES:
+        raise ValueError(f"scene: pulses = {pulses} exceeds {MAX_PULSES} (a day at 10 kHz)")
     return start, pulses
 
 

@@ -27,7 +27,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..lens.plan import make_plan
-from ..params import Config, FMCWChirp, preset
+from ..params import Config, FMCWChirp
+from ..presets import preset
 from ..topo.insar_geometry import ZHAO_LOOK_ANGLE_RAD
 from .model import Scene, Targets
 

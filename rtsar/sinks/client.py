@@ -8,14 +8,16 @@ from pathlib import Path
 import zmq
 import zmq.auth
 
-from .publish import DEFAULT_ENDPOINT
+from .publish import DEFAULT_ENDPOINT, load_secret_key
 from .wire import Message, decode
 
 
 class StripSubscriber:
     """Client: connect a SUB socket and receive :class:`Message` s.
 
-    ``curve_server_key``: the publisher's public-key file when it uses CURVE.
+    ``curve_server_key``: the publisher's public-key file when it uses CURVE;
+    ``curve_client_key``: this client's secret-key file when the publisher admits only known
+    clients (``rtsar run --curve-clients DIR``).
     Counts ``strips``, ``missed_strips`` (gaps in seq) and ``bad_messages`` (undecodable).
     """
 
@@ -23,6 +25,7 @@ class StripSubscriber:
         self,
         endpoint: str = DEFAULT_ENDPOINT,
         curve_server_key: str | Path | None = None,
+        curve_client_key: str | Path | None = None,
         hwm_messages: int = 0,
         context: zmq.Context | None = None,
     ):
@@ -30,9 +33,17 @@ class StripSubscriber:
         self.socket = s = ctx.socket(zmq.SUB)
         s.setsockopt(zmq.LINGER, 0)
         s.setsockopt(zmq.RCVHWM, int(hwm_messages))
+        if curve_client_key is not None and curve_server_key is None:
+            raise ValueError("a CURVE client key needs the publisher's key (--curve-server-key)")
         if curve_server_key is not None:
-            server_public, _ = zmq.auth.load_certificate(str(curve_server_key))
-            s.curve_publickey, s.curve_secretkey = zmq.curve_keypair()
+            try:
+                server_public, _ = zmq.auth.load_certificate(str(curve_server_key))
+            except (OSError, ValueError) as exc:
+                raise ValueError(f"{curve_server_key}: not a CURVE key file ({exc})") from None
+            if curve_client_key is not None:  # a publisher that authenticates clients
+                s.curve_publickey, s.curve_secretkey = load_secret_key(curve_client_key)
+            else:
+                s.curve_publickey, s.curve_secretkey = zmq.curve_keypair()
             s.curve_serverkey = server_public
         s.setsockopt(zmq.SUBSCRIBE, b"")
         try:

@@ -86,12 +86,22 @@ class RecordingWriter:
 
 @dataclass
 class Recording:
+    """An open recording, checked: every dataset present, one entry per shot, shots of the
+    configured length, pulse numbers increasing, positions on the configured step."""
+
     path: Path
     config: Config
     scene: dict
     pulses: int
     start_along_track_m: float
     _file: h5py.File
+    pulse_index: np.ndarray | None = None  # int64[pulse]
+    time_s: np.ndarray | None = None  # float64[pulse]
+
+    @property
+    def shots(self):
+        """The shots dataset [pulse, sample] (read lazily, block by block)."""
+        return self._file["shots"]
 
     def batches(self, size: int) -> Iterator[np.ndarray]:
         """Shots in blocks of ``size`` pulses (the last block may be shorter)."""
@@ -127,19 +137,70 @@ def _open(path: str | Path, fmt: str) -> h5py.File:
     return f
 
 
+def _json_attr(f: h5py.File, name: str, default=None) -> dict:
+    if name not in f.attrs:
+        if default is not None:
+            return default
+        raise ValueError(f"the attribute {name!r} is missing")
+    text = f.attrs[name]
+    try:
+        value = json.loads(text.decode() if isinstance(text, bytes) else str(text))
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise ValueError(f"the attribute {name!r} is not JSON ({exc})") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"the attribute {name!r} is not a JSON object")
+    return value
+
+
+def _dataset(f: h5py.File, name: str, ndim: int, kind: str) -> h5py.Dataset:
+    if name not in f or not isinstance(f[name], h5py.Dataset):
+        raise ValueError(f"the dataset {name!r} is missing")
+    ds = f[name]
+    kinds = {"complex": np.complexfloating, "int": np.integer, "float": np.floating}
+    if ds.ndim != ndim or not np.issubdtype(ds.dtype, kinds[kind]):
+        raise ValueError(f"the dataset {name!r} must be {ndim}-D {kind}, got {ds.shape} {ds.dtype}")
+    return ds
+
+
 def open_recording(path: str | Path) -> Recording:
+    """Open and check a recording; ValueError naming the file and what is wrong with it."""
     f = _open(path, RECORDING_FORMAT)
-    cfg = config_from_dict(json.loads(f.attrs["config"]))
-    pulses = f["shots"].shape[0]
-    start = float(f["along_track_m"][0]) if pulses else 0.0
-    if pulses > 1:
-        # Shot 0's position and the step define the image's azimuth axis; a recording whose
-        # positions do not follow the configured step is refused rather than mis-labelled.
-        steps = np.diff(f["along_track_m"][: min(pulses, 4096)])
-        if not np.allclose(steps, cfg.geometry.along_track_step_m, rtol=1e-6, atol=0):
-            f.close()
-            raise ValueError(f"{path}: along_track_m does not advance by the configured step")
-    return Recording(Path(path), cfg, json.loads(f.attrs.get("scene", "{}")), pulses, start, f)
+    try:
+        cfg = config_from_dict(_json_attr(f, "config"))
+        scene = _json_attr(f, "scene", {})
+        shots = _dataset(f, "shots", 2, "complex")
+        pulses, samples = shots.shape
+        if samples != cfg.waveform.samples_per_shot:
+            raise ValueError(
+                f"shots hold {samples} samples per shot; the configuration's waveform has "
+                f"{cfg.waveform.samples_per_shot}"
+            )
+        meta = {
+            name: _dataset(f, name, 1, kind)[...]
+            for name, kind in (
+                ("pulse_index", "int"),
+                ("time_s", "float"),
+                ("along_track_m", "float"),
+            )
+        }
+        for name, values in meta.items():
+            if len(values) != pulses:
+                raise ValueError(f"{name} has {len(values)} entries for {pulses} shots")
+            if not np.isfinite(values).all():
+                raise ValueError(f"{name} holds non-finite values")
+        if pulses > 1 and not np.all(np.diff(meta["pulse_index"]) > 0):
+            raise ValueError("pulse_index must increase from shot to shot")
+        if pulses > 1:
+            # Shot 0's position and the step define the image's azimuth axis; a recording whose
+            # positions do not follow the configured step is refused rather than mis-labelled.
+            steps = np.diff(meta["along_track_m"])
+            if not np.allclose(steps, cfg.geometry.along_track_step_m, rtol=1e-6, atol=0):
+                raise ValueError("along_track_m does not advance by the configured step")
+    except (ValueError, KeyError, TypeError, OSError) as exc:
+        f.close()
+        raise ValueError(f"{path}: {exc}") from None
+    start = float(meta["along_track_m"][0]) if pulses else 0.0
+    return Recording(Path(path), cfg, scene, pulses, start, f, meta["pulse_index"], meta["time_s"])
 
 
 def write_image(

@@ -14,6 +14,7 @@ Every message is multipart,
 from __future__ import annotations
 
 import json
+import math
 import time
 from dataclasses import dataclass
 
@@ -108,6 +109,57 @@ class Message:
     valid: np.ndarray | None = None
 
 
+MAX_RANGE_BINS = 1 << 16  # the widest strip a subscriber accepts
+MAX_LINES = 1 << 16  # the most lines in one strip
+
+
+def _int(header: dict, key: str, low: int = 0, high: int | None = None) -> int:
+    v = header.get(key)
+    if isinstance(v, bool) or not isinstance(v, int) or v < low or (high is not None and v > high):
+        bound = f"{low} … {high}" if high is not None else f">= {low}"
+        raise ValueError(f"header field {key!r} must be an integer {bound}, got {v!r}")
+    return v
+
+
+def _float(header: dict, key: str) -> float:
+    v = header.get(key)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise ValueError(f"header field {key!r} must be a finite number, got {v!r}")
+    return float(v)
+
+
+def check_strip_header(header: dict) -> None:
+    """ValueError naming the field when a strip header is not what ``strip_header`` writes."""
+    if header.get("format") != STRIP_FORMAT or header.get("version") != STRIP_VERSION:
+        raise ValueError(f"not an {STRIP_FORMAT} v{STRIP_VERSION} strip")
+    if not isinstance(header.get("stream_id"), str):
+        raise ValueError("header field 'stream_id' must be a string")
+    _int(header, "seq")
+    _int(header, "first_line")
+    _int(header, "line_count", 1, MAX_LINES)
+    _int(header, "range_bins", 1, MAX_RANGE_BINS)
+    for key in ("azimuth_first_m", "azimuth_step_m", "range_first_m", "range_step_m"):
+        _float(header, key)
+    if header.get("dtype") != "complex64" or header.get("byte_order", "little") != "little":
+        raise ValueError("strips carry little-endian complex64 lines")
+    runs = header.get("flagged_lines", [])
+    if not isinstance(runs, list) or not all(
+        isinstance(r, list)
+        and len(r) == 2
+        and all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in r)
+        for r in runs
+    ):
+        raise ValueError("header field 'flagged_lines' must be a list of [first_line, count]")
+    counters = header.get("counters", {})
+    if not isinstance(counters, dict) or not all(
+        isinstance(k, str) and isinstance(v, int) and not isinstance(v, bool)
+        for k, v in counters.items()
+    ):
+        raise ValueError("header field 'counters' must map names to integers")
+    if not isinstance(header.get("config"), dict):
+        raise ValueError("header field 'config' must be an object")
+
+
 def decode(frames: list[bytes]) -> Message:
     """Parse one multipart message; ValueError on anything that is not a valid rtsar message."""
     if len(frames) < 2:
@@ -123,11 +175,10 @@ def decode(frames: list[bytes]) -> Message:
         return _decode_height(header, frames)
     if topic != "strip":
         return Message(topic, header)
-    if header.get("format") != STRIP_FORMAT or header.get("version") != STRIP_VERSION:
-        raise ValueError(f"not an {STRIP_FORMAT} v{STRIP_VERSION} strip")
+    check_strip_header(header)
     if len(frames) != 3:
         raise ValueError("a strip has 3 frames")
-    shape = (int(header["line_count"]), int(header["range_bins"]))
+    shape = (header["line_count"], header["range_bins"])
     payload = bytes(frames[2])
     if header.get("dtype") != "complex64" or len(payload) != shape[0] * shape[1] * 8:
         raise ValueError(f"payload of {len(payload)} bytes does not match {shape} complex64")
@@ -139,7 +190,10 @@ def _decode_height(header: dict, frames: list[bytes]) -> Message:
         raise ValueError(f"not an {HEIGHT_FORMAT} v{HEIGHT_VERSION} message")
     if len(frames) != 4:
         raise ValueError("a height message has 4 frames")
-    shape = (int(header["line_count"]), int(header["range_bins"]))
+    shape = (
+        _int(header, "line_count", 1, MAX_LINES),
+        _int(header, "range_bins", 1, MAX_RANGE_BINS),
+    )
     h, v = bytes(frames[2]), bytes(frames[3])
     if len(h) != shape[0] * shape[1] * 4 or len(v) != shape[0] * shape[1]:
         raise ValueError(f"height payload does not match {shape}")

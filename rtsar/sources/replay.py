@@ -73,11 +73,10 @@ class ReplaySource(Source):
 
     @classmethod
     def from_recording(cls, recording, rate="real", batch: int = 64) -> ReplaySource:
-        f = recording._file
         return cls(
-            f["shots"],
-            f["pulse_index"][...],
-            f["time_s"][...],
+            recording.shots,
+            recording.pulse_index,
+            recording.time_s,
             recording.config.geometry.prf_hz,
             rate,
             batch,

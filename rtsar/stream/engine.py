@@ -24,6 +24,7 @@ from ..lens import make_lens, make_plan
 from ..params import Config
 from ..physical.aocell import AOCell
 from ..samples import zero_nonfinite_rows
+from .memory import check_memory
 
 
 @dataclass
@@ -56,6 +57,7 @@ class StreamProcessor:
         physical=None,
     ):
         self.config = config
+        check_memory(config)
         self.plan = make_plan(config)
         self.lens = make_lens(self.plan, lens_backend, device, config.processor.precision)
         self.dtype = self.lens.dtype

@@ -50,6 +50,7 @@ from .engine import Lines, StreamProcessor
 from .height import HeightBatch, HeightChannel
 from .hold import HeldPulses
 from .ingest import Ingest, PulseBlock, concat_blocks
+from .memory import check_memory
 from .queue import BoundedQueue
 from .stats import PipelineStats
 from .strips import LineBlock, StreamInfo, StripAssembler, StripSink
@@ -119,6 +120,9 @@ class Pipeline:
         self.source = source
         self.sinks = list(sinks)
         self.settings = s = settings or PipelineSettings()
+        n = config.processor.aperture_pulses
+        capacity = s.queue_pulses or 8 * n
+        check_memory(config, capacity, 1 if height is not None else 0)
         self.engine = StreamProcessor(
             config, s.lens_backend, s.device, start_along_track_m, corrections, physical
         )
@@ -131,9 +135,7 @@ class Pipeline:
         )
         self._held = HeldPulses()  # pulses inside the line stages (metadata)
         self._holding = bool(corrections and corrections.line_stages)
-        n = config.processor.aperture_pulses
         self.max_batch = s.max_batch or config.processor.micro_batch
-        capacity = s.queue_pulses or 8 * n
         self.q_shots = BoundedQueue(capacity, "shots")
         self.q_lines = BoundedQueue(capacity, "compressed")
         self.q_image = BoundedQueue(capacity, "image lines")

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ...lens import range_axis_m
-from ...params import PRESETS, preset
+from ...presets import PRESETS, preset
 from ...scene import Simulator, load_scene
 from ...sinks.io import RecordingWriter, open_recording, read_image, write_image
 from ...stream.engine import StreamProcessor

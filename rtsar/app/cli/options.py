@@ -15,7 +15,7 @@ from ...lens import LENS_BACKENDS, range_axis_m
 from ...params import PRECISIONS, Processor
 from ...physical import CARRIERS, paper_ccd
 from ...scene.correction_context import correction_context
-from ...sinks.publish import DEFAULT_ENDPOINT, DELIVERIES
+from ...sinks.publish import DEFAULT_ENDPOINT, DELIVERIES, STALL_TIMEOUT_S
 from ...stream.pipeline import STAGE_LAYOUTS, PipelineSettings
 
 
@@ -103,6 +103,13 @@ def add_pipeline_options(s, delivery: str) -> None:
         help="most pulses per lens launch "
         "(default: the configuration's micro_batch; fewer when keeping up)",
     )
+    g.add_argument(
+        "--max-gap-pulses",
+        type=int,
+        metavar="P",
+        help="longest run of missing sequence numbers that is zero-filled; a longer jump that "
+        "the next shot confirms is a restart (default: one aperture)",
+    )
     add_processing_knobs(g)
     g = s.add_argument_group("publication (ZeroMQ; wire format in README 'Strip protocol')")
     g.add_argument(
@@ -120,9 +127,23 @@ def add_pipeline_options(s, delivery: str) -> None:
     g.add_argument("--strip-lines", type=int, default=16, help="lines per strip (default 16)")
     g.add_argument("--strip-ms", type=float, help="strip length in ms at the PRF instead")
     g.add_argument(
+        "--stall-timeout",
+        type=float,
+        default=STALL_TIMEOUT_S,
+        metavar="S",
+        help="lossless delivery: the longest wait for a subscriber that reads nothing before it "
+        f"is cut off, counted and reported (default {STALL_TIMEOUT_S:g} s)",
+    )
+    g.add_argument(
         "--curve-key",
         metavar="SECRET_KEY_FILE",
         help="encrypt with ZeroMQ CURVE (key pair from `rtsar keygen`)",
+    )
+    g.add_argument(
+        "--curve-clients",
+        metavar="DIR",
+        help="with --curve-key: admit only the subscribers whose public keys (*.key from "
+        "`rtsar keygen`) are in DIR",
     )
     s.add_argument(
         "-o",
@@ -143,6 +164,11 @@ def add_subscriber_options(s) -> None:
         "--curve-server-key",
         metavar="PUBLIC_KEY_FILE",
         help="the publisher's public key when it uses CURVE",
+    )
+    s.add_argument(
+        "--curve-client-key",
+        metavar="SECRET_KEY_FILE",
+        help="this subscriber's secret key, when the publisher admits only known clients",
     )
 
 
@@ -177,13 +203,21 @@ def physical_ccd(args):
     return replace(paper_ccd(args.physical), full_scale_amplitude=args.full_scale)
 
 
-def pipeline_settings(args) -> PipelineSettings:
+def pipeline_settings(args, deadline: bool = False) -> PipelineSettings:
+    for name in ("max_batch", "max_gap_pulses"):
+        value = getattr(args, name)
+        if value is not None and value < 1:
+            raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {value}")
+    if not args.stall_timeout > 0:
+        raise ValueError(f"--stall-timeout must be > 0 seconds, got {args.stall_timeout}")
     return PipelineSettings(
         lens_backend=args.lens,
         device=args.device,
         stages=args.stages,
         strip_lines=args.strip_lines,
         max_batch=args.max_batch or 0,
+        max_gap_pulses=args.max_gap_pulses or 0,
+        deadline=deadline,
     )
 
 

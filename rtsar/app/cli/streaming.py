@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import argparse
+import os
 from dataclasses import replace
 from pathlib import Path
 
 import zmq.auth
 
-from ...params import preset
+from ...presets import preset
 from ...scene import DEMO_SCENE, load_scene
 from ...sinks.io import open_recording
 from ...sinks.publish import DEFAULT_ENDPOINT
@@ -45,17 +47,20 @@ def cmd_run(args) -> int:
             cfg.waveform.samples_per_shot,
             baudrate=args.baudrate,
             idle_timeout_s=args.duration,
+            reconnect=args.reconnect,
         )
         return run_stream(
             cfg,
             source,
-            pipeline_settings(args),
+            pipeline_settings(args, deadline=args.duration is not None),
             args.endpoint,
             args.delivery,
             output=args.output,
             curve_secret_key=args.curve_key,
             corrections=correction_chain(args, cfg),
             physical=physical_ccd(args),
+            stall_timeout_s=args.stall_timeout,
+            curve_clients=args.curve_clients,
         )
 
     if args.preset:
@@ -69,7 +74,7 @@ def cmd_run(args) -> int:
     return run_stream(
         scene.config,
         source,
-        pipeline_settings(args),
+        pipeline_settings(args, deadline=args.duration is not None),
         args.endpoint,
         args.delivery,
         scene.start_along_track_m,
@@ -78,6 +83,8 @@ def cmd_run(args) -> int:
         total_pulses=source.total,
         corrections=correction_chain(args, scene.config, scene, scene.start_along_track_m),
         physical=physical_ccd(args),
+        stall_timeout_s=args.stall_timeout,
+        curve_clients=args.curve_clients,
     )
 
 
@@ -100,13 +107,17 @@ def cmd_replay(args) -> int:
             total_pulses=rec.pulses,
             corrections=correction_chain(args, cfg, None, rec.start_along_track_m),
             physical=physical_ccd(args),
+            stall_timeout_s=args.stall_timeout,
+            curve_clients=args.curve_clients,
         )
 
 
 def cmd_subscribe(args) -> int:
     if args.timeout is not None and args.timeout <= 0:
         return die(f"--timeout must be > 0 seconds, got {args.timeout}")
-    return subscribe(args.endpoint, args.output, args.curve_server_key, args.timeout)
+    return subscribe(
+        args.endpoint, args.output, args.curve_server_key, args.timeout, args.curve_client_key
+    )
 
 
 def cmd_view(args) -> int:
@@ -119,15 +130,25 @@ def cmd_view(args) -> int:
         args.dynamic_range_db,
         args.curve_server_key,
         args.timeout,
+        curve_client_key=args.curve_client_key,
     )
 
 
 def cmd_keygen(args) -> int:
-    Path(args.directory).mkdir(parents=True, exist_ok=True)
-    public, secret = zmq.auth.create_certificates(args.directory, args.name)
+    folder = Path(args.directory)
+    public, secret = folder / f"{args.name}.key", folder / f"{args.name}.key_secret"
+    there = [str(p) for p in (public, secret) if p.exists()]
+    if there and not args.force:
+        return die(f"{', '.join(there)} exist(s): keep them, or replace them with --force")
+    folder.mkdir(parents=True, exist_ok=True)
+    for p in (public, secret):
+        p.unlink(missing_ok=True)
+    public, secret = zmq.auth.create_certificates(str(folder), args.name)
+    os.chmod(secret, 0o600)  # the secret key is readable by its owner only
     print(
-        f"wrote {public} (give to subscribers: --curve-server-key)\n"
-        f"wrote {secret} (keep private: run/replay --curve-key)"
+        f"wrote {public} (give to subscribers: --curve-server-key; or, for a subscriber's own "
+        f"pair, put it in the publisher's --curve-clients folder)\n"
+        f"wrote {secret} (owner-only: run/replay --curve-key, or subscribe --curve-client-key)"
     )
     return 0
 
@@ -159,6 +180,13 @@ def add_parsers(sub) -> None:
     )
     src.add_argument(
         "--duration", type=float, help="stop after this many seconds (serial: of silence)"
+    )
+    src.add_argument(
+        "--reconnect",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="with --serial: reopen a lost link, pausing 0.1 s doubling to 5 s (default: on for "
+        "socket://, off for serial ports)",
     )
     add_pipeline_options(s, "drop")
     s.set_defaults(func=cmd_run)
@@ -223,8 +251,12 @@ def add_parsers(sub) -> None:
         "keygen",
         help="make a CURVE key pair for encrypted publication",
         description="Write a ZeroMQ CURVE key pair: NAME.key (public: give it to subscribers, "
-        "--curve-server-key) and NAME.key_secret (keep it: run/replay --curve-key).",
+        "--curve-server-key) and NAME.key_secret (owner-only, mode 0600: run/replay "
+        "--curve-key).  A subscriber's own pair lets a publisher admit only known clients "
+        "(run/replay --curve-clients DIR holding their NAME.key files; subscribe/view "
+        "--curve-client-key).  An existing pair is kept unless --force.",
     )
     s.add_argument("directory", help="folder to write NAME.key and NAME.key_secret into")
     s.add_argument("--name", default="rtsar", help="file name stem (default rtsar)")
+    s.add_argument("--force", action="store_true", help="replace an existing key pair")
     s.set_defaults(func=cmd_keygen)

@@ -21,7 +21,7 @@ from ...ccd.fft import FFTCorrelator
 from ...lens.base import compress_reference
 from ...lens.opencl import AOLens
 from ...lens.plan import make_plan
-from ...params import PRESETS, preset
+from ...presets import PRESETS, preset
 from ...scene import Simulator, point_scene
 
 

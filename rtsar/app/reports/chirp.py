@@ -39,7 +39,8 @@ from ...analysis import analyse_point_target
 from ...focus.hcn_align import HCNAligner
 from ...focus.linearize import ChirpLinearizer
 from ...lens.plan import make_plan
-from ...params import C_M_PER_S, preset
+from ...params import C_M_PER_S
+from ...presets import preset
 from ...scene import Simulator, point_scene
 from ...stream.engine import focus_batches
 

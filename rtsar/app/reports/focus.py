@@ -13,7 +13,7 @@ import sys
 import time
 
 from ...analysis.acceptance import markdown_table, run_point_targets
-from ...params import PRESETS, preset
+from ...presets import PRESETS, preset
 
 
 def main(argv=None) -> int:

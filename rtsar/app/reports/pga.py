@@ -40,8 +40,9 @@ from ...ccd.base import correlate_reference, design_mask
 from ...focus.pga import PGASettings, PGAStage
 from ...lens.base import compress_reference
 from ...lens.plan import make_plan, range_axis_m
-from ...params import Config, FMCWChirp, Geometry, Processor, preset
+from ...params import Config, FMCWChirp, Geometry, Processor
 from ...phase import phasor
+from ...presets import preset
 from ...scene import Simulator, point_scene
 from ...scene.surfaces import bright_points, diffuse_surface
 

@@ -32,8 +32,8 @@ from ...focus.pra import PhaseToRetro
 from ...focus.reference_region import ReferenceGeometry, ReferenceRegionCorrector
 from ...lens.numpy_lens import NumpyLens
 from ...lens.plan import make_plan, range_axis_m
-from ...params import preset
 from ...phase import wrap
+from ...presets import preset
 from ...scene import Simulator, point_scene
 
 MICRO_BATCH = 64

@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from ...lens.plan import range_axis_m
-from ...params import preset
+from ...presets import preset
 from ...scene import Simulator, point_scene
 from ...scene.effects import REGISTRY
 

@@ -10,7 +10,8 @@ import numpy as np
 from ...analysis import theoretical_irw_factor
 from ...analysis.acceptance import SINC_IRW, acceptance_targets, azimuth_weights
 from ...lens.plan import range_axis_m
-from ...params import Config, Processor, preset
+from ...params import Config, Processor
+from ...presets import preset
 from ...scene import Simulator, point_scene
 
 

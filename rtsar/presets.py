@@ -1,0 +1,119 @@
+"""The instruments of the source papers as configurations (README "Presets")."""
+
+from __future__ import annotations
+
+from .params import Config, FMCWChirp, Geometry, Processor, PulsedChirp
+
+
+def _psaltis_jpl() -> Config:
+    # Experimental processor of Psaltis & Wagner (Table 1): 40 MHz chirp, 10 µs AO aperture,
+    # 512 x 320 CCD, L ≈ 15 km illuminated.  L-band (JPL), 20 km slant range, 250 m/s.
+    # D = 2·step (Nyquist in azimuth, Crouch eq. 4.10) makes ρA = λR/(2Nd) = L/N (Psaltis eq. 7).
+    return Config(
+        PulsedChirp(
+            bandwidth_hz=40e6, pulse_duration_s=3.2e-6, sample_rate_hz=48e6, receive_window_s=10e-6
+        ),
+        Geometry(
+            wavelength_m=0.235,
+            slant_range_m=20e3,
+            along_track_step_m=0.15625,
+            prf_hz=1600.0,
+            antenna_length_m=0.3125,
+        ),
+        Processor(aperture_pulses=512, range_bins=320),
+    )
+
+
+def _psaltis_max() -> Config:
+    # "Maximum possible" column of Table 1: 1200 range cells, ρR < 1 m, ρA ~ 15 m, N = 512.
+    # X-band, 15 km, PRF 10 kHz, 300 m/s; D = 2·step so ρA = L/N ≈ 15.3 m.
+    return Config(
+        PulsedChirp(
+            bandwidth_hz=200e6, pulse_duration_s=2e-6, sample_rate_hz=240e6, receive_window_s=7.5e-6
+        ),
+        Geometry(
+            wavelength_m=0.03125,
+            slant_range_m=15e3,
+            along_track_step_m=0.03,
+            prf_hz=10e3,
+            antenna_length_m=0.06,
+        ),
+        Processor(aperture_pulses=512, range_bins=1200),
+    )
+
+
+def _crouch_sal() -> Config:
+    # Crouch (2012) stripmap SAL: 1.55 µm, 3 THz over 300 ms, 10 µm steps, 2048 shots in the
+    # aperture, ≈1.5 m range, 10 µm fibre aperture.  The LO is delayed to 1.5 m so the beat
+    # band is 3.4 kHz wide: 1024 complex samples per shot, a 51 mm unambiguous range window.
+    return Config(
+        FMCWChirp(
+            bandwidth_hz=3e12,
+            chirp_duration_s=0.3,
+            sample_rate_hz=1024 / 0.3,
+            reference_range_m=1.5,
+        ),
+        Geometry(
+            wavelength_m=1.55e-6,
+            slant_range_m=1.5,
+            along_track_step_m=10e-6,
+            prf_hz=2.0,
+            antenna_length_m=10e-6,
+        ),
+        Processor(aperture_pulses=2048, range_bins=512),
+    )
+
+
+def _zhao_insal() -> Config:
+    # Zhao et al. (2014): 1550 nm, 2.4 m, 8 mm synthetic aperture (233 µm azimuth resolution),
+    # 100 ms of chirp giving 170 µm range resolution (B ≈ 0.88 THz), 0.4 mm real apertures.
+    return Config(
+        FMCWChirp(
+            bandwidth_hz=0.8817e12,
+            chirp_duration_s=0.1,
+            sample_rate_hz=2560.0,
+            reference_range_m=2.4,
+        ),
+        Geometry(
+            wavelength_m=1.55e-6,
+            slant_range_m=2.4,
+            along_track_step_m=50e-6,
+            prf_hz=5.0,
+            antenna_length_m=0.4e-3,
+        ),
+        Processor(aperture_pulses=160, range_bins=256),
+    )
+
+
+def _tiny() -> Config:
+    # A small, fast variant of psaltis-jpl for tests and quick looks.
+    return Config(
+        PulsedChirp(
+            bandwidth_hz=40e6, pulse_duration_s=2.0e-6, sample_rate_hz=48e6, receive_window_s=4.0e-6
+        ),
+        Geometry(
+            wavelength_m=0.235,
+            slant_range_m=2e3,
+            along_track_step_m=0.5,
+            prf_hz=500.0,
+            antenna_length_m=1.0,
+        ),
+        Processor(aperture_pulses=64, range_bins=64, micro_batch=16),
+    )
+
+
+PRESETS = {
+    "psaltis-jpl": _psaltis_jpl,
+    "psaltis-max": _psaltis_max,
+    "crouch-sal": _crouch_sal,
+    "zhao-insal": _zhao_insal,
+    "tiny": _tiny,
+}
+
+
+def preset(name: str) -> Config:
+    """Return the named preset (see PRESETS); raises ValueError listing the names."""
+    try:
+        return PRESETS[name]()
+    except KeyError:
+        raise ValueError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}") from None

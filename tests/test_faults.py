@@ -1,0 +1,120 @@
+"""Bad input never reaches a traceback or a silent success: malformed recordings, hostile strip
+headers, impossible configurations each get a one-line error naming what is wrong (exit status
+2), or are counted and reported."""
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+from rtsar.app.cli import main
+from rtsar.presets import preset
+
+CFG = preset("tiny")
+S = CFG.waveform.samples_per_shot
+
+
+def recording(path, mutate):
+    with h5py.File(path, "w") as f:
+        f.attrs["format"] = "rtsar-recording"
+        f.attrs["format_version"] = 1
+        f.attrs["config"] = json.dumps(CFG.to_dict())
+        f.attrs["scene"] = "{}"
+        n = 160
+        f["shots"] = np.zeros((n, S), np.complex64)
+        f["pulse_index"] = np.arange(n)
+        f["time_s"] = np.arange(n) / CFG.geometry.prf_hz
+        f["along_track_m"] = np.arange(n) * CFG.geometry.along_track_step_m
+        mutate(f)
+    return path
+
+
+def _replace(f, name, data):
+    del f[name]
+    f[name] = data
+
+
+BAD_RECORDINGS = {
+    "config missing": (lambda f: f.attrs.__delitem__("config"), "'config' is missing"),
+    "config not JSON": (lambda f: f.attrs.__setitem__("config", "{nope"), "not JSON"),
+    "config a list": (lambda f: f.attrs.__setitem__("config", "[1, 2]"), "not a JSON object"),
+    "unknown config key": (
+        lambda f: f.attrs.__setitem__(
+            "config",
+            json.dumps({**CFG.to_dict(), "processor": {**CFG.to_dict()["processor"], "x": 1}}),
+        ),
+        "unknown key",
+    ),
+    "along_track_m missing": (lambda f: f.__delitem__("along_track_m"), "'along_track_m'"),
+    "time_s missing": (lambda f: f.__delitem__("time_s"), "'time_s' is missing"),
+    "shots of strings": (
+        lambda f: _replace(f, "shots", np.full((160, S), b"ab", "S2")),
+        "must be 2-D complex",
+    ),
+    "shots of the wrong length": (
+        lambda f: _replace(f, "shots", np.ones((160, S + 3), np.complex64)),
+        f"hold {S + 3} samples",
+    ),
+    "descending pulse_index": (
+        lambda f: _replace(f, "pulse_index", np.arange(160)[::-1]),
+        "must increase",
+    ),
+    "short time_s": (lambda f: _replace(f, "time_s", np.arange(10.0)), "10 entries"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_RECORDINGS))
+@pytest.mark.parametrize("command", ["process", "replay"])
+def test_a_malformed_recording_is_a_one_line_error(tmp_path, capsys, case, command):
+    mutate, expected = BAD_RECORDINGS[case]
+    rec = recording(tmp_path / "bad.h5", mutate)
+    out = tmp_path / "out.h5"
+    args = [command, str(rec), "-o", str(out), "--lens", "numpy"]
+    if command == "replay":
+        args += ["--rate", "max", "--endpoint", "tcp://127.0.0.1:0"]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(rec) in err[0] and expected in err[0]
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "changes, expected",
+    [
+        ({"micro_batch": 10**9}, "micro_batch"),
+        ({"fft_length": 2**40}, "fft_length"),
+        ({"aperture_pulses": 10**7}, "aperture_pulses"),
+        ({"range_bins": 10**7}, "range_bins"),
+    ],
+)
+def test_impossible_processor_sizes_are_refused(changes, expected):
+    with pytest.raises(ValueError, match=expected):
+        CFG.with_processor(**changes)
+
+
+def test_a_huge_shot_or_scene_is_refused(tmp_path, capsys):
+    scene = tmp_path / "big.toml"
+    scene.write_text(
+        'preset = "tiny"\n[waveform]\nkind = "pulsed"\nbandwidth_hz = 4e7\n'
+        "pulse_duration_s = 3.2e-6\nsample_rate_hz = 1e15\nreceive_window_s = 1.2e-5\n"
+        "[[targets]]\nalong_track_m = 0.0\nslant_range_m = 20000.0\n"
+    )
+    assert main(["simulate", str(scene), "-o", str(tmp_path / "r.h5")]) == 2
+    assert "samples per shot" in capsys.readouterr().err
+    many = tmp_path / "many.toml"
+    many.write_text(
+        'preset = "tiny"\npulses = 2000000000\n'
+        "[[targets]]\nalong_track_m = 0.0\nslant_range_m = 20000.0\n"
+    )
+    assert main(["simulate", str(many), "-o", str(tmp_path / "r.h5")]) == 2
+    assert "pulses" in capsys.readouterr().err
+
+
+def test_a_configuration_larger_than_the_machine_is_refused_before_allocating():
+    from rtsar.stream.memory import MEMORY_FRACTION, available_bytes, check_memory
+
+    cfg = preset("psaltis-max").with_processor(aperture_pulses=60000, range_bins=60000)
+    need = MEMORY_FRACTION * (available_bytes() or 1e9)
+    with pytest.raises(ValueError, match="GiB are available"):
+        check_memory(cfg, queue_pulses=int(need))

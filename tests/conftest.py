@@ -1,3 +1,5 @@
+import os
+
 import numpy as np
 import pytest
 
@@ -9,3 +11,23 @@ def rng():
 
 def crandn(rng, *shape, dtype=np.complex128):
     return (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(dtype)
+
+
+def opencl_unavailable_here() -> str | None:
+    """Why the OpenCL lens cannot run on this machine (None when it can), probed once."""
+    from rtsar.lens import opencl_unavailable
+
+    return opencl_unavailable()
+
+
+@pytest.fixture(scope="session")
+def opencl():
+    """For tests of the OpenCL kernels themselves: skipped, with the driver's reason, where no
+    OpenCL device can build a kernel (e.g. PoCL 3.0 on a CPU its LLVM does not know); the rest
+    of the suite then runs on the NumPy lens through ``--lens auto``.  Set RTSAR_REQUIRE_OPENCL=1
+    to make that a failure on machines where OpenCL must work."""
+    reason = opencl_unavailable_here()
+    if reason is not None:
+        if os.environ.get("RTSAR_REQUIRE_OPENCL") == "1":
+            pytest.fail(f"OpenCL required (RTSAR_REQUIRE_OPENCL=1) but unavailable: {reason}")
+        pytest.skip(f"OpenCL unavailable here: {reason}")

@@ -29,7 +29,7 @@ snr_db = 0.0
 """
 
 
-@pytest.mark.parametrize("correlator, lens", [("fft", "opencl"), ("direct", "numpy")])
+@pytest.mark.parametrize("correlator, lens", [("fft", "auto"), ("direct", "numpy")])
 def test_simulate_process_quicklook(tmp_path, capsys, correlator, lens):
     scene_file = tmp_path / "s.toml"
     scene_file.write_text(SCENE.format(correlator=correlator))
@@ -91,7 +91,7 @@ def test_nonfinite_shots_are_zeroed_counted_and_never_reach_the_image():
     bad = shots.copy()
     bad[5, 3] = np.nan
     bad[9, 0] = np.inf
-    eng = StreamProcessor(cfg, "opencl", start_along_track_m=scene.start_along_track_m)
+    eng = StreamProcessor(cfg, "auto", start_along_track_m=scene.start_along_track_m)
     image = np.concatenate([eng.push(bad[i:i + 16]).lines for i in range(0, len(bad), 16)]
                            + [eng.flush().lines])
     assert eng.nonfinite_pulses == 2 and eng.pulses_in == len(bad)

@@ -118,3 +118,76 @@ def test_a_configuration_larger_than_the_machine_is_refused_before_allocating():
     need = MEMORY_FRACTION * (available_bytes() or 1e9)
     with pytest.raises(ValueError, match="GiB are available"):
         check_memory(cfg, queue_pulses=int(need))
+
+
+def test_a_hostile_publisher_is_counted_not_obeyed(tmp_path, capsys):
+    """Strips with a missing seq, a changing range axis, malformed flagged_lines, string counters,
+    a 1e9-bin header with no lines, a first_line 10^8 ahead: `rtsar subscribe` counts them,
+    never crashes, never allocates for them, and keeps the honest strips."""
+    import threading
+    import time
+
+    import zmq
+
+    from rtsar.sinks.io import read_image
+
+    pub = zmq.Context.instance().socket(zmq.XPUB)
+    pub.bind("tcp://127.0.0.1:*")
+    endpoint = pub.getsockopt_string(zmq.LAST_ENDPOINT)
+    out = tmp_path / "sub.h5"
+    result = {}
+    t = threading.Thread(
+        target=lambda: result.setdefault(
+            "rc", main(["subscribe", endpoint, "-o", str(out), "--timeout", "15"])
+        ),
+        daemon=True,
+    )
+    t.start()
+    assert pub.poll(10_000)  # the subscription
+    pub.recv()
+    time.sleep(0.2)
+    bins = 8
+    good = {
+        "format": "rtsar-strip",
+        "version": 1,
+        "stream_id": "s",
+        "first_line": 0,
+        "line_count": 2,
+        "range_bins": bins,
+        "dtype": "complex64",
+        "byte_order": "little",
+        "azimuth_first_m": 0.0,
+        "azimuth_step_m": 1.0,
+        "range_first_m": 100.0,
+        "range_step_m": 3.0,
+        "flagged_lines": [],
+        "counters": {"lines_out": 2},
+        "config": CFG.to_dict(),
+    }
+
+    def send(seq_no, first, lines=2, payload=None, **bad):
+        h = {**good, "seq": seq_no, "first_line": first, "line_count": lines, **bad}
+        h = {k: v for k, v in h.items() if v is not None}
+        data = np.ones((lines, bins), np.complex64).tobytes() if payload is None else payload
+        pub.send_multipart([b"strip", json.dumps(h).encode(), data])
+
+    send(0, 0)
+    send(None, 2)  # no seq
+    send(1, 2, range_bins=16, payload=np.ones((2, 16), np.complex64).tobytes())  # other axis
+    send(2, 2, flagged_lines=[["x", 1]])
+    send(3, 2, counters="lots")
+    send(4, 2, lines=0, range_bins=10**9, payload=b"")  # would allocate 8 GB of range axis
+    send(5, 10**8)  # a jump far ahead: listed, not filled with 6 GB of zero lines
+    send(6, 10**8 + 2)
+    pub.send_multipart([b"end", json.dumps({"stream_id": "s", "counters": "many"}).encode()])
+    t.join(20)
+    assert not t.is_alive() and result["rc"] == 0
+    image, az, rg, attrs = read_image(out)
+    assert image.shape == (6, bins)  # the three honest strips, nothing else
+    assert json.loads(attrs["line_jumps"]) == [[2, 10**8 - 2]]
+    assert attrs["inconsistent_strips"] == 1 and attrs["missing_lines"] == 0
+    np.testing.assert_array_equal(az[-2:], [10**8 + 2, 10**8 + 3])  # true positions kept
+    err = capsys.readouterr().err
+    assert "bad messages 4" in err and "line-number jumps not filled 1" in err
+    assert out.stat().st_size < 5_000_000
+    pub.close(0)

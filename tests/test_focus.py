@@ -13,7 +13,7 @@ from rtsar.presets import PRESETS, preset
 from rtsar.windows import window
 
 RECT_PSLR_DB = -13.26
-LENS = "opencl"  # the acceptance runs through the OpenCL AO lens, as the instrument does
+LENS = "auto"  # the OpenCL AO lens as the instrument uses it; NumPy where no device can build
 
 
 def curvature_bias_cells(cfg, windows):

@@ -59,7 +59,7 @@ def chirp_echoes(name: str, pulses: int, rng) -> np.ndarray:
 
 @pytest.mark.parametrize("kernel", KERNELS)
 @pytest.mark.parametrize("name", PRESETS)
-def test_presets_match_reference(name, kernel):
+def test_presets_match_reference(name, kernel, opencl):
     lens = lens_for(name, kernel)
     rng = np.random.default_rng(2024)
     for pulses in (1, 7, 64):
@@ -71,7 +71,7 @@ def test_presets_match_reference(name, kernel):
 
 @pytest.mark.parametrize("kernel", KERNELS)
 @pytest.mark.parametrize("name", PRESETS)
-def test_chirp_echoes_match_reference(name, kernel):
+def test_chirp_echoes_match_reference(name, kernel, opencl):
     lens = lens_for(name, kernel)
     x = chirp_echoes(name, 9, np.random.default_rng(7))
     ref = compress_reference(lens.plan, x)
@@ -100,14 +100,14 @@ def synthetic_plan(S, nfft, sign1, two_pass, bin_start, bin_count, seed=0) -> Le
     ],
 )
 @pytest.mark.parametrize("kernel", KERNELS)
-def test_odd_plans(kernel, S, nfft, sign1, two_pass, bin_start, bin_count):
+def test_odd_plans(kernel, opencl, S, nfft, sign1, two_pass, bin_start, bin_count):
     plan = synthetic_plan(S, nfft, sign1, two_pass, bin_start, bin_count)
     lens = AOLens(plan, kernel=kernel)
     x = noise(np.random.default_rng(3), 11, S)
     assert rel_rms(lens.compress(x), compress_reference(plan, x)) <= TOL
 
 
-def test_lanes_and_buffer_reuse():
+def test_lanes_and_buffer_reuse(opencl):
     plan = make_plan(preset("tiny"))
     rng = np.random.default_rng(11)
     for lanes in (1, 2, 4, 8, "copy"):
@@ -119,7 +119,7 @@ def test_lanes_and_buffer_reuse():
             assert rel_rms(lens.compress(x), compress_reference(plan, x)) <= TOL, (lanes, pulses)
 
 
-def test_complex128_out_and_empty():
+def test_complex128_out_and_empty(opencl):
     lens = lens_for("tiny", "lanes")
     S, bins = lens.plan.samples_per_shot, lens.plan.bin_count
     x = noise(np.random.default_rng(5), 5, S).astype(np.complex128)
@@ -132,7 +132,7 @@ def test_complex128_out_and_empty():
     assert rel_rms(lens.compress(x_strided), compress_reference(lens.plan, x_strided)) <= TOL
 
 
-def test_bad_input_raises():
+def test_bad_input_raises(opencl):
     lens = lens_for("tiny", "lanes")
     S, bins = lens.plan.samples_per_shot, lens.plan.bin_count
     with pytest.raises(ValueError, match="shape"):
@@ -160,7 +160,7 @@ def test_kernels_found_by_loader():
         opencl.kernel_source("no-such-kernel.cl")
 
 
-def test_program_cache_and_devices(monkeypatch):
+def test_program_cache_and_devices(monkeypatch, opencl):
     queue = opencl.default_queue()
     assert queue is opencl.default_queue()
     defines = {"NFFT": 8, "LOG2_NFFT": 3, "S": 8, "BIN_COUNT": 8, "BIN_OFFSET": 0, "SIGN1": -1,

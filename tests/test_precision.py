@@ -48,8 +48,7 @@ def test_numpy_lens_in_each_precision(name, precision, rng):
 
 @pytest.mark.parametrize("kernel", ["lanes", "group"])
 @pytest.mark.parametrize("name", sorted(PRESETS))
-def test_opencl_lens_in_double(name, kernel, rng):
-    pytest.importorskip("pyopencl")
+def test_opencl_lens_in_double(name, kernel, rng, opencl):
     from rtsar.lens.opencl import AOLens
 
     plan = make_plan(preset(name))
@@ -68,8 +67,7 @@ def test_opencl_lens_in_double(name, kernel, rng):
         lens.compress(x, out=np.empty((33, plan.bin_count), np.complex64))
 
 
-def test_opencl_double_refused_on_a_device_without_fp64(monkeypatch):
-    pytest.importorskip("pyopencl")
+def test_opencl_double_refused_on_a_device_without_fp64(monkeypatch, opencl):
     from rtsar.lens import opencl as lens_module
 
     monkeypatch.setattr(lens_module, "supports_double", lambda device: False)
@@ -81,8 +79,7 @@ def test_opencl_double_refused_on_a_device_without_fp64(monkeypatch):
     lens_module.AOLens(plan, precision="complex64")  # single precision needs nothing
 
 
-def test_pocl_cpu_reports_double():
-    pytest.importorskip("pyopencl")
+def test_pocl_cpu_reports_double(opencl):
     from rtsar.lens import cl_loader as opencl
     from rtsar.lens.opencl import supports_double
 
@@ -134,11 +131,11 @@ def test_a_subclass_written_before_the_knob_stays_single_precision(rng):
 
 
 @pytest.mark.parametrize("lens", ["numpy", "opencl"])
-def test_engine_end_to_end_in_double(lens, rng):
+def test_engine_end_to_end_in_double(lens, rng, request):
     """process_block with precision complex128: lens and CCD in double, against the float64
     chain compress_reference → correlate_reference; complex64 stays within 1e-5."""
     if lens == "opencl":
-        pytest.importorskip("pyopencl")
+        request.getfixturevalue("opencl")
     cfg = preset("tiny")
     plan = make_plan(cfg)
     shots = crandn(rng, 150, plan.samples_per_shot)

@@ -110,7 +110,7 @@ def _focus_one(
 
 def run_point_targets(
     cfg: Config,
-    lens_backend: str = "opencl",
+    lens_backend: str = "auto",
     antenna: bool = False,
     noise_snr_db: float | None = None,
 ) -> list[TargetResult]:

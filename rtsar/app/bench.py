@@ -18,27 +18,27 @@ from ..ccd.base import design_mask
 from ..ccd.direct import DirectCorrelator
 from ..ccd.fft import FFTCorrelator
 from ..ccd.partitioned import PartitionedCorrelator
-from ..lens.cl_loader import device_info
+from ..lens.base import make_lens, opencl_unavailable
 from ..lens.numpy_lens import NumpyLens
-from ..lens.opencl import AOLens
 from ..lens.plan import make_plan
 from ..presets import preset
 from .bench_pipeline import bench_pipeline
 
 
-def bench_lens(cfg, batches=(16, 64, 256), seconds=1.0, device=None, rounds=3) -> list[dict]:
+def bench_lens(
+    cfg, batches=(16, 64, 256), seconds=1.0, device=None, rounds=3, opencl=True
+) -> list[dict]:
     """Pulses/s of the OpenCL lens and of the same plan on NumPy's and SciPy's FFT (complex64).
 
     The three backends alternate for ``rounds`` rounds and each keeps its best round, so a
-    neighbour's load on the shared machine penalises none of them in particular.
+    neighbour's load on the shared machine penalises none of them in particular.  With
+    ``opencl=False`` (no working OpenCL device) the OpenCL figures are None.
     """
     plan = make_plan(cfg)
     rng = np.random.default_rng(0)
-    backends = {
-        "opencl": AOLens(plan, device=device),
-        "numpy": NumpyLens(plan),
-        "scipy": NumpyLens(plan, library="scipy"),
-    }
+    backends = {"numpy": NumpyLens(plan), "scipy": NumpyLens(plan, library="scipy")}
+    if opencl:
+        backends["opencl"] = make_lens(plan, "opencl", device)
     nfft = plan.nfft
     rows = []
     for b in batches:
@@ -53,17 +53,18 @@ def bench_lens(cfg, batches=(16, 64, 256), seconds=1.0, device=None, rounds=3) -
             for name, call in calls.items():
                 rate = rate_per_s(lambda s=shots, f=call: f(s), b, seconds / rounds)
                 best[name] = max(best[name], rate)
+        cl = best.get("opencl")
         rows.append(
             {
                 "stage": "lens",
                 "batch": b,
-                "opencl_pulses_per_s": best["opencl"],
+                "opencl_pulses_per_s": cl,
                 "numpy_fft_pulses_per_s": best["numpy"],
                 "scipy_fft_pulses_per_s": best["scipy"],
                 "numpy_one_fft_pulses_per_s": best["numpy_one_fft"],
-                "opencl_over_numpy": best["opencl"] / best["numpy"],
-                "opencl_over_scipy": best["opencl"] / best["scipy"],
-                "opencl_over_numpy_one_fft": best["opencl"] / best["numpy_one_fft"],
+                "opencl_over_numpy": cl and cl / best["numpy"],
+                "opencl_over_scipy": cl and cl / best["scipy"],
+                "opencl_over_numpy_one_fft": cl and cl / best["numpy_one_fft"],
             }
         )
     return rows
@@ -137,18 +138,29 @@ def add_arguments(parser) -> None:
     parser.add_argument("--device", help="OpenCL platform/device name substring")
 
 
+def _num(value, width: int, fmt: str) -> str:
+    return f"{'n/a':>{width}}" if value is None else f"{value:{width}{fmt}}"
+
+
 def run_bench(args) -> int:
     name = getattr(args, "preset", None) or "psaltis-max"  # lens and correlators alone
     cfg = preset(name)
     out = sys.stdout
     seconds = args.seconds
+    reason = None if args.device else opencl_unavailable()
+    if reason is None:
+        from ..lens.cl_loader import device_info
+
+        device = device_info(args.device)
+    else:
+        device = f"unavailable ({reason}); OpenCL columns empty, pipelines on the NumPy lens"
     print(
         f"rtsar bench: preset {name} (samples/shot {cfg.waveform.samples_per_shot}, "
         f"{cfg.processor.range_bins} range bins, N = {cfg.processor.aperture_pulses}, "
-        f"PRF {cfg.geometry.prf_hz:g} Hz); OpenCL: {device_info(args.device)}",
+        f"PRF {cfg.geometry.prf_hz:g} Hz); OpenCL: {device}",
         file=out,
     )
-    lens_rows = bench_lens(cfg, seconds=seconds, device=args.device)
+    lens_rows = bench_lens(cfg, seconds=seconds, device=args.device, opencl=reason is None)
     print("\nAO lens (range compression), pulses/s", file=out)
     print(
         "(NumPy/SciPy: the same plan in complex64; 1 FFT: one bare np.fft.fft of the batch)",
@@ -161,10 +173,11 @@ def run_bench(args) -> int:
     )
     for r in lens_rows:
         print(
-            f"{r['batch']:6d} {r['opencl_pulses_per_s']:10,.0f} "
+            f"{r['batch']:6d} {_num(r['opencl_pulses_per_s'], 10, ',.0f')} "
             f"{r['numpy_fft_pulses_per_s']:10,.0f} {r['scipy_fft_pulses_per_s']:10,.0f} "
-            f"{r['numpy_one_fft_pulses_per_s']:10,.0f} {r['opencl_over_numpy']:9.2f} "
-            f"{r['opencl_over_scipy']:9.2f} {r['opencl_over_numpy_one_fft']:9.2f}",
+            f"{r['numpy_one_fft_pulses_per_s']:10,.0f} {_num(r['opencl_over_numpy'], 9, '.2f')} "
+            f"{_num(r['opencl_over_scipy'], 9, '.2f')} "
+            f"{_num(r['opencl_over_numpy_one_fft'], 9, '.2f')}",
             file=out,
         )
     corr_rows = bench_correlators(cfg, seconds=seconds)
@@ -178,7 +191,8 @@ def run_bench(args) -> int:
         )
     prf = cfg.geometry.prf_hz
     best = max(corr_rows[0]["fft_pulses_per_s"], corr_rows[0]["direct_pulses_per_s"])
-    lens_best = max(r["opencl_pulses_per_s"] for r in lens_rows)
+    lens_key = "opencl_pulses_per_s" if reason is None else "numpy_fft_pulses_per_s"
+    lens_best = max(r[lens_key] for r in lens_rows)
     print(
         f"\nreal-time factors at PRF {prf:g} Hz: lens {lens_best / prf:.2f}x, "
         f"best correlator {best / prf:.2f}x",
@@ -210,7 +224,7 @@ def run_bench(args) -> int:
             json.dump(
                 {
                     "preset": name,
-                    "device": device_info(args.device),
+                    "device": device,
                     "lens": lens_rows,
                     "correlator": corr_rows,
                     "pipeline": pipeline_rows,

@@ -61,6 +61,13 @@ _LABELS = {
 }
 
 
+def lens_label(lens) -> str:
+    """The lens in use, for the banner: "opencl lens", or the fallback and why."""
+    if lens.fallback_reason:
+        return "NumPy lens (OpenCL unavailable, see the warning above)"
+    return f"{lens.backend} lens"
+
+
 def problems(counters: dict) -> list[str]:
     """Every counter that is not zero and says something went wrong or was done about it."""
     out = []
@@ -139,27 +146,9 @@ def run_stream(
             stream.write(("\r" + line + "  ") if tty else (line + "\n"))
             stream.flush()
 
-    n = config.processor
-    print(
-        f"rtsar: {source.description}; CCD {n.aperture_pulses} x {n.range_bins}, "
-        f"{n.correlator} correlator, {settings.lens_backend} lens, {settings.stages} stages, "
-        f"strips of {settings.strip_lines} lines on {endpoint} ({delivery})"
-        + (f"; corrections: {', '.join(corrections.names)}" if corrections else "")
-        + (f"; physical CCD, carrier in {physical.carrier}" if physical else "")
-        + (f"; {n.precision}" if n.precision != "complex64" else "")
-        + (f"; range migration {n.range_migration_taps} taps" if n.range_migration_taps else ""),
-        file=stream,
-        flush=True,
-    )
     interrupted = None
     try:
-        if wait_subscribers:
-            print(
-                f"waiting for {wait_subscribers} subscriber(s) on {endpoint} …",
-                file=stream,
-                flush=True,
-            )
-            publisher.wait_for_subscribers(wait_subscribers)
+        print("rtsar: preparing the lens and the correlator …", file=stream, flush=True)
         pipe = Pipeline(
             config,
             source,
@@ -171,6 +160,27 @@ def run_stream(
             corrections=corrections,
             physical=physical,
         )
+        n = config.processor
+        print(
+            f"rtsar: {source.description}; CCD {n.aperture_pulses} x {n.range_bins}, "
+            f"{n.correlator} correlator, {lens_label(pipe.engine.lens)}, {settings.stages} stages, "
+            f"strips of {settings.strip_lines} lines on {endpoint} ({delivery})"
+            + (f"; corrections: {', '.join(corrections.names)}" if corrections else "")
+            + (f"; physical CCD, carrier in {physical.carrier}" if physical else "")
+            + (f"; {n.precision}" if n.precision != "complex64" else "")
+            + (
+                f"; range migration {n.range_migration_taps} taps" if n.range_migration_taps else ""
+            ),
+            file=stream,
+            flush=True,
+        )
+        if wait_subscribers:
+            print(
+                f"waiting for {wait_subscribers} subscriber(s) on {endpoint} …",
+                file=stream,
+                flush=True,
+            )
+            publisher.wait_for_subscribers(wait_subscribers)
         pipe.start()
         try:
             stats = pipe.join()

@@ -52,8 +52,12 @@ def save_quicklook(
     # Pixel edges, half a step beyond the first and last pixel centres.
     dr = (range_m[-1] - range_m[0]) / max(len(range_m) - 1, 1)
     da = (azimuth_m[-1] - azimuth_m[0]) / max(len(azimuth_m) - 1, 1)
-    extent = [(range_m[0] - dr / 2) / scale, (range_m[-1] + dr / 2) / scale,
-              (azimuth_m[-1] + da / 2) / scale, (azimuth_m[0] - da / 2) / scale]
+    extent = [
+        (range_m[0] - dr / 2) / scale,
+        (range_m[-1] + dr / 2) / scale,
+        (azimuth_m[-1] + da / 2) / scale,
+        (azimuth_m[0] - da / 2) / scale,
+    ]
     height = min(12.0, max(3.0, 8.0 * image.shape[0] / max(image.shape[1], 1)))
     fig, ax = plt.subplots(figsize=(8, height), dpi=100)
     im = ax.imshow(

@@ -7,6 +7,7 @@ import time
 
 from ..sinks.client import StripSubscriber
 from ..sinks.record import StripRecorder
+from . import signals
 
 
 def subscribe(
@@ -23,7 +24,7 @@ def subscribe(
     sub = StripSubscriber(endpoint, curve_server_key, curve_client_key, hwm_messages=0)
     rec = StripRecorder(output, endpoint)
     final = None
-    interrupted = False
+    interrupted = None
     print(f"subscribe: listening on {endpoint}; writing {output} (Ctrl-C to stop)", file=stream)
     last = time.perf_counter()
     try:
@@ -36,18 +37,19 @@ def subscribe(
                 rec.add_strip(msg.header, msg.lines)
             elif msg.topic == "end" and rec.writer is not None:
                 if msg.header.get("stream_id") == rec.stream_id:
-                    final = msg.header.get("counters")
+                    counters = msg.header.get("counters")
+                    final = counters if is_counters(counters) else rec.counters
                     break
             now = time.perf_counter()
             if now - last > 2.0:
                 last = now
                 print(
-                    f"subscribe: {sub.counters['strips']} strips, {rec.next_line - rec.first_line}"
-                    f" lines, missed strips {sub.counters['missed_strips']}",
+                    f"subscribe: {sub.counters['strips']} strips, {rec.lines_written} lines, "
+                    f"missed strips {sub.counters['missed_strips']}",
                     file=stream,
                 )
-    except KeyboardInterrupt:
-        interrupted = True
+    except KeyboardInterrupt as exc:
+        interrupted = exc
     finally:
         lines = rec.finish(
             final,
@@ -55,14 +57,42 @@ def subscribe(
             complete=final is not None,
         )
         sub.close()
+    status = 0 if interrupted is None else signals.exit_status(interrupted)
     if rec.writer is None:
-        print("subscribe: no strip received; nothing written", file=stream)
-        return 130 if interrupted else 1
+        print(
+            "subscribe: no strip received; nothing written"
+            + (
+                f" (bad messages {sub.counters['bad_messages']})"
+                if sub.counters["bad_messages"]
+                else ""
+            ),
+            file=stream,
+        )
+        return status or 1
+    odd = [
+        f"{label} {value}"
+        for label, value in (
+            ("bad messages", sub.counters["bad_messages"]),
+            ("strips that did not fit the image", rec.inconsistent_strips),
+            ("line-number jumps not filled", len(rec.line_jumps)),
+            ("repeated strips", rec.overlapping_strips),
+        )
+        if value
+    ]
     print(
         f"wrote {output}: {lines} lines from line {rec.first_line}; strips received "
         f"{sub.counters['strips']}, missed {sub.counters['missed_strips']} "
-        f"({rec.missing_lines} zero lines), bad messages {sub.counters['bad_messages']}"
+        f"({rec.missing_lines} zero lines)"
+        + (f"; {', '.join(odd)}" if odd else "")
         + ("" if final is not None else "; the stream's end was not seen"),
         file=stream,
     )
-    return 130 if interrupted else 0
+    return status
+
+
+def is_counters(value) -> bool:
+    """A counters object as the strip protocol defines it: names to integers."""
+    return isinstance(value, dict) and all(
+        isinstance(k, str) and isinstance(v, int) and not isinstance(v, bool)
+        for k, v in value.items()
+    )

@@ -283,9 +283,7 @@ def measure_speed(pulses: int = 1024, batch: int = 64, repeats: int = 3) -> dict
         return best
 
     out = {
-        "direct_512x320": rate(
-            lambda: DirectCorrelator(design_mask(cfg, range_axis_m(cfg))), 320
-        )
+        "direct_512x320": rate(lambda: DirectCorrelator(design_mask(cfg, range_axis_m(cfg))), 320)
     }
     cases = [
         ("range_512x320", "range", 512, 160), ("azimuth_512x320", "azimuth", 256, 320),

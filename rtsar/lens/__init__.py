@@ -6,7 +6,7 @@ with its kernels in ``kernels/lens.cl``) and ``cl_loader`` (device choice, kerne
 the build cache, shared by every OpenCL kernel of rtsar).
 """
 
-from .base import LENS_BACKENDS, Lens, compress_reference, make_lens
+from .base import LENS_BACKENDS, Lens, compress_reference, make_lens, opencl_unavailable
 from .numpy_lens import NumpyLens
 from .plan import LensPlan, make_plan, next_pow2, range_axis_m
 
@@ -18,6 +18,7 @@ __all__ = [
     "compress_reference",
     "make_lens",
     "make_plan",
+    "opencl_unavailable",
     "next_pow2",
     "range_axis_m",
 ]

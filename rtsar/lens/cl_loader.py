@@ -31,6 +31,7 @@ __all__ = [
     "kernel_source",
     "kernels_dir",
     "list_devices",
+    "probe",
     "select_device",
 ]
 
@@ -225,6 +226,59 @@ def build_program(
     try:
         program = cl.Program(context, source).build(options=list(opts))
     except cl.RuntimeError as exc:
-        raise RuntimeError(f"building {name} with {' '.join(opts)} failed:\n{exc}") from exc
+        raise RuntimeError(
+            f"building {name} with {' '.join(opts)} failed:\n{exc}{_build_hint(str(exc))}"
+        ) from exc
     with _lock:
         return cache.setdefault(key, program)
+
+
+def _build_hint(log: str) -> str:
+    """What a user can do about a build failure the driver, not the kernel, caused."""
+    if "unknown target CPU" in log:
+        return (
+            "\nThis OpenCL driver's compiler (PoCL's LLVM) does not know this CPU model, so it "
+            "cannot build any kernel here.  Use `--lens numpy` (or `--lens auto`, the default, "
+            "which falls back by itself), pick another device with RTSAR_OPENCL_DEVICE, or "
+            f"install a newer PoCL.  {FALLBACK_HINT}"
+        )
+    return ""
+
+
+FALLBACK_HINT = (
+    "Any OpenCL driver works: a newer PoCL (e.g. the distribution's pocl-opencl-icd), a GPU's "
+    "ICD, or Intel's CPU OpenCL runtime."
+)
+
+
+_probes: dict[str, str | None] = {}
+_PROBE_KERNEL = "__kernel void probe(__global float *x) { x[get_global_id(0)] *= 2.0f; }"
+
+
+def probe(device: cl.Device | str | None = None) -> str | None:
+    """None if OpenCL can build and run a kernel on the selected device, else why not (one line).
+
+    Done once per process and device request; ``make_lens(backend="auto")`` uses it to choose
+    between the OpenCL lens and the NumPy one.
+    """
+    key = device if isinstance(device, str) or device is None else _label(device)
+    with _lock:
+        if key in _probes:
+            return _probes[key]
+    try:
+        queue = default_queue(device)
+        program = cl.Program(queue.context, _PROBE_KERNEL).build()
+        buf = cl.Buffer(queue.context, cl.mem_flags.READ_WRITE, 4)
+        program.probe(queue, (1,), None, buf)
+        queue.finish()
+        reason = None
+    except (cl.Error, RuntimeError) as exc:
+        text = str(exc)
+        lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+        errors = [ln for ln in lines if ln.startswith("error:")]
+        reason = (errors or lines or [type(exc).__name__])[0]
+        if "unknown target CPU" in text:
+            reason = f"PoCL's compiler does not know this CPU model ({reason})"
+    with _lock:
+        _probes[key] = reason
+    return reason

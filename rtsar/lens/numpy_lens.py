@@ -18,6 +18,9 @@ class NumpyLens:
     no OpenCL device is wanted.
     """
 
+    backend = "numpy"
+    fallback_reason: str | None = None  # set by make_lens("auto") when OpenCL was unavailable
+
     def __init__(self, plan: LensPlan, library: str = "numpy", precision: str = "complex64"):
         if library == "numpy":
             self._fft = np.fft

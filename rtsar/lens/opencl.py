@@ -84,6 +84,9 @@ class AOLens:
     blocking copy of the result releases the GIL while the device works.
     """
 
+    backend = "opencl"
+    fallback_reason: str | None = None
+
     def __init__(
         self,
         plan: LensPlan,

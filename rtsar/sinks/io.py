@@ -6,14 +6,18 @@ format_version, config (JSON of the effective configuration), scene (JSON), rtsa
 
 Image (``rtsar process``):  /image complex64 [azimuth, range], /azimuth_m, /range_m float64;
 attributes format="rtsar-image", format_version, config (JSON), source, lens, correlator,
-nonfinite_pulses (shots zeroed because they held NaN/Inf).
+nonfinite_pulses (shots zeroed because they held NaN/Inf), complete (False while a stream is
+written and in a file whose writer was killed).
 Complex values are HDF5 compounds of two floats named r and i (h5py's convention).
 """
 
 from __future__ import annotations
 
 import json
+import os
+import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,6 +30,29 @@ from ..params import Config, config_from_dict
 RECORDING_FORMAT = "rtsar-recording"
 IMAGE_FORMAT = "rtsar-image"
 FORMAT_VERSION = 1
+
+
+@contextmanager
+def replace_when_complete(path: str | Path) -> Iterator[Path]:
+    """Write to a temporary file beside ``path``, renamed to ``path`` only when the block ends
+    without an exception; otherwise removed, so an existing ``path`` stays as it was and no
+    partial file is left under its name (a partial recording or batch image has no value).
+
+    The temporary file is created at once: an unwritable destination is reported before any
+    work is done.
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
+    try:
+        tmp.open("xb").close()
+    except OSError as exc:
+        raise ValueError(f"cannot write {path}: {exc.strerror or exc}") from None
+    try:
+        yield tmp
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    os.replace(tmp, path)
 
 
 class RecordingWriter:
@@ -126,7 +153,10 @@ def _open(path: str | Path, fmt: str) -> h5py.File:
     try:
         f = h5py.File(path, "r")
     except OSError as exc:
-        raise ValueError(f"{path}: not an HDF5 file ({exc})") from None
+        try:  # an image still being written by a live stream (crash-safe SWMR mode)
+            f = h5py.File(path, "r", swmr=True)
+        except OSError:
+            raise ValueError(f"{path}: not an HDF5 file ({exc})") from None
     found = f.attrs.get("format")
     if found != fmt:
         f.close()
@@ -231,14 +261,37 @@ def read_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, di
 class ImageWriter:
     """Write an image file line block by line block (streams of any length, bounded memory).
 
-    Same layout as :func:`write_image`; ``close(**attrs)`` adds the final attributes.
+    Same layout as :func:`write_image`; ``close(**attrs)`` adds the final attributes and sets
+    ``complete`` to True.
+
+    ``crash_safe=True`` (live streams: ``run -o``, ``subscribe -o``) writes in HDF5's
+    single-writer/multiple-reader mode, flushed at least every ``flush_every_s``: a writer killed
+    at any moment (SIGKILL, an OOM kill, a power cut after the disk has the data) leaves a file
+    that opens, holding every line flushed before the kill, with ``complete`` False.  The file
+    is set up under a temporary name and takes its own name once it is in that state, so no
+    half-made file ever carries the name.  Readers can open it while it is written.
     """
 
     def __init__(
-        self, path: str | Path, config: Config, range_m: np.ndarray, chunk_lines: int = 64, **attrs
+        self,
+        path: str | Path,
+        config: Config,
+        range_m: np.ndarray,
+        chunk_lines: int = 64,
+        crash_safe: bool = False,
+        flush_every_s: float = 0.5,
+        **attrs,
     ):
         self.path = Path(path)
-        self._f = h5py.File(self.path, "w")
+        self.crash_safe = crash_safe
+        self.flush_every_s = float(flush_every_s)
+        target = (
+            self.path.with_name(f".{self.path.name}.partial-{os.getpid()}")
+            if crash_safe
+            else self.path
+        )
+        libver = ("v110", "v110") if crash_safe else None
+        self._f = h5py.File(target, "w", libver=libver)
         nr = len(range_m)
         self._image = self._f.create_dataset(
             "image", (0, nr), np.complex64, maxshape=(None, nr), chunks=(chunk_lines, nr)
@@ -252,8 +305,13 @@ class ImageWriter:
         a["format_version"] = FORMAT_VERSION
         a["config"] = json.dumps(config.to_dict())
         a["rtsar_version"] = __version__
+        a["complete"] = False
         for k, v in attrs.items():
             a[k] = v
+        if crash_safe:
+            self._f.swmr_mode = True  # from here on the file on disk is always readable
+            os.replace(target, self.path)
+        self._flushed_s = time.monotonic()
         self.lines = 0
 
     def write(self, lines: np.ndarray, azimuth_m: np.ndarray) -> None:
@@ -263,9 +321,26 @@ class ImageWriter:
         self._azimuth.resize(end, axis=0)
         self._azimuth[self.lines : end] = azimuth_m
         self.lines = end
+        if self.crash_safe and time.monotonic() - self._flushed_s >= self.flush_every_s:
+            self._f.flush()
+            self._flushed_s = time.monotonic()
 
     def close(self, **attrs) -> None:
-        if self._f.id.valid:
-            for k, v in attrs.items():
-                self._f.attrs[k] = v
+        """Close with the final attributes; ``complete`` True unless ``complete=False`` given."""
+        if not self._f.id.valid:
+            return
+        attrs.setdefault("complete", True)
+        if self.crash_safe:
+            # Attributes cannot be added in SWMR mode: close (the data is safe from here on),
+            # reopen in normal mode for the final attributes.
             self._f.close()
+            self._f = h5py.File(self.path, "r+")
+        for k, v in attrs.items():
+            self._f.attrs[k] = v
+        self._f.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close(complete=exc[0] is None)

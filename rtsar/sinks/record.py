@@ -2,9 +2,13 @@
 
 Strips are written as they come (bounded memory).  A strip that never arrived leaves zero lines
 in the image; they are counted (``missing_lines``) and listed in the ``missing_line_runs``
-attribute, never hidden.  Lines whose aperture held a zero-filled pulse are listed in
-``flagged_line_runs``.  The image starts at the first strip received (a late subscriber's image
-starts late; the ``first_line`` attribute says where).
+attribute, never hidden — up to ``max_fill_bytes`` of zeros per gap: a longer jump of
+``first_line`` (a publisher's bug or a hostile one) is not filled but listed in ``line_jumps``
+(the ``azimuth_m`` dataset keeps every written line's true position).  A strip that does not fit
+the image (other range axis or line spacing than the first strip's, a configuration that does
+not parse) is not written but counted in ``inconsistent_strips``.  Lines whose aperture held a
+zero-filled pulse are listed in ``flagged_line_runs``.  The image starts at the first strip
+received (a late subscriber's image starts late; the ``first_line`` attribute says where).
 """
 
 from __future__ import annotations
@@ -19,44 +23,73 @@ from ..stream.strips import StreamInfo, Strip, StripSink
 from .io import ImageWriter
 from .wire import strip_header
 
+MAX_FILL_BYTES = 64 << 20  # the most zeros written for one gap of missing lines
+
 
 class StripRecorder:
     """Append strips (wire header + lines) to an image file, filling and counting gaps."""
 
-    def __init__(self, path: str | Path, source: str):
+    def __init__(self, path: str | Path, source: str, max_fill_bytes: int = MAX_FILL_BYTES):
         self.path = Path(path)
         self.source = source
+        self.max_fill_bytes = int(max_fill_bytes)
         self.writer: ImageWriter | None = None
         self.stream_id: str | None = None
         self.first_line = 0
         self.next_line = 0
+        self.lines_written = 0
         self.missing_lines = 0
         self.missing_runs: list[list[int]] = []
+        self.line_jumps: list[list[int]] = []
         self.flagged_runs: list[list[int]] = []
         self.overlapping_strips = 0
+        self.inconsistent_strips = 0
         self.counters: dict = {}
 
+    def _axes(self, header: dict) -> tuple:
+        return (
+            header["range_bins"],
+            header["range_first_m"],
+            header["range_step_m"],
+            header["azimuth_step_m"],
+        )
+
     def add_strip(self, header: dict, lines: np.ndarray) -> None:
+        """Write one strip (its header checked by rtsar.sinks.wire.check_strip_header)."""
         first = int(header["first_line"])
         if self.writer is None:
-            cfg = config_from_dict(header["config"])
+            try:
+                cfg = config_from_dict(header["config"])
+            except ValueError:
+                self.inconsistent_strips += 1
+                return
             nr = int(header["range_bins"])
             range_m = header["range_first_m"] + header["range_step_m"] * np.arange(nr)
-            self.writer = ImageWriter(self.path, cfg, range_m, source=self.source, first_line=first)
+            self.writer = ImageWriter(
+                self.path, cfg, range_m, crash_safe=True, source=self.source, first_line=first
+            )
             self.stream_id = header.get("stream_id")
             self.first_line = self.next_line = first
+            self._axes0 = self._axes(header)
             self._az0 = header["azimuth_first_m"] - first * header["azimuth_step_m"]
             self._daz = header["azimuth_step_m"]
         if header.get("stream_id") != self.stream_id:
             raise ValueError("a new stream started (publisher restarted); this image is closed")
+        if self._axes(header) != self._axes0 or lines.shape[1] != self._axes0[0]:
+            self.inconsistent_strips += 1
+            return
         if first < self.next_line:  # already written (should not happen on one connection)
             self.overlapping_strips += 1
             return
         if first > self.next_line:
             gap = first - self.next_line
-            self.missing_runs.append([self.next_line, gap])
-            self.missing_lines += gap
-            self._write(np.zeros((gap, lines.shape[1]), np.complex64))
+            if gap * lines.shape[1] * 8 <= self.max_fill_bytes:
+                self.missing_runs.append([self.next_line, gap])
+                self.missing_lines += gap
+                self._write(np.zeros((gap, lines.shape[1]), np.complex64))
+            else:  # not filled: listed, the lines after it keep their true positions
+                self.line_jumps.append([self.next_line, gap])
+                self.next_line = first
         self.flagged_runs.extend(list(r) for r in header.get("flagged_lines", []))
         self.counters = header.get("counters", self.counters)
         self._write(lines)
@@ -65,6 +98,7 @@ class StripRecorder:
         j = self.next_line + np.arange(len(lines))
         self.writer.write(lines, self._az0 + j * self._daz)
         self.next_line += len(lines)
+        self.lines_written += len(lines)
 
     def finish(self, final_counters: dict | None = None, **attrs) -> int:
         """Close the file (attributes: counters, gaps, flags); return the number of lines."""
@@ -76,6 +110,8 @@ class StripRecorder:
             nonfinite_pulses=int(counters.get("nonfinite_pulses", 0)),
             missing_lines=self.missing_lines,
             missing_line_runs=json.dumps(self.missing_runs),
+            line_jumps=json.dumps(self.line_jumps),
+            inconsistent_strips=self.inconsistent_strips,
             flagged_line_runs=json.dumps(self.flagged_runs),
             **attrs,
         )

@@ -50,7 +50,7 @@ class StreamProcessor:
     def __init__(
         self,
         config: Config,
-        lens_backend: str = "opencl",
+        lens_backend: str = "auto",
         device: str | None = None,
         start_along_track_m: float = 0.0,
         corrections=None,
@@ -150,7 +150,7 @@ class StreamProcessor:
 def focus_batches(
     config: Config,
     batches: Iterable,
-    lens_backend: str = "opencl",
+    lens_backend: str = "auto",
     start_along_track_m: float = 0.0,
     corrections=None,
     physical=None,
@@ -178,7 +178,7 @@ def focus_batches(
 def process_block(
     config: Config,
     shots: np.ndarray,
-    lens_backend: str = "opencl",
+    lens_backend: str = "auto",
     start_along_track_m: float = 0.0,
     aux: dict | None = None,
     corrections=None,

@@ -70,7 +70,7 @@ OWN_COUNTERS = (
 class PipelineSettings:
     """How the pipeline runs (the processing itself is the Config)."""
 
-    lens_backend: str = "opencl"
+    lens_backend: str = "auto"
     device: str | None = None
     stages: str = "split"  # "split": lens and CCD in their own threads; "fused": one thread
     strip_lines: int = 16  # lines per published strip
@@ -155,7 +155,7 @@ class Pipeline:
             stream_id=stream_id or new_stream_id(),
             config=config,
             source=source.description,
-            lens_backend=s.lens_backend,
+            lens_backend=self.engine.lens.backend,
             range_m=self.engine.range_m,
             start_along_track_m=float(start_along_track_m),
             # perf_counter times (latency) + this offset = UNIX times (headers).

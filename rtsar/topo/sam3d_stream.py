@@ -18,7 +18,6 @@ from .sam3d import (
 
 
 @dataclass
-
 class SamLines:
     """Finished lines of ``SamPhaseStream``: the ``SamPhase`` fields of lines first_line..."""
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 
 from ...sinks.publish import DEFAULT_ENDPOINT
 from .. import signals
@@ -47,6 +48,11 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Warnings as one plain line on stderr (users need the message, not our source line)."""
+    print(f"rtsar: warning: {message}", file=file or sys.stderr, flush=True)
+
+
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -54,6 +60,7 @@ def main(argv=None) -> int:
         parser.print_help()
         return 0
     signals.install()
+    warnings.showwarning = _show_warning
     try:
         return args.func(args)
     except (ValueError, OSError, RuntimeError) as exc:

@@ -8,12 +8,16 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 from ...lens import range_axis_m
 from ...presets import PRESETS, preset
 from ...scene import Simulator, load_scene
-from ...sinks.io import RecordingWriter, open_recording, read_image, write_image
+from ...sinks.io import (
+    ImageWriter,
+    RecordingWriter,
+    open_recording,
+    read_image,
+    replace_when_complete,
+)
 from ...stream.engine import StreamProcessor
 from ..progress import Progress
 from ..quicklook import save_quicklook
@@ -82,7 +86,10 @@ def cmd_simulate(args) -> int:
     prog = Progress(scene.pulses, "simulate")
     batch = scene.config.processor.micro_batch
     t0 = time.perf_counter()
-    with RecordingWriter(args.output, scene.config, scene.to_dict(), chunk_pulses=batch) as rec:
+    with (
+        replace_when_complete(args.output) as tmp,
+        RecordingWriter(tmp, scene.config, scene.to_dict(), chunk_pulses=batch) as rec,
+    ):
         done = 0
         while done < scene.pulses:
             shots = list(sim.shots(batch))
@@ -115,46 +122,48 @@ def cmd_process(args) -> int:
             correction_chain(args, cfg, None, rec.start_along_track_m),
             physical_ccd(args),
         )
-        prog = Progress(rec.pulses, "process")
-        parts, done = [], 0
-        t0 = time.perf_counter()
         if eng.corrections and eng.corrections.raw_stages:
             raise ValueError(
                 "corrections that use auxiliary channels (hcn, linearize, reference_region) run "
                 "in `rtsar run --scene`; recordings hold the main channel only"
             )
-        for shots in rec.batches(cfg.processor.micro_batch):
-            parts.append(eng.push(shots).lines)
-            done += len(shots)
-            prog.update(done)
-        parts.append(eng.flush().lines)
+        if rec.pulses < cfg.processor.aperture_pulses:
+            return die(
+                f"{args.recording} holds {rec.pulses} shots, fewer than the aperture of "
+                f"{cfg.processor.aperture_pulses}: no full-aperture line to write"
+            )
+        prog = Progress(rec.pulses, "process")
+        done = 0
+        t0 = time.perf_counter()
+        # The image goes to disk as it is focused (bounded memory), under a temporary name
+        # until it is complete.
+        with (
+            replace_when_complete(args.output) as tmp,
+            ImageWriter(tmp, cfg, eng.range_m, source=str(args.recording)) as img,
+        ):
+            for shots in rec.batches(cfg.processor.micro_batch):
+                out = eng.push(shots)
+                img.write(out.lines, eng.azimuth_m(out.first_line, len(out.lines)))
+                done += len(shots)
+                prog.update(done)
+            out = eng.flush()
+            img.write(out.lines, eng.azimuth_m(out.first_line, len(out.lines)))
+            img.close(
+                lens=eng.lens.backend,
+                correlator=cfg.processor.correlator,
+                nonfinite_pulses=eng.nonfinite_pulses,
+            )
         dt = time.perf_counter() - t0
         prog.done(done)
-    image = np.concatenate(parts)
     if eng.nonfinite_pulses:
         print(
             f"warning: {eng.nonfinite_pulses} of {done} shots held NaN/Inf and were zeroed",
             file=sys.stderr,
         )
-    if len(image) == 0:
-        return die(
-            f"{args.recording} holds {rec.pulses} shots, fewer than the aperture of "
-            f"{cfg.processor.aperture_pulses}: no full-aperture line to write"
-        )
-    write_image(
-        args.output,
-        image,
-        eng.azimuth_m(0, len(image)),
-        eng.range_m,
-        cfg,
-        source=str(args.recording),
-        lens=args.lens,
-        correlator=cfg.processor.correlator,
-        nonfinite_pulses=eng.nonfinite_pulses,
-    )
     print(
-        f"wrote {args.output}: image {image.shape[0]} azimuth × {image.shape[1]} range, "
-        f"{done / dt:,.0f} pulses/s ({args.lens} lens, {cfg.processor.correlator} correlator)"
+        f"wrote {args.output}: image {img.lines} azimuth × {len(eng.range_m)} range, "
+        f"{done / dt:,.0f} pulses/s ({eng.lens.backend} lens, "
+        f"{cfg.processor.correlator} correlator)"
     )
     return 0
 

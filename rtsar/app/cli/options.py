@@ -32,7 +32,9 @@ def add_lens_options(g) -> None:
         "--lens",
         default=LENS_BACKENDS[0],
         choices=LENS_BACKENDS,
-        help="AO lens backend: opencl (default; PoCL CPU unless RTSAR_OPENCL_DEVICE) or numpy",
+        help="AO lens backend: auto (default: OpenCL where a kernel builds on the device, else "
+        "NumPy, said on the banner), opencl (PoCL CPU unless RTSAR_OPENCL_DEVICE; an error if "
+        "it cannot build), or numpy",
     )
     g.add_argument("--device", help="OpenCL platform/device name substring")
 

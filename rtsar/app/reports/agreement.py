@@ -26,8 +26,9 @@ from ...scene import Simulator, point_scene
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--presets", default=",".join(PRESETS))
     args = ap.parse_args(argv)
     print(f"{'preset':12} {'lens':>10} {'direct':>10} {'fft':>10}   (relative rms vs float64)")
@@ -38,8 +39,15 @@ def main(argv=None) -> int:
         rng = np.random.default_rng(5)
         xs = rng.uniform(-0.5, 0.5, 8) * cfg.synthetic_aperture_m
         rs = rng.uniform(plan.range_m[0], plan.range_m[-1], 8)
-        scene = point_scene(cfg, xs, rs, effects=[("noise", {"snr_db": 0.0})], seed=2,
-                            pulses=n + 300, start_along_track_m=-0.5 * cfg.synthetic_aperture_m)
+        scene = point_scene(
+            cfg,
+            xs,
+            rs,
+            effects=[("noise", {"snr_db": 0.0})],
+            seed=2,
+            pulses=n + 300,
+            start_along_track_m=-0.5 * cfg.synthetic_aperture_m,
+        )
         shots = Simulator(scene).block(scene.pulses)
         ref_lines = compress_reference(plan, shots)
         lines = AOLens(plan).compress(shots)
@@ -49,7 +57,7 @@ def main(argv=None) -> int:
         errs = []
         for corr in (DirectCorrelator(mask), FFTCorrelator(mask)):
             b = cfg.processor.micro_batch
-            out = [corr.push(lines[i:i + b]) for i in range(0, len(lines), b)] + [corr.flush()]
+            out = [corr.push(lines[i : i + b]) for i in range(0, len(lines), b)] + [corr.flush()]
             errs.append(relative_rms(np.concatenate(out), ref_img))
         print(f"{name:12} {lens_err:10.2e} {errs[0]:10.2e} {errs[1]:10.2e}")
     return 0

@@ -20,7 +20,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    ap.add_argument("--lens", default="opencl", choices=("opencl", "numpy"))
+    ap.add_argument("--lens", default="auto", choices=("auto", "opencl", "numpy"))
     ap.add_argument("--antenna", action="store_true", help="simulate the two-way antenna pattern")
     ap.add_argument("--presets", default=",".join(PRESETS), help="comma-separated preset names")
     ap.add_argument("-o", "--output", help="write the Markdown table here too")

@@ -46,8 +46,10 @@ def main(argv=None) -> int:
     cfg = preset(args.preset)
     cases = [("none", [])] + [(n, [(n, PARAMS.get(n, {}))]) for n in REGISTRY]
     cases.append(("all", [(n, PARAMS.get(n, {})) for n in REGISTRY]))
-    print(f"simulator cost, {args.preset}, {args.targets} targets, "
-          f"{cfg.waveform.samples_per_shot} samples/shot")
+    print(
+        f"simulator cost, {args.preset}, {args.targets} targets, "
+        f"{cfg.waveform.samples_per_shot} samples/shot"
+    )
     # Three interleaved rounds, best of three: the machine is shared and noisy.
     best = {label: float("inf") for label, _ in cases}
     for _ in range(3):

@@ -43,6 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...lens.base import opencl_unavailable
 from .measure import measure_cost, measure_quality, reference_image, trace_latency_s
 from .report import markdown, pareto_front, plot
 from .scenes import TradeoffScene, Variant, default_scenes, make_scene, simulate
@@ -162,7 +163,10 @@ def run(args) -> int:
     if args.repeats < 1:
         raise ValueError("--repeats must be >= 1")
     scenes = default_scenes(args.quick, not getattr(args, "no_corrections", False))
-    if args.lens_numpy:
+    reason = None if args.lens_numpy or args.device else opencl_unavailable()
+    if reason is not None:
+        print(f"tradeoff: OpenCL unavailable ({reason}): every row on the NumPy lens", flush=True)
+    if args.lens_numpy or reason is not None:
         for s in scenes:
             s.variants = [v for v in s.variants if v.knob != "lens"]
             s.variants = [replace(v, lens_backend="numpy") for v in s.variants]

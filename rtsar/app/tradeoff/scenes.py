@@ -23,7 +23,7 @@ class Variant:
     knob: str
     value: str
     processor: dict = field(default_factory=dict)  # Processor field changes
-    lens_backend: str = "opencl"
+    lens_backend: str = "auto"
     default: bool = False
     corrections: tuple = ()  # rtsar.corrections specs, e.g. ("pga",)
     physical: str | None = None  # physical mode with the paper's CCD: carrier "range"/"azimuth"

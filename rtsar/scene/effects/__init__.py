@@ -43,8 +43,9 @@ def load_effects(specs, config):
         accepted = [p for p in inspect.signature(cls).parameters if p != "config"]
         unknown = set(params) - set(accepted)
         if unknown:
-            raise ValueError(f"effect {name!r}: unknown parameters {sorted(unknown)}; "
-                             f"it takes {accepted}")
+            raise ValueError(
+                f"effect {name!r}: unknown parameters {sorted(unknown)}; it takes {accepted}"
+            )
         try:
             effects.append(cls(config, **params))
         except TypeError as exc:

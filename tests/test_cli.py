@@ -92,8 +92,9 @@ def test_nonfinite_shots_are_zeroed_counted_and_never_reach_the_image():
     bad[5, 3] = np.nan
     bad[9, 0] = np.inf
     eng = StreamProcessor(cfg, "auto", start_along_track_m=scene.start_along_track_m)
-    image = np.concatenate([eng.push(bad[i:i + 16]).lines for i in range(0, len(bad), 16)]
-                           + [eng.flush().lines])
+    image = np.concatenate(
+        [eng.push(bad[i : i + 16]).lines for i in range(0, len(bad), 16)] + [eng.flush().lines]
+    )
     assert eng.nonfinite_pulses == 2 and eng.pulses_in == len(bad)
     assert np.isfinite(image).all() and image.shape == clean.shape
     # Dropping two of 64 aperture pulses costs a little peak, nothing more.

@@ -33,8 +33,9 @@ def rel_rms(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def noise(rng, pulses: int, samples: int) -> np.ndarray:
-    return (rng.standard_normal((pulses, samples))
-            + 1j * rng.standard_normal((pulses, samples))).astype(np.complex64)
+    return (
+        rng.standard_normal((pulses, samples)) + 1j * rng.standard_normal((pulses, samples))
+    ).astype(np.complex64)
 
 
 def chirp_echoes(name: str, pulses: int, rng) -> np.ndarray:
@@ -48,7 +49,7 @@ def chirp_echoes(name: str, pulses: int, rng) -> np.ndarray:
             if isinstance(wf, PulsedChirp):
                 rep = pulsed_replica(wf)
                 start = int(rng.integers(0, S - rep.size + 1))
-                x[p, start:start + rep.size] += amp * rep
+                x[p, start : start + rep.size] += amp * rep
             else:
                 assert isinstance(wf, FMCWChirp)
                 f = rng.uniform(-0.4, 0.4)  # beat frequency in cycles per sample
@@ -86,8 +87,18 @@ def synthetic_plan(S, nfft, sign1, two_pass, bin_start, bin_count, seed=0) -> Le
     def c(n):
         return rng.standard_normal(n) + 1j * rng.standard_normal(n)
 
-    return LensPlan(S, nfft, c(S), sign1, c(nfft) if two_pass else None, -sign1, bin_start,
-                    bin_count, c(bin_count), np.arange(bin_count, dtype=float))
+    return LensPlan(
+        S,
+        nfft,
+        c(S),
+        sign1,
+        c(nfft) if two_pass else None,
+        -sign1,
+        bin_start,
+        bin_count,
+        c(bin_count),
+        np.arange(bin_count, dtype=float),
+    )
 
 
 @pytest.mark.parametrize(
@@ -163,8 +174,15 @@ def test_kernels_found_by_loader():
 def test_program_cache_and_devices(monkeypatch, opencl):
     queue = opencl.default_queue()
     assert queue is opencl.default_queue()
-    defines = {"NFFT": 8, "LOG2_NFFT": 3, "S": 8, "BIN_COUNT": 8, "BIN_OFFSET": 0, "SIGN1": -1,
-               "LANES": 1}
+    defines = {
+        "NFFT": 8,
+        "LOG2_NFFT": 3,
+        "S": 8,
+        "BIN_COUNT": 8,
+        "BIN_OFFSET": 0,
+        "SIGN1": -1,
+        "LANES": 1,
+    }
     prog = opencl.build_program(queue.context, "lens.cl", defines)
     assert prog is opencl.build_program(queue.context, "lens.cl", dict(defines))
     assert isinstance(opencl.device_info(), str) and opencl.device_info(queue)

@@ -326,3 +326,23 @@ def test_an_overload_beyond_the_gap_bound_is_a_counted_restart(tiny):
     assert c["discontinuities"] >= 1 and c["gap_pulses"] <= n * c["discontinuities"] + n
     assert c["pulses_received"] == 51 * 32 - c["dropped_pulses"] == c["pulses_accepted"]
     assert c["pulses_processed"] == c["pulses_accepted"] + c["gap_pulses"]
+
+
+def test_stats_messages_carry_stage_busy_times_while_running(tiny):
+    """Every stats message says how busy each stage has been so far, not only the last one."""
+    cfg, scene, shots = tiny
+
+    class Stats(Collect):
+        def __init__(self):
+            super().__init__()
+            self.messages = []
+
+        def stats(self, d, pipeline):
+            self.messages.append(d)
+
+    sink = Stats()
+    Pipeline(cfg, replay(cfg, shots, rate=8.0), [sink], stats_every_s=0.02).run()
+    running = [m for m in sink.messages if m["counters"]["pulses_processed"] > 0]
+    assert running, "no stats message while pulses were being processed"
+    busy = running[0]["stage_busy_s"]
+    assert busy.get("lens", 0) > 0 and busy.get("ccd", 0) > 0

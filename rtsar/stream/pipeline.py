@@ -187,6 +187,7 @@ class Pipeline:
 
     def _lens_stage(self) -> None:
         busy = 0.0
+        key = "lens" if self.settings.stages == "split" else "lens+ccd"
         try:
             while True:
                 batches = self.q_shots.get_batch(self.max_batch)
@@ -200,6 +201,7 @@ class Pipeline:
                     t = time.perf_counter()
                     out = self._range(block)
                     busy += time.perf_counter() - t
+                    self.stats.busy_s[key] = busy  # live in every stats message
                     self._forward(out)
                 if batches is None:
                     break
@@ -208,7 +210,7 @@ class Pipeline:
             if self.settings.stages == "fused":
                 self._put_image(self._ccd_flush())
         finally:
-            self.stats.busy_s["lens" if self.settings.stages == "split" else "lens+ccd"] = busy
+            self.stats.busy_s[key] = busy
             (self.q_image if self.settings.stages == "fused" else self.q_lines).close()
 
     def _range(self, block: PulseBlock) -> PulseBlock | None:
@@ -246,6 +248,7 @@ class Pipeline:
                 t = time.perf_counter()
                 out = self._ccd_step(blocks)
                 busy += time.perf_counter() - t
+                self.stats.busy_s["ccd"] = busy
                 self._put_image(out)
             self._put_image(self._ccd_flush())
         finally:

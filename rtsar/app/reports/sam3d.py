@@ -6,7 +6,7 @@
                                  [--seed 1] [--no-rate]
                                  [--json FILE] [--png DIR] [-o FILE.md]
 
-Geometry: Zhao 2014's 2.4 m at the look angle atan √2 from the vertical (rtsar.topo.surfaces.
+Geometry: Zhao 2014's 2.4 m at the look angle atan √2 from the vertical (rtsar.scene.surfaces.
 zhao_config, as tools/insal_report.py), 233 µm azimuth and 170 µm range resolution; the FMCW
 shot is sampled at 1280 Hz (a 21.8 mm window) to halve the simulation.  The masks' angular period
 P_φ is chosen for the same 2π height as Zhao's interferometer: h_2π = P_φ R0 sin φ0 = 3.3 mm
@@ -15,7 +15,7 @@ eq. 1), offset by ``--mask-phase-rad`` from the patent's ideal alignment: a proc
 assumes the ideal (eq. 7 with θ = 0) is biased, one that knows θ or calibrates on a flat
 reference (eq. 15) is not.
 
-Scenes (rtsar.topo.surfaces): ``ridge`` (Zhao Fig. 3, 2.5 mm, 8 mm half-width, crest along
+Scenes (rtsar.scene.surfaces): ``ridge`` (Zhao Fig. 3, 2.5 mm, 8 mm half-width, crest along
 track, ground around), ``pin`` (Zhao Fig. 4, a 10 mm dome of 1.5 mm on the ground) and
 ``pin_alone`` (the same dome, no return around it: the S0 ≈ 0 pixels are masked and counted).
 The flat reference of eq. 15 is a separate speckled plane (other seed, 32 lines).  Each scene is

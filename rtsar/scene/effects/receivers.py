@@ -19,7 +19,7 @@ random walk ψ_k[p] (radians, steps of standard deviation ``piston_step_rad``, d
 Generator seeded by ``seed``; ``truth(pulses)`` returns it) and an along-track offset of the
 track ``k · along_track_offset_m`` (a registration error in azimuth).
 
-The scatterers must carry ``ground_range_m`` and ``height_m`` (rtsar.topo.surfaces builds such
+The scatterers must carry ``ground_range_m`` and ``height_m`` (rtsar.scene.surfaces builds such
 scenes) and ``slant_range_m = hypot(ground_range_m, H - height_m)``.  ``snr_db`` adds the
 receiver noise of rtsar.scene.effects.noise to every auxiliary channel (independent draws from
 the simulator's generator; the main channel's noise is the "noise" effect's).  Effects that
@@ -130,7 +130,7 @@ class InterferometricReceivers(Effect):
         if tg.ground_range_m is None or tg.height_m is None:
             raise ValueError(
                 "interferometric_receivers needs targets with ground_range_m and height_m "
-                "(see rtsar.topo.surfaces)"
+                "(see rtsar.scene.surfaces)"
             )
         x = ctx.along_offset_m
         y = np.asarray(tg.ground_range_m, np.float64)

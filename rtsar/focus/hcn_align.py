@@ -282,6 +282,7 @@ class HCNAligner(CorrectionStage):
             max_offset_hz=float(max_offset_hz),
         )
         self.taps, self.kaiser_beta, self.channel = taps, float(kaiser_beta), channel
+        self.channels = (channel,)
         wf = config.waveform
         if not isinstance(wf, FMCWChirp):
             raise ValueError("HCN alignment applies to FMCW waveforms")

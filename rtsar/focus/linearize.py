@@ -188,6 +188,7 @@ class ChirpLinearizer(CorrectionStage):
         self.delay_s = delay_s
         self.aligner = aligner
         self.taps, self.kaiser_beta, self.channel = taps, float(kaiser_beta), channel
+        self.channels = (channel,) + (aligner.channels if aligner is not None else ())
         self._s, self._fs, self._k = wf.samples_per_shot, wf.sample_rate_hz, wf.chirp_rate_hz_per_s
         self._t_main = channel_times_s(config, 1)
         self._k_t = self._k * self._t_main

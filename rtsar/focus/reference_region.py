@@ -227,6 +227,7 @@ class ReferenceRegionCorrector(CorrectionStage):
     """
 
     domain = "raw"
+    channels = CHANNELS
     counter_names = ("pulses_in", "pulses_not_estimated", "nonfinite_reference")
 
     def __init__(

@@ -22,6 +22,7 @@ class CorrectionStage(ABC):
     """One phase or chirp correction in the stream (see the module docstring)."""
 
     domain: ClassVar[str]  # one of DOMAINS
+    channels: tuple[str, ...] = ()  # the auxiliary channels it reads (raw stages)
     counter_names: ClassVar[tuple[str, ...]] = ()  # integer attributes reported as counters
 
     @property

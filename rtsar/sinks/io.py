@@ -1,8 +1,12 @@
 """Recording and image files (HDF5).  Layouts are documented in README.md ("File formats").
 
 Recording (``rtsar simulate``):  /shots complex64 [pulse, sample], /pulse_index int64 [pulse],
-/time_s float64 [pulse], /along_track_m float64 [pulse]; attributes format="rtsar-recording",
-format_version, config (JSON of the effective configuration), scene (JSON), rtsar_version.
+/time_s float64 [pulse], /along_track_m float64 [pulse], and (format version 2) one dataset
+/channels/NAME complex64 [pulse, sample] per auxiliary channel of the shot (second receiver,
+reference interferometer, HCN cell, reference-region receivers, modulation channels);
+attributes format="rtsar-recording", format_version, config (JSON of the effective
+configuration), scene (JSON), channels (JSON list of {name, samples_per_shot, sample_rate_hz,
+dtype}; version 2), rtsar_version.  Version 1 files (main channel only) still read.
 
 Image (``rtsar process``):  /image complex64 [azimuth, range], /azimuth_m, /range_m float64;
 attributes format="rtsar-image", format_version, config (JSON), source, lens, correlator,
@@ -18,7 +22,7 @@ import os
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import h5py
@@ -26,10 +30,12 @@ import numpy as np
 
 from .. import __version__
 from ..params import Config, config_from_dict
+from ..scene.model import Scene, scene_from_dict
 
 RECORDING_FORMAT = "rtsar-recording"
 IMAGE_FORMAT = "rtsar-image"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 1  # images
+RECORDING_VERSION = 2  # 2: auxiliary channels under /channels
 
 
 @contextmanager
@@ -56,7 +62,11 @@ def replace_when_complete(path: str | Path) -> Iterator[Path]:
 
 
 class RecordingWriter:
-    """Append shots to a new recording file; use as a context manager."""
+    """Append shots (and their auxiliary channels) to a new recording; a context manager.
+
+    The auxiliary channels are fixed by the first ``write``: every later write must carry the
+    same names and lengths (ValueError otherwise), so no channel is ever silently dropped.
+    """
 
     def __init__(
         self, path: str | Path, config: Config, scene: dict | None = None, chunk_pulses: int = 64
@@ -78,16 +88,63 @@ class RecordingWriter:
         }
         a = self._f.attrs
         a["format"] = RECORDING_FORMAT
-        a["format_version"] = FORMAT_VERSION
+        a["format_version"] = RECORDING_VERSION
         a["config"] = json.dumps(config.to_dict())
         a["scene"] = json.dumps(scene or {})
         a["rtsar_version"] = __version__
+        self._config = config
+        self._chunk = chunk
+        self._channels: dict[str, h5py.Dataset] | None = None  # fixed by the first write
         self.pulses = 0
 
-    def write(self, samples: np.ndarray, pulse_index, time_s, along_track_m) -> None:
+    @property
+    def channel_names(self) -> list[str]:
+        """The auxiliary channels written (empty before the first write)."""
+        return sorted(self._channels or {})
+
+    def _make_channels(self, aux: dict) -> None:
+        wf = self._config.waveform
+        self._channels, described = {}, []
+        group = self._f.create_group("channels")
+        for name in sorted(aux):
+            width = np.asarray(aux[name]).shape[-1]
+            self._channels[name] = group.create_dataset(
+                name, (0, width), np.complex64, maxshape=(None, width), chunks=(self._chunk, width)
+            )
+            described.append(
+                {
+                    "name": name,
+                    "samples_per_shot": int(width),
+                    # every channel spans the shot's sweep: its rate scales with its length
+                    "sample_rate_hz": wf.sample_rate_hz * width / wf.samples_per_shot,
+                    "dtype": "complex64",
+                }
+            )
+        self._f.attrs["channels"] = json.dumps(described)
+
+    def write(
+        self, samples: np.ndarray, pulse_index, time_s, along_track_m, aux: dict | None = None
+    ) -> None:
+        """Append shots; ``aux`` maps each auxiliary channel's name to [pulse, sample]."""
         samples = np.atleast_2d(samples)
         n = len(samples)
+        aux = aux or {}
+        if self._channels is None:
+            self._make_channels(aux)
+        if set(aux) != set(self._channels):
+            raise ValueError(
+                f"auxiliary channels {sorted(aux)} differ from the recording's "
+                f"{sorted(self._channels)}"
+            )
         end = self.pulses + n
+        for name, ds in self._channels.items():
+            values = np.asarray(aux[name])
+            if values.shape != (n, ds.shape[1]):
+                raise ValueError(
+                    f"channel {name!r}: {values.shape} for {n} shots of {ds.shape[1]} samples"
+                )
+            ds.resize(end, axis=0)
+            ds[self.pulses : end] = values
         self._shots.resize(end, axis=0)
         self._shots[self.pulses : end] = samples
         for name, values in (
@@ -124,6 +181,7 @@ class Recording:
     _file: h5py.File
     pulse_index: np.ndarray | None = None  # int64[pulse]
     time_s: np.ndarray | None = None  # float64[pulse]
+    channels: dict = field(default_factory=dict)  # auxiliary channel name → dataset
 
     @property
     def shots(self):
@@ -132,9 +190,24 @@ class Recording:
 
     def batches(self, size: int) -> Iterator[np.ndarray]:
         """Shots in blocks of ``size`` pulses (the last block may be shorter)."""
+        for shots, _ in self.batches_with_aux(size):
+            yield shots
+
+    def batches_with_aux(self, size: int) -> Iterator[tuple[np.ndarray, dict]]:
+        """(shots, {channel: samples}) in blocks of ``size`` pulses, every channel read."""
         shots = self._file["shots"]
         for i in range(0, self.pulses, size):
-            yield shots[i : i + size]
+            aux = {name: ds[i : i + size] for name, ds in self.channels.items()}
+            yield shots[i : i + size], aux
+
+    def scene_object(self) -> Scene | None:
+        """The recorded scene as an rtsar.scene.Scene (None when the recording has none)."""
+        if not self.scene:
+            return None
+        try:
+            return scene_from_dict(self.scene, name=self.scene.get("name", "scene"))
+        except (ValueError, TypeError) as exc:
+            raise ValueError(f"{self.path}: the recorded scene does not parse ({exc})") from None
 
     def close(self) -> None:
         self._file.close()
@@ -161,7 +234,8 @@ def _open(path: str | Path, fmt: str) -> h5py.File:
     if found != fmt:
         f.close()
         raise ValueError(f"{path}: expected an {fmt} file, found format={found!r}")
-    if int(f.attrs.get("format_version", -1)) > FORMAT_VERSION:
+    newest = RECORDING_VERSION if fmt == RECORDING_FORMAT else FORMAT_VERSION
+    if int(f.attrs.get("format_version", -1)) > newest:
         f.close()
         raise ValueError(f"{path}: format_version newer than this rtsar understands")
     return f
@@ -218,6 +292,7 @@ def open_recording(path: str | Path) -> Recording:
                 raise ValueError(f"{name} has {len(values)} entries for {pulses} shots")
             if not np.isfinite(values).all():
                 raise ValueError(f"{name} holds non-finite values")
+        channels = _channels(f, pulses)
         if pulses > 1 and not np.all(np.diff(meta["pulse_index"]) > 0):
             raise ValueError("pulse_index must increase from shot to shot")
         if pulses > 1:
@@ -230,7 +305,30 @@ def open_recording(path: str | Path) -> Recording:
         f.close()
         raise ValueError(f"{path}: {exc}") from None
     start = float(meta["along_track_m"][0]) if pulses else 0.0
-    return Recording(Path(path), cfg, scene, pulses, start, f, meta["pulse_index"], meta["time_s"])
+    return Recording(
+        Path(path), cfg, scene, pulses, start, f, meta["pulse_index"], meta["time_s"], channels
+    )
+
+
+def _channels(f: h5py.File, pulses: int) -> dict:
+    """The auxiliary channel datasets of a version 2 recording, checked against ``channels``."""
+    described = json.loads(f.attrs["channels"]) if "channels" in f.attrs else []
+    if not isinstance(described, list) or not all(
+        isinstance(c, dict) and isinstance(c.get("name"), str) for c in described
+    ):
+        raise ValueError("the attribute 'channels' must be a JSON list of {name, ...} objects")
+    group = f.get("channels")
+    found = sorted(group) if isinstance(group, h5py.Group) else []
+    names = sorted(c["name"] for c in described)
+    if found != names:
+        raise ValueError(f"channels listed {names} but datasets under /channels are {found}")
+    out = {}
+    for name in names:
+        ds = _dataset(group, name, 2, "complex")
+        if ds.shape[0] != pulses:
+            raise ValueError(f"channel {name!r} has {ds.shape[0]} shots for {pulses}")
+        out[name] = ds
+    return out
 
 
 def write_image(

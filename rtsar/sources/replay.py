@@ -37,8 +37,9 @@ def parse_rate(text: str | float) -> float | None:
 class ReplaySource(Source):
     """Shots from array-likes (an h5py dataset or NumPy arrays) at ``rate`` (see parse_rate).
 
-    ``shots[pulse, sample]``, ``pulse_index`` and ``time_s`` per shot; ``prf_hz`` is the recorded
-    rate.  Paced replay: arrival = scheduled time; unpaced: the time the shot was read.
+    ``shots[pulse, sample]``, ``pulse_index`` and ``time_s`` per shot, and ``aux`` (auxiliary
+    channel name → [pulse, sample]) travelling with them; ``prf_hz`` is the recorded rate.
+    Paced replay: arrival = scheduled time; unpaced: the time the shot was read.
     """
 
     live = False
@@ -53,15 +54,19 @@ class ReplaySource(Source):
         batch: int = 64,
         description: str = "replay",
         live: bool = False,
+        aux: dict | None = None,
     ):
         super().__init__()
         self.live = live  # True: behave as an instrument (dropped when the pipeline is full)
         self.shots = shots
+        self.aux = dict(aux or {})  # auxiliary channel name → array-like [pulse, sample]
         self.pulse_index = np.asarray(pulse_index, np.int64)
         self.time_s = np.asarray(time_s, np.float64)
         self.total = len(self.pulse_index)
         if not (len(shots) == len(self.time_s) == self.total):
             raise ValueError("shots, pulse_index and time_s must have one entry per shot")
+        if any(len(a) != self.total for a in self.aux.values()):
+            raise ValueError("every auxiliary channel must have one entry per shot")
         self.prf_hz = float(prf_hz)
         self.factor = parse_rate(rate)
         self.chunk = batch if self.factor is None else release_chunk(self.prf_hz * self.factor)
@@ -81,6 +86,7 @@ class ReplaySource(Source):
             rate,
             batch,
             description=f"replay of {recording.path} ({rate})",
+            aux=recording.channels,
         )
 
     def __iter__(self) -> Iterator[ShotBatch]:
@@ -97,7 +103,10 @@ class ReplaySource(Source):
             self.last_release = (p + n, time.perf_counter())
             if self.first_release is None:
                 self.first_release = self.last_release
-            yield ShotBatch(self.pulse_index[p : p + n], self.time_s[p : p + n], arrival, samples)
+            aux = {k: np.asarray(v[p : p + n], np.complex64) for k, v in self.aux.items()}
+            yield ShotBatch(
+                self.pulse_index[p : p + n], self.time_s[p : p + n], arrival, samples, aux
+            )
             p += n
             self.released = p
 

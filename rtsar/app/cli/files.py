@@ -8,6 +8,8 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+
 from ...lens import range_axis_m
 from ...presets import PRESETS, preset
 from ...scene import Simulator, load_scene
@@ -25,6 +27,7 @@ from .options import (
     add_correlator_option,
     add_lens_options,
     add_processing_knobs,
+    check_channels,
     correction_chain,
     die,
     physical_ccd,
@@ -98,14 +101,16 @@ def cmd_simulate(args) -> int:
                 [s.index for s in shots],
                 [s.time_s for s in shots],
                 [s.along_track_m for s in shots],
+                {name: np.stack([s.aux[name] for s in shots]) for name in shots[0].aux},
             )
             done += len(shots)
             prog.update(done)
     dt = time.perf_counter() - t0
     prog.done(done)
     effects = ", ".join(n for n, _ in scene.effects) or "none"
+    channels = f" + channels {', '.join(rec.channel_names)}" if rec.channel_names else ""
     print(
-        f"wrote {args.output}: {done} shots × {sim.samples_per_shot} samples, "
+        f"wrote {args.output}: {done} shots × {sim.samples_per_shot} samples{channels}, "
         f"{len(scene.targets)} targets, effects: {effects}; {1e6 * dt / max(done, 1):.1f} µs/shot"
     )
     return 0
@@ -114,19 +119,11 @@ def cmd_simulate(args) -> int:
 def cmd_process(args) -> int:
     with open_recording(args.recording) as rec:
         cfg = processor_changes(args, rec.config)
+        chain = correction_chain(args, cfg, rec.scene_object(), rec.start_along_track_m)
+        check_channels(chain, rec)  # before the lens is built: a wrong request fails at once
         eng = StreamProcessor(
-            cfg,
-            args.lens,
-            args.device,
-            rec.start_along_track_m,
-            correction_chain(args, cfg, None, rec.start_along_track_m),
-            physical_ccd(args),
+            cfg, args.lens, args.device, rec.start_along_track_m, chain, physical_ccd(args)
         )
-        if eng.corrections and eng.corrections.raw_stages:
-            raise ValueError(
-                "corrections that use auxiliary channels (hcn, linearize, reference_region) run "
-                "in `rtsar run --scene`; recordings hold the main channel only"
-            )
         if rec.pulses < cfg.processor.aperture_pulses:
             return die(
                 f"{args.recording} holds {rec.pulses} shots, fewer than the aperture of "
@@ -141,8 +138,8 @@ def cmd_process(args) -> int:
             replace_when_complete(args.output) as tmp,
             ImageWriter(tmp, cfg, eng.range_m, source=str(args.recording)) as img,
         ):
-            for shots in rec.batches(cfg.processor.micro_batch):
-                out = eng.push(shots)
+            for shots, aux in rec.batches_with_aux(cfg.processor.micro_batch):
+                out = eng.push(shots, aux)
                 img.write(out.lines, eng.azimuth_m(out.first_line, len(out.lines)))
                 done += len(shots)
                 prog.update(done)

@@ -178,6 +178,11 @@ def add_subscriber_options(s) -> None:
 def processor_changes(args, cfg):
     """The configuration with the processor knobs given on the command line."""
     changes = {}
+    if args.correlator and getattr(args, "physical", None):
+        raise ValueError(
+            f"--correlator {args.correlator} does not apply with --physical: the physical mode "
+            "emulates the paper's CCD itself (a shift register with its own charge transfer)"
+        )
     if args.correlator:
         changes["correlator"] = args.correlator
     if getattr(args, "micro_batch", None) is not None:
@@ -196,6 +201,22 @@ def correction_chain(args, cfg, scene=None, start_along_track_m=0.0):
         return None
     context = correction_context(scene, start_along_track_m)
     return CorrectionChain.from_specs(args.correct, cfg, context)
+
+
+def check_channels(chain, recording) -> None:
+    """Every auxiliary channel the --correct stages read is in the recording, or a clear error."""
+    if not chain:
+        return
+    have = set(recording.channels)
+    for name, stage in chain.named:
+        missing = [c for c in stage.channels if c not in have]
+        if missing:
+            held = ", ".join(sorted(have)) or "the main channel only"
+            raise ValueError(
+                f"--correct {name} reads the auxiliary channel(s) {', '.join(missing)}, but "
+                f"{recording.path} holds {held}: simulate the scene with the effect that makes "
+                "it (this rtsar records every channel), or run the scene live"
+            )
 
 
 def physical_ccd(args):

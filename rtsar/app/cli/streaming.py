@@ -22,6 +22,7 @@ from ..view import view
 from .options import (
     add_pipeline_options,
     add_subscriber_options,
+    check_channels,
     correction_chain,
     die,
     physical_ccd,
@@ -36,10 +37,14 @@ def cmd_run(args) -> int:
     if args.duration is not None and args.duration <= 0:
         return die(f"--duration must be > 0 seconds, got {args.duration}")
     if args.serial:
-        if args.scene:
-            cfg = load_scene(args.scene).config
+        # Pulse 0's along-track position: the scene's (the instrument scans the scene the file
+        # describes, as the fake instrument does); a bare preset starts at 0 m.
+        start_m, described = 0.0, None
+        if args.preset and not args.scene:
+            cfg = preset(args.preset)
         else:
-            cfg = preset(args.preset) if args.preset else load_scene(DEMO_SCENE).config
+            described = load_scene(args.scene or DEMO_SCENE)
+            cfg, start_m = described.config, described.start_along_track_m
         cfg = processor_changes(args, cfg)
         strip_lines(args, cfg.geometry.prf_hz)
         source = SerialSource(
@@ -55,9 +60,10 @@ def cmd_run(args) -> int:
             pipeline_settings(args, deadline=args.duration is not None),
             args.endpoint,
             args.delivery,
+            start_m,
             output=args.output,
             curve_secret_key=args.curve_key,
-            corrections=correction_chain(args, cfg),
+            corrections=correction_chain(args, cfg, described, start_m),
             physical=physical_ccd(args),
             stall_timeout_s=args.stall_timeout,
             curve_clients=args.curve_clients,
@@ -94,6 +100,8 @@ def cmd_replay(args) -> int:
         strip_lines(args, cfg.geometry.prf_hz)
         batch = args.max_batch or cfg.processor.micro_batch
         source = ReplaySource.from_recording(rec, args.rate, batch)
+        chain = correction_chain(args, cfg, rec.scene_object(), rec.start_along_track_m)
+        check_channels(chain, rec)
         return run_stream(
             cfg,
             source,
@@ -105,7 +113,7 @@ def cmd_replay(args) -> int:
             args.curve_key,
             wait_subscribers=args.wait_subscribers,
             total_pulses=rec.pulses,
-            corrections=correction_chain(args, cfg, None, rec.start_along_track_m),
+            corrections=chain,
             physical=physical_ccd(args),
             stall_timeout_s=args.stall_timeout,
             curve_clients=args.curve_clients,

@@ -346,3 +346,19 @@ def test_stats_messages_carry_stage_busy_times_while_running(tiny):
     assert running, "no stats message while pulses were being processed"
     busy = running[0]["stage_busy_s"]
     assert busy.get("lens", 0) > 0 and busy.get("ccd", 0) > 0
+
+
+def test_the_live_status_warns_when_processing_falls_below_the_source_rate():
+    from rtsar.app.live import RateWatch
+
+    said = []
+    watch = RateWatch(1600.0, said.append)
+    for t in range(0, 12):  # keeps up: 1600 pulses each second
+        watch.update(float(t), 1600 * t)
+    assert said == []
+    slow = RateWatch(1600.0, said.append)
+    for t in range(0, 12):  # 1093 pulses/s, as physical mode on the demo scene was measured
+        slow.update(float(t), 1093 * t)
+    assert len(said) == 1  # once, not on every status line
+    assert "processing 1,093 pulses/s, below the source's 1,600 Hz" in said[0]
+    assert "rtsar replay" in said[0]

@@ -61,6 +61,40 @@ _LABELS = {
 }
 
 
+class RateWatch:
+    """Says when the stream is processed slower than its source should deliver it.
+
+    Rates are measured over windows of at least ``window_s``; two windows in a row below
+    ``fraction`` of ``expected_hz`` give one warning (then at most one per ``repeat_s``).
+    """
+
+    def __init__(self, expected_hz: float, say, window_s=2.0, fraction=0.9, repeat_s=30.0):
+        self.expected_hz, self.say = float(expected_hz), say
+        self.window_s, self.fraction, self.repeat_s = window_s, fraction, repeat_s
+        self._mark: tuple[float, int] | None = None
+        self._slow = 0
+        self._said_s = -float("inf")
+
+    def update(self, now_s: float, pulses: int) -> None:
+        if self._mark is None:
+            self._mark = (now_s, pulses)
+            return
+        t0, p0 = self._mark
+        if now_s - t0 < self.window_s:
+            return
+        rate = (pulses - p0) / (now_s - t0)
+        self._mark = (now_s, pulses)
+        self._slow = self._slow + 1 if rate < self.fraction * self.expected_hz else 0
+        if self._slow >= 2 and now_s - self._said_s >= self.repeat_s:
+            self._said_s = now_s
+            self.say(
+                f"warning: processing {rate:,.0f} pulses/s, below the source's "
+                f"{self.expected_hz:,.0f} Hz: this machine cannot keep up with this "
+                "configuration live (see `rtsar bench`); record it and `rtsar replay REC.h5 "
+                "--rate F` at a rate it can follow"
+            )
+
+
 def lens_label(lens) -> str:
     """The lens in use, for the banner: "opencl lens", or the fallback and why."""
     if lens.fallback_reason:
@@ -107,12 +141,14 @@ def run_stream(
     physical=None,
     stall_timeout_s: float = STALL_TIMEOUT_S,
     curve_clients=None,
+    expected_rate_hz: float | None = None,
 ) -> int:
     """Run until the source ends, Ctrl-C or a signal; print status lines and a summary.
 
     Exit status: 0 when the stream ended cleanly, 1 when the source failed (an instrument link
     lost for good) or nothing could be written to ``output``, 128 + the signal number when
-    interrupted (130 for Ctrl-C).
+    interrupted (130 for Ctrl-C).  ``expected_rate_hz``: the rate the source should deliver (a
+    simulation's PRF, a paced replay's): a stream processed slower is warned about.
     """
     stream = stream or sys.stdout
     err = sys.stderr
@@ -138,8 +174,12 @@ def run_stream(
         sinks.append(recorder)
     last = [0.0]
 
+    watch = None if expected_rate_hz is None else RateWatch(expected_rate_hz, say)
+
     def show(d: dict) -> None:
         now = time.perf_counter()
+        if watch is not None and not d.get("final"):
+            watch.update(d["elapsed_s"], d["counters"].get("pulses_processed", 0))
         if d.get("final") or now - last[0] >= (0.5 if tty else 5.0):
             last[0] = now
             line = format_status(d, total_pulses)
@@ -163,7 +203,8 @@ def run_stream(
         n = config.processor
         print(
             f"rtsar: {source.description}; CCD {n.aperture_pulses} x {n.range_bins}, "
-            f"{n.correlator} correlator, {lens_label(pipe.engine.lens)}, {settings.stages} stages, "
+            f"{'emulated CCD' if physical else n.correlator + ' correlator'}, "
+            f"{lens_label(pipe.engine.lens)}, {settings.stages} stages, "
             f"strips of {settings.strip_lines} lines on {endpoint} ({delivery})"
             + (f"; corrections: {', '.join(corrections.names)}" if corrections else "")
             + (f"; physical CCD, carrier in {physical.carrier}" if physical else "")

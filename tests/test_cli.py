@@ -113,3 +113,25 @@ def test_user_mistakes_get_one_line_errors(tmp_path, capsys, monkeypatch):
     assert main(["process", str(rec), "-o", str(tmp_path / "i.h5")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("rtsar: error:") and "Traceback" not in err
+
+
+def test_quicklook_true_aspect(tmp_path):
+    """--true-aspect: equal metres on both axes (the image's shape follows its extent)."""
+    from rtsar.app.quicklook import save_quicklook
+
+    img = np.zeros((40, 10), np.complex64)  # all below the dynamic range: black
+    az, rg = np.arange(40) * 1.0, 100.0 + np.arange(10) * 1.0  # 40 m along track, 10 m range
+    plain, true = tmp_path / "plain.png", tmp_path / "true.png"
+    save_quicklook(plain, img, az, rg)
+    save_quicklook(true, img, az, rg, true_aspect=True)
+    import matplotlib.image as mpimg
+
+    def dark_box(path):  # the image area: black pixels left of the colour bar
+        a = mpimg.imread(path)[..., :3].mean(axis=2)
+        a = a[:, : int(0.7 * a.shape[1])]
+        rows, cols = np.nonzero(a < 0.05)
+        return np.ptp(rows), np.ptp(cols)
+
+    h, w = dark_box(true)
+    assert h / w == pytest.approx(4.0, rel=0.1)  # 40 m by 10 m drawn 4:1
+    assert plain.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -32,9 +32,19 @@ def to_db(image: np.ndarray, dynamic_range_db: float) -> np.ndarray:
 
 
 def save_quicklook(
-    path, image, azimuth_m, range_m, dynamic_range_db: float = 50.0, title: str = ""
+    path,
+    image,
+    azimuth_m,
+    range_m,
+    dynamic_range_db: float = 50.0,
+    title: str = "",
+    true_aspect: bool = False,
 ) -> None:
-    """Write a PNG: range across, azimuth (along track) down, grey scale in dB."""
+    """Write a PNG: range across, azimuth (along track) down, grey scale in dB.
+
+    ``true_aspect``: one metre is as long on both axes, so a focused point looks round (the
+    default fills the figure; the axes' metres say how much one axis is stretched).
+    """
     plt = file_pyplot()
 
     if dynamic_range_db <= 0:
@@ -58,7 +68,11 @@ def save_quicklook(
         (azimuth_m[-1] + da / 2) / scale,
         (azimuth_m[0] - da / 2) / scale,
     ]
-    height = min(12.0, max(3.0, 8.0 * image.shape[0] / max(image.shape[1], 1)))
+    if true_aspect:
+        ratio = abs(extent[2] - extent[3]) / max(abs(extent[1] - extent[0]), 1e-30)
+        height = min(12.0, max(3.0, 7.0 * ratio + 1.0))
+    else:
+        height = min(12.0, max(3.0, 8.0 * image.shape[0] / max(image.shape[1], 1)))
     fig, ax = plt.subplots(figsize=(8, height), dpi=100)
     im = ax.imshow(
         db,
@@ -66,7 +80,7 @@ def save_quicklook(
         vmin=-dynamic_range_db,
         vmax=0,
         extent=extent,
-        aspect="auto",
+        aspect="equal" if true_aspect else "auto",
         interpolation="nearest",
     )
     ax.set_xlabel(f"slant range [{unit}]")

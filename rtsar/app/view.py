@@ -45,20 +45,22 @@ def view(
     timeout_s: float = 30.0,
     stream=None,
     curve_client_key=None,
+    true_aspect: bool = False,
 ) -> int:
-    """Live waterfall window, or with ``png`` a snapshot once ``lines`` lines have arrived."""
+    """Live waterfall window, or with ``png`` a snapshot once ``lines`` lines have arrived
+    (``true_aspect``: equal metres on both axes, see save_quicklook)."""
     stream = stream or sys.stderr
     sub = StripSubscriber(endpoint, curve_server_key, curve_client_key, hwm_messages=64)
     fall = Waterfall(lines)
     try:
         if png:
-            return _snapshot(sub, fall, png, dynamic_range_db, timeout_s, stream)
+            return _snapshot(sub, fall, png, dynamic_range_db, timeout_s, stream, true_aspect)
         return _window(sub, fall, dynamic_range_db, stream)
     finally:
         sub.close()
 
 
-def _snapshot(sub, fall, png, dynamic_range_db, timeout_s, stream) -> int:
+def _snapshot(sub, fall, png, dynamic_range_db, timeout_s, stream, true_aspect=False) -> int:
     print(f"view: waiting for {fall.lines} lines from {sub.endpoint} …", file=stream)
     try:
         while fall.filled < fall.lines:
@@ -83,6 +85,7 @@ def _snapshot(sub, fall, png, dynamic_range_db, timeout_s, stream) -> int:
         fall.range_m,
         dynamic_range_db,
         title=f"{sub.endpoint}: last {k} lines",
+        true_aspect=true_aspect,
     )
     print(f"wrote {png}: {k} lines", file=stream)
     return 0

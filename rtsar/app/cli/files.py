@@ -174,6 +174,7 @@ def cmd_quicklook(args) -> int:
         rg,
         dynamic_range_db=args.dynamic_range_db,
         title=Path(args.image).name,
+        true_aspect=args.true_aspect,
     )
     print(f"wrote {args.output}")
     return 0
@@ -229,5 +230,11 @@ def add_parsers(sub) -> None:
         type=float,
         default=50.0,
         help="dB below the peak shown as black (default 50)",
+    )
+    s.add_argument(
+        "--true-aspect",
+        action="store_true",
+        help="one metre as long on both axes, so a focused point looks like a point (default: "
+        "the image fills the figure; the axes' metres give the stretch)",
     )
     s.set_defaults(func=cmd_quicklook)

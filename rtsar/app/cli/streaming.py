@@ -141,6 +141,7 @@ def cmd_view(args) -> int:
         args.curve_server_key,
         args.timeout,
         curve_client_key=args.curve_client_key,
+        true_aspect=args.true_aspect,
     )
 
 
@@ -254,6 +255,13 @@ def add_parsers(sub) -> None:
         type=float,
         default=30.0,
         help="--png: give up after this many seconds of silence (default 30)",
+    )
+    s.add_argument(
+        "--true-aspect",
+        action="store_true",
+        help="--png: "
+        "one metre as long on both axes, so a focused point looks like a point (default: "
+        "the image fills the figure; the axes' metres give the stretch)",
     )
     s.set_defaults(func=cmd_view)
 

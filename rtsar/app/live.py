@@ -142,6 +142,7 @@ def run_stream(
     stall_timeout_s: float = STALL_TIMEOUT_S,
     curve_clients=None,
     expected_rate_hz: float | None = None,
+    height=None,
 ) -> int:
     """Run until the source ends, Ctrl-C or a signal; print status lines and a summary.
 
@@ -199,6 +200,7 @@ def run_stream(
             stats_every_s=0.5 if tty else 1.0,
             corrections=corrections,
             physical=physical,
+            height=height,
         )
         n = config.processor
         print(
@@ -208,6 +210,7 @@ def run_stream(
             f"strips of {settings.strip_lines} lines on {endpoint} ({delivery})"
             + (f"; corrections: {', '.join(corrections.names)}" if corrections else "")
             + (f"; physical CCD, carrier in {physical.carrier}" if physical else "")
+            + (f"; height strips of {height.strip_lines} lines" if height is not None else "")
             + (f"; {n.precision}" if n.precision != "complex64" else "")
             + (
                 f"; range migration {n.range_migration_taps} taps" if n.range_migration_taps else ""

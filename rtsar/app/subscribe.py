@@ -35,6 +35,8 @@ def subscribe(
                 break
             if msg.topic == "strip":
                 rec.add_strip(msg.header, msg.lines)
+            elif msg.topic == "height":
+                rec.add_height(msg.header, msg.lines, msg.valid)
             elif msg.topic == "end" and rec.writer is not None:
                 if msg.header.get("stream_id") == rec.stream_id:
                     counters = msg.header.get("counters")

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..focus.chain import CorrectionContext
 from ..focus.reference_region import ReferenceGeometry
+from ..topo.insar_geometry import InsalGeometry
 from .effects import load_effects
 from .model import Scene
 
@@ -22,6 +23,25 @@ def _effect(scene: Scene, name: str):
     """The instantiated effect ``name`` of the scene, or None when the scene does not name it."""
     specs = [(n, p) for n, p in scene.effects if n == name]
     return load_effects(specs, scene.config)[0] if specs else None
+
+
+def insal_geometry(scene: Scene | None):
+    """The interferometer of the scene's ``interferometric_receivers`` effect (main antenna and
+    the second receiver ``rx1``) as an rtsar.topo.insar_geometry.InsalGeometry; ValueError when
+    the scene has none (height strips need it)."""
+    effect = None if scene is None else _effect(scene, "interferometric_receivers")
+    if effect is None:
+        raise ValueError(
+            "--height insal needs the interferometer's geometry: a scene (or a recording of "
+            "one) with the interferometric_receivers effect"
+        )
+    dy, dz = float(effect.dy_m[1] - effect.dy_m[0]), float(effect.dz_m[1] - effect.dz_m[0])
+    return InsalGeometry.from_config(
+        scene.config,
+        baseline_m=float(np.hypot(dy, dz)),
+        baseline_angle_deg=float(np.degrees(np.arctan2(dz, dy))),
+        passes=2 if effect.mode == "two_pass" else 1,
+    )
 
 
 def correction_context(scene: Scene | None, start_along_track_m: float | None = None):

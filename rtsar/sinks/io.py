@@ -11,7 +11,9 @@ dtype}; version 2), rtsar_version.  Version 1 files (main channel only) still re
 Image (``rtsar process``):  /image complex64 [azimuth, range], /azimuth_m, /range_m float64;
 attributes format="rtsar-image", format_version, config (JSON), source, lens, correlator,
 nonfinite_pulses (shots zeroed because they held NaN/Inf), complete (False while a stream is
-written and in a file whose writer was killed).
+written and in a file whose writer was killed).  With height strips (``--height insal``):
+/height_m float32 [azimuth, range] and /height_valid uint8 (1: coherent and unwrapped), rows
+aligned with /image's.
 Complex values are HDF5 compounds of two floats named r and i (h5py's convention).
 """
 
@@ -356,6 +358,21 @@ def read_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, di
         return (f["image"][...], f["azimuth_m"][...], f["range_m"][...], dict(f.attrs))
 
 
+def read_heights(path: str | Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """(height_m float32 [azimuth, range], valid bool) of an image file; None without heights.
+
+    Rows the height strips have not reached yet (a stream cut short) are invalid."""
+    with _open(path, IMAGE_FORMAT) as f:
+        if "height_m" not in f:
+            return None
+        rows = f["image"].shape[0]
+        h = np.zeros(f["image"].shape, np.float32)
+        v = np.zeros(f["image"].shape, bool)
+        n = min(rows, f["height_m"].shape[0])
+        h[:n], v[:n] = f["height_m"][:n], f["height_valid"][:n] != 0
+        return h, v
+
+
 class ImageWriter:
     """Write an image file line block by line block (streams of any length, bounded memory).
 
@@ -378,6 +395,7 @@ class ImageWriter:
         chunk_lines: int = 64,
         crash_safe: bool = False,
         flush_every_s: float = 0.5,
+        heights: bool = False,
         **attrs,
     ):
         self.path = Path(path)
@@ -398,6 +416,15 @@ class ImageWriter:
             "azimuth_m", (0,), np.float64, maxshape=(None,), chunks=(4096,)
         )
         self._f.create_dataset("range_m", data=np.asarray(range_m, np.float64))
+        self._height = self._valid = None
+        if heights:  # created now: no dataset can be added once the file is in SWMR mode
+            self._height, self._valid = (
+                self._f.create_dataset(
+                    name, (0, nr), dtype, maxshape=(None, nr), chunks=(chunk_lines, nr)
+                )
+                for name, dtype in (("height_m", np.float32), ("height_valid", np.uint8))
+            )
+        self.height_lines = 0  # rows of height_m written (the highest row + 1)
         a = self._f.attrs
         a["format"] = IMAGE_FORMAT
         a["format_version"] = FORMAT_VERSION
@@ -422,6 +449,22 @@ class ImageWriter:
         if self.crash_safe and time.monotonic() - self._flushed_s >= self.flush_every_s:
             self._f.flush()
             self._flushed_s = time.monotonic()
+
+    @property
+    def has_heights(self) -> bool:
+        return self._height is not None
+
+    def write_heights(self, row: int, height_m: np.ndarray, valid: np.ndarray) -> None:
+        """Heights of image rows ``row`` … (a height strip); rows never written stay invalid."""
+        if self._height is None:
+            raise ValueError("this image file was opened without heights")
+        end = row + len(height_m)
+        if end > self._height.shape[0]:
+            self._height.resize(end, axis=0)
+            self._valid.resize(end, axis=0)
+        self._height[row:end] = np.where(valid, height_m, 0.0)
+        self._valid[row:end] = valid
+        self.height_lines = max(self.height_lines, end)
 
     def close(self, **attrs) -> None:
         """Close with the final attributes; ``complete`` True unless ``complete=False`` given."""

@@ -21,7 +21,7 @@ import numpy as np
 from ..params import config_from_dict
 from ..stream.strips import StreamInfo, Strip, StripSink
 from .io import ImageWriter
-from .wire import strip_header
+from .wire import height_header, strip_header
 
 MAX_FILL_BYTES = 64 << 20  # the most zeros written for one gap of missing lines
 
@@ -44,6 +44,8 @@ class StripRecorder:
         self.flagged_runs: list[list[int]] = []
         self.overlapping_strips = 0
         self.inconsistent_strips = 0
+        self.height_strips = 0
+        self.inconsistent_heights = 0
         self.counters: dict = {}
 
     def _axes(self, header: dict) -> tuple:
@@ -66,7 +68,13 @@ class StripRecorder:
             nr = int(header["range_bins"])
             range_m = header["range_first_m"] + header["range_step_m"] * np.arange(nr)
             self.writer = ImageWriter(
-                self.path, cfg, range_m, crash_safe=True, source=self.source, first_line=first
+                self.path,
+                cfg,
+                range_m,
+                crash_safe=True,
+                heights=bool(header.get("height_strips", False)),
+                source=self.source,
+                first_line=first,
             )
             self.stream_id = header.get("stream_id")
             self.first_line = self.next_line = first
@@ -94,6 +102,24 @@ class StripRecorder:
         self.counters = header.get("counters", self.counters)
         self._write(lines)
 
+    def add_height(self, header: dict, height_m: np.ndarray, valid: np.ndarray) -> None:
+        """Write one height strip (rtsar.sinks.wire.height_header) beside the image's lines."""
+        w = self.writer
+        if w is None or not w.has_heights or header.get("stream_id") != self.stream_id:
+            self.inconsistent_heights += 1  # before the first strip, or not announced
+            return
+        if height_m.shape != valid.shape or height_m.shape[1] != self._axes0[0]:
+            self.inconsistent_heights += 1
+            return
+        row = int(header["first_line"]) - self.first_line
+        if row < 0:  # a late subscriber: the strip began before its image
+            height_m, valid, row = height_m[-row:], valid[-row:], 0
+        if row + len(height_m) > self.next_line + self.max_fill_bytes // 8 // height_m.shape[1]:
+            self.inconsistent_heights += 1  # far beyond the image: not obeyed
+            return
+        w.write_heights(row, height_m, valid)
+        self.height_strips += 1
+
     def _write(self, lines: np.ndarray) -> None:
         j = self.next_line + np.arange(len(lines))
         self.writer.write(lines, self._az0 + j * self._daz)
@@ -113,6 +139,15 @@ class StripRecorder:
             line_jumps=json.dumps(self.line_jumps),
             inconsistent_strips=self.inconsistent_strips,
             flagged_line_runs=json.dumps(self.flagged_runs),
+            **(
+                {
+                    "height_strips": self.height_strips,
+                    "inconsistent_heights": self.inconsistent_heights,
+                    "height_method": "insal",
+                }
+                if self.writer.has_heights
+                else {}
+            ),
             **attrs,
         )
         return self.writer.lines
@@ -127,6 +162,9 @@ class ImageFileSink(StripSink):
 
     def strip(self, strip: Strip, info: StreamInfo) -> None:
         self.recorder.add_strip(strip_header(strip, info), strip.lines)
+
+    def height(self, strip, seq: int, info: StreamInfo) -> None:
+        self.recorder.add_height(height_header(strip, seq, info), strip.height_m, strip.valid)
 
     def end(self, stats: dict, info: StreamInfo) -> None:
         self.lines = self.recorder.finish(

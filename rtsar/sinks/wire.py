@@ -53,6 +53,7 @@ def strip_header(strip: Strip, info: StreamInfo) -> dict:
         "flagged_lines": [list(r) for r in strip.flagged_lines],
         "counters": strip.counters,
         "config": info.config_dict,
+        "height_strips": info.heights,
     }
 
 

@@ -160,6 +160,7 @@ class Pipeline:
             start_along_track_m=float(start_along_track_m),
             # perf_counter times (latency) + this offset = UNIX times (headers).
             clock_offset_s=time.time() - time.perf_counter(),
+            heights=self.height is not None,
         )
         self.strips = StripAssembler(self.info)
 

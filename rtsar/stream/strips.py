@@ -63,6 +63,7 @@ class StreamInfo:
     range_m: np.ndarray  # slant range of each column
     start_along_track_m: float  # platform position of pulse 0
     clock_offset_s: float  # perf_counter time + this = UNIX time
+    heights: bool = False  # height strips (3D) are published beside the image strips
     config_dict: dict = field(default_factory=dict)  # config.to_dict(), formed once
 
     def __post_init__(self):

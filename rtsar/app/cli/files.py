@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...instrument import SECOND_RECEIVER
 from ...lens import range_axis_m
 from ...presets import PRESETS, preset
 from ...scene import Simulator, load_scene
@@ -17,19 +18,22 @@ from ...sinks.io import (
     ImageWriter,
     RecordingWriter,
     open_recording,
+    read_heights,
     read_image,
     replace_when_complete,
 )
 from ...stream.engine import StreamProcessor
 from ..progress import Progress
-from ..quicklook import save_quicklook
+from ..quicklook import save_height_quicklook, save_quicklook
 from .options import (
     add_correlator_option,
+    add_height_options,
     add_lens_options,
     add_processing_knobs,
     check_channels,
     correction_chain,
     die,
+    height_stage,
     physical_ccd,
     processor_changes,
     warn_outside_swath,
@@ -121,6 +125,17 @@ def cmd_process(args) -> int:
         cfg = processor_changes(args, rec.config)
         chain = correction_chain(args, cfg, rec.scene_object(), rec.start_along_track_m)
         check_channels(chain, rec)  # before the lens is built: a wrong request fails at once
+        heights = height_stage(args, cfg, rec.scene_object())
+        second = None  # the second receiver's lens and CCD, in step with the main ones
+        if heights is not None:
+            if SECOND_RECEIVER not in rec.channels:
+                raise ValueError(
+                    f"--height insal needs the second receiver's channel {SECOND_RECEIVER!r}; "
+                    f"{args.recording} holds {', '.join(sorted(rec.channels)) or 'none'}"
+                )
+            if chain and chain.line_stages:
+                raise ValueError("--height with pra or pga is not supported (main receiver only)")
+            second = StreamProcessor(cfg, args.lens, args.device, rec.start_along_track_m)
         eng = StreamProcessor(
             cfg, args.lens, args.device, rec.start_along_track_m, chain, physical_ccd(args)
         )
@@ -136,19 +151,30 @@ def cmd_process(args) -> int:
         # until it is complete.
         with (
             replace_when_complete(args.output) as tmp,
-            ImageWriter(tmp, cfg, eng.range_m, source=str(args.recording)) as img,
+            ImageWriter(
+                tmp, cfg, eng.range_m, heights=second is not None, source=str(args.recording)
+            ) as img,
         ):
             for shots, aux in rec.batches_with_aux(cfg.processor.micro_batch):
                 out = eng.push(shots, aux)
                 img.write(out.lines, eng.azimuth_m(out.first_line, len(out.lines)))
+                if second is not None:
+                    lines2 = second.push(aux[SECOND_RECEIVER]).lines
+                    _write_heights(img, heights.process(out.lines, lines2))
                 done += len(shots)
                 prog.update(done)
             out = eng.flush()
             img.write(out.lines, eng.azimuth_m(out.first_line, len(out.lines)))
+            extra = {}
+            if second is not None:
+                strips = heights.process(out.lines, second.flush().lines) + heights.flush()
+                _write_heights(img, strips)
+                extra = {"height_method": "insal", "height_strips": heights.strips_out}
             img.close(
                 lens=eng.lens.backend,
                 correlator=cfg.processor.correlator,
                 nonfinite_pulses=eng.nonfinite_pulses,
+                **extra,
             )
         dt = time.perf_counter() - t0
         prog.done(done)
@@ -165,6 +191,11 @@ def cmd_process(args) -> int:
     return 0
 
 
+def _write_heights(img: ImageWriter, strips) -> None:
+    for strip in strips:
+        img.write_heights(strip.first_line, strip.height_m, strip.valid)
+
+
 def cmd_quicklook(args) -> int:
     image, az, rg, attrs = read_image(args.image)
     save_quicklook(
@@ -177,6 +208,13 @@ def cmd_quicklook(args) -> int:
         true_aspect=args.true_aspect,
     )
     print(f"wrote {args.output}")
+    if args.height:
+        heights = read_heights(args.image)
+        if heights is None:
+            return die(f"{args.image} holds no heights (made without --height insal)")
+        h, valid = heights
+        save_height_quicklook(args.height, h, valid, az, rg, f"{Path(args.image).name}: height")
+        print(f"wrote {args.height}: {valid.mean():.0%} of the pixels valid")
     return 0
 
 
@@ -215,6 +253,7 @@ def add_parsers(sub) -> None:
         "--micro-batch", type=int, help="pulses per lens launch (default: the configuration's)"
     )
     add_processing_knobs(s)
+    add_height_options(s)
     s.set_defaults(func=cmd_process)
 
     s = sub.add_parser(
@@ -230,6 +269,9 @@ def add_parsers(sub) -> None:
         type=float,
         default=50.0,
         help="dB below the peak shown as black (default 50)",
+    )
+    s.add_argument(
+        "--height", metavar="PNG", help="also draw the image's height map (--height insal)"
     )
     s.add_argument(
         "--true-aspect",

@@ -14,9 +14,10 @@ from ...focus.chain import CorrectionChain
 from ...lens import LENS_BACKENDS, range_axis_m
 from ...params import PRECISIONS, Processor
 from ...physical import CARRIERS, paper_ccd
-from ...scene.correction_context import correction_context
+from ...scene.correction_context import correction_context, insal_geometry
 from ...sinks.publish import DEFAULT_ENDPOINT, DELIVERIES, STALL_TIMEOUT_S
 from ...stream.pipeline import STAGE_LAYOUTS, PipelineSettings
+from ...topo.stream import HeightStripStage
 
 
 def die(msg: str) -> int:
@@ -88,6 +89,37 @@ def add_processing_knobs(g) -> None:
     )
 
 
+def add_height_options(g) -> None:
+    """--height and its strip size (process, run, replay)."""
+    g.add_argument(
+        "--height",
+        choices=("insal",),
+        help="3D: height strips from the second receiver (interferometric SAL, Zhao 2014), "
+        "published on the 'height' topic and written beside the image; needs a scene or "
+        "recording with the interferometric_receivers effect",
+    )
+    g.add_argument(
+        "--height-strip-lines",
+        type=int,
+        default=32,
+        metavar="L",
+        help="lines per height strip (default 32; unwrapped with 8 lines of overlap)",
+    )
+
+
+def height_stage(args, cfg, scene):
+    """The HeightStripStage asked for by --height (None without it)."""
+    if not getattr(args, "height", None):
+        return None
+    if args.height_strip_lines < 8:
+        raise ValueError(f"--height-strip-lines must be >= 8, got {args.height_strip_lines}")
+    if getattr(args, "physical", None):
+        raise ValueError("--height with --physical is not supported (the ideal CCD only)")
+    return HeightStripStage(
+        insal_geometry(scene), range_axis_m(cfg), strip_lines=args.height_strip_lines
+    )
+
+
 def add_pipeline_options(s, delivery: str) -> None:
     """The live pipeline's options (run, replay): processing, publication, the image file."""
     g = s.add_argument_group("processing")
@@ -113,6 +145,7 @@ def add_pipeline_options(s, delivery: str) -> None:
         "the next shot confirms is a restart (default: one aperture)",
     )
     add_processing_knobs(g)
+    add_height_options(g)
     g = s.add_argument_group("publication (ZeroMQ; wire format in README 'Strip protocol')")
     g.add_argument(
         "--endpoint",

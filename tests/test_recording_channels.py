@@ -175,3 +175,66 @@ def test_correlator_with_physical_mode_is_refused(recorded, capsys):
     args = ["process", str(rec), "-o", str(d / "x.h5"), "--physical", "range"]
     assert main(args + ["--correlator", "fft", "--lens", "numpy"]) == 2
     assert "--correlator fft does not apply with --physical" in capsys.readouterr().err
+
+
+def test_a_multichannel_instrument_is_corrected_live_like_its_recording(recorded, tmp_path):
+    """The fake instrument sends every channel of a crouch-sal recording (main, reference
+    interferometer, HCN cell over 8 frame channels); `run --serial --scene` takes the channel
+    map from the scene and corrects with hcn + linearize: the image and its positions equal
+    `process` of the recording."""
+    import threading
+
+    from tools_loader import load_tool
+
+    from rtsar.sources.channel_map import ChannelMap
+
+    d, scene, rec = recorded
+    ref = tmp_path / "ref.h5"
+    corrections = ["--correct", "hcn", "--correct", "linearize", "--lens", "numpy"]
+    assert main(["process", str(rec), "-o", str(ref)] + corrections) == 0
+    fake = load_tool("fake_instrument")
+    with open_recording(rec) as r:
+        cmap = fake.recording_map(r)
+        blocks = list(fake.recording_shots(r))
+    assert cmap == ChannelMap.for_scene(scene)
+    assert cmap.text == "main,hcn_cell*8,reference_interferometer"
+    server = fake.listen("127.0.0.1:0")
+    port = server.getsockname()[1]
+
+    def serve():
+        with server:
+            fake.serve_tcp(server, blocks, 2000.0, start_delay_s=0.1)
+
+    threading.Thread(target=serve, daemon=True).start()
+    img = tmp_path / "live.h5"
+    args = ["run", "--serial", f"socket://127.0.0.1:{port}", "--scene", str(d / "s.toml")]
+    args += ["--no-reconnect", "--duration", "3", "-o", str(img)]
+    args += ["--endpoint", "ipc://" + str(tmp_path / "pub")]
+    assert main(args + corrections) == 1  # the instrument hung up after its last shot
+    got, az, _, attrs = read_image(img)
+    want, want_az, _, _ = read_image(ref)
+    np.testing.assert_allclose(az, want_az)
+    assert got.shape == want.shape
+    assert np.abs(got - want).max() <= 1e-5 * np.abs(want).max()
+    assert json.loads(attrs["counters"])["wrong_length"] == 0
+
+
+def test_channel_maps_parse_pack_and_unpack():
+    from rtsar.sources.channel_map import ChannelMap
+
+    m = ChannelMap.parse("main, ri ,hcn*3")
+    assert m.text == "main,ri,hcn*3" and m.frame_channels == 5 and m.aux_names == ["ri", "hcn"]
+    rng = np.random.default_rng(0)
+    main_ch = rng.standard_normal((4, 6)).astype(np.complex64)
+    aux = {"ri": main_ch * 2, "hcn": rng.standard_normal((4, 18)).astype(np.complex64)}
+    frames = m.pack(main_ch, aux)
+    assert frames.shape == (4, 5, 6)
+    back, back_aux = m.unpack(frames)
+    np.testing.assert_array_equal(back, main_ch)
+    for k in aux:
+        np.testing.assert_array_equal(back_aux[k], aux[k])
+    for bad in ("ri,hcn", "main,main", "main*2,ri", "main,hcn*x", "main,bad name"):
+        with pytest.raises(ValueError):
+            ChannelMap.parse(bad)
+    with pytest.raises(ValueError, match="not a multiple"):
+        ChannelMap.for_channels(6, {"odd": 7})

@@ -32,6 +32,7 @@ import numpy as np
 
 from rtsar.scene import DEMO_SCENE, Scene, Simulator, load_scene
 from rtsar.sinks.io import open_recording
+from rtsar.sources.channel_map import ChannelMap
 from rtsar.sources.frame import SAMPLE_TYPES, SYNC, encode_frame
 
 CI16_PEAK = 8192  # --scale auto for ci16: the first block's largest |I| or |Q| maps to this
@@ -143,22 +144,35 @@ def _flip_bytes(frame: bytes, rng: np.random.Generator) -> bytes:
 
 # -- where the shots come from --------------------------------------------------------------
 def scene_shots(scene: Scene, pulses: int | None = None, block: int = 1) -> Iterator[np.ndarray]:
-    """The scene's simulated shots in blocks of ``block`` (all of them by default)."""
+    """The scene's simulated shots in blocks of ``block`` (all of them by default): [pulse,
+    sample], or [pulse, frame channel, sample] when its effects add channels."""
     sim = Simulator(scene)
+    cmap = ChannelMap.for_scene(scene)
     left = scene.pulses if pulses is None else min(pulses, scene.pulses)
     while left > 0:
         n = min(block, left)
-        yield sim.block(n)
+        main, aux = sim.block_with_aux(n)
+        yield main if cmap is None else cmap.pack(main, aux)
         left -= n
 
 
+def recording_map(recording) -> ChannelMap | None:
+    """The channel map of a recording's shots (None: the main channel only)."""
+    if not recording.channels:
+        return None
+    widths = {k: ds.shape[1] for k, ds in recording.channels.items()}
+    return ChannelMap.for_channels(recording.config.waveform.samples_per_shot, widths)
+
+
 def recording_shots(recording, pulses: int | None = None, block: int = 64) -> Iterator[np.ndarray]:
-    """The recording's shots in blocks of ``block`` (all of them by default)."""
+    """The recording's shots in blocks of ``block`` (all of them by default), every channel
+    packed into frame channels by recording_map."""
+    cmap = recording_map(recording)
     left = recording.pulses if pulses is None else min(pulses, recording.pulses)
-    for shots in recording.batches(block):
+    for shots, aux in recording.batches_with_aux(block):
         if left <= 0:
             break
-        yield shots[:left]
+        yield (shots if cmap is None else cmap.pack(shots, aux))[:left]
         left -= len(shots)
 
 
@@ -341,12 +355,14 @@ def main(argv=None) -> int:
     try:
         if args.recording:
             rec = open_recording(args.recording)
-            cfg, name = rec.config, args.recording
+            cfg, name, cmap = rec.config, args.recording, recording_map(rec)
             shots = recording_shots(rec, args.pulses)
         else:
             scene = load_scene(args.scene or DEMO_SCENE)
-            cfg, name = scene.config, f"scene '{scene.name}'"
+            cfg, name, cmap = scene.config, f"scene '{scene.name}'", ChannelMap.for_scene(scene)
             shots = scene_shots(scene, args.pulses)
+        if cmap is not None:
+            name += f", channels {cmap.text} (rtsar run --serial … --channel-map {cmap.text})"
         return _serve(args, cfg, name, shots)
     except ValueError as exc:
         print(f"fake_instrument: {exc}", file=sys.stderr)

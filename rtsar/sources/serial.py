@@ -33,6 +33,7 @@ import numpy as np
 import serial
 
 from .base import ShotBatch, Source
+from .channel_map import ChannelMap
 from .frame import MAX_PAYLOAD_BYTES, Frame, FrameParser
 
 _READ_BYTES = 1 << 18  # most bytes taken in one read
@@ -41,7 +42,9 @@ MAX_CHANNELS = 64  # most channels a frame of the configured stream may carry
 
 
 class SerialSource(Source):
-    """Shots from frames arriving on ``url``: channel ``channel`` of each frame, in batches.
+    """Shots from frames arriving on ``url``: channel ``channel`` of each frame, in batches;
+    with ``channel_map`` (rtsar.sources.channel_map) every channel of the shot, the auxiliary
+    ones in ``ShotBatch.aux``.
 
     A batch is yielded as soon as a read completes at least one frame (at most ``batch_frames``
     per batch); ``arrival_s`` is the perf_counter time at which that read returned.  Frames
@@ -68,6 +71,7 @@ class SerialSource(Source):
         max_payload_bytes: int = MAX_PAYLOAD_BYTES,
         reconnect: bool | None = None,
         max_channels: int = MAX_CHANNELS,
+        channel_map: ChannelMap | None = None,
     ):
         super().__init__()
         if not samples_per_shot >= 1:
@@ -85,12 +89,16 @@ class SerialSource(Source):
         self.batch_frames = int(batch_frames)
         self.idle_timeout_s = idle_timeout_s
         self.channel = int(channel)
+        self.channel_map = channel_map
         self.poll_s = float(poll_s)
+        needed = channel + 1 if channel_map is None else channel_map.frame_channels
         self.parser = FrameParser(
-            max_payload_bytes, self.samples_per_shot, max(max_channels, channel + 1), channel + 1
+            max_payload_bytes, self.samples_per_shot, max(max_channels, needed), needed
         )
         self.counters = dict(self.parser.counters, link_drops=0, reconnects=0)
-        self.description = f"serial instrument at {url}"
+        self.description = f"serial instrument at {url}" + (
+            f" (channels {channel_map.text})" if channel_map is not None else ""
+        )
         self.stop_reason: str | None = None
         self.reconnect = url.startswith("socket://") if reconnect is None else bool(reconnect)
         self.baudrate = baudrate
@@ -126,8 +134,14 @@ class SerialSource(Source):
             # u64 counters keep their bits in int64 (2**63 and above read as negative numbers).
             seq = np.array([f.sequence for f in part], np.uint64).view(np.int64)
             stamp_ns = np.array([f.timestamp_ns for f in part], np.uint64)
-            samples = np.stack([f.samples[self.channel] for f in part])
-            yield ShotBatch(seq, stamp_ns / 1e9, np.full(len(part), arrival_s), samples)
+            arrival = np.full(len(part), arrival_s)
+            if self.channel_map is None:
+                samples = np.stack([f.samples[self.channel] for f in part])
+                yield ShotBatch(seq, stamp_ns / 1e9, arrival, samples)
+            else:
+                m = self.channel_map
+                samples, aux = m.unpack(np.stack([f.samples[: m.frame_channels] for f in part]))
+                yield ShotBatch(seq, stamp_ns / 1e9, arrival, samples, aux)
 
     def _reopen(self, last_byte: float) -> bool:
         """Reopen the link, pausing longer after each failure; False when the source is closed

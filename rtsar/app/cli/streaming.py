@@ -13,6 +13,7 @@ from ...presets import preset
 from ...scene import DEMO_SCENE, load_scene
 from ...sinks.io import open_recording
 from ...sinks.publish import DEFAULT_ENDPOINT
+from ...sources.channel_map import ChannelMap
 from ...sources.replay import ReplaySource
 from ...sources.serial import SerialSource
 from ...sources.sim import SimSource
@@ -32,6 +33,13 @@ from .options import (
     strip_lines,
     warn_outside_swath,
 )
+
+
+def channel_map(args, scene) -> ChannelMap | None:
+    """--channel-map, or the scene's channels (main + its effects' auxiliary ones), or None."""
+    if args.channel_map:
+        return ChannelMap.parse(args.channel_map)
+    return None if scene is None else ChannelMap.for_scene(scene)
 
 
 def cmd_run(args) -> int:
@@ -54,6 +62,7 @@ def cmd_run(args) -> int:
             baudrate=args.baudrate,
             idle_timeout_s=args.duration,
             reconnect=args.reconnect,
+            channel_map=channel_map(args, described),
         )
         return run_stream(
             cfg,
@@ -192,6 +201,14 @@ def add_parsers(sub) -> None:
     src.add_argument("--preset", help="with --serial: processing configuration preset")
     src.add_argument(
         "--baudrate", type=int, default=3_000_000, help="serial line rate (default 3000000)"
+    )
+    src.add_argument(
+        "--channel-map",
+        metavar="MAP",
+        help="with --serial: the shot's channels in frame order, e.g. "
+        "main,reference_interferometer,hcn_cell*8 (NAME*K: K frame channels); default: main "
+        "and every auxiliary channel of --scene's effects, by name (fake_instrument prints its "
+        "map); main only without a scene",
     )
     src.add_argument(
         "--duration", type=float, help="stop after this many seconds (serial: of silence)"

@@ -1,6 +1,8 @@
 """3D from the commands: `process`/`replay --height insal` write height maps beside the image,
 `quicklook --height` draws them (issue 13)."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -109,3 +111,87 @@ def test_subscribe_records_the_published_heights(insal_recording):
     np.testing.assert_allclose(height, np.where(v, h, 0.0), atol=1e-7)
     _, _, _, attrs = read_image(out)
     assert attrs["height_strips"] >= 3 and attrs["inconsistent_heights"] == 0
+
+
+SURFACE_SCENE = """
+preset = "zhao-insal"
+seed = 2
+[geometry]
+platform_height_m = 1.3856406460551016
+[waveform]
+sample_rate_hz = 640.0
+[processor]
+aperture_pulses = 48
+range_bins = 48
+[surface]
+shape = "{shape}"
+lines = 32
+[[effects]]
+name = "noise"
+snr_db = 10.0
+[[effects]]
+name = "interferometric_receivers"
+snr_db = 10.0
+"""
+
+
+@pytest.mark.parametrize("shape", ["ridge", "drawing_pin"])
+def test_a_surface_scene_file_gives_heights_from_the_commands_alone(tmp_path, shape):
+    """simulate → process --height insal on a [surface] scene file: heights within h_2π/20 of
+    the surface's truth (Zhao's acceptance), at every strip size the command accepts."""
+    from rtsar.scene import load_scene
+    from rtsar.scene.files import SHAPES
+    from rtsar.scene.relief import default_spacing_m, surface_scene
+    from rtsar.topo.insar import height_error
+
+    scene_file, rec = tmp_path / "s.toml", tmp_path / "r.h5"
+    scene_file.write_text(SURFACE_SCENE.format(shape=shape))
+    assert main(["simulate", str(scene_file), "-o", str(rec)]) == 0
+    scene = load_scene(scene_file)
+    truth_scene = surface_scene(
+        scene.config,
+        SHAPES[shape](),
+        32,
+        spacing_m=default_spacing_m(scene.config, 2.0),
+        seed=2,
+        effects=scene.effects,
+    )
+    assert len(truth_scene.scene.targets) == len(scene.targets)  # the same scatterers
+    geo = insal_geometry(scene)
+    for strip in (8, 16, 32):
+        img = tmp_path / f"i{strip}.h5"
+        args = ["process", str(rec), "-o", str(img), "--lens", "numpy", "--height", "insal"]
+        assert main(args + ["--height-strip-lines", str(strip)]) == 0
+        _, az, rg, _ = read_image(img)
+        h, v = read_heights(img)
+        truth = truth_scene.truth(az, rg)
+        e = height_error(h, v, truth.height_m, truth.scored)
+        h2pi = float(geo.ambiguity_height_m(float(np.mean(rg))))
+        assert e["coverage"] > 0.8 and e["rms_m"] <= h2pi / 20, (strip, e, h2pi)
+        assert abs(e["bias_m"]) < h2pi / 4  # no 2π slip
+
+
+def test_surface_scene_files_refuse_what_does_not_fit(tmp_path):
+    from rtsar.scene import load_scene
+
+    bad = {
+        'shape = "wave"': "surface.shape must be one of",
+        "lines = 0": "surface.lines",
+        "scatterers_per_cell = -1": "scatterers_per_cell",
+        "bump = 3": "surface (ridge)",
+    }
+    for line, message in bad.items():
+        f = tmp_path / "s.toml"
+        text = SURFACE_SCENE.format(shape="ridge")
+        key = line.split(" =")[0]
+        old = (
+            next(t for t in text.splitlines() if t.startswith(key + " =")) if key in text else None
+        )
+        f.write_text(
+            text.replace(old, line) if old else text.replace("lines = 32", "lines = 32\n" + line)
+        )
+        with pytest.raises(ValueError, match=re.escape(message)):
+            load_scene(f)
+    f.write_text(SURFACE_SCENE.format(shape="ridge") + "[[targets]]\nalong_track_m = 0\n")
+    with pytest.raises(ValueError, match="sets its own targets"):
+        load_scene(f)

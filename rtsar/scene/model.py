@@ -28,7 +28,6 @@ Unknown keys are errors (a typo must not silently fall back to a default).
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
@@ -38,11 +37,6 @@ from ..lens.plan import range_axis_m
 from ..params import Config, Geometry, Processor, waveform_from_dict
 from ..presets import preset
 from .effects import load_effects
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
 
 _TOP_KEYS = {
     "preset",
@@ -258,9 +252,16 @@ def scene_from_dict(d: dict, name: str = "scene") -> Scene:
     unknown = set(d) - _TOP_KEYS
     if unknown:
         raise ValueError(f"scene: unknown keys {sorted(unknown)}; known: {sorted(_TOP_KEYS)}")
-    cfg = _config(d)
+    cfg, effects, seed = scene_settings(d)
     targets = _targets(_table_list(d, "targets"), cfg)
     start, pulses = _scan_extent(cfg, targets, d.get("start_along_track_m"), d.get("pulses"))
+    return Scene(cfg, targets, pulses, start, seed, effects, d.get("name", name))
+
+
+def scene_settings(d: dict) -> tuple[Config, tuple, int]:
+    """The configuration, effects and seed of a scene mapping, validated (everything a scene
+    has besides its scatterers; rtsar.scene.files builds surface scenes from it)."""
+    cfg = _config(d)
     effects = []
     for i, e in enumerate(_table_list(d, "effects")):
         if "name" not in e:
@@ -271,23 +272,7 @@ def scene_from_dict(d: dict, name: str = "scene") -> Scene:
     seed = d.get("seed", 0)
     if not isinstance(seed, int):
         raise ValueError("scene: seed must be an integer")
-    return Scene(cfg, targets, pulses, start, seed, tuple(effects), d.get("name", name))
-
-
-def load_scene(path: str | Path) -> Scene:
-    """Read a TOML scene file (errors name the file and the offending key)."""
-    path = Path(path)
-    try:
-        with path.open("rb") as f:
-            d = tomllib.load(f)
-    except FileNotFoundError:
-        raise ValueError(f"scene file not found: {path}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"{path}: not valid TOML: {exc}") from None
-    try:
-        return scene_from_dict(d, name=path.stem)
-    except (ValueError, TypeError) as exc:
-        raise ValueError(f"{path}: {exc}") from None
+    return cfg, tuple(effects), seed
 
 
 def point_scene(
@@ -319,8 +304,8 @@ def point_scene(
 __all__ = [
     "Scene",
     "Targets",
-    "load_scene",
     "scene_from_dict",
+    "scene_settings",
     "point_scene",
     "DEMO_SCENE",
 ]

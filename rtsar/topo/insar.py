@@ -184,11 +184,33 @@ def form_interferogram(
 
 
 # ---- step VI: unwrap, phase → height ------------------------------------------------------
-def absolute_cycle_shift(unwrapped, mask) -> float:
-    """The multiple of 2π that puts the median unwrapped phase of ``mask`` in [-π, π)."""
+LOW_PERCENTILE = 10.0  # the absolute 2π cycle rule without reference pixels (see below)
+
+
+def absolute_cycle_shift(unwrapped, mask, percentile: float = LOW_PERCENTILE) -> float:
+    """The multiple of 2π that puts the ``percentile``-th percentile of the unwrapped phase of
+    ``mask`` in [-π, π).
+
+    InSAL measures heights modulo h_2π: the absolute cycle is not in the data (Zhao 2014 reads
+    relative heights).  With pixels known to lie on the reference plane, their median (50) fixes
+    it.  Without them rtsar assumes that the scene's lower part (its lowest 10 % of heights,
+    low_scene_percentile: the plate or ground an object stands on) lies within ±h_2π/2 of the
+    reference plane.  A median over the
+    whole scene would put every pixel one cycle low wherever the raised part covers most of the
+    image (a 2.5 mm ridge filling a narrow range window: median above h_2π/2 = 1.65 mm).
+    """
     if not mask.any():
         return 0.0
-    return -TWO_PI * math.floor(float(np.median(unwrapped[mask])) / TWO_PI + 0.5)
+    level = float(np.percentile(unwrapped[mask], percentile))
+    return -TWO_PI * math.floor(level / TWO_PI + 0.5)
+
+
+def low_scene_percentile(geometry, range_m) -> float:
+    """The phase percentile of the scene's lower part: LOW_PERCENTILE where phase grows with
+    height, 100 - LOW_PERCENTILE where it falls (the sign of the geometry's phase-height law)."""
+    r = float(np.mean(range_m))
+    rises = geometry.height_from_phase(r, 1.0) > geometry.height_from_phase(r, 0.0)
+    return LOW_PERCENTILE if rises else 100.0 - LOW_PERCENTILE
 
 
 @dataclass(frozen=True)
@@ -227,8 +249,10 @@ def height_map(
     flat_earth: "geometry" (exact reference-plane phase per slant range) or "fringes" (a ramp
     estimated by estimate_fringe_ramp(method=fringe_method) on the multilooked interferogram:
     heights are then relative to the scene's largest flat area).  The absolute 2π cycle
-    puts the median unwrapped phase over ``reference_mask`` (default: every valid pixel) in
-    [-π, π).  This is the float64 batch reference of rtsar.topo.stream.HeightStripStage.
+    puts the median unwrapped phase over ``reference_mask`` (pixels on the reference plane) in
+    [-π, π); without a mask, the lowest 10 % of heights over every valid pixel
+    (absolute_cycle_shift).  This is the float64 batch reference of
+    rtsar.topo.stream.HeightStripStage.
     """
     m = np.asarray(main, np.complex128)
     s = np.asarray(slave, np.complex128)
@@ -249,8 +273,11 @@ def height_map(
     ifg = form_interferogram(m, s, reg, fe, looks, coherence_min, intensity_floor)
     wrapped = np.where(ifg.valid, ifg.wrapped_rad, 0.0)
     unw = unwrap_quality(wrapped, ifg.valid, method, ifg.coherence)
-    ref = ifg.valid if reference_mask is None else (ifg.valid & reference_mask)
-    unw = np.where(ifg.valid, unw + absolute_cycle_shift(unw, ref), 0.0)
+    if reference_mask is None:
+        shift = absolute_cycle_shift(unw, ifg.valid, low_scene_percentile(geometry, r))
+    else:
+        shift = absolute_cycle_shift(unw, ifg.valid & reference_mask, percentile=50.0)
+    unw = np.where(ifg.valid, unw + shift, 0.0)
     h = np.where(ifg.valid, geometry.height_from_phase(r[None, :], unw), 0.0)
     return HeightMap(h, ifg.valid, ifg.coherence, wrapped, unw, reg, ramp)
 

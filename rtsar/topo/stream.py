@@ -12,7 +12,8 @@ order, pairs them by line index and emits height strips of ``strip_lines`` lines
 * the new strip's 2π cycle is the one that best matches the previous strip's unwrapped phase on
   those O shared lines (median of the difference), so heights stay continuous across strip
   boundaries.  A strip without a valid shared pixel falls back to the absolute rule of the first
-  strip (median phase in [-π, π)) and is counted in ``strips_not_aligned``.
+  strip (the 10th percentile of its phase in [-π, π): rtsar.topo.insar.absolute_cycle_shift)
+  and is counted in ``strips_not_aligned``.
 
 Latency: a strip leaves L + O + margin lines after its first line.  Memory: the two line buffers
 hold at most L + 2(O + margin) lines plus the last input batch, and O lines of phase.
@@ -27,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..phase import TWO_PI
-from .insar import absolute_cycle_shift, form_interferogram
+from .insar import absolute_cycle_shift, form_interferogram, low_scene_percentile
 from .insar_geometry import InsalGeometry
 from .registration import Registration, estimate_registration
 from .unwrap import unwrap_quality
@@ -86,6 +87,7 @@ class HeightStripStage:
         self.method = method
         self.subpixel = subpixel
         self.taps = taps
+        self._low_percentile = low_scene_percentile(geometry, self.range_m)
         fe = geometry.flat_earth_phasor(self.range_m) if flat_earth is None else flat_earth
         self.flat_earth = np.asarray(fe, np.complex128).reshape(1, -1)
         bins = len(self.range_m)
@@ -209,7 +211,7 @@ class HeightStripStage:
                 unw = unw + TWO_PI * math.floor(float(np.median(diff)) / TWO_PI + 0.5)
                 aligned = True
         if not aligned:
-            unw = unw + absolute_cycle_shift(unw, valid)
+            unw = unw + absolute_cycle_shift(unw, valid, self._low_percentile)
             if self._prev_unw is not None:
                 self.strips_not_aligned += 1
         unw = np.where(valid, unw, 0.0)

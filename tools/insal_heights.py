@@ -1,0 +1,98 @@
+"""Heights from the command path against the truth: `rtsar process --height insal` on Zhao's
+ridge and drawing pin, every strip size, scored against the surface's height on the image grid.
+
+    python tools/insal_heights.py [--lines 96] [--range-bins 96] [--strips 8,16,32,48,64,96]
+
+Each scene is simulated once (Zhao 2014's bench: 2.4 m, 1.6 mm baseline, look angle atan √2,
+h_2π = 3.29 mm; 10 dB per-sample SNR), recorded with its second receiver, then processed by the
+`process` command with each --height-strip-lines.  Prints rms / bias of the valid heights on the
+scored pixels (rtsar.topo.insar.height_error), coverage, and the limit h_2π/20.  Not a test
+(tests/test_height_commands.py is the fast one).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from rtsar.app.cli import main as rtsar
+from rtsar.scene.correction_context import insal_geometry
+from rtsar.scene.relief import default_spacing_m, ridge, sphere_cap, surface_scene, zhao_config
+from rtsar.scene.simulator import Simulator
+from rtsar.sinks.io import RecordingWriter, read_heights, read_image
+from rtsar.topo.insar import height_error
+
+SURFACES = {"ridge": lambda: ridge(2.5e-3, 8e-3), "pin": lambda: sphere_cap(5e-3, 1.5e-3)}
+
+
+def score(name: str, args, folder: Path) -> list[str]:
+    cfg = zhao_config(sample_rate_hz=1280.0, aperture_pulses=160, range_bins=args.range_bins)
+    effects = [("noise", {"snr_db": 10.0}), ("interferometric_receivers", {"snr_db": 10.0})]
+    ss = surface_scene(
+        cfg,
+        SURFACES[name](),
+        args.lines,
+        seed=1,
+        spacing_m=default_spacing_m(cfg, 2.0),
+        effects=effects,
+    )
+    scene = ss.scene
+    t0 = time.perf_counter()
+    shots, aux = Simulator(scene).block_with_aux(scene.pulses)
+    idx = np.arange(scene.pulses)
+    rec = folder / f"{name}.h5"
+    with RecordingWriter(rec, cfg, scene.to_dict()) as w:
+        w.write(shots, idx, idx / cfg.geometry.prf_hz, scene.along_track_of(idx), aux)
+    out = [
+        f"{name}: {scene.pulses} shots, {len(scene.targets)} scatterers, simulated in "
+        f"{time.perf_counter() - t0:.1f} s"
+    ]
+    geo = insal_geometry(scene)
+    for strip in args.strips:
+        img = folder / f"{name}-{strip}.h5"
+        cmd = ["process", str(rec), "-o", str(img), "--lens", "numpy", "--height", "insal"]
+        if rtsar(cmd + ["--height-strip-lines", str(strip)]) != 0:
+            out.append(f"  strip {strip}: process failed")
+            continue
+        _, az, rg, _ = read_image(img)
+        h, v = read_heights(img)
+        truth = ss.truth(az, rg)
+        e = height_error(h, v, truth.height_m, truth.scored)
+        limit = float(geo.ambiguity_height_m(float(np.mean(rg)))) / 20
+        rms = e["rms_m"]
+        out.append(
+            f"  strip {strip:3d}: rms {rms * 1e6:6.1f} µm, bias {e['bias_m'] * 1e6:6.1f} µm, "
+            f"coverage {e['coverage']:.2f}, limit {limit * 1e6:.0f} µm: "
+            + ("pass" if rms is not None and rms <= limit else "FAIL")
+        )
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--lines", type=int, default=96)
+    ap.add_argument("--range-bins", type=int, default=96)
+    ap.add_argument(
+        "--strips",
+        type=lambda t: [int(x) for x in t.split(",")],
+        default=[8, 16, 32, 48, 64, 96],
+        help="--height-strip-lines values (default 8,16,32,48,64,96)",
+    )
+    ap.add_argument("--scenes", default="ridge,pin")
+    args = ap.parse_args(argv)
+    failed = False
+    with tempfile.TemporaryDirectory(prefix="rtsar-insal-") as tmp:
+        for name in args.scenes.split(","):
+            for line in score(name, args, Path(tmp)):
+                print(line, flush=True)
+                failed |= line.endswith("FAIL") or line.endswith("failed")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

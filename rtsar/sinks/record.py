@@ -46,6 +46,7 @@ class StripRecorder:
         self.inconsistent_strips = 0
         self.height_strips = 0
         self.inconsistent_heights = 0
+        self._early_heights: list = []  # height strips that came before the first image strip
         self.counters: dict = {}
 
     def _axes(self, header: dict) -> tuple:
@@ -81,6 +82,9 @@ class StripRecorder:
             self._axes0 = self._axes(header)
             self._az0 = header["azimuth_first_m"] - first * header["azimuth_step_m"]
             self._daz = header["azimuth_step_m"]
+            early, self._early_heights = self._early_heights, []
+            for args in early:
+                self.add_height(*args)
         if header.get("stream_id") != self.stream_id:
             raise ValueError("a new stream started (publisher restarted); this image is closed")
         if self._axes(header) != self._axes0 or lines.shape[1] != self._axes0[0]:
@@ -105,8 +109,15 @@ class StripRecorder:
     def add_height(self, header: dict, height_m: np.ndarray, valid: np.ndarray) -> None:
         """Write one height strip (rtsar.sinks.wire.height_header) beside the image's lines."""
         w = self.writer
-        if w is None or not w.has_heights or header.get("stream_id") != self.stream_id:
-            self.inconsistent_heights += 1  # before the first strip, or not announced
+        if w is None:  # heights can overtake the first image strip: held until it comes
+            held = sum(h.nbytes + v.nbytes for _, h, v in self._early_heights)
+            if held + height_m.nbytes + valid.nbytes <= self.max_fill_bytes:
+                self._early_heights.append((header, height_m, valid))
+            else:
+                self.inconsistent_heights += 1
+            return
+        if not w.has_heights or header.get("stream_id") != self.stream_id:
+            self.inconsistent_heights += 1  # not announced, or another stream's
             return
         if height_m.shape != valid.shape or height_m.shape[1] != self._axes0[0]:
             self.inconsistent_heights += 1

@@ -89,12 +89,19 @@ def cmd_simulate(args) -> int:
             return die(f"--pulses must be >= 1, got {args.pulses}")
         scene = replace(scene, pulses=args.pulses)
     warn_outside_swath(scene)
+    simulate_to(scene, args.output)
+    return 0
+
+
+def simulate_to(scene, output) -> None:
+    """Simulate every shot of ``scene`` (all its channels) into the recording ``output``,
+    written under a temporary name until complete; progress on stderr, a summary line."""
     sim = Simulator(scene)
     prog = Progress(scene.pulses, "simulate")
     batch = scene.config.processor.micro_batch
     t0 = time.perf_counter()
     with (
-        replace_when_complete(args.output) as tmp,
+        replace_when_complete(output) as tmp,
         RecordingWriter(tmp, scene.config, scene.to_dict(), chunk_pulses=batch) as rec,
     ):
         done = 0
@@ -114,10 +121,9 @@ def cmd_simulate(args) -> int:
     effects = ", ".join(n for n, _ in scene.effects) or "none"
     channels = f" + channels {', '.join(rec.channel_names)}" if rec.channel_names else ""
     print(
-        f"wrote {args.output}: {done} shots × {sim.samples_per_shot} samples{channels}, "
+        f"wrote {output}: {done} shots × {sim.samples_per_shot} samples{channels}, "
         f"{len(scene.targets)} targets, effects: {effects}; {1e6 * dt / max(done, 1):.1f} µs/shot"
     )
-    return 0
 
 
 def cmd_process(args) -> int:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import zmq.auth
 
+from ... import __version__
 from ...presets import preset
 from ...scene import DEMO_SCENE, load_scene
 from ...sinks.io import open_recording
@@ -20,6 +21,7 @@ from ...sources.sim import SimSource
 from ..live import run_stream
 from ..subscribe import subscribe
 from ..view import view
+from .files import simulate_to
 from .options import (
     add_pipeline_options,
     add_subscriber_options,
@@ -135,6 +137,21 @@ def cmd_replay(args) -> int:
         )
 
 
+DEMO_CACHE = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "rtsar"
+
+
+def cmd_demo(args) -> int:
+    scene = load_scene(f"{args.which}-ridge")
+    cached = DEMO_CACHE / f"{scene.name}-{__version__}.h5"
+    if not cached.is_file():
+        print(f"demo: simulating {scene.name} once into {cached} …", flush=True)
+        cached.parent.mkdir(parents=True, exist_ok=True)
+        simulate_to(scene, cached)
+    args.recording = str(cached)
+    args.height = args.height or "insal"
+    return cmd_replay(args)
+
+
 def cmd_subscribe(args) -> int:
     if args.timeout is not None and args.timeout <= 0:
         return die(f"--timeout must be > 0 seconds, got {args.timeout}")
@@ -246,6 +263,29 @@ def add_parsers(sub) -> None:
     )
     add_pipeline_options(s, "lossless")
     s.set_defaults(func=cmd_replay)
+
+    s = sub.add_parser(
+        "demo",
+        help="the 3D demo: InSAL heights of Zhao's ridge, published live (about a minute)",
+        description="Simulate the built-in scene insal-ridge once (about 10 s; the recording "
+        f"is cached in {DEMO_CACHE}), then replay it at --rate times its PRF through the "
+        "pipeline with height strips (--height insal), publishing image and height strips "
+        "like `rtsar replay`. Watch with `rtsar subscribe -o demo.h5` and draw with `rtsar "
+        "quicklook demo.h5 -o demo.png --height demo-height.png`, or give -o here.",
+    )
+    s.add_argument("which", choices=("insal",), help="the demo to run (insal)")
+    s.add_argument(
+        "--rate", default="5", help="replay rate: a factor of the PRF (default 5: 10 s), or max"
+    )
+    s.add_argument(
+        "--wait-subscribers",
+        type=int,
+        default=0,
+        metavar="N",
+        help="wait until N subscribers are connected before starting (default 0)",
+    )
+    add_pipeline_options(s, "lossless")
+    s.set_defaults(func=cmd_demo, height="insal")
 
     s = sub.add_parser(
         "subscribe",

@@ -219,3 +219,15 @@ def test_the_3d_demo_simulates_once_then_replays_with_heights(tmp_path, monkeypa
     for name in ("a.h5", "b.h5"):
         h, v = read_heights(tmp_path / name)
         assert v.mean() > 0.8 and np.abs(h[v]).max() < 3e-3
+
+
+def test_recordings_carry_the_3d_platform_position(insal_recording):
+    from rtsar.sinks.io import open_recording
+
+    _, rec, _, _ = insal_recording
+    with open_recording(rec) as r:
+        pos = r.position_m
+        along = r.start_along_track_m + np.arange(r.pulses) * r.config.geometry.along_track_step_m
+        assert pos.shape == (r.pulses, 3)
+        np.testing.assert_allclose(pos[:, 0], along)
+        assert np.all(pos[:, 1] == 0) and np.all(pos[:, 2] == r.config.geometry.platform_height_m)

@@ -3,7 +3,9 @@
 Recording (``rtsar simulate``):  /shots complex64 [pulse, sample], /pulse_index int64 [pulse],
 /time_s float64 [pulse], /along_track_m float64 [pulse], and (format version 2) one dataset
 /channels/NAME complex64 [pulse, sample] per auxiliary channel of the shot (second receiver,
-reference interferometer, HCN cell, reference-region receivers, modulation channels);
+reference interferometer, HCN cell, reference-region receivers, modulation channels), and
+/position_m float64 [pulse, 3] (x along track, y cross-track, z above the reference plane)
+where the geometry has a platform height;
 attributes format="rtsar-recording", format_version, config (JSON of the effective
 configuration), scene (JSON), channels (JSON list of {name, samples_per_shot, sample_rate_hz,
 dtype}; version 2), rtsar_version.  Version 1 files (main channel only) still read.
@@ -96,6 +98,13 @@ class RecordingWriter:
         a["rtsar_version"] = __version__
         self._config = config
         self._chunk = chunk
+        # Per-pulse 3-D platform position where the geometry has one (a platform height above
+        # the reference plane): x along track, y cross-track, z up (rtsar.scene.relief's frame).
+        self._position = None
+        if config.geometry.platform_height_m > 0:
+            self._position = self._f.create_dataset(
+                "position_m", (0, 3), np.float64, maxshape=(None, 3), chunks=(4096, 3)
+            )
         self._channels: dict[str, h5py.Dataset] | None = None  # fixed by the first write
         self.pulses = 0
 
@@ -157,6 +166,12 @@ class RecordingWriter:
             ds = self._meta[name]
             ds.resize(end, axis=0)
             ds[self.pulses : end] = np.atleast_1d(values)
+        if self._position is not None:
+            xyz = np.zeros((n, 3))
+            xyz[:, 0] = np.atleast_1d(along_track_m)
+            xyz[:, 2] = self._config.geometry.platform_height_m
+            self._position.resize(end, axis=0)
+            self._position[self.pulses : end] = xyz
         self.pulses = end
 
     def close(self) -> None:
@@ -184,6 +199,11 @@ class Recording:
     pulse_index: np.ndarray | None = None  # int64[pulse]
     time_s: np.ndarray | None = None  # float64[pulse]
     channels: dict = field(default_factory=dict)  # auxiliary channel name → dataset
+
+    @property
+    def position_m(self) -> np.ndarray | None:
+        """Per-pulse platform position [pulse, (x, y, z)] in metres; None where not recorded."""
+        return self._file["position_m"][...] if "position_m" in self._file else None
 
     @property
     def shots(self):
@@ -295,6 +315,10 @@ def open_recording(path: str | Path) -> Recording:
             if not np.isfinite(values).all():
                 raise ValueError(f"{name} holds non-finite values")
         channels = _channels(f, pulses)
+        if "position_m" in f:
+            pos = _dataset(f, "position_m", 2, "float")
+            if pos.shape != (pulses, 3):
+                raise ValueError(f"position_m must be [{pulses}, 3], got {pos.shape}")
         if pulses > 1 and not np.all(np.diff(meta["pulse_index"]) > 0):
             raise ValueError("pulse_index must increase from shot to shot")
         if pulses > 1:

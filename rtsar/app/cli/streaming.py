@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -42,6 +43,25 @@ def channel_map(args, scene) -> ChannelMap | None:
     if args.channel_map:
         return ChannelMap.parse(args.channel_map)
     return None if scene is None else ChannelMap.for_scene(scene)
+
+
+SLOW_FIRST_LINE_S = 30.0  # a live run whose first line takes longer than this gets a hint
+
+
+def warn_slow_first_line(scene, name) -> None:
+    """A live simulation waits N pulses at the real PRF for its first line: say so when that is
+    long (a lidar bench at a few Hz), and how to look at the scene sooner."""
+    g = scene.config.geometry
+    wait_s = scene.config.processor.aperture_pulses / g.prf_hz
+    if wait_s > SLOW_FIRST_LINE_S:
+        print(
+            f"note: at the scene's real PRF ({g.prf_hz:g} Hz) the first image line comes after "
+            f"{wait_s:,.0f} s (one aperture of {scene.config.processor.aperture_pulses} "
+            f"pulses). For a quicker look: rtsar simulate {name} -o REC.h5, then rtsar replay "
+            "REC.h5 --rate F (F times the PRF, or max)",
+            file=sys.stderr,
+            flush=True,
+        )
 
 
 def cmd_run(args) -> int:
@@ -88,6 +108,7 @@ def cmd_run(args) -> int:
     scene = replace(scene, config=processor_changes(args, scene.config))
     warn_outside_swath(scene)
     strip_lines(args, scene.config.geometry.prf_hz)
+    warn_slow_first_line(scene, args.scene)
     pulses = None if args.duration is None else int(args.duration * scene.config.geometry.prf_hz)
     source = SimSource(scene, pulses)
     return run_stream(

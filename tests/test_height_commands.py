@@ -3,6 +3,7 @@
 
 import re
 
+import h5py
 import numpy as np
 import pytest
 
@@ -43,14 +44,16 @@ def insal_recording(tmp_path_factory):
     strips = stage.process(main_img, rx1_img) + stage.flush()
     h = np.zeros(main_img.shape)
     v = np.zeros(main_img.shape, bool)
+    c = np.zeros(main_img.shape)
     for s in strips:
         h[s.first_line : s.first_line + len(s)] = s.height_m
         v[s.first_line : s.first_line + len(s)] = s.valid
-    return d, rec, h, v
+        c[s.first_line : s.first_line + len(s)] = s.coherence
+    return d, rec, h, v, c
 
 
 def test_process_writes_the_height_map(insal_recording):
-    d, rec, h, v = insal_recording
+    d, rec, h, v, c = insal_recording
     img = d / "p.h5"
     args = ["process", str(rec), "-o", str(img), "--lens", "numpy", "--height", "insal"]
     assert main(args + ["--height-strip-lines", str(STRIP)]) == 0
@@ -60,10 +63,12 @@ def test_process_writes_the_height_map(insal_recording):
     np.testing.assert_array_equal(valid, v)
     assert valid.mean() > 0.5  # most of the ridge is coherent and unwrapped
     np.testing.assert_allclose(height, np.where(v, h, 0.0), atol=1e-7)  # float32 storage
+    with h5py.File(img) as f:
+        np.testing.assert_allclose(f["coherence"][...], c, atol=1e-6)
 
 
 def test_replay_records_the_same_heights_and_quicklook_draws_them(insal_recording, capsys):
-    d, rec, h, v = insal_recording
+    d, rec, h, v, c = insal_recording
     img, png, hpng = d / "r.h5", d / "r.png", d / "h.png"
     args = ["replay", str(rec), "--rate", "max", "--lens", "numpy", "--height", "insal"]
     args += ["--height-strip-lines", str(STRIP), "-o", str(img)]
@@ -92,7 +97,7 @@ def test_subscribe_records_the_published_heights(insal_recording):
     import socket
     import threading
 
-    d, rec, h, v = insal_recording
+    d, rec, h, v, c = insal_recording
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         ep = f"tcp://127.0.0.1:{s.getsockname()[1]}"
@@ -111,6 +116,8 @@ def test_subscribe_records_the_published_heights(insal_recording):
     np.testing.assert_allclose(height, np.where(v, h, 0.0), atol=1e-7)
     _, _, _, attrs = read_image(out)
     assert attrs["height_strips"] >= 3 and attrs["inconsistent_heights"] == 0
+    with h5py.File(out) as f:  # the coherence came over the wire (height messages v2)
+        np.testing.assert_allclose(f["coherence"][...], c, atol=1e-6)
 
 
 SURFACE_SCENE = """
@@ -224,7 +231,7 @@ def test_the_3d_demo_simulates_once_then_replays_with_heights(tmp_path, monkeypa
 def test_recordings_carry_the_3d_platform_position(insal_recording):
     from rtsar.sinks.io import open_recording
 
-    _, rec, _, _ = insal_recording
+    _, rec, _, _, _ = insal_recording
     with open_recording(rec) as r:
         pos = r.position_m
         along = r.start_along_track_m + np.arange(r.pulses) * r.config.geometry.along_track_step_m

@@ -258,12 +258,22 @@ def test_pipeline_publishes_height_strips_equal_to_the_batch_chain(ridge_lines):
     # The wire format round-trips (float32 heights, validity mask).
     info = StreamInfo("x", cfg, "test", "numpy", rg, 0.0, 0.0)  # what height_header reads
     s0 = sink.heights[1]
+    header = height_header(s0, 1, info)
     frames = [
         b"height",
-        json.dumps(height_header(s0, 1, info)).encode(),
+        json.dumps(header).encode(),
         s0.height_m.astype("<f4").tobytes(),
         s0.valid.astype(np.uint8).tobytes(),
+        s0.coherence.astype("<f4").tobytes(),
     ]
     msg = decode(frames)
     assert np.array_equal(msg.valid, s0.valid)
     np.testing.assert_allclose(msg.lines, s0.height_m, rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(msg.coherence, s0.coherence, rtol=1e-6, atol=1e-7)
+    # A version 1 message (no coherence frame) still decodes; a frame count that does not fit
+    # the version is refused.
+    v1 = [frames[0], json.dumps({**header, "version": 1}).encode(), frames[2], frames[3]]
+    old = decode(v1)
+    assert old.coherence is None and np.array_equal(old.valid, s0.valid)
+    with pytest.raises(ValueError, match="has 5 frames"):
+        decode(frames[:4])

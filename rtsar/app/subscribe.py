@@ -36,7 +36,7 @@ def subscribe(
             if msg.topic == "strip":
                 rec.add_strip(msg.header, msg.lines)
             elif msg.topic == "height":
-                rec.add_height(msg.header, msg.lines, msg.valid)
+                rec.add_height(msg.header, msg.lines, msg.valid, msg.coherence)
             elif msg.topic == "end" and rec.writer is not None:
                 if msg.header.get("stream_id") == rec.stream_id:
                     counters = msg.header.get("counters")

@@ -14,8 +14,8 @@ Image (``rtsar process``):  /image complex64 [azimuth, range], /azimuth_m, /rang
 attributes format="rtsar-image", format_version, config (JSON), source, lens, correlator,
 nonfinite_pulses (shots zeroed because they held NaN/Inf), complete (False while a stream is
 written and in a file whose writer was killed).  With height strips (``--height insal``):
-/height_m float32 [azimuth, range] and /height_valid uint8 (1: coherent and unwrapped), rows
-aligned with /image's.
+/height_m float32 [azimuth, range], /height_valid uint8 (1: coherent and unwrapped) and
+/coherence float32, rows aligned with /image's.
 Complex values are HDF5 compounds of two floats named r and i (h5py's convention).
 """
 
@@ -440,13 +440,17 @@ class ImageWriter:
             "azimuth_m", (0,), np.float64, maxshape=(None,), chunks=(4096,)
         )
         self._f.create_dataset("range_m", data=np.asarray(range_m, np.float64))
-        self._height = self._valid = None
+        self._height = self._valid = self._coherence = None
         if heights:  # created now: no dataset can be added once the file is in SWMR mode
-            self._height, self._valid = (
+            self._height, self._valid, self._coherence = (
                 self._f.create_dataset(
                     name, (0, nr), dtype, maxshape=(None, nr), chunks=(chunk_lines, nr)
                 )
-                for name, dtype in (("height_m", np.float32), ("height_valid", np.uint8))
+                for name, dtype in (
+                    ("height_m", np.float32),
+                    ("height_valid", np.uint8),
+                    ("coherence", np.float32),
+                )
             )
         self.height_lines = 0  # rows of height_m written (the highest row + 1)
         a = self._f.attrs
@@ -478,16 +482,20 @@ class ImageWriter:
     def has_heights(self) -> bool:
         return self._height is not None
 
-    def write_heights(self, row: int, height_m: np.ndarray, valid: np.ndarray) -> None:
-        """Heights of image rows ``row`` … (a height strip); rows never written stay invalid."""
+    def write_heights(
+        self, row: int, height_m: np.ndarray, valid: np.ndarray, coherence=None
+    ) -> None:
+        """Heights of image rows ``row`` … (a height strip); rows never written stay invalid.
+        ``coherence`` None (a version 1 height message): written as 0."""
         if self._height is None:
             raise ValueError("this image file was opened without heights")
         end = row + len(height_m)
         if end > self._height.shape[0]:
-            self._height.resize(end, axis=0)
-            self._valid.resize(end, axis=0)
+            for ds in (self._height, self._valid, self._coherence):
+                ds.resize(end, axis=0)
         self._height[row:end] = np.where(valid, height_m, 0.0)
         self._valid[row:end] = valid
+        self._coherence[row:end] = 0.0 if coherence is None else coherence
         self.height_lines = max(self.height_lines, end)
 
     def close(self, **attrs) -> None:

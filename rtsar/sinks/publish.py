@@ -240,7 +240,11 @@ class ZmqPublisher(StripSink):
         self.send("strip", strip_header(strip, info), strip.lines)
 
     def height(self, strip, seq: int, info: StreamInfo) -> None:
-        payload = [strip.height_m.astype("<f4"), strip.valid.astype(np.uint8)]
+        payload = [
+            strip.height_m.astype("<f4"),
+            strip.valid.astype(np.uint8),
+            strip.coherence.astype("<f4"),
+        ]
         self.send("height", height_header(strip, seq, info), payload)
 
     def stats(self, stats: dict, info: StreamInfo) -> None:

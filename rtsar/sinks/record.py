@@ -106,29 +106,35 @@ class StripRecorder:
         self.counters = header.get("counters", self.counters)
         self._write(lines)
 
-    def add_height(self, header: dict, height_m: np.ndarray, valid: np.ndarray) -> None:
-        """Write one height strip (rtsar.sinks.wire.height_header) beside the image's lines."""
+    def add_height(
+        self, header: dict, height_m: np.ndarray, valid: np.ndarray, coherence=None
+    ) -> None:
+        """Write one height strip (rtsar.sinks.wire.height_header) beside the image's lines;
+        ``coherence`` None for a version 1 message (no coherence frame)."""
         w = self.writer
         if w is None:  # heights can overtake the first image strip: held until it comes
-            held = sum(h.nbytes + v.nbytes for _, h, v in self._early_heights)
-            if held + height_m.nbytes + valid.nbytes <= self.max_fill_bytes:
-                self._early_heights.append((header, height_m, valid))
+            held = sum(h.nbytes * 3 for _, h, _, _ in self._early_heights)
+            if held + height_m.nbytes * 3 <= self.max_fill_bytes:
+                self._early_heights.append((header, height_m, valid, coherence))
             else:
                 self.inconsistent_heights += 1
             return
         if not w.has_heights or header.get("stream_id") != self.stream_id:
             self.inconsistent_heights += 1  # not announced, or another stream's
             return
-        if height_m.shape != valid.shape or height_m.shape[1] != self._axes0[0]:
+        shape_ok = height_m.shape == valid.shape and height_m.shape[1] == self._axes0[0]
+        if not shape_ok or (coherence is not None and coherence.shape != height_m.shape):
             self.inconsistent_heights += 1
             return
         row = int(header["first_line"]) - self.first_line
         if row < 0:  # a late subscriber: the strip began before its image
-            height_m, valid, row = height_m[-row:], valid[-row:], 0
+            cut, row = -row, 0
+            height_m, valid = height_m[cut:], valid[cut:]
+            coherence = None if coherence is None else coherence[cut:]
         if row + len(height_m) > self.next_line + self.max_fill_bytes // 8 // height_m.shape[1]:
             self.inconsistent_heights += 1  # far beyond the image: not obeyed
             return
-        w.write_heights(row, height_m, valid)
+        w.write_heights(row, height_m, valid, coherence)
         self.height_strips += 1
 
     def _write(self, lines: np.ndarray) -> None:
@@ -175,7 +181,9 @@ class ImageFileSink(StripSink):
         self.recorder.add_strip(strip_header(strip, info), strip.lines)
 
     def height(self, strip, seq: int, info: StreamInfo) -> None:
-        self.recorder.add_height(height_header(strip, seq, info), strip.height_m, strip.valid)
+        self.recorder.add_height(
+            height_header(strip, seq, info), strip.height_m, strip.valid, strip.coherence
+        )
 
     def end(self, stats: dict, info: StreamInfo) -> None:
         self.lines = self.recorder.finish(

@@ -25,7 +25,7 @@ from ..stream.strips import StreamInfo, Strip
 STRIP_FORMAT = "rtsar-strip"
 STRIP_VERSION = 1
 HEIGHT_FORMAT = "rtsar-height"
-HEIGHT_VERSION = 1
+HEIGHT_VERSION = 2  # 2: a fifth frame, the coherence (version 1 messages still decode)
 STATS_FORMAT = "rtsar-stats"
 
 
@@ -61,7 +61,8 @@ def height_header(strip, seq: int, info: StreamInfo) -> dict:
     """The JSON header of a height message (3D imaging: rtsar.topo.stream.HeightStrip).
 
     Frames: topic ``height``, this header, heights float32 little-endian [line, bin] in metres
-    (0 where not valid), validity uint8 [line, bin] (1 = valid: coherent, unwrapped).
+    (0 where not valid), validity uint8 [line, bin] (1 = valid: coherent, unwrapped), and
+    (version 2) the interferometric coherence float32 [line, bin].
     """
     rng = info.range_m
     n_lines, n_bins = strip.height_m.shape
@@ -75,6 +76,7 @@ def height_header(strip, seq: int, info: StreamInfo) -> dict:
         "range_bins": n_bins,
         "dtype": "float32",
         "valid_dtype": "uint8",
+        "coherence_dtype": "float32",
         "byte_order": "little",
         "units": "m",
         "aligned": bool(strip.aligned),
@@ -108,6 +110,7 @@ class Message:
     header: dict
     lines: np.ndarray | None = None
     valid: np.ndarray | None = None
+    coherence: np.ndarray | None = None  # height messages of version 2
 
 
 MAX_RANGE_BINS = 1 << 16  # the widest strip a subscriber accepts
@@ -187,16 +190,25 @@ def decode(frames: list[bytes]) -> Message:
 
 
 def _decode_height(header: dict, frames: list[bytes]) -> Message:
-    if header.get("format") != HEIGHT_FORMAT or header.get("version") != HEIGHT_VERSION:
-        raise ValueError(f"not an {HEIGHT_FORMAT} v{HEIGHT_VERSION} message")
-    if len(frames) != 4:
-        raise ValueError("a height message has 4 frames")
+    version = header.get("version")
+    if header.get("format") != HEIGHT_FORMAT or version not in (1, HEIGHT_VERSION):
+        raise ValueError(f"not an {HEIGHT_FORMAT} v1 or v{HEIGHT_VERSION} message")
+    count = 4 if version == 1 else 5
+    if len(frames) != count:
+        raise ValueError(f"a height message of version {version} has {count} frames")
     shape = (
         _int(header, "line_count", 1, MAX_LINES),
         _int(header, "range_bins", 1, MAX_RANGE_BINS),
     )
+    n = shape[0] * shape[1]
     h, v = bytes(frames[2]), bytes(frames[3])
-    if len(h) != shape[0] * shape[1] * 4 or len(v) != shape[0] * shape[1]:
+    c = bytes(frames[4]) if count == 5 else b"\0" * (4 * n)
+    if len(h) != 4 * n or len(v) != n or len(c) != 4 * n:
         raise ValueError(f"height payload does not match {shape}")
-    height = np.frombuffer(h, "<f4").reshape(shape)
-    return Message("height", header, height, np.frombuffer(v, np.uint8).reshape(shape).astype(bool))
+    return Message(
+        "height",
+        header,
+        np.frombuffer(h, "<f4").reshape(shape),
+        np.frombuffer(v, np.uint8).reshape(shape).astype(bool),
+        None if count == 4 else np.frombuffer(c, "<f4").reshape(shape),
+    )

@@ -199,7 +199,7 @@ def cmd_process(args) -> int:
 
 def _write_heights(img: ImageWriter, strips) -> None:
     for strip in strips:
-        img.write_heights(strip.first_line, strip.height_m, strip.valid)
+        img.write_heights(strip.first_line, strip.height_m, strip.valid, strip.coherence)
 
 
 def cmd_quicklook(args) -> int:

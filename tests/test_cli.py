@@ -7,7 +7,8 @@ import pytest
 from rtsar.analysis import relative_rms
 from rtsar.app.cli import main
 from rtsar.scene import Simulator, load_scene
-from rtsar.sinks.io import open_recording, read_image
+from rtsar.sinks.image_file import read_image
+from rtsar.sinks.io import open_recording
 from rtsar.stream.engine import process_block
 
 SCENE = """

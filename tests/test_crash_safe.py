@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from rtsar.app.cli import main
-from rtsar.sinks.io import read_image
+from rtsar.sinks.image_file import read_image
 
 SCENE = """
 preset = "tiny"
@@ -27,7 +27,7 @@ slant_range_m = 2000.0
 WRITER = """
 import sys, time, numpy as np
 from rtsar.presets import preset
-from rtsar.sinks.io import ImageWriter
+from rtsar.sinks.image_file import ImageWriter
 cfg = preset("tiny")
 nr = cfg.processor.range_bins
 w = ImageWriter(sys.argv[1], cfg, np.arange(nr, dtype=float), crash_safe=True)

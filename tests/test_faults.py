@@ -129,7 +129,7 @@ def test_a_hostile_publisher_is_counted_not_obeyed(tmp_path, capsys):
 
     import zmq
 
-    from rtsar.sinks.io import read_image
+    from rtsar.sinks.image_file import read_image
 
     pub = zmq.Context.instance().socket(zmq.XPUB)
     pub.bind("tcp://127.0.0.1:*")

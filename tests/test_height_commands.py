@@ -12,7 +12,8 @@ from rtsar.instrument import SECOND_RECEIVER
 from rtsar.scene.correction_context import insal_geometry
 from rtsar.scene.relief import default_spacing_m, ridge, surface_scene, zhao_config
 from rtsar.scene.simulator import Simulator
-from rtsar.sinks.io import RecordingWriter, read_heights, read_image
+from rtsar.sinks.image_file import read_heights, read_image
+from rtsar.sinks.io import RecordingWriter
 from rtsar.stream.engine import process_block
 from rtsar.topo.stream import HeightStripStage
 

@@ -13,7 +13,7 @@ from rtsar.app.cli import main
 from rtsar.presets import preset
 from rtsar.scene import Simulator, point_scene
 from rtsar.sinks.client import StripSubscriber
-from rtsar.sinks.io import read_image
+from rtsar.sinks.image_file import read_image
 from rtsar.sinks.publish import ZmqPublisher, is_local_endpoint
 from rtsar.sinks.wire import decode
 from rtsar.sources.replay import ReplaySource

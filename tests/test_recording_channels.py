@@ -11,7 +11,8 @@ from rtsar.app.cli import main
 from rtsar.app.cli.options import correction_chain
 from rtsar.scene import Simulator, load_scene
 from rtsar.scene.correction_context import correction_context
-from rtsar.sinks.io import open_recording, read_image
+from rtsar.sinks.image_file import read_image
+from rtsar.sinks.io import open_recording
 from rtsar.stream.engine import StreamProcessor
 
 SCENE = """

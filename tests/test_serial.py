@@ -244,7 +244,7 @@ def test_serial_run_of_a_scene_keeps_its_along_track_positions(tmp_path):
     azimuth axis as `process` of the scene's recording (it was 60 m off for the demo scene)."""
     from rtsar.app.cli import main
     from rtsar.scene import Simulator, load_scene
-    from rtsar.sinks.io import read_image
+    from rtsar.sinks.image_file import read_image
 
     scene_file = tmp_path / "s.toml"
     scene_file.write_text(

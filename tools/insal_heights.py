@@ -24,7 +24,8 @@ from rtsar.app.cli import main as rtsar
 from rtsar.scene.correction_context import insal_geometry
 from rtsar.scene.relief import default_spacing_m, ridge, sphere_cap, surface_scene, zhao_config
 from rtsar.scene.simulator import Simulator
-from rtsar.sinks.io import RecordingWriter, read_heights, read_image
+from rtsar.sinks.image_file import read_heights, read_image
+from rtsar.sinks.io import RecordingWriter
 from rtsar.topo.insar import height_error
 
 SURFACES = {"ridge": lambda: ridge(2.5e-3, 8e-3), "pin": lambda: sphere_cap(5e-3, 1.5e-3)}

@@ -6,7 +6,7 @@ Each kill starts a fresh writer on the built-in demo scene (at its real PRF), wa
 image file has taken its name, lets it stream for a random 0 .. --max-delay seconds, and kills
 it with SIGKILL (what an OOM kill or a power cut does to a process).  Kills alternate between
 `run -o IMG` and `subscribe -o IMG` (fed by a `run` on a private ipc:// endpoint).  Every file
-must open with `rtsar.sinks.io.read_image`, hold whole lines with finite positions, and say
+must open with `rtsar.sinks.image_file.read_image`, hold whole lines with finite positions, and say
 `complete = False`; no temporary file may be left.  Prints one line per kill and a summary;
 exit status 1 if any file failed.  Not a test (tests/test_crash_safe.py is the fast one).
 """
@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rtsar.sinks.io import read_image
+from rtsar.sinks.image_file import read_image
 
 
 def rtsar(*args: str) -> subprocess.Popen:

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..params import config_from_dict
 from ..stream.strips import StreamInfo, Strip, StripSink
-from .io import ImageWriter
+from .image_file import ImageWriter
 from .wire import height_header, strip_header
 
 MAX_FILL_BYTES = 64 << 20  # the most zeros written for one gap of missing lines

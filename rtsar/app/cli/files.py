@@ -14,14 +14,8 @@ from ...instrument import SECOND_RECEIVER
 from ...lens import range_axis_m
 from ...presets import PRESETS, preset
 from ...scene import Simulator, load_scene
-from ...sinks.io import (
-    ImageWriter,
-    RecordingWriter,
-    open_recording,
-    read_heights,
-    read_image,
-    replace_when_complete,
-)
+from ...sinks.image_file import ImageWriter, read_heights, read_image
+from ...sinks.io import RecordingWriter, open_recording, replace_when_complete
 from ...stream.engine import StreamProcessor
 from ..progress import Progress
 from ..quicklook import save_height_quicklook, save_quicklook

@@ -1,0 +1,187 @@
+"""Image files (HDF5): the focused image, written whole or line block by line block.
+
+Image (``rtsar process``):  /image complex64 [azimuth, range], /azimuth_m, /range_m float64;
+attributes format="rtsar-image", format_version, config (JSON), source, lens, correlator,
+nonfinite_pulses (shots zeroed because they held NaN/Inf), complete (False while a stream is
+written and in a file whose writer was killed).  With height strips (``--height insal``):
+/height_m float32 [azimuth, range], /height_valid uint8 (1: coherent and unwrapped) and
+/coherence float32, rows aligned with /image's.
+Layout in README.md ("File formats").  Complex values are HDF5 compounds of two floats named r
+and i (h5py's convention).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from .. import __version__
+from ..params import Config
+from .io import FORMAT_VERSION, IMAGE_FORMAT, open_checked
+
+
+def write_image(
+    path: str | Path,
+    image: np.ndarray,
+    azimuth_m: np.ndarray,
+    range_m: np.ndarray,
+    config: Config,
+    **attrs,
+) -> None:
+    with h5py.File(path, "w") as f:
+        f.create_dataset("image", data=np.asarray(image, np.complex64))
+        f.create_dataset("azimuth_m", data=np.asarray(azimuth_m, np.float64))
+        f.create_dataset("range_m", data=np.asarray(range_m, np.float64))
+        f.attrs["format"] = IMAGE_FORMAT
+        f.attrs["format_version"] = FORMAT_VERSION
+        f.attrs["config"] = json.dumps(config.to_dict())
+        f.attrs["rtsar_version"] = __version__
+        for k, v in attrs.items():
+            f.attrs[k] = v
+
+
+def read_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    with open_checked(path, IMAGE_FORMAT) as f:
+        return (f["image"][...], f["azimuth_m"][...], f["range_m"][...], dict(f.attrs))
+
+
+def read_heights(path: str | Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """(height_m float32 [azimuth, range], valid bool) of an image file; None without heights.
+
+    Rows the height strips have not reached yet (a stream cut short) are invalid."""
+    with open_checked(path, IMAGE_FORMAT) as f:
+        if "height_m" not in f:
+            return None
+        rows = f["image"].shape[0]
+        h = np.zeros(f["image"].shape, np.float32)
+        v = np.zeros(f["image"].shape, bool)
+        n = min(rows, f["height_m"].shape[0])
+        h[:n], v[:n] = f["height_m"][:n], f["height_valid"][:n] != 0
+        return h, v
+
+
+class ImageWriter:
+    """Write an image file line block by line block (streams of any length, bounded memory).
+
+    Same layout as :func:`write_image`; ``close(**attrs)`` adds the final attributes and sets
+    ``complete`` to True.
+
+    ``crash_safe=True`` (live streams: ``run -o``, ``subscribe -o``) writes in HDF5's
+    single-writer/multiple-reader mode, flushed at least every ``flush_every_s``: a writer killed
+    at any moment (SIGKILL, an OOM kill, a power cut after the disk has the data) leaves a file
+    that opens, holding every line flushed before the kill, with ``complete`` False.  The file
+    is set up under a temporary name and takes its own name once it is in that state, so no
+    half-made file ever carries the name.  Readers can open it while it is written.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        config: Config,
+        range_m: np.ndarray,
+        chunk_lines: int = 64,
+        crash_safe: bool = False,
+        flush_every_s: float = 0.5,
+        heights: bool = False,
+        **attrs,
+    ):
+        self.path = Path(path)
+        self.crash_safe = crash_safe
+        self.flush_every_s = float(flush_every_s)
+        target = (
+            self.path.with_name(f".{self.path.name}.partial-{os.getpid()}")
+            if crash_safe
+            else self.path
+        )
+        libver = ("v110", "v110") if crash_safe else None
+        self._f = h5py.File(target, "w", libver=libver)
+        nr = len(range_m)
+        self._image = self._f.create_dataset(
+            "image", (0, nr), np.complex64, maxshape=(None, nr), chunks=(chunk_lines, nr)
+        )
+        self._azimuth = self._f.create_dataset(
+            "azimuth_m", (0,), np.float64, maxshape=(None,), chunks=(4096,)
+        )
+        self._f.create_dataset("range_m", data=np.asarray(range_m, np.float64))
+        self._height = self._valid = self._coherence = None
+        if heights:  # created now: no dataset can be added once the file is in SWMR mode
+            self._height, self._valid, self._coherence = (
+                self._f.create_dataset(
+                    name, (0, nr), dtype, maxshape=(None, nr), chunks=(chunk_lines, nr)
+                )
+                for name, dtype in (
+                    ("height_m", np.float32),
+                    ("height_valid", np.uint8),
+                    ("coherence", np.float32),
+                )
+            )
+        self.height_lines = 0  # rows of height_m written (the highest row + 1)
+        a = self._f.attrs
+        a["format"] = IMAGE_FORMAT
+        a["format_version"] = FORMAT_VERSION
+        a["config"] = json.dumps(config.to_dict())
+        a["rtsar_version"] = __version__
+        a["complete"] = False
+        for k, v in attrs.items():
+            a[k] = v
+        if crash_safe:
+            self._f.swmr_mode = True  # from here on the file on disk is always readable
+            os.replace(target, self.path)
+        self._flushed_s = time.monotonic()
+        self.lines = 0
+
+    def write(self, lines: np.ndarray, azimuth_m: np.ndarray) -> None:
+        end = self.lines + len(lines)
+        self._image.resize(end, axis=0)
+        self._image[self.lines : end] = lines
+        self._azimuth.resize(end, axis=0)
+        self._azimuth[self.lines : end] = azimuth_m
+        self.lines = end
+        if self.crash_safe and time.monotonic() - self._flushed_s >= self.flush_every_s:
+            self._f.flush()
+            self._flushed_s = time.monotonic()
+
+    @property
+    def has_heights(self) -> bool:
+        return self._height is not None
+
+    def write_heights(
+        self, row: int, height_m: np.ndarray, valid: np.ndarray, coherence=None
+    ) -> None:
+        """Heights of image rows ``row`` … (a height strip); rows never written stay invalid.
+        ``coherence`` None (a version 1 height message): written as 0."""
+        if self._height is None:
+            raise ValueError("this image file was opened without heights")
+        end = row + len(height_m)
+        if end > self._height.shape[0]:
+            for ds in (self._height, self._valid, self._coherence):
+                ds.resize(end, axis=0)
+        self._height[row:end] = np.where(valid, height_m, 0.0)
+        self._valid[row:end] = valid
+        self._coherence[row:end] = 0.0 if coherence is None else coherence
+        self.height_lines = max(self.height_lines, end)
+
+    def close(self, **attrs) -> None:
+        """Close with the final attributes; ``complete`` True unless ``complete=False`` given."""
+        if not self._f.id.valid:
+            return
+        attrs.setdefault("complete", True)
+        if self.crash_safe:
+            # Attributes cannot be added in SWMR mode: close (the data is safe from here on),
+            # reopen in normal mode for the final attributes.
+            self._f.close()
+            self._f = h5py.File(self.path, "r+")
+        for k, v in attrs.items():
+            self._f.attrs[k] = v
+        self._f.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close(complete=exc[0] is None)

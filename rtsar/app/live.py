@@ -260,7 +260,8 @@ def run_stream(
                 f"rtsar: no image written to {output}: no line was focused"
                 + (
                     f" ({c['wrong_length']} frames of another shape than the configuration's "
-                    f"{config.waveform.samples_per_shot} samples per shot: check --preset/--scene)"
+                    f"{config.waveform.samples_per_shot} samples per shot (and the channel map's "
+                    "channels): check --preset/--scene/--channel-map)"
                     if c.get("wrong_length")
                     else ""
                 ),

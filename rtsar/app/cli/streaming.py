@@ -108,7 +108,7 @@ def cmd_run(args) -> int:
     scene = replace(scene, config=processor_changes(args, scene.config))
     warn_outside_swath(scene)
     strip_lines(args, scene.config.geometry.prf_hz)
-    warn_slow_first_line(scene, args.scene)
+    warn_slow_first_line(scene, args.scene or scene.name)
     pulses = None if args.duration is None else int(args.duration * scene.config.geometry.prf_hz)
     source = SimSource(scene, pulses)
     return run_stream(

@@ -15,6 +15,7 @@ import numpy as np
 from ..focus.chain import CorrectionContext
 from ..focus.reference_region import ReferenceGeometry
 from ..topo.insar_geometry import InsalGeometry
+from ..topo.sam3d import ModulationGeometry
 from .effects import load_effects
 from .model import Scene
 
@@ -41,6 +42,24 @@ def insal_geometry(scene: Scene | None):
         baseline_m=float(np.hypot(dy, dz)),
         baseline_angle_deg=float(np.degrees(np.arctan2(dz, dy))),
         passes=2 if effect.mode == "two_pass" else 1,
+    )
+
+
+def modulation_geometry(scene: Scene | None):
+    """The masks of the scene's ``amplitude_modulation_3d`` effect as an
+    rtsar.topo.sam3d.ModulationGeometry; ValueError when the scene has none."""
+    effect = None if scene is None else _effect(scene, "amplitude_modulation_3d")
+    if effect is None:
+        raise ValueError(
+            "--height sam needs the masks' geometry: a scene (or a recording of one) with the "
+            "amplitude_modulation_3d effect"
+        )
+    return ModulationGeometry.from_config(
+        scene.config,
+        effect.angular_period_rad,
+        mask_offset_a=effect.a,
+        mask_depth_b=effect.b,
+        mask_phase_rad=effect.mask_phase_rad,
     )
 
 

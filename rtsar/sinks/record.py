@@ -45,6 +45,7 @@ class StripRecorder:
         self.overlapping_strips = 0
         self.inconsistent_strips = 0
         self.height_strips = 0
+        self.height_kind = ""
         self.inconsistent_heights = 0
         self._early_heights: list = []  # height strips that came before the first image strip
         self.counters: dict = {}
@@ -78,6 +79,8 @@ class StripRecorder:
                 first_line=first,
             )
             self.stream_id = header.get("stream_id")
+            kind = header.get("height_kind")
+            self.height_kind = kind if isinstance(kind, str) and kind.isidentifier() else "unknown"
             self.first_line = self.next_line = first
             self._axes0 = self._axes(header)
             self._az0 = header["azimuth_first_m"] - first * header["azimuth_step_m"]
@@ -160,7 +163,7 @@ class StripRecorder:
                 {
                     "height_strips": self.height_strips,
                     "inconsistent_heights": self.inconsistent_heights,
-                    "height_method": "insal",
+                    "height_method": self.height_kind,
                 }
                 if self.writer.has_heights
                 else {}

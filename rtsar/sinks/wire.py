@@ -54,6 +54,7 @@ def strip_header(strip: Strip, info: StreamInfo) -> dict:
         "counters": strip.counters,
         "config": info.config_dict,
         "height_strips": info.heights,
+        "height_kind": info.height_kind,
     }
 
 

@@ -21,11 +21,12 @@ line stage may hold pulses back (PGA holds a block): the pulses' arrival times a
 with them, so latency and flags stay exact; the held pulses come out at the end of the stream.
 Their counters join the pipeline's.
 
-3D imaging (``height``: an rtsar.topo.stream.HeightStripStage): the auxiliary channel of the
-second receiver (``height_channel``) goes through its own AO lens and CCD in step with the main
-channel (rtsar.stream.height); the stage turns each pair of line blocks into height strips
-(unwrapped with overlap, so heights stay continuous across strips), published beside the image
-strips (sink method ``height``).
+3D imaging (``height``: an rtsar.topo.stream.HeightStripStage or
+rtsar.topo.sam3d_strips.SamHeightStripStage): the auxiliary receivers the stage reads
+(``height.channels``) go through their own AO lens and CCD in step with the main channel
+(rtsar.stream.height); the stage turns the line blocks into height strips (unwrapped with
+overlap, so heights stay continuous across strips), published beside the image strips (sink
+method ``height``).
 
 Latency of an image line: from the arrival of the last pulse that contributes to it (pulse
 j + N - 1 for line j, Psaltis & Wagner 1981: the row leaves the CCD after N shifts) to the
@@ -43,7 +44,6 @@ import time
 import uuid
 from dataclasses import dataclass
 
-from ..instrument import SECOND_RECEIVER
 from ..params import Config
 from ..sources.base import Source
 from .engine import Lines, StreamProcessor
@@ -107,7 +107,6 @@ class Pipeline:
         corrections=None,
         physical=None,
         height=None,
-        height_channel: str = SECOND_RECEIVER,
         stream_id: str | None = None,
     ):
         self.config = config
@@ -129,9 +128,7 @@ class Pipeline:
         self.height = (
             None
             if height is None
-            else HeightChannel(
-                config, height, height_channel, s.lens_backend, s.device, start_along_track_m
-            )
+            else HeightChannel(config, height, s.lens_backend, s.device, start_along_track_m)
         )
         self._held = HeldPulses()  # pulses inside the line stages (metadata)
         self._holding = bool(corrections and corrections.line_stages)
@@ -161,6 +158,7 @@ class Pipeline:
             # perf_counter times (latency) + this offset = UNIX times (headers).
             clock_offset_s=time.time() - time.perf_counter(),
             heights=self.height is not None,
+            height_kind="" if height is None else height.kind,
         )
         self.strips = StripAssembler(self.info)
 
@@ -218,7 +216,7 @@ class Pipeline:
         """Range half of the engine on one block; the pulses it releases, with their metadata."""
         zero = bool(block.flagged.all())  # zero pulses (gap fill): zero lines, no launch
         lines = self.engine.range_stage(block.samples, block.aux, zero)
-        aux = {} if self.height is None else {"lines2": self.height.compress(block)}
+        aux = {} if self.height is None else self.height.compress(block)
         if self._holding:  # a line stage may hold pulses: their metadata waits with them
             self._held.hold(
                 PulseBlock(block.first_pulse, block.samples[:, :0], block.arrival_s, block.flagged)
@@ -262,7 +260,7 @@ class Pipeline:
         self.own["pulses_processed"] += len(block)
         out = self.engine.azimuth_stage(block.samples)
         if self.height is not None:
-            self._put_heights(self.height.correlate(out.lines, block.aux["lines2"]))
+            self._put_heights(self.height.correlate(out.lines, block.aux))
         return self._line_block(out)
 
     def _ccd_flush(self) -> LineBlock | None:

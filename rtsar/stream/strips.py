@@ -64,6 +64,7 @@ class StreamInfo:
     start_along_track_m: float  # platform position of pulse 0
     clock_offset_s: float  # perf_counter time + this = UNIX time
     heights: bool = False  # height strips (3D) are published beside the image strips
+    height_kind: str = ""  # their method: "insal" or "sam"
     config_dict: dict = field(default_factory=dict)  # config.to_dict(), formed once
 
     def __post_init__(self):

@@ -27,11 +27,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..phase import TWO_PI
-from .insar import absolute_cycle_shift, form_interferogram, low_scene_percentile
+from ..instrument import SECOND_RECEIVER
+from .insar import form_interferogram, low_scene_percentile
 from .insar_geometry import InsalGeometry
 from .registration import Registration, estimate_registration
-from .unwrap import unwrap_quality
+from .strip_unwrap import StripUnwrapper
 
 
 @dataclass(frozen=True)
@@ -55,6 +55,9 @@ class HeightStripStage:
     on the first ``strip_lines + 2·overlap_lines`` lines (``subpixel`` as estimate_registration)
     and keeps it.  ``flat_earth``: phasor per range bin (default: the geometry's reference plane).
     """
+
+    kind = "insal"  # the 3D method, as --height names it
+    channels = (SECOND_RECEIVER,)  # the auxiliary channel it reads beside the main one
 
     def __init__(
         self,
@@ -87,7 +90,7 @@ class HeightStripStage:
         self.method = method
         self.subpixel = subpixel
         self.taps = taps
-        self._low_percentile = low_scene_percentile(geometry, self.range_m)
+        self._unwrapper = StripUnwrapper(method, low_scene_percentile(geometry, self.range_m))
         fe = geometry.flat_earth_phasor(self.range_m) if flat_earth is None else flat_earth
         self.flat_earth = np.asarray(fe, np.complex128).reshape(1, -1)
         bins = len(self.range_m)
@@ -98,14 +101,11 @@ class HeightStripStage:
         self._first = 0  # global line index of the buffers' row 0
         self._slave_in = 0
         self._next = 0  # first line of the next strip
-        self._prev_unw = None  # unwrapped phase of lines [next - O, next), previous strip
-        self._prev_valid = None
         self._prev_last = None  # (height, valid) of line next - 1
         self._done = False
         self.lines_in = 0
         self.nonfinite_lines = 0  # lines holding NaN/Inf (zeroed; their pixels come out masked)
         self.strips_out = 0
-        self.strips_not_aligned = 0
         self.pixels_masked = 0
         self.max_boundary_jump_m = 0.0  # max |h(first line) - h(line before)| at strip boundaries
         self.max_interior_step_m = 0.0  # the same between neighbouring lines inside strips
@@ -199,28 +199,15 @@ class HeightStripStage:
         )
         dom = slice(u0 - b0, u1 - b0)
         valid = ifg.valid[dom]
-        wrapped = np.where(valid, ifg.wrapped_rad[dom], 0.0)
         coherence = ifg.coherence[dom]
-        unw = unwrap_quality(wrapped, valid, self.method, coherence) if u1 - u0 > 1 else wrapped
-        aligned = False
-        if self._prev_unw is not None:
-            n = start - u0
-            both = self._prev_valid[-n:] & valid[:n]
-            if both.any():
-                diff = self._prev_unw[-n:][both] - unw[:n][both]
-                unw = unw + TWO_PI * math.floor(float(np.median(diff)) / TWO_PI + 0.5)
-                aligned = True
-        if not aligned:
-            unw = unw + absolute_cycle_shift(unw, valid, self._low_percentile)
-            if self._prev_unw is not None:
-                self.strips_not_aligned += 1
-        unw = np.where(valid, unw, 0.0)
+        n = start - u0  # lines shared with the previous strip
+        prev_unw, prev_valid = self._unwrapper.prev_unw, self._unwrapper.prev_valid
+        unw, aligned = self._unwrapper.unwrap(ifg.wrapped_rad[dom], valid, coherence, n)
         height = np.where(valid, self.geometry.height_from_phase(self.range_m[None, :], unw), 0.0)
         e0, e1 = start - u0, stop - u0
-        if self._prev_unw is not None and aligned:
-            n = start - u0
-            both = self._prev_valid[-n:] & valid[:n]
-            prev_h = self.geometry.height_from_phase(self.range_m[None, :], self._prev_unw[-n:])
+        if aligned:
+            both = prev_valid[-n:] & valid[:n]
+            prev_h = self.geometry.height_from_phase(self.range_m[None, :], prev_unw[-n:])
             self.max_overlap_mismatch_m = max(
                 self.max_overlap_mismatch_m, float(np.max(np.abs(prev_h - height[:n])[both]))
             )
@@ -237,11 +224,15 @@ class HeightStripStage:
                 step = float(np.max(np.abs(np.diff(h_out, axis=0))[both]))
                 self.max_interior_step_m = max(self.max_interior_step_m, step)
         keep = slice(max(e1 - o, 0), e1)
-        self._prev_unw, self._prev_valid = unw[keep], valid[keep]
+        self._unwrapper.keep(unw[keep], valid[keep])
         self._prev_last = (h_out[-1], v_out[-1])
         self.strips_out += 1
         self.pixels_masked += int(v_out.size - v_out.sum())
         return HeightStrip(start, h_out, v_out, coherence[e0:e1], aligned)
+
+    @property
+    def strips_not_aligned(self) -> int:
+        return self._unwrapper.strips_not_aligned
 
     @property
     def stats(self) -> dict:

@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ...instrument import SECOND_RECEIVER
 from ...lens import range_axis_m
 from ...presets import PRESETS, preset
 from ...scene import Simulator, load_scene
@@ -126,16 +125,20 @@ def cmd_process(args) -> int:
         chain = correction_chain(args, cfg, rec.scene_object(), rec.start_along_track_m)
         check_channels(chain, rec)  # before the lens is built: a wrong request fails at once
         heights = height_stage(args, cfg, rec.scene_object())
-        second = None  # the second receiver's lens and CCD, in step with the main ones
+        receivers = {}  # each auxiliary receiver's lens and CCD, in step with the main ones
         if heights is not None:
-            if SECOND_RECEIVER not in rec.channels:
+            missing = [c for c in heights.channels if c not in rec.channels]
+            if missing:
                 raise ValueError(
-                    f"--height insal needs the second receiver's channel {SECOND_RECEIVER!r}; "
+                    f"--height {args.height} needs the channel(s) {', '.join(missing)}; "
                     f"{args.recording} holds {', '.join(sorted(rec.channels)) or 'none'}"
                 )
             if chain and chain.line_stages:
                 raise ValueError("--height with pra or pga is not supported (main receiver only)")
-            second = StreamProcessor(cfg, args.lens, args.device, rec.start_along_track_m)
+            receivers = {
+                c: StreamProcessor(cfg, args.lens, args.device, rec.start_along_track_m)
+                for c in heights.channels
+            }
         eng = StreamProcessor(
             cfg, args.lens, args.device, rec.start_along_track_m, chain, physical_ccd(args)
         )
@@ -152,24 +155,24 @@ def cmd_process(args) -> int:
         with (
             replace_when_complete(args.output) as tmp,
             ImageWriter(
-                tmp, cfg, eng.range_m, heights=second is not None, source=str(args.recording)
+                tmp, cfg, eng.range_m, heights=bool(receivers), source=str(args.recording)
             ) as img,
         ):
             for shots, aux in rec.batches_with_aux(cfg.processor.micro_batch):
                 out = eng.push(shots, aux)
                 img.write(out.lines, eng.azimuth_m(out.first_line, len(out.lines)))
-                if second is not None:
-                    lines2 = second.push(aux[SECOND_RECEIVER]).lines
-                    _write_heights(img, heights.process(out.lines, lines2))
+                if receivers:
+                    more = [e.push(aux[c]).lines for c, e in receivers.items()]
+                    _write_heights(img, heights.process(out.lines, *more))
                 done += len(shots)
                 prog.update(done)
             out = eng.flush()
             img.write(out.lines, eng.azimuth_m(out.first_line, len(out.lines)))
             extra = {}
-            if second is not None:
-                strips = heights.process(out.lines, second.flush().lines) + heights.flush()
-                _write_heights(img, strips)
-                extra = {"height_method": "insal", "height_strips": heights.strips_out}
+            if receivers:
+                more = [e.flush().lines for e in receivers.values()]
+                _write_heights(img, heights.process(out.lines, *more) + heights.flush())
+                extra = {"height_method": args.height, "height_strips": heights.strips_out}
             img.close(
                 lens=eng.lens.backend,
                 correlator=cfg.processor.correlator,

@@ -14,9 +14,10 @@ from ...focus.chain import CorrectionChain
 from ...lens import LENS_BACKENDS, range_axis_m
 from ...params import PRECISIONS, Processor
 from ...physical import CARRIERS, paper_ccd
-from ...scene.correction_context import correction_context, insal_geometry
+from ...scene.correction_context import correction_context, insal_geometry, modulation_geometry
 from ...sinks.publish import DEFAULT_ENDPOINT, DELIVERIES, STALL_TIMEOUT_S
 from ...stream.pipeline import STAGE_LAYOUTS, PipelineSettings
+from ...topo.sam3d_strips import SamHeightStripStage
 from ...topo.stream import HeightStripStage
 
 
@@ -89,14 +90,18 @@ def add_processing_knobs(g) -> None:
     )
 
 
+HEIGHT_METHODS = ("insal", "sam")
+
+
 def add_height_options(g) -> None:
     """--height and its strip size (process, run, replay)."""
     g.add_argument(
         "--height",
-        choices=("insal",),
-        help="3D: height strips from the second receiver (interferometric SAL, Zhao 2014), "
-        "published on the 'height' topic and written beside the image; needs a scene or "
-        "recording with the interferometric_receivers effect",
+        choices=HEIGHT_METHODS,
+        help="3D: height strips, published on the 'height' topic and written beside the image: "
+        "insal (a second receiver, Zhao 2014; the scene's interferometric_receivers effect) or "
+        "sam (cosine/sine-masked channels S1, S2, the INO 3D patent; the scene's "
+        "amplitude_modulation_3d effect)",
     )
     g.add_argument(
         "--height-strip-lines",
@@ -115,9 +120,10 @@ def height_stage(args, cfg, scene):
         raise ValueError(f"--height-strip-lines must be >= 8, got {args.height_strip_lines}")
     if getattr(args, "physical", None):
         raise ValueError("--height with --physical is not supported (the ideal CCD only)")
-    return HeightStripStage(
-        insal_geometry(scene), range_axis_m(cfg), strip_lines=args.height_strip_lines
-    )
+    rg, lines = range_axis_m(cfg), args.height_strip_lines
+    if args.height == "sam":
+        return SamHeightStripStage(modulation_geometry(scene), rg, strip_lines=lines)
+    return HeightStripStage(insal_geometry(scene), rg, strip_lines=lines)
 
 
 def add_pipeline_options(s, delivery: str) -> None:

@@ -216,3 +216,31 @@ def focus_channels(
         image, azimuth_m, range_m = process_block(config, shots, lens_backend, start_along_track_m)
         images.append(image)
     return images, azimuth_m, range_m
+
+
+def brightest_point(
+    config: Config, batches, start_along_track_m: float = 0.0, lens_backend: str = "numpy"
+) -> tuple[float, float]:
+    """(along-track, slant range) in metres of the brightest pixel of the image that ``batches``
+    (shots [pulse, sample], in order) focus to, uncorrected; bounded memory (one line block at
+    a time).  ``--correct pra`` takes it as the retro-reflector when neither the command nor the
+    scene gives one (Crouch's retro is the scene's brightest point)."""
+    eng = StreamProcessor(config, lens_backend, None, start_along_track_m)
+    best, where = -1.0, (0, 0)
+
+    def look(out: Lines) -> None:
+        nonlocal best, where
+        if len(out.lines):
+            mag = np.abs(out.lines)
+            k = int(np.argmax(mag))
+            if mag.flat[k] > best:
+                best = float(mag.flat[k])
+                where = (out.first_line + k // mag.shape[1], k % mag.shape[1])
+
+    for shots in batches:
+        look(eng.push(shots))
+    look(eng.flush())
+    if best <= 0:
+        raise ValueError("no bright point to take as the retro-reflector: the image is empty")
+    line, col = where
+    return float(eng.azimuth_m(line, 1)[0]), float(eng.range_m[col])

@@ -122,7 +122,7 @@ def simulate_to(scene, output) -> None:
 def cmd_process(args) -> int:
     with open_recording(args.recording) as rec:
         cfg = processor_changes(args, rec.config)
-        chain = correction_chain(args, cfg, rec.scene_object(), rec.start_along_track_m)
+        chain = correction_chain(args, cfg, rec.scene_object(), rec.start_along_track_m, rec)
         check_channels(chain, rec)  # before the lens is built: a wrong request fails at once
         heights = height_stage(args, cfg, rec.scene_object())
         receivers = {}  # each auxiliary receiver's lens and CCD, in step with the main ones

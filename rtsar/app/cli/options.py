@@ -16,6 +16,7 @@ from ...params import PRECISIONS, Processor
 from ...physical import CARRIERS, paper_ccd
 from ...scene.correction_context import correction_context, insal_geometry, modulation_geometry
 from ...sinks.publish import DEFAULT_ENDPOINT, DELIVERIES, STALL_TIMEOUT_S
+from ...stream.engine import brightest_point
 from ...stream.pipeline import STAGE_LAYOUTS, PipelineSettings
 from ...topo.sam3d_strips import SamHeightStripStage
 from ...topo.stream import HeightStripStage
@@ -71,8 +72,8 @@ def add_processing_knobs(g) -> None:
         action="append",
         metavar="NAME[:KEY=VALUE,...]",
         help=f"phase/chirp correction in the stream, repeatable: {', '.join(CORRECTIONS)} "
-        "(pra: pra:along_track_m=X,range_m=R; default the scene's brightest point; README "
-        "'Phase errors and focusing')",
+        "(pra: pra:along_track_m=X,range_m=R; default the scene's brightest point, or a "
+        "recording's found in a first pass; README 'Phase errors and focusing')",
     )
     g.add_argument(
         "--physical",
@@ -233,12 +234,24 @@ def processor_changes(args, cfg):
     return cfg.with_processor(**changes) if changes else cfg
 
 
-def correction_chain(args, cfg, scene=None, start_along_track_m=0.0):
+def correction_chain(args, cfg, scene=None, start_along_track_m=0.0, recording=None):
     """The --correct stages as a CorrectionChain (None when none are asked for); ``scene``
-    supplies the defaults and geometry the corrections read from it."""
+    supplies the defaults and geometry the corrections read from it.  ``pra`` without a position
+    and without a scene that names one takes the brightest point of ``recording`` (a first,
+    uncorrected pass over it)."""
     if not getattr(args, "correct", None):
         return None
     context = correction_context(scene, start_along_track_m)
+    bare_pra = any(s.split(":")[0].strip() == "pra" and "=" not in s for s in args.correct)
+    if bare_pra and context.retro_m is None and recording is not None:
+        batches = recording.batches(cfg.processor.micro_batch)
+        x, r = brightest_point(cfg, batches, recording.start_along_track_m)
+        print(
+            f"pra: taking the brightest point of {recording.path} as the retro-reflector: "
+            f"along track {x:.6g} m, slant range {r:.6g} m (found in a first pass)",
+            file=sys.stderr,
+        )
+        context = replace(context, retro_m=(x, r))
     return CorrectionChain.from_specs(args.correct, cfg, context)
 
 

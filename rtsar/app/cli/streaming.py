@@ -136,7 +136,7 @@ def cmd_replay(args) -> int:
         strip_lines(args, cfg.geometry.prf_hz)
         batch = args.max_batch or cfg.processor.micro_batch
         source = ReplaySource.from_recording(rec, args.rate, batch)
-        chain = correction_chain(args, cfg, rec.scene_object(), rec.start_along_track_m)
+        chain = correction_chain(args, cfg, rec.scene_object(), rec.start_along_track_m, rec)
         check_channels(chain, rec)
         return run_stream(
             cfg,

@@ -136,3 +136,26 @@ def test_quicklook_true_aspect(tmp_path):
     h, w = dark_box(true)
     assert h / w == pytest.approx(4.0, rel=0.1)  # 40 m by 10 m drawn 4:1
     assert plain.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_outputs_are_checked_before_the_work(tmp_path, capsys):
+    """An output that cannot be written is reported at once (exit 2), not after the work."""
+    import time
+
+    bad = str(tmp_path / "no-such-folder" / "x")
+    for args in (
+        ["table1", "--out", bad + ".md"],
+        ["bench", "--json", bad + ".json"],
+        ["run", "--duration", "30", "-o", bad + ".h5"],
+        ["subscribe", "ipc://" + str(tmp_path / "nothing"), "-o", bad + ".h5"],
+    ):
+        t0 = time.perf_counter()
+        assert main(args) == 2, args
+        assert time.perf_counter() - t0 < 5, args
+        assert "does not exist" in capsys.readouterr().err
+
+
+def test_version():
+    with pytest.raises(SystemExit) as info:
+        main(["--version"])
+    assert info.value.code == 0

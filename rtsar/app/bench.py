@@ -22,6 +22,7 @@ from ..lens.base import make_lens, opencl_unavailable
 from ..lens.numpy_lens import NumpyLens
 from ..lens.plan import make_plan
 from ..presets import preset
+from ..sinks.io import check_writable
 from .bench_pipeline import bench_pipeline
 
 
@@ -147,6 +148,8 @@ def run_bench(args) -> int:
     cfg = preset(name)
     out = sys.stdout
     seconds = args.seconds
+    if args.json:
+        check_writable(args.json)  # before the minutes of measuring
     reason = None if args.device else opencl_unavailable()
     if reason is None:
         from ..lens.cl_loader import device_info

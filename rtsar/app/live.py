@@ -10,6 +10,7 @@ import sys
 import time
 
 from ..params import Config
+from ..sinks.io import check_writable
 from ..sinks.publish import STALL_TIMEOUT_S, ZmqPublisher
 from ..sinks.record import ImageFileSink
 from ..stream.pipeline import Pipeline, PipelineSettings
@@ -171,6 +172,7 @@ def run_stream(
     sinks: list = [publisher]
     recorder = None
     if output:
+        check_writable(output)  # before the stream starts, not at its first strip
         recorder = ImageFileSink(output, source.description)
         sinks.append(recorder)
     last = [0.0]

@@ -6,6 +6,7 @@ import sys
 import time
 
 from ..sinks.client import StripSubscriber
+from ..sinks.io import check_writable
 from ..sinks.record import StripRecorder
 from . import signals
 
@@ -21,6 +22,7 @@ def subscribe(
     """Write every strip received into ``output`` until the stream's end message, Ctrl-C, or
     ``timeout_s`` without a message.  Missed strips become zero lines, counted and listed."""
     stream = stream or sys.stderr
+    check_writable(output)  # before listening, not at the first strip
     sub = StripSubscriber(endpoint, curve_server_key, curve_client_key, hwm_messages=0)
     rec = StripRecorder(output, endpoint)
     final = None

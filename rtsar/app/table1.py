@@ -44,6 +44,7 @@ from ..physical.carrier import pulses_integrated, range_cells
 from ..physical.settings import PhysicalSettings, paper_ccd
 from ..presets import preset
 from ..scene import Simulator, point_scene
+from ..sinks.io import check_writable
 
 # Psaltis & Wagner 1981, Table 1, as printed.
 PAPER = {
@@ -405,12 +406,17 @@ def add_arguments(parser) -> None:
 
 def run(args) -> int:
     """``rtsar table1``: progress on stderr, the table on stdout (or --out)."""
+    outputs = [p for p in (getattr(args, "out", None), getattr(args, "json", None)) if p]
+    for path in outputs:
+        check_writable(path)  # before the ~25 s of work
     data = table1_data(speed=getattr(args, "speed", False))
     text = table1_markdown(data)
     if getattr(args, "out", None):
         Path(args.out).write_text(text, encoding="utf-8")
+        print(f"wrote {args.out}", file=sys.stderr)
     else:
         sys.stdout.write(text)
     if getattr(args, "json", None):
         Path(args.json).write_text(json.dumps(data, indent=2, default=float), encoding="utf-8")
+        print(f"wrote {args.json}", file=sys.stderr)
     return 0

@@ -37,6 +37,19 @@ FORMAT_VERSION = 1  # images (rtsar.sinks.image_file)
 RECORDING_VERSION = 2  # 2: auxiliary channels under /channels
 
 
+def check_writable(path: str | Path) -> None:
+    """ValueError now, before any work, when ``path`` could not be written later (its folder is
+    missing or not writable, or it is a folder)."""
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    if path.is_dir():
+        raise ValueError(f"cannot write {path}: it is a folder")
+    if not folder.is_dir():
+        raise ValueError(f"cannot write {path}: the folder {folder} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise ValueError(f"cannot write {path}: permission denied")
+
+
 @contextmanager
 def replace_when_complete(path: str | Path) -> Iterator[Path]:
     """Write to a temporary file beside ``path``, renamed to ``path`` only when the block ends

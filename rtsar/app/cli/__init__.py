@@ -11,6 +11,7 @@ import argparse
 import sys
 import warnings
 
+from ... import __version__
 from ...sinks.publish import DEFAULT_ENDPOINT
 from .. import signals
 from . import files, measure, streaming
@@ -41,6 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
         "processor: an OpenCL 'AO lens' compresses each pulse in range, a shifting-"
         "CCD correlator with a chirp mask compresses in azimuth.",
     )
+    p.add_argument("--version", action="version", version=f"rtsar {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     files.add_parsers(sub)
     streaming.add_parsers(sub)

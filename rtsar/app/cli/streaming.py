@@ -287,7 +287,7 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "demo",
-        help="the 3D demo: InSAL heights of Zhao's ridge, published live (about a minute)",
+        help="the 3D demo: InSAL heights of Zhao's ridge, published live (about 20 s)",
         description="Simulate the built-in scene insal-ridge once (about 10 s; the recording "
         f"is cached in {DEMO_CACHE}), then replay it at --rate times its PRF through the "
         "pipeline with height strips (--height insal), publishing image and height strips "

@@ -298,3 +298,40 @@ def test_sam_heights_from_the_commands(tmp_path):
     np.testing.assert_array_equal(v, maps[16][1])
     np.testing.assert_allclose(h, maps[16][0], atol=1e-7)
     assert read_image(out)[3]["height_method"] == "sam"
+
+
+def test_heights_land_on_their_image_rows_across_a_line_jump(tmp_path):
+    """A strip far ahead is not zero-filled (line_jumps); a height strip after it must land on
+    the image rows of its lines, not on row = line index."""
+    import json as _json
+
+    from rtsar.presets import preset
+    from rtsar.sinks.record import StripRecorder
+
+    bins = 4
+    head = {
+        "stream_id": "s",
+        "range_bins": bins,
+        "range_first_m": 100.0,
+        "range_step_m": 1.0,
+        "azimuth_step_m": 1.0,
+        "config": preset("tiny").to_dict(),
+        "height_strips": True,
+        "height_kind": "insal",
+    }
+    rec = StripRecorder(tmp_path / "j.h5", "test", max_fill_bytes=1000)
+    rec.add_strip(
+        {**head, "first_line": 0, "azimuth_first_m": 0.0}, np.ones((2, bins), np.complex64)
+    )
+    far = 10**6
+    rec.add_strip(
+        {**head, "first_line": far, "azimuth_first_m": float(far)}, np.ones((2, bins), np.complex64)
+    )
+    h = np.full((2, bins), 7e-4, np.float32)
+    rec.add_height({**head, "first_line": far}, h, np.ones((2, bins), bool))
+    rec.finish()
+    height, valid = read_heights(tmp_path / "j.h5")
+    assert valid[2:].all() and not valid[:2].any()  # rows 2-3 hold lines far, far + 1
+    np.testing.assert_allclose(height[2:], 7e-4)
+    with h5py.File(tmp_path / "j.h5") as f:
+        assert _json.loads(f.attrs["line_jumps"]) == [[2, far - 2]]

@@ -48,6 +48,7 @@ class StripRecorder:
         self.height_kind = ""
         self.inconsistent_heights = 0
         self._early_heights: list = []  # height strips that came before the first image strip
+        self._skipped = [(0, 0)]  # (line index, lines skipped by jumps before it): line → row
         self.counters: dict = {}
 
     def _axes(self, header: dict) -> tuple:
@@ -104,6 +105,7 @@ class StripRecorder:
                 self._write(np.zeros((gap, lines.shape[1]), np.complex64))
             else:  # not filled: listed, the lines after it keep their true positions
                 self.line_jumps.append([self.next_line, gap])
+                self._skipped.append((first, self._skipped[-1][1] + gap))
                 self.next_line = first
         self.flagged_runs.extend(list(r) for r in header.get("flagged_lines", []))
         self.counters = header.get("counters", self.counters)
@@ -129,7 +131,9 @@ class StripRecorder:
         if not shape_ok or (coherence is not None and coherence.shape != height_m.shape):
             self.inconsistent_heights += 1
             return
-        row = int(header["first_line"]) - self.first_line
+        line = int(header["first_line"])
+        skipped = next(s for start, s in reversed(self._skipped) if start <= line or start == 0)
+        row = line - self.first_line - skipped  # the image row of that line
         if row < 0:  # a late subscriber: the strip began before its image
             cut, row = -row, 0
             height_m, valid = height_m[cut:], valid[cut:]

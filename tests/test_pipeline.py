@@ -362,3 +362,9 @@ def test_the_live_status_warns_when_processing_falls_below_the_source_rate():
     assert len(said) == 1  # once, not on every status line
     assert "processing 1,093 pulses/s, below the source's 1,600 Hz" in said[0]
     assert "rtsar replay" in said[0]
+
+
+def test_a_sink_that_is_not_a_strip_sink_is_refused_at_once(tiny):
+    cfg, _, shots = tiny
+    with pytest.raises(TypeError, match="StripSink"):
+        Pipeline(cfg, replay(cfg, shots), [object()], PipelineSettings())

@@ -118,6 +118,9 @@ class Pipeline:
             )
         self.source = source
         self.sinks = list(sinks)
+        for sink in self.sinks:  # a wrong object fails here, not in a stage thread mid-stream
+            if not isinstance(sink, StripSink):
+                raise TypeError(f"sinks must be StripSink objects, got {type(sink).__name__}")
         self.settings = s = settings or PipelineSettings()
         n = config.processor.aperture_pulses
         capacity = s.queue_pulses or 8 * n

@@ -191,3 +191,69 @@ def test_a_hostile_publisher_is_counted_not_obeyed(tmp_path, capsys):
     assert "bad messages 4" in err and "line-number jumps not filled 1" in err
     assert out.stat().st_size < 5_000_000
     pub.close(0)
+
+
+def test_one_message_cannot_end_or_poison_a_recording(tmp_path, capsys):
+    """A seq of 10**30, a strip of another stream, a JSON header nested 200 000 deep and one
+    strip 10**15 lines ahead: each counted, none ends `rtsar subscribe`, none crashes it, and
+    every honest strip after them is written."""
+    import threading
+    import time
+
+    import zmq
+
+    from rtsar.sinks.image_file import read_image
+
+    pub = zmq.Context.instance().socket(zmq.XPUB)
+    pub.bind("tcp://127.0.0.1:*")
+    endpoint = pub.getsockopt_string(zmq.LAST_ENDPOINT)
+    out = tmp_path / "sub.h5"
+    result = {}
+    t = threading.Thread(
+        target=lambda: result.setdefault(
+            "rc", main(["subscribe", endpoint, "-o", str(out), "--timeout", "15"])
+        ),
+        daemon=True,
+    )
+    t.start()
+    assert pub.poll(10_000)
+    pub.recv()
+    time.sleep(0.2)
+    bins = 8
+    head = {
+        "format": "rtsar-strip",
+        "version": 1,
+        "stream_id": "s",
+        "line_count": 2,
+        "range_bins": bins,
+        "dtype": "complex64",
+        "byte_order": "little",
+        "azimuth_first_m": 0.0,
+        "azimuth_step_m": 1.0,
+        "range_first_m": 100.0,
+        "range_step_m": 3.0,
+        "config": CFG.to_dict(),
+    }
+    data = np.ones((2, bins), np.complex64).tobytes()
+
+    def send(seq_no, first, **other):
+        h = {**head, "seq": seq_no, "first_line": first, **other}
+        pub.send_multipart([b"strip", json.dumps(h).encode(), data])
+
+    send(0, 0)
+    send(10**30, 2)  # not an integer any JSON reader keeps: a bad message
+    send(1, 2, stream_id="other")  # another publisher's strip: counted, not written
+    pub.send_multipart([b"strip", b"[" * 200_000, data])  # deeper than the JSON parser goes
+    send(2, 10**15)  # one strip far ahead, not confirmed by the next: dropped
+    for k in range(3, 8):
+        send(k, 2 * (k - 2))  # the honest strips go on: lines 2 … 11
+    pub.send_multipart([b"end", json.dumps({"stream_id": "s", "counters": {}}).encode()])
+    t.join(20)
+    pub.close(0)
+    assert not t.is_alive() and result["rc"] == 0
+    image, az, _, attrs = read_image(out)
+    assert image.shape == (12, bins) and attrs["complete"]
+    np.testing.assert_array_equal(az, np.arange(12))
+    assert attrs["other_stream_strips"] == 1 and attrs["stray_strips"] == 1
+    assert json.loads(attrs["line_jumps"]) == []
+    assert "bad messages 2" in capsys.readouterr().err

@@ -327,11 +327,16 @@ def test_heights_land_on_their_image_rows_across_a_line_jump(tmp_path):
     rec.add_strip(
         {**head, "first_line": far, "azimuth_first_m": float(far)}, np.ones((2, bins), np.complex64)
     )
+    # the next strip continues from it: the jump is real (a lone far strip would be dropped)
+    rec.add_strip(
+        {**head, "first_line": far + 2, "azimuth_first_m": float(far + 2)},
+        np.ones((2, bins), np.complex64),
+    )
     h = np.full((2, bins), 7e-4, np.float32)
     rec.add_height({**head, "first_line": far}, h, np.ones((2, bins), bool))
     rec.finish()
     height, valid = read_heights(tmp_path / "j.h5")
-    assert valid[2:].all() and not valid[:2].any()  # rows 2-3 hold lines far, far + 1
-    np.testing.assert_allclose(height[2:], 7e-4)
+    assert valid[2:4].all() and not valid[:2].any() and not valid[4:].any()  # far, far + 1
+    np.testing.assert_allclose(height[2:4], 7e-4)
     with h5py.File(tmp_path / "j.h5") as f:
         assert _json.loads(f.attrs["line_jumps"]) == [[2, far - 2]]

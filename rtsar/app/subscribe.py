@@ -80,6 +80,8 @@ def subscribe(
             ("strips that did not fit the image", rec.inconsistent_strips),
             ("line-number jumps not filled", len(rec.line_jumps)),
             ("repeated strips", rec.overlapping_strips),
+            ("strips of another stream (a restarted publisher?)", rec.other_stream_strips),
+            ("strips far ahead that the next did not confirm", rec.stray_strips),
         )
         if value
     ]

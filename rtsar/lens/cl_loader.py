@@ -226,8 +226,12 @@ def build_program(
     try:
         program = cl.Program(context, source).build(options=list(opts))
     except cl.RuntimeError as exc:
+        text = str(exc)
+        errors = [ln.strip() for ln in text.splitlines() if ln.strip().startswith("error:")]
+        first = errors[0] if errors else (text.strip().splitlines() or ["no build log"])[0]
+        hint = _build_hint(text).replace("\n", " ")
         raise RuntimeError(
-            f"building {name} with {' '.join(opts)} failed:\n{exc}{_build_hint(str(exc))}"
+            f"building {name} on {context.devices[0].name.strip()} failed: {first}{hint}"
         ) from exc
     with _lock:
         return cache.setdefault(key, program)

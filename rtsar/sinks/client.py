@@ -9,7 +9,7 @@ import zmq
 import zmq.auth
 
 from .publish import DEFAULT_ENDPOINT, load_secret_key
-from .wire import Message, decode
+from .wire import MAX_FRAME_BYTES, Message, decode
 
 
 class StripSubscriber:
@@ -33,6 +33,9 @@ class StripSubscriber:
         self.socket = s = ctx.socket(zmq.SUB)
         s.setsockopt(zmq.LINGER, 0)
         s.setsockopt(zmq.RCVHWM, int(hwm_messages))
+        # A message part larger than any strip can be drops the connection instead of filling
+        # the memory (a header's numbers are checked, but the bytes arrive first).
+        s.setsockopt(zmq.MAXMSGSIZE, MAX_FRAME_BYTES)
         if curve_client_key is not None and curve_server_key is None:
             raise ValueError("a CURVE client key needs the publisher's key (--curve-server-key)")
         if curve_server_key is not None:
@@ -54,7 +57,7 @@ class StripSubscriber:
         self.endpoint = endpoint
         self.counters = {"strips": 0, "missed_strips": 0, "bad_messages": 0}
         self.stream_id: str | None = None
-        self._next_seq: int | None = None
+        self._next_seq: dict[str, int] = {}  # stream_id → the seq expected next
 
     def recv(self, timeout_s: float | None = None) -> Message | None:
         """Next valid message, or None after ``timeout_s`` without one."""
@@ -76,13 +79,17 @@ class StripSubscriber:
             return msg
 
     def _count(self, header: dict) -> None:
-        if header.get("stream_id") != self.stream_id:
-            self.stream_id = header.get("stream_id")
-            self._next_seq = None
+        """Gaps in ``seq`` per stream (a strip of another stream does not reset the count)."""
+        stream = header.get("stream_id")
+        if self.stream_id is None:
+            self.stream_id = stream
+        expected = self._next_seq.get(stream)
         seq = int(header["seq"])
-        if self._next_seq is not None and seq > self._next_seq:
-            self.counters["missed_strips"] += seq - self._next_seq
-        self._next_seq = seq + 1
+        if expected is not None and seq > expected:
+            self.counters["missed_strips"] += seq - expected
+        self._next_seq[stream] = max(seq + 1, expected or 0)
+        while len(self._next_seq) > 8:  # bounded: the oldest streams are forgotten
+            self._next_seq.pop(next(iter(self._next_seq)))
         self.counters["strips"] += 1
 
     def close(self) -> None:

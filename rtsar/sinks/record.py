@@ -2,9 +2,12 @@
 
 Strips are written as they come (bounded memory).  A strip that never arrived leaves zero lines
 in the image; they are counted (``missing_lines``) and listed in the ``missing_line_runs``
-attribute, never hidden — up to ``max_fill_bytes`` of zeros per gap: a longer jump of
-``first_line`` (a publisher's bug or a hostile one) is not filled but listed in ``line_jumps``
-(the ``azimuth_m`` dataset keeps every written line's true position).  A strip that does not fit
+attribute, never hidden — up to ``max_fill_bytes`` of zeros per gap.  A longer jump of
+``first_line`` (a publisher's bug or a hostile one) is held until the next strip: if that one
+continues from it, the jump is real, not filled but listed in ``line_jumps`` (the ``azimuth_m``
+dataset keeps every written line's true position); if not, the strip is dropped and counted in
+``stray_strips``, and the image goes on.  Strips of another stream (a restarted or second
+publisher) are counted in ``other_stream_strips``, never written.  A strip that does not fit
 the image (other range axis or line spacing than the first strip's, a configuration that does
 not parse) is not written but counted in ``inconsistent_strips``.  Lines whose aperture held a
 zero-filled pulse are listed in ``flagged_line_runs``.  The image starts at the first strip
@@ -45,6 +48,9 @@ class StripRecorder:
         self.overlapping_strips = 0
         self.inconsistent_strips = 0
         self.height_strips = 0
+        self.other_stream_strips = 0  # strips of another stream_id: counted, not written
+        self.stray_strips = 0  # a far jump the next strip did not confirm: dropped
+        self._candidate: tuple | None = None  # (header, lines) of an unconfirmed far jump
         self.height_kind = ""
         self.inconsistent_heights = 0
         self._early_heights: list = []  # height strips that came before the first image strip
@@ -90,10 +96,25 @@ class StripRecorder:
             for args in early:
                 self.add_height(*args)
         if header.get("stream_id") != self.stream_id:
-            raise ValueError("a new stream started (publisher restarted); this image is closed")
+            self.other_stream_strips += 1  # a restarted or second publisher: not this image's
+            return
         if self._axes(header) != self._axes0 or lines.shape[1] != self._axes0[0]:
             self.inconsistent_strips += 1
             return
+        if self._candidate is not None:  # a jump far ahead: did the stream really move?
+            held, self._candidate = self._candidate, None
+            if first == int(held[0]["first_line"]) + len(held[1]):
+                self._accept(*held)  # confirmed: this strip continues from it
+            else:
+                self.stray_strips += 1  # a number out of thin air: dropped
+        first_gap = first - self.next_line
+        if first_gap * lines.shape[1] * 8 > self.max_fill_bytes:
+            self._candidate = (header, lines)  # held until the next strip says what it was
+            return
+        self._accept(header, lines)
+
+    def _accept(self, header: dict, lines: np.ndarray) -> None:
+        first = int(header["first_line"])
         if first < self.next_line:  # already written (should not happen on one connection)
             self.overlapping_strips += 1
             return
@@ -154,6 +175,9 @@ class StripRecorder:
         """Close the file (attributes: counters, gaps, flags); return the number of lines."""
         if self.writer is None:
             return 0
+        if self._candidate is not None:  # the stream ended on it: kept, as ingest keeps its last
+            held, self._candidate = self._candidate, None
+            self._accept(*held)
         counters = final_counters or self.counters
         self.writer.close(
             counters=json.dumps(counters),
@@ -162,6 +186,8 @@ class StripRecorder:
             missing_line_runs=json.dumps(self.missing_runs),
             line_jumps=json.dumps(self.line_jumps),
             inconsistent_strips=self.inconsistent_strips,
+            other_stream_strips=self.other_stream_strips,
+            stray_strips=self.stray_strips,
             flagged_line_runs=json.dumps(self.flagged_runs),
             **(
                 {

@@ -116,6 +116,8 @@ class Message:
 
 MAX_RANGE_BINS = 1 << 16  # the widest strip a subscriber accepts
 MAX_LINES = 1 << 16  # the most lines in one strip
+MAX_COUNT = (1 << 53) - 1  # seq and line numbers: integers every JSON reader keeps exactly
+MAX_FRAME_BYTES = 1 << 30  # the largest message part a subscriber accepts (ZMQ_MAXMSGSIZE)
 
 
 def _int(header: dict, key: str, low: int = 0, high: int | None = None) -> int:
@@ -139,8 +141,8 @@ def check_strip_header(header: dict) -> None:
         raise ValueError(f"not an {STRIP_FORMAT} v{STRIP_VERSION} strip")
     if not isinstance(header.get("stream_id"), str):
         raise ValueError("header field 'stream_id' must be a string")
-    _int(header, "seq")
-    _int(header, "first_line")
+    _int(header, "seq", 0, MAX_COUNT)
+    _int(header, "first_line", 0, MAX_COUNT)
     _int(header, "line_count", 1, MAX_LINES)
     _int(header, "range_bins", 1, MAX_RANGE_BINS)
     for key in ("azimuth_first_m", "azimuth_step_m", "range_first_m", "range_step_m"):
@@ -172,8 +174,8 @@ def decode(frames: list[bytes]) -> Message:
     topic = bytes(frames[0]).decode("ascii", "replace")
     try:
         header = json.loads(bytes(frames[1]))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ValueError(f"header is not JSON: {exc}") from None
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+        raise ValueError(f"header is not JSON: {type(exc).__name__}") from None
     if not isinstance(header, dict):
         raise ValueError("header is not a JSON object")
     if topic == "height":
@@ -194,6 +196,10 @@ def _decode_height(header: dict, frames: list[bytes]) -> Message:
     version = header.get("version")
     if header.get("format") != HEIGHT_FORMAT or version not in (1, HEIGHT_VERSION):
         raise ValueError(f"not an {HEIGHT_FORMAT} v1 or v{HEIGHT_VERSION} message")
+    if not isinstance(header.get("stream_id"), str):
+        raise ValueError("header field 'stream_id' must be a string")
+    _int(header, "seq", 0, MAX_COUNT)
+    _int(header, "first_line", 0, MAX_COUNT)
     count = 4 if version == 1 else 5
     if len(frames) != count:
         raise ValueError(f"a height message of version {version} has {count} frames")

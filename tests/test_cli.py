@@ -146,7 +146,7 @@ def test_outputs_are_checked_before_the_work(tmp_path, capsys):
     for args in (
         ["table1", "--out", bad + ".md"],
         ["bench", "--json", bad + ".json"],
-        ["run", "--duration", "30", "-o", bad + ".h5"],
+        ["run", "--duration", "30", "-o", bad + ".h5", "--endpoint", "ipc://" + bad + ".pub"],
         ["subscribe", "ipc://" + str(tmp_path / "nothing"), "-o", bad + ".h5"],
     ):
         t0 = time.perf_counter()

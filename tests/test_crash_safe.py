@@ -158,3 +158,42 @@ def test_a_clean_stream_is_marked_complete(tmp_path, capsys):
     with h5py.File(out, "r") as f:  # a plain reader opens a finished file
         assert f.attrs["complete"] and f["image"].shape[0] > 0
     assert not [p for p in os.listdir(tmp_path) if p.startswith(".")]
+
+
+def test_lines_written_before_a_quiet_spell_are_flushed_by_the_idle_call(tmp_path):
+    """Flushing happens on writes when due, and on flush_if_due() when the stream is quiet: a
+    kill during a stall loses nothing written more than the flush period before it."""
+    code = """
+import sys, time, numpy as np
+from rtsar.presets import preset
+from rtsar.sinks.image_file import ImageWriter
+cfg = preset("tiny")
+nr = cfg.processor.range_bins
+w = ImageWriter(sys.argv[1], cfg, np.arange(nr, dtype=float), crash_safe=True, flush_every_s=0.2)
+for k in range(3):
+    w.write(np.full((4, nr), k + 1, np.complex64), np.arange(4 * k, 4 * k + 4) * 0.5)
+print("written", flush=True)
+while True:  # the stream went quiet; the owner calls the idle flush
+    time.sleep(0.05)
+    w.flush_if_due()
+"""
+    path = tmp_path / "quiet.h5"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code, str(path)], stdout=subprocess.PIPE, text=True
+    )
+    assert proc.stdout.readline().strip() == "written"
+    time.sleep(0.6)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(10)
+    image, az, _, attrs = read_image(path)
+    assert len(image) == 12 and not attrs["complete"]
+
+
+def test_a_stale_temporary_name_does_not_block_the_next_run(tmp_path, monkeypatch):
+    from rtsar.sinks.io import replace_when_complete
+
+    out = tmp_path / "out.h5"
+    (tmp_path / f".out.h5.partial-{os.getpid()}").write_bytes(b"left by a killed run")
+    with replace_when_complete(out) as tmp:
+        tmp.write_bytes(b"new")
+    assert out.read_bytes() == b"new"

@@ -257,3 +257,47 @@ def test_one_message_cannot_end_or_poison_a_recording(tmp_path, capsys):
     assert attrs["other_stream_strips"] == 1 and attrs["stray_strips"] == 1
     assert json.loads(attrs["line_jumps"]) == []
     assert "bad messages 2" in capsys.readouterr().err
+
+
+def test_a_v1_height_header_allocates_nothing_from_its_numbers():
+    import tracemalloc
+
+    from rtsar.sinks.wire import decode
+
+    header = {"format": "rtsar-height", "version": 1, "stream_id": "x", "seq": 0}
+    header.update(first_line=0, line_count=65536, range_bins=65536)
+    tracemalloc.start()
+    with pytest.raises(ValueError, match="payload does not match"):
+        decode([b"height", json.dumps(header).encode(), b"", b""])
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 10_000_000
+
+
+def test_a_refused_recording_write_leaves_the_file_readable(tmp_path):
+    from rtsar.sinks.io import RecordingWriter, open_recording
+
+    path = tmp_path / "r.h5"
+    z = np.zeros((2, S), np.complex64)
+    step = CFG.geometry.along_track_step_m
+    with RecordingWriter(path, CFG) as w:
+        w.write(z, [0, 1], [0.0, 0.1], [0.0, step], {"a": z, "b": z})
+        with pytest.raises(ValueError, match="channel 'b'"):
+            w.write(z, [2, 3], [0.2, 0.3], [2 * step, 3 * step], {"a": z, "b": z[:, :3]})
+    with open_recording(path) as r:
+        assert r.pulses == 2 and r.channels["a"].shape == (2, S)
+
+
+def test_the_subscribers_own_stream_is_never_forgotten():
+    from rtsar.sinks.client import StripSubscriber
+
+    sub = StripSubscriber("tcp://127.0.0.1:1")
+    try:
+        for k in range(5):
+            sub._count({"stream_id": "A", "seq": k})
+        for k in range(8):
+            sub._count({"stream_id": f"B{k}", "seq": 0})
+        sub._count({"stream_id": "A", "seq": 50})
+        assert sub.counters["missed_strips"] == 45
+    finally:
+        sub.close()

@@ -340,3 +340,35 @@ def test_heights_land_on_their_image_rows_across_a_line_jump(tmp_path):
     np.testing.assert_allclose(height[2:4], 7e-4)
     with h5py.File(tmp_path / "j.h5") as f:
         assert _json.loads(f.attrs["line_jumps"]) == [[2, far - 2]]
+
+
+def test_height_lines_inside_a_line_jump_are_dropped_not_shifted(tmp_path):
+    from rtsar.presets import preset
+    from rtsar.sinks.record import StripRecorder
+
+    bins = 4
+    head = {
+        "stream_id": "s",
+        "range_bins": bins,
+        "range_first_m": 100.0,
+        "range_step_m": 1.0,
+        "azimuth_step_m": 1.0,
+        "config": preset("tiny").to_dict(),
+        "height_strips": True,
+        "height_kind": "insal",
+    }
+    rec = StripRecorder(tmp_path / "j.h5", "test", max_fill_bytes=10 * bins * 8)
+    for first in (0, 100, 104):  # lines 0-3, then a jump to 100 confirmed by 104
+        rec.add_strip(
+            {**head, "first_line": first, "azimuth_first_m": float(first)},
+            np.ones((4, bins), np.complex64),
+        )
+    h = (2 + np.arange(4, dtype=np.float32))[:, None] * np.ones((1, bins), np.float32) * 1e-4
+    rec.add_height({**head, "first_line": 2}, h, np.ones((4, bins), bool))  # lines 2-5
+    rec.add_height({**head, "first_line": 10**7}, h, np.ones((4, bins), bool))  # far beyond
+    rec.finish()
+    height, valid = read_heights(tmp_path / "j.h5")
+    assert valid[2:4].all() and not valid[4:].any()  # lines 4, 5 have no image row
+    np.testing.assert_allclose(height[2:4, 0], [2e-4, 3e-4])
+    with h5py.File(tmp_path / "j.h5") as f:
+        assert f["height_m"].shape[0] <= 12 and f.attrs["inconsistent_heights"] == 1

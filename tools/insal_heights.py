@@ -79,10 +79,13 @@ def score(name: str, method: str, args, folder: Path) -> list[str]:
         else:
             limit = modulation_geometry(scene).elevation_resolution_m  # eq. 14
         rms = e["rms_m"]
+        if rms is None:  # no valid pixel on the scored area
+            out.append(f"  strip {strip:3d}: no valid height on the surface: FAIL")
+            continue
         out.append(
             f"  strip {strip:3d}: rms {rms * 1e6:6.1f} µm, bias {e['bias_m'] * 1e6:6.1f} µm, "
             f"coverage {e['coverage']:.2f}, limit {limit * 1e6:.0f} µm: "
-            + ("pass" if rms is not None and rms <= limit else "FAIL")
+            + ("pass" if rms <= limit else "FAIL")
         )
     return out
 

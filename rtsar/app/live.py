@@ -161,6 +161,8 @@ def run_stream(
 
     tty = hasattr(stream, "isatty") and stream.isatty()
     source.notify = say
+    if output:
+        check_writable(output)  # before anything starts, not at the stream's first strip
     publisher = ZmqPublisher(
         endpoint,
         delivery,
@@ -172,7 +174,6 @@ def run_stream(
     sinks: list = [publisher]
     recorder = None
     if output:
-        check_writable(output)  # before the stream starts, not at its first strip
         recorder = ImageFileSink(output, source.description)
         sinks.append(recorder)
     last = [0.0]

@@ -30,11 +30,16 @@ def subscribe(
     print(f"subscribe: listening on {endpoint}; writing {output} (Ctrl-C to stop)", file=stream)
     last = time.perf_counter()
     try:
+        quiet_since = time.perf_counter()
         while True:
-            msg = sub.recv(timeout_s)
+            msg = sub.recv(0.5)  # in slices: a quiet stream still gets its lines flushed
             if msg is None:
-                print(f"subscribe: no message for {timeout_s:g} s, stopping", file=stream)
-                break
+                rec.flush_if_due()
+                if timeout_s is not None and time.perf_counter() - quiet_since >= timeout_s:
+                    print(f"subscribe: no message for {timeout_s:g} s, stopping", file=stream)
+                    break
+                continue
+            quiet_since = time.perf_counter()
             if msg.topic == "strip":
                 rec.add_strip(msg.header, msg.lines)
             elif msg.topic == "height":

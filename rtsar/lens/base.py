@@ -50,19 +50,26 @@ def make_lens(
     backend in use is the lens's ``backend`` attribute.
     """
     if backend == "auto":
+        requested = _device_requested(device)  # a device asked for by name is never replaced
         reason = opencl_unavailable(device)
-        if reason is None or _device_requested(device):
-            backend = "opencl"  # a device asked for by name is never silently replaced
-        else:
-            warnings.warn(
-                f"OpenCL lens unavailable, using the NumPy lens (same results, slower): {reason}."
-                " `--lens numpy` says so without this warning.",
-                RuntimeWarning,
-                stacklevel=2,
-            )
-            lens = NumpyLens(plan, precision=precision)
-            lens.fallback_reason = reason
-            return lens
+        if reason is None or requested:
+            from .opencl import AOLens
+
+            try:
+                return AOLens(plan, device=device, precision=precision)
+            except (RuntimeError, ValueError) as exc:  # the probe built, this plan did not
+                if requested:
+                    raise
+                reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        warnings.warn(
+            f"OpenCL lens unavailable, using the NumPy lens (same results, slower): {reason}."
+            " `--lens numpy` says so without this warning.",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+        lens = NumpyLens(plan, precision=precision)
+        lens.fallback_reason = reason
+        return lens
     if backend == "opencl":
         # Imported here, not above: pyopencl takes a while to load and the NumPy backend and
         # the tools that never compress (presets, quicklook, subscribe) do without it.

@@ -266,6 +266,8 @@ def probe(device: cl.Device | str | None = None) -> str | None:
     between the OpenCL lens and the NumPy one.
     """
     key = device if isinstance(device, str) or device is None else _label(device)
+    if device is None:  # the environment chooses the device: a change of it is another probe
+        key = f"env:{os.environ.get(ENV_DEVICE, '')}"
     with _lock:
         if key in _probes:
             return _probes[key]

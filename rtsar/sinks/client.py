@@ -88,8 +88,9 @@ class StripSubscriber:
         if expected is not None and seq > expected:
             self.counters["missed_strips"] += seq - expected
         self._next_seq[stream] = max(seq + 1, expected or 0)
-        while len(self._next_seq) > 8:  # bounded: the oldest streams are forgotten
-            self._next_seq.pop(next(iter(self._next_seq)))
+        while len(self._next_seq) > 8:  # bounded: the oldest other streams are forgotten
+            oldest = next(k for k in self._next_seq if k != self.stream_id)
+            self._next_seq.pop(oldest)
         self.counters["strips"] += 1
 
     def close(self) -> None:

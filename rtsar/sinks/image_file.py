@@ -133,6 +133,7 @@ class ImageWriter:
             self._f.swmr_mode = True  # from here on the file on disk is always readable
             os.replace(target, self.path)
         self._flushed_s = time.monotonic()
+        self._dirty = False
         self.lines = 0
 
     def write(self, lines: np.ndarray, azimuth_m: np.ndarray) -> None:
@@ -142,9 +143,17 @@ class ImageWriter:
         self._azimuth.resize(end, axis=0)
         self._azimuth[self.lines : end] = azimuth_m
         self.lines = end
-        if self.crash_safe and time.monotonic() - self._flushed_s >= self.flush_every_s:
-            self._f.flush()
-            self._flushed_s = time.monotonic()
+        self._dirty = True
+        self.flush_if_due()
+
+    def flush_if_due(self) -> None:
+        """Crash-safe files: flush what was written if the last flush is ``flush_every_s`` old
+        (called after every write, and by the writers' owners when a stream is idle)."""
+        if self.crash_safe and self._dirty and self._f.id.valid:
+            if time.monotonic() - self._flushed_s >= self.flush_every_s:
+                self._f.flush()
+                self._flushed_s = time.monotonic()
+                self._dirty = False
 
     @property
     def has_heights(self) -> bool:
@@ -165,6 +174,8 @@ class ImageWriter:
         self._valid[row:end] = valid
         self._coherence[row:end] = 0.0 if coherence is None else coherence
         self.height_lines = max(self.height_lines, end)
+        self._dirty = True
+        self.flush_if_due()
 
     def close(self, **attrs) -> None:
         """Close with the final attributes; ``complete`` True unless ``complete=False`` given."""

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import os
+import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -60,11 +61,12 @@ def replace_when_complete(path: str | Path) -> Iterator[Path]:
     work is done.
     """
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
     try:
-        tmp.open("xb").close()
+        fd, name = tempfile.mkstemp(prefix=f".{path.name}.partial-", dir=path.parent)
     except OSError as exc:
         raise ValueError(f"cannot write {path}: {exc.strerror or exc}") from None
+    os.close(fd)
+    tmp = Path(name)
     try:
         yield tmp
     except BaseException:
@@ -156,14 +158,16 @@ class RecordingWriter:
                 f"{sorted(self._channels)}"
             )
         end = self.pulses + n
+        if samples.shape[1:] != self._shots.shape[1:]:
+            raise ValueError(f"shots {samples.shape}, the recording's have {self._shots.shape[1]}")
+        channels = {name: np.asarray(aux[name]) for name in self._channels}
+        for name, values in channels.items():  # every check before any dataset grows
+            width = self._channels[name].shape[1]
+            if values.shape != (n, width):
+                raise ValueError(f"channel {name!r}: {values.shape} for {n} shots of {width}")
         for name, ds in self._channels.items():
-            values = np.asarray(aux[name])
-            if values.shape != (n, ds.shape[1]):
-                raise ValueError(
-                    f"channel {name!r}: {values.shape} for {n} shots of {ds.shape[1]} samples"
-                )
             ds.resize(end, axis=0)
-            ds[self.pulses : end] = values
+            ds[self.pulses : end] = channels[name]
         self._shots.resize(end, axis=0)
         self._shots[self.pulses : end] = samples
         for name, values in (

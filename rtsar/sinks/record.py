@@ -54,7 +54,6 @@ class StripRecorder:
         self.height_kind = ""
         self.inconsistent_heights = 0
         self._early_heights: list = []  # height strips that came before the first image strip
-        self._skipped = [(0, 0)]  # (line index, lines skipped by jumps before it): line → row
         self.counters: dict = {}
 
     def _axes(self, header: dict) -> tuple:
@@ -126,7 +125,6 @@ class StripRecorder:
                 self._write(np.zeros((gap, lines.shape[1]), np.complex64))
             else:  # not filled: listed, the lines after it keep their true positions
                 self.line_jumps.append([self.next_line, gap])
-                self._skipped.append((first, self._skipped[-1][1] + gap))
                 self.next_line = first
         self.flagged_runs.extend(list(r) for r in header.get("flagged_lines", []))
         self.counters = header.get("counters", self.counters)
@@ -152,18 +150,29 @@ class StripRecorder:
         if not shape_ok or (coherence is not None and coherence.shape != height_m.shape):
             self.inconsistent_heights += 1
             return
-        line = int(header["first_line"])
-        skipped = next(s for start, s in reversed(self._skipped) if start <= line or start == 0)
-        row = line - self.first_line - skipped  # the image row of that line
-        if row < 0:  # a late subscriber: the strip began before its image
-            cut, row = -row, 0
-            height_m, valid = height_m[cut:], valid[cut:]
-            coherence = None if coherence is None else coherence[cut:]
-        if row + len(height_m) > self.next_line + self.max_fill_bytes // 8 // height_m.shape[1]:
-            self.inconsistent_heights += 1  # far beyond the image: not obeyed
+        lines = int(header["first_line"]) + np.arange(len(height_m))
+        keep = lines >= self.first_line  # a late subscriber: lines before its image
+        skipped = np.zeros(len(lines), np.int64)
+        for start, gap in self.line_jumps:  # lines inside a jump have no image row
+            keep &= ~((lines >= start) & (lines < start + gap))
+            skipped += np.where(lines >= start + gap, gap, 0)
+        rows = (lines - self.first_line - skipped)[keep]
+        if not len(rows):
+            self.inconsistent_heights += 1
             return
-        w.write_heights(row, height_m, valid, coherence)
+        limit = w.lines + self.max_fill_bytes // 8 // height_m.shape[1]
+        if rows[-1] >= limit:  # far beyond the image's rows: not obeyed
+            self.inconsistent_heights += 1
+            return
+        coherence = None if coherence is None else coherence[keep]
+        w.write_heights(int(rows[0]), height_m[keep], valid[keep], coherence)
         self.height_strips += 1
+
+    def flush_if_due(self) -> None:
+        """Flush what is written when it is due (a stream that went quiet keeps no unflushed
+        lines for longer than the flush period)."""
+        if self.writer is not None:
+            self.writer.flush_if_due()
 
     def _write(self, lines: np.ndarray) -> None:
         j = self.next_line + np.arange(len(lines))
@@ -212,6 +221,9 @@ class ImageFileSink(StripSink):
 
     def strip(self, strip: Strip, info: StreamInfo) -> None:
         self.recorder.add_strip(strip_header(strip, info), strip.lines)
+
+    def stats(self, stats: dict, info: StreamInfo) -> None:  # periodic: flush a quiet stream
+        self.recorder.flush_if_due()
 
     def height(self, strip, seq: int, info: StreamInfo) -> None:
         self.recorder.add_height(

@@ -209,8 +209,8 @@ def _decode_height(header: dict, frames: list[bytes]) -> Message:
     )
     n = shape[0] * shape[1]
     h, v = bytes(frames[2]), bytes(frames[3])
-    c = bytes(frames[4]) if count == 5 else b"\0" * (4 * n)
-    if len(h) != 4 * n or len(v) != n or len(c) != 4 * n:
+    c = bytes(frames[4]) if count == 5 else None  # nothing is allocated from the header's numbers
+    if len(h) != 4 * n or len(v) != n or (c is not None and len(c) != 4 * n):
         raise ValueError(f"height payload does not match {shape}")
     return Message(
         "height",

@@ -111,10 +111,10 @@ class Pipeline:
     ):
         self.config = config
         self.corrections = corrections
-        if height is not None and corrections and corrections.line_stages:
+        if height is not None and corrections:
             raise ValueError(
-                "height strips with line-domain corrections (pra, pga) are not supported: they "
-                "correct the main receiver only and would bias the interferometric phase"
+                "height strips with --correct are not supported: the corrections act on the "
+                "main receiver only and would bias the height phase between the receivers"
             )
         self.source = source
         self.sinks = list(sinks)
@@ -124,7 +124,7 @@ class Pipeline:
         self.settings = s = settings or PipelineSettings()
         n = config.processor.aperture_pulses
         capacity = s.queue_pulses or 8 * n
-        check_memory(config, capacity, 1 if height is not None else 0)
+        check_memory(config, capacity, 0 if height is None else len(height.channels))
         self.engine = StreamProcessor(
             config, s.lens_backend, s.device, start_along_track_m, corrections, physical
         )

@@ -12,7 +12,8 @@ order, pairs them by line index and emits height strips of ``strip_lines`` lines
 * the new strip's 2π cycle is the one that best matches the previous strip's unwrapped phase on
   those O shared lines (median of the difference), so heights stay continuous across strip
   boundaries.  A strip without a valid shared pixel falls back to the absolute rule of the first
-  strip (the 10th percentile of its phase in [-π, π): rtsar.topo.insar.absolute_cycle_shift)
+  strip (the scene's lowest 10 % of heights within ±h_2π/2 of the reference plane:
+  rtsar.topo.insar.absolute_cycle_shift, low_scene_percentile)
   and is counted in ``strips_not_aligned``.
 
 Latency: a strip leaves L + O + margin lines after its first line.  Memory: the two line buffers

@@ -133,8 +133,11 @@ def cmd_process(args) -> int:
                     f"--height {args.height} needs the channel(s) {', '.join(missing)}; "
                     f"{args.recording} holds {', '.join(sorted(rec.channels)) or 'none'}"
                 )
-            if chain and chain.line_stages:
-                raise ValueError("--height with pra or pga is not supported (main receiver only)")
+            if chain:
+                raise ValueError(
+                    "--height with --correct is not supported: the corrections act on the main "
+                    "receiver only and would bias the height phase between the receivers"
+                )
             receivers = {
                 c: StreamProcessor(cfg, args.lens, args.device, rec.start_along_track_m)
                 for c in heights.channels

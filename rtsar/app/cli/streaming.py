@@ -13,6 +13,7 @@ import zmq.auth
 from ... import __version__
 from ...presets import preset
 from ...scene import DEMO_SCENE, load_scene
+from ...scene.files import BUILT_IN
 from ...sinks.io import open_recording
 from ...sinks.publish import DEFAULT_ENDPOINT
 from ...sources.channel_map import ChannelMap
@@ -162,7 +163,7 @@ DEMO_CACHE = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / 
 
 
 def cmd_demo(args) -> int:
-    scene = load_scene(f"{args.which}-ridge")
+    scene = load_scene(BUILT_IN / f"{args.which}-ridge.toml")  # never a local file of that name
     cached = DEMO_CACHE / f"{scene.name}-{__version__}.h5"
     if not cached.is_file():
         print(f"demo: simulating {scene.name} once into {cached} …", flush=True)

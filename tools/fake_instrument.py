@@ -169,7 +169,7 @@ def recording_shots(recording, pulses: int | None = None, block: int = 64) -> It
     packed into frame channels by recording_map."""
     cmap = recording_map(recording)
     left = recording.pulses if pulses is None else min(pulses, recording.pulses)
-    for shots, aux in recording.batches_with_aux(block):
+    for shots, aux in recording.batches_with_aux(block, list(recording.channels)):
         if left <= 0:
             break
         yield (shots if cmap is None else cmap.pack(shots, aux))[:left]

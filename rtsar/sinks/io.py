@@ -224,15 +224,16 @@ class Recording:
 
     def batches(self, size: int) -> Iterator[np.ndarray]:
         """Shots in blocks of ``size`` pulses (the last block may be shorter)."""
-        for shots, _ in self.batches_with_aux(size):
-            yield shots
-
-    def batches_with_aux(self, size: int) -> Iterator[tuple[np.ndarray, dict]]:
-        """(shots, {channel: samples}) in blocks of ``size`` pulses, every channel read."""
         shots = self._file["shots"]
         for i in range(0, self.pulses, size):
-            aux = {name: ds[i : i + size] for name, ds in self.channels.items()}
-            yield shots[i : i + size], aux
+            yield shots[i : i + size]
+
+    def batches_with_aux(self, size: int, names=()) -> Iterator[tuple[np.ndarray, dict]]:
+        """(shots, {channel: samples}) in blocks of ``size`` pulses; only the channels
+        ``names`` are read (an oversampled HCN channel is 8× the shots' bytes)."""
+        shots = self._file["shots"]
+        for i in range(0, self.pulses, size):
+            yield shots[i : i + size], {n: self.channels[n][i : i + size] for n in names}
 
     def scene_object(self) -> Scene | None:
         """The recorded scene as an rtsar.scene.Scene (None when the recording has none)."""

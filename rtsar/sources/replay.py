@@ -77,7 +77,8 @@ class ReplaySource(Source):
         self.last_release: tuple[int, float] | None = None
 
     @classmethod
-    def from_recording(cls, recording, rate="real", batch: int = 64) -> ReplaySource:
+    def from_recording(cls, recording, rate="real", batch: int = 64, channels=()) -> ReplaySource:
+        """The recording's shots and its auxiliary ``channels`` (those the processing reads)."""
         return cls(
             recording.shots,
             recording.pulse_index,
@@ -86,7 +87,7 @@ class ReplaySource(Source):
             rate,
             batch,
             description=f"replay of {recording.path} ({rate})",
-            aux=recording.channels,
+            aux={name: recording.channels[name] for name in channels},
         )
 
     def __iter__(self) -> Iterator[ShotBatch]:

@@ -122,17 +122,13 @@ def simulate_to(scene, output) -> None:
 def cmd_process(args) -> int:
     with open_recording(args.recording) as rec:
         cfg = processor_changes(args, rec.config)
-        chain = correction_chain(args, cfg, rec.scene_object(), rec.start_along_track_m, rec)
-        check_channels(chain, rec)  # before the lens is built: a wrong request fails at once
-        heights = height_stage(args, cfg, rec.scene_object())
+        scene = rec.scene_object()
+        chain = correction_chain(args, cfg, scene, rec.start_along_track_m, rec)
+        heights = height_stage(args, cfg, scene)
+        # Before the lens is built: a wrong request fails at once; only these are read.
+        channels = check_channels(rec, chain, heights)
         receivers = {}  # each auxiliary receiver's lens and CCD, in step with the main ones
         if heights is not None:
-            missing = [c for c in heights.channels if c not in rec.channels]
-            if missing:
-                raise ValueError(
-                    f"--height {args.height} needs the channel(s) {', '.join(missing)}; "
-                    f"{args.recording} holds {', '.join(sorted(rec.channels)) or 'none'}"
-                )
             if chain:
                 raise ValueError(
                     "--height with --correct is not supported: the corrections act on the main "
@@ -161,7 +157,7 @@ def cmd_process(args) -> int:
                 tmp, cfg, eng.range_m, heights=bool(receivers), source=str(args.recording)
             ) as img,
         ):
-            for shots, aux in rec.batches_with_aux(cfg.processor.micro_batch):
+            for shots, aux in rec.batches_with_aux(cfg.processor.micro_batch, channels):
                 out = eng.push(shots, aux)
                 img.write(out.lines, eng.azimuth_m(out.first_line, len(out.lines)))
                 if receivers:

@@ -255,20 +255,24 @@ def correction_chain(args, cfg, scene=None, start_along_track_m=0.0, recording=N
     return CorrectionChain.from_specs(args.correct, cfg, context)
 
 
-def check_channels(chain, recording) -> None:
-    """Every auxiliary channel the --correct stages read is in the recording, or a clear error."""
-    if not chain:
-        return
-    have = set(recording.channels)
-    for name, stage in chain.named:
+def check_channels(recording, chain=None, heights=None) -> list[str]:
+    """The auxiliary channels the --correct stages and the --height stage read (the only ones
+    to read from ``recording``); a clear error when the recording lacks one."""
+    readers = [(f"--correct {name}", stage) for name, stage in (chain.named if chain else [])]
+    if heights is not None:
+        readers.append((f"--height {heights.kind}", heights))
+    have, needed = set(recording.channels), set()
+    for option, stage in readers:
         missing = [c for c in stage.channels if c not in have]
         if missing:
             held = ", ".join(sorted(have)) or "the main channel only"
             raise ValueError(
-                f"--correct {name} reads the auxiliary channel(s) {', '.join(missing)}, but "
+                f"{option} reads the auxiliary channel(s) {', '.join(missing)}, but "
                 f"{recording.path} holds {held}: simulate the scene with the effect that makes "
                 "it (this rtsar records every channel), or run the scene live"
             )
+        needed.update(stage.channels)
+    return sorted(needed)
 
 
 def physical_ccd(args):

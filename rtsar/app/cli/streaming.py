@@ -136,9 +136,11 @@ def cmd_replay(args) -> int:
         cfg = processor_changes(args, rec.config)
         strip_lines(args, cfg.geometry.prf_hz)
         batch = args.max_batch or cfg.processor.micro_batch
-        source = ReplaySource.from_recording(rec, args.rate, batch)
-        chain = correction_chain(args, cfg, rec.scene_object(), rec.start_along_track_m, rec)
-        check_channels(chain, rec)
+        scene = rec.scene_object()
+        chain = correction_chain(args, cfg, scene, rec.start_along_track_m, rec)
+        heights = height_stage(args, cfg, scene)
+        channels = check_channels(rec, chain, heights)
+        source = ReplaySource.from_recording(rec, args.rate, batch, channels)
         return run_stream(
             cfg,
             source,
@@ -152,7 +154,7 @@ def cmd_replay(args) -> int:
             total_pulses=rec.pulses,
             expected_rate_hz=None if source.factor is None else cfg.geometry.prf_hz * source.factor,
             corrections=chain,
-            height=height_stage(args, cfg, rec.scene_object()),
+            height=heights,
             physical=physical_ccd(args),
             stall_timeout_s=args.stall_timeout,
             curve_clients=args.curve_clients,

@@ -120,16 +120,13 @@ def test_a_configuration_larger_than_the_machine_is_refused_before_allocating():
         check_memory(cfg, queue_pulses=int(need))
 
 
-def test_a_hostile_publisher_is_counted_not_obeyed(tmp_path, capsys):
-    """Strips with a missing seq, a changing range axis, malformed flagged_lines, string counters,
-    a 1e9-bin header with no lines, a first_line 10^8 ahead: `rtsar subscribe` counts them,
-    never crashes, never allocates for them, and keeps the honest strips."""
+def _subscribe_to_a_bare_publisher(tmp_path):
+    """A hand-driven XPUB and `rtsar subscribe -o` reading it in a thread, subscribed:
+    (publisher, output path, thread, {"rc": exit status} once it ends)."""
     import threading
     import time
 
     import zmq
-
-    from rtsar.sinks.image_file import read_image
 
     pub = zmq.Context.instance().socket(zmq.XPUB)
     pub.bind("tcp://127.0.0.1:*")
@@ -146,6 +143,17 @@ def test_a_hostile_publisher_is_counted_not_obeyed(tmp_path, capsys):
     assert pub.poll(10_000)  # the subscription
     pub.recv()
     time.sleep(0.2)
+    return pub, out, t, result
+
+
+def test_a_hostile_publisher_is_counted_not_obeyed(tmp_path, capsys):
+    """Strips with a missing seq, a changing range axis, malformed flagged_lines, string counters,
+    a 1e9-bin header with no lines, a first_line 10^8 ahead: `rtsar subscribe` counts them,
+    never crashes, never allocates for them, and keeps the honest strips."""
+
+    from rtsar.sinks.image_file import read_image
+
+    pub, out, t, result = _subscribe_to_a_bare_publisher(tmp_path)
     bins = 8
     good = {
         "format": "rtsar-strip",
@@ -197,28 +205,10 @@ def test_one_message_cannot_end_or_poison_a_recording(tmp_path, capsys):
     """A seq of 10**30, a strip of another stream, a JSON header nested 200 000 deep and one
     strip 10**15 lines ahead: each counted, none ends `rtsar subscribe`, none crashes it, and
     every honest strip after them is written."""
-    import threading
-    import time
-
-    import zmq
 
     from rtsar.sinks.image_file import read_image
 
-    pub = zmq.Context.instance().socket(zmq.XPUB)
-    pub.bind("tcp://127.0.0.1:*")
-    endpoint = pub.getsockopt_string(zmq.LAST_ENDPOINT)
-    out = tmp_path / "sub.h5"
-    result = {}
-    t = threading.Thread(
-        target=lambda: result.setdefault(
-            "rc", main(["subscribe", endpoint, "-o", str(out), "--timeout", "15"])
-        ),
-        daemon=True,
-    )
-    t.start()
-    assert pub.poll(10_000)
-    pub.recv()
-    time.sleep(0.2)
+    pub, out, t, result = _subscribe_to_a_bare_publisher(tmp_path)
     bins = 8
     head = {
         "format": "rtsar-strip",

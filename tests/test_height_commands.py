@@ -300,16 +300,11 @@ def test_sam_heights_from_the_commands(tmp_path):
     assert read_image(out)[3]["height_method"] == "sam"
 
 
-def test_heights_land_on_their_image_rows_across_a_line_jump(tmp_path):
-    """A strip far ahead is not zero-filled (line_jumps); a height strip after it must land on
-    the image rows of its lines, not on row = line index."""
-    import json as _json
-
+def recorder_header(bins: int) -> dict:
+    """The fields of a 3D run's strip and height headers that StripRecorder reads."""
     from rtsar.presets import preset
-    from rtsar.sinks.record import StripRecorder
 
-    bins = 4
-    head = {
+    return {
         "stream_id": "s",
         "range_bins": bins,
         "range_first_m": 100.0,
@@ -319,6 +314,16 @@ def test_heights_land_on_their_image_rows_across_a_line_jump(tmp_path):
         "height_strips": True,
         "height_kind": "insal",
     }
+
+
+def test_heights_land_on_their_image_rows_across_a_line_jump(tmp_path):
+    """A strip far ahead is not zero-filled (line_jumps); a height strip after it must land on
+    the image rows of its lines, not on row = line index."""
+    import json as _json
+
+    from rtsar.sinks.record import StripRecorder
+
+    bins, head = 4, recorder_header(4)
     rec = StripRecorder(tmp_path / "j.h5", "test", max_fill_bytes=1000)
     rec.add_strip(
         {**head, "first_line": 0, "azimuth_first_m": 0.0}, np.ones((2, bins), np.complex64)
@@ -343,20 +348,9 @@ def test_heights_land_on_their_image_rows_across_a_line_jump(tmp_path):
 
 
 def test_height_lines_inside_a_line_jump_are_dropped_not_shifted(tmp_path):
-    from rtsar.presets import preset
     from rtsar.sinks.record import StripRecorder
 
-    bins = 4
-    head = {
-        "stream_id": "s",
-        "range_bins": bins,
-        "range_first_m": 100.0,
-        "range_step_m": 1.0,
-        "azimuth_step_m": 1.0,
-        "config": preset("tiny").to_dict(),
-        "height_strips": True,
-        "height_kind": "insal",
-    }
+    bins, head = 4, recorder_header(4)
     rec = StripRecorder(tmp_path / "j.h5", "test", max_fill_bytes=10 * bins * 8)
     for first in (0, 100, 104):  # lines 0-3, then a jump to 100 confirmed by 104
         rec.add_strip(

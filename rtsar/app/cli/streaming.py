@@ -218,6 +218,17 @@ def cmd_keygen(args) -> int:
     return 0
 
 
+def add_wait_subscribers(s) -> None:
+    """--wait-subscribers (replay, demo)."""
+    s.add_argument(
+        "--wait-subscribers",
+        type=int,
+        default=0,
+        metavar="N",
+        help="wait until N subscribers are connected before starting (default 0)",
+    )
+
+
 def add_parsers(sub) -> None:
     s = sub.add_parser(
         "run",
@@ -278,13 +289,7 @@ def add_parsers(sub) -> None:
         default="real",
         help="real (recorded PRF, default), max (as fast as possible) or a factor",
     )
-    s.add_argument(
-        "--wait-subscribers",
-        type=int,
-        default=0,
-        metavar="N",
-        help="wait until N subscribers are connected before starting (default 0)",
-    )
+    add_wait_subscribers(s)
     add_pipeline_options(s, "lossless")
     s.set_defaults(func=cmd_replay)
 
@@ -301,13 +306,7 @@ def add_parsers(sub) -> None:
     s.add_argument(
         "--rate", default="5", help="replay rate: a factor of the PRF (default 5: 10 s), or max"
     )
-    s.add_argument(
-        "--wait-subscribers",
-        type=int,
-        default=0,
-        metavar="N",
-        help="wait until N subscribers are connected before starting (default 0)",
-    )
+    add_wait_subscribers(s)
     add_pipeline_options(s, "lossless")
     s.set_defaults(func=cmd_demo, height="insal")
 

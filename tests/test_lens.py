@@ -7,7 +7,7 @@ import pytest
 
 pytest.importorskip("pyopencl")
 
-from rtsar.lens import cl_loader as opencl  # noqa: E402
+from rtsar.lens import cl_loader  # noqa: E402
 from rtsar.lens.base import compress_reference  # noqa: E402
 from rtsar.lens.opencl import KERNELS, AOLens  # noqa: E402
 from rtsar.lens.plan import LensPlan, make_plan, pulsed_replica
@@ -163,17 +163,17 @@ def test_bad_input_raises(opencl):
 
 
 def test_kernels_found_by_loader():
-    folder = opencl.kernels_dir()
+    folder = cl_loader.kernels_dir()
     assert folder.joinpath("lens.cl").is_file()
-    source = opencl.kernel_source("lens.cl")
+    source = cl_loader.kernel_source("lens.cl")
     assert "lens_lanes" in source and "lens_group" in source
     with pytest.raises(FileNotFoundError):
-        opencl.kernel_source("no-such-kernel.cl")
+        cl_loader.kernel_source("no-such-kernel.cl")
 
 
 def test_program_cache_and_devices(monkeypatch, opencl):
-    queue = opencl.default_queue()
-    assert queue is opencl.default_queue()
+    queue = cl_loader.default_queue()
+    assert queue is cl_loader.default_queue()
     defines = {
         "NFFT": 8,
         "LOG2_NFFT": 3,
@@ -183,17 +183,17 @@ def test_program_cache_and_devices(monkeypatch, opencl):
         "SIGN1": -1,
         "LANES": 1,
     }
-    prog = opencl.build_program(queue.context, "lens.cl", defines)
-    assert prog is opencl.build_program(queue.context, "lens.cl", dict(defines))
-    assert isinstance(opencl.device_info(), str) and opencl.device_info(queue)
-    monkeypatch.setenv(opencl.ENV_DEVICE, "no-such-device-anywhere")
+    prog = cl_loader.build_program(queue.context, "lens.cl", defines)
+    assert prog is cl_loader.build_program(queue.context, "lens.cl", dict(defines))
+    assert isinstance(cl_loader.device_info(), str) and cl_loader.device_info(queue)
+    monkeypatch.setenv(cl_loader.ENV_DEVICE, "no-such-device-anywhere")
     with pytest.raises(RuntimeError, match="no OpenCL device matches"):
-        opencl.select_device()
+        cl_loader.select_device()
     label = queue.device.name.strip()
-    assert opencl.select_device(label[:6]).name == queue.device.name
+    assert cl_loader.select_device(label[:6]).name == queue.device.name
 
 
 def test_no_platform_message(monkeypatch):
-    monkeypatch.setattr(opencl.cl, "get_platforms", lambda: [])
+    monkeypatch.setattr(cl_loader.cl, "get_platforms", lambda: [])
     with pytest.raises(RuntimeError, match=r"pip install pyopencl\[pocl\]"):
-        opencl.select_device()
+        cl_loader.select_device()

@@ -80,10 +80,10 @@ def test_opencl_double_refused_on_a_device_without_fp64(monkeypatch, opencl):
 
 
 def test_pocl_cpu_reports_double(opencl):
-    from rtsar.lens import cl_loader as opencl
+    from rtsar.lens import cl_loader
     from rtsar.lens.opencl import supports_double
 
-    device = opencl.default_queue().device
+    device = cl_loader.default_queue().device
     if "portable computing language" in device.platform.name.lower():
         assert supports_double(device)
 

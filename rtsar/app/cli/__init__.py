@@ -1,8 +1,8 @@
 """The ``rtsar`` command.  ``rtsar COMMAND --help`` explains each command.
 
 One module per command group: ``files`` (presets, simulate, process, quicklook), ``streaming``
-(run, replay, subscribe, view, keygen), ``measure`` (bench, tradeoff, table1); ``options``
-declares the options they share.
+(run, replay, subscribe, view, keygen), ``measure`` (bench, tradeoff, table1), ``batch``;
+``options`` declares the options they share.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import warnings
 from ... import __version__
 from ...sinks.publish import DEFAULT_ENDPOINT
 from .. import signals
-from . import files, measure, streaming
+from . import batch, files, measure, streaming
 from .options import die
 
 EPILOG = f"""examples:
@@ -26,6 +26,7 @@ EPILOG = f"""examples:
   rtsar presets                              the instrument presets and their theoretical figures
   rtsar simulate scene.toml -o rec.h5        raw shots of a scene
   rtsar process rec.h5 -o img.h5             range + azimuth compression (streaming engine)
+  rtsar batch recs/ --out-dir imgs           many recordings through process, on Dask
   rtsar quicklook img.h5 -o img.png          dB image with axes in metres
   rtsar bench                                lens and correlator throughput in one run
   rtsar tradeoff                             what accuracy costs in time: every knob, one run
@@ -47,6 +48,7 @@ def build_parser() -> argparse.ArgumentParser:
     files.add_parsers(sub)
     streaming.add_parsers(sub)
     measure.add_parsers(sub)
+    batch.add_parsers(sub)
     return p
 
 

@@ -195,6 +195,9 @@ class Processor:
                       N multiply-adds per pixel per line), "fft" (overlap-save blocks of
                       M - N + 1 lines: fastest, latency ~N pulses) or "partitioned"
                       (partitioned overlap-save: lines leave in blocks of partition_lines)
+                      or "nonuniform" (non-uniformly partitioned: a head block of
+                      partition_lines, tail blocks doubling up to tail_block_lines; the
+                      partitioned latency at fewer multiply-adds)
     fft_length        FFT correlator block transform length M (power of two >= N; None: 2N);
                       lines leave in blocks of M - N + 1: the latency/throughput knob of "fft"
     partition_lines   L, the block of the "partitioned" correlator: a power of two, at most N
@@ -203,6 +206,11 @@ class Processor:
                       costs 2N/L complex multiply-adds per pixel and its share of two 2L-point
                       transforms, so halving L halves the wait and doubles the multiply-adds.
                       16 at 10 kHz PRF: ≤ 1.5 ms wait, 64 multiply-adds per pixel (N = 512)
+    tail_block_lines  the largest block of the "nonuniform" correlator's tail (a power of two;
+                      blocks 2L, 4L, … up to it, two partitions each, the last size takes the
+                      rest): 2·(partitions) multiply-adds per pixel and line instead of 2N/L
+                      (N = 512, L = 16, 128: 18 instead of 64) for one more pair of transforms
+                      per block size
     micro_batch       pulses per AO-lens launch
     precision         one of PRECISIONS: the sample type of the AO lens and the CCD.
                       "complex64" (default): float32 arithmetic, the real-time setting, within
@@ -222,7 +230,7 @@ class Processor:
                       correlator per offset (~5x)
     """
 
-    CORRELATORS = ("direct", "fft", "partitioned")  # no annotation: a constant, not a field
+    CORRELATORS = ("direct", "fft", "partitioned", "nonuniform")  # a constant, not a field
 
     aperture_pulses: int
     range_bins: int
@@ -234,6 +242,7 @@ class Processor:
     correlator: str = "fft"
     fft_length: int | None = None
     partition_lines: int = 16
+    tail_block_lines: int = 128
     micro_batch: int = 64
     precision: str = "complex64"
     range_migration_taps: int = 0
@@ -274,7 +283,10 @@ class Processor:
         lines = self.partition_lines
         if not (isinstance(lines, int) and lines >= 1 and not lines & (lines - 1)):
             raise ValueError(f"Processor.partition_lines must be a power of two, got {lines!r}")
-        if self.correlator == "partitioned" and lines > self.aperture_pulses:
+        tail = self.tail_block_lines
+        if not (isinstance(tail, int) and tail >= 1 and not tail & (tail - 1)):
+            raise ValueError(f"Processor.tail_block_lines must be a power of two, got {tail!r}")
+        if self.correlator in ("partitioned", "nonuniform") and lines > self.aperture_pulses:
             raise ValueError(
                 f"Processor.partition_lines {lines} exceeds aperture_pulses {self.aperture_pulses}"
             )

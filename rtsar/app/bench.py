@@ -17,6 +17,7 @@ from ..analysis.timing import rate_per_s
 from ..ccd.base import design_mask
 from ..ccd.direct import DirectCorrelator
 from ..ccd.fft import FFTCorrelator
+from ..ccd.nonuniform import NonUniformCorrelator
 from ..ccd.partitioned import PartitionedCorrelator
 from ..lens.base import make_lens, opencl_unavailable
 from ..lens.numpy_lens import NumpyLens
@@ -72,10 +73,11 @@ def bench_lens(
 
 
 def bench_correlators(cfg, batch=64, seconds=1.0, pushes=400) -> list[dict]:
-    """Pulses/s of the three correlators, pushes of ``batch`` lines, measured in one run.
+    """Pulses/s of the four correlators, pushes of ``batch`` lines, measured in one run.
 
-    The partitioned correlator (blocks of ``cfg.processor.partition_lines`` = L) is also fed the
-    way a low-latency stream feeds it, one block per push: its pulses/s then, and the time of
+    The partitioned correlator (blocks of ``cfg.processor.partition_lines`` = L) and the
+    nonuniform one (head block L, tail blocks up to ``tail_block_lines``) are also fed the way a
+    low-latency stream feeds them, one block of L per push: their pulses/s then, and the time of
     such a push (what it adds to a line's latency), median and 99th percentile of ``pushes``.
     """
     plan = make_plan(cfg)
@@ -88,35 +90,43 @@ def bench_correlators(cfg, batch=64, seconds=1.0, pushes=400) -> list[dict]:
         "direct": DirectCorrelator(mask),
         "fft": FFTCorrelator(mask),
         "partitioned": PartitionedCorrelator(mask, block),
+        "nonuniform": NonUniformCorrelator(mask, block, cfg.processor.tail_block_lines),
     }
     rates = {}
     for name, corr in corrs.items():
         rates[name] = rate_per_s(lambda c=corr, x=lines[:batch]: c.push(x), batch, seconds)
-    streaming = corrs["partitioned"]
     one_block = lines[:block]
-    block_rate = rate_per_s(lambda: streaming.push(one_block), block, seconds)
-    times = np.empty(pushes)
-    for i in range(pushes):
-        t0 = time.perf_counter()
-        streaming.push(one_block)
-        times[i] = time.perf_counter() - t0
-    return [
-        {
-            "stage": "correlator",
-            "batch": batch,
-            "direct_pulses_per_s": rates["direct"],
-            "fft_pulses_per_s": rates["fft"],
-            "fft_over_direct": rates["fft"] / rates["direct"],
-            "partitioned_pulses_per_s": rates["partitioned"],
-            "partitioned_over_fft": rates["partitioned"] / rates["fft"],
-            "partition_lines": block,
-            "partitioned_one_block_pulses_per_s": block_rate,
-            "partitioned_push_median_ms": 1e3 * float(np.median(times)),
-            "partitioned_push_p99_ms": 1e3 * float(np.percentile(times, 99)),
-            "aperture_pulses": mask.shape[0],
-            "range_bins": mask.shape[1],
-        }
-    ]
+    blocks = {}
+    for name in ("partitioned", "nonuniform"):
+        streaming = corrs[name]
+        block_rate = rate_per_s(lambda c=streaming: c.push(one_block), block, seconds)
+        times = np.empty(pushes)
+        for i in range(pushes):
+            t0 = time.perf_counter()
+            streaming.push(one_block)
+            times[i] = time.perf_counter() - t0
+        blocks[name] = (block_rate, times)
+    corrs["nonuniform"].close()
+    row = {
+        "stage": "correlator",
+        "batch": batch,
+        "direct_pulses_per_s": rates["direct"],
+        "fft_pulses_per_s": rates["fft"],
+        "fft_over_direct": rates["fft"] / rates["direct"],
+        "partitioned_pulses_per_s": rates["partitioned"],
+        "partitioned_over_fft": rates["partitioned"] / rates["fft"],
+        "nonuniform_pulses_per_s": rates["nonuniform"],
+        "nonuniform_over_partitioned": rates["nonuniform"] / rates["partitioned"],
+        "partition_lines": block,
+        "tail_block_lines": cfg.processor.tail_block_lines,
+        "aperture_pulses": mask.shape[0],
+        "range_bins": mask.shape[1],
+    }
+    for name, (block_rate, times) in blocks.items():
+        row[f"{name}_one_block_pulses_per_s"] = block_rate
+        row[f"{name}_push_median_ms"] = 1e3 * float(np.median(times))
+        row[f"{name}_push_p99_ms"] = 1e3 * float(np.percentile(times, 99))
+    return [row]
 
 
 def add_arguments(parser) -> None:
@@ -188,10 +198,20 @@ def run_bench(args) -> int:
     for r in corr_rows:
         print(
             f"batch {r['batch']}: direct {r['direct_pulses_per_s']:,.0f}, "
-            f"fft {r['fft_pulses_per_s']:,.0f}, fft/direct {r['fft_over_direct']:.1f}x "
-            f"({r['aperture_pulses']} x {r['range_bins']})",
+            f"fft {r['fft_pulses_per_s']:,.0f}, fft/direct {r['fft_over_direct']:.1f}x, "
+            f"partitioned {r['partitioned_pulses_per_s']:,.0f}, "
+            f"nonuniform {r['nonuniform_pulses_per_s']:,.0f}, nonuniform/partitioned "
+            f"{r['nonuniform_over_partitioned']:.2f}x ({r['aperture_pulses']} x "
+            f"{r['range_bins']})",
             file=out,
         )
+        for kind in ("partitioned", "nonuniform"):
+            print(
+                f"  {kind}, one block of {r['partition_lines']} per push: "
+                f"{r[f'{kind}_one_block_pulses_per_s']:,.0f} pulses/s, push median "
+                f"{r[f'{kind}_push_median_ms']:.3f} ms, p99 {r[f'{kind}_push_p99_ms']:.3f} ms",
+                file=out,
+            )
     prf = cfg.geometry.prf_hz
     best = max(corr_rows[0]["fft_pulses_per_s"], corr_rows[0]["direct_pulses_per_s"])
     lens_key = "opencl_pulses_per_s" if reason is None else "numpy_fft_pulses_per_s"

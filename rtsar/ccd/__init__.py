@@ -2,7 +2,8 @@
 
 ``base`` (the Correlator interface, the mask design and the float64 reference), one module per
 implementation (``direct``: the numba shift register; ``fft``: overlap-save blocks;
-``partitioned``: partitioned overlap-save; ``migration``: range-migration taps across range
+``partitioned``: partitioned overlap-save; ``nonuniform``: non-uniformly partitioned
+overlap-save; ``migration``: range-migration taps across range
 bins; ``physical``: the paper's intensity-detecting CCD), and here the two factories.
 """
 
@@ -20,6 +21,7 @@ from .migration import (
     MigrationMask,
     design_migration_mask,
 )
+from .nonuniform import NonUniformCorrelator
 from .partitioned import PartitionedCorrelator
 
 __all__ = [
@@ -27,6 +29,7 @@ __all__ = [
     "Correlator",
     "DirectCorrelator",
     "FFTCorrelator",
+    "NonUniformCorrelator",
     "PartitionedCorrelator",
     "aperture_offsets_m",
     "correlate_reference",
@@ -45,6 +48,7 @@ def make_correlator(
     *,
     partition_lines: int = 16,
     precision: str = "complex64",
+    tail_block_lines: int = 128,
 ) -> Correlator:
     """The correlator named by ``Processor.correlator`` (one of CORRELATORS).
 
@@ -61,7 +65,12 @@ def make_correlator(
             return FFTMigrationCorrelator(mask, fft_length, precision)
         taps = [
             make_correlator(
-                kind, m, fft_length, partition_lines=partition_lines, precision=precision
+                kind,
+                m,
+                fft_length,
+                partition_lines=partition_lines,
+                precision=precision,
+                tail_block_lines=tail_block_lines,
             )
             for m in mask.tap_masks()
         ]
@@ -70,6 +79,8 @@ def make_correlator(
         return DirectCorrelator(mask, precision)
     if kind == "fft":
         return FFTCorrelator(mask, fft_length, precision)
+    if kind == "nonuniform":
+        return NonUniformCorrelator(mask, partition_lines, tail_block_lines, precision)
     return PartitionedCorrelator(mask, partition_lines, precision)
 
 
@@ -94,4 +105,5 @@ def make_ccd(config: Config, range_m: np.ndarray, physical=None) -> Correlator:
         p.fft_length,
         partition_lines=p.partition_lines,
         precision=p.precision,
+        tail_block_lines=p.tail_block_lines,
     )

@@ -47,8 +47,23 @@ def add_correlator_option(g) -> None:
         "--correlator",
         choices=Processor.CORRELATORS,
         help="direct: CCD shift register, one line per pulse; fft: overlap-save blocks (fast, "
-        "one block of latency); partitioned: partitioned overlap-save (low latency, fast) "
-        "(default: the configuration's)",
+        "one block of latency); partitioned: partitioned overlap-save (low latency, fast); "
+        "nonuniform: a short head block and long tail blocks (the partitioned latency, fewer "
+        "multiply-adds) (default: the configuration's)",
+    )
+    g.add_argument(
+        "--partition-lines",
+        type=int,
+        metavar="L",
+        help="block of the partitioned correlator, head block of the nonuniform one: lines "
+        "leave in blocks of L (power of two; default: the configuration's, 16 in the presets)",
+    )
+    g.add_argument(
+        "--tail-block-lines",
+        type=int,
+        metavar="B",
+        help="largest tail block of the nonuniform correlator (power of two; default: the "
+        "configuration's, 128)",
     )
 
 
@@ -225,8 +240,9 @@ def processor_changes(args, cfg):
         )
     if args.correlator:
         changes["correlator"] = args.correlator
-    if getattr(args, "micro_batch", None) is not None:
-        changes["micro_batch"] = args.micro_batch
+    for name in ("micro_batch", "partition_lines", "tail_block_lines"):
+        if getattr(args, name, None) is not None:
+            changes[name] = getattr(args, name)
     if getattr(args, "precision", None):
         changes["precision"] = args.precision
     if getattr(args, "range_migration_taps", None) is not None:

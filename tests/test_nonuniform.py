@@ -1,0 +1,127 @@
+"""The non-uniformly partitioned correlator: the float64 reference, push sizes, flush, threads."""
+
+import numpy as np
+import pytest
+from conftest import crandn
+
+from rtsar.analysis import relative_rms
+from rtsar.ccd import make_ccd, make_correlator
+from rtsar.ccd.base import correlate_reference
+from rtsar.ccd.nonuniform import NonUniformCorrelator, plan_segments
+from rtsar.ccd.partitioned import PartitionedCorrelator
+from rtsar.params import Processor
+
+TOL = 1e-5  # float32 sums of N terms, as the other correlators (test_ccd.py)
+
+
+def _stream(corr, lines, sizes, flush_every=None):
+    out, i = [], 0
+    for k, b in enumerate(sizes):
+        out.append(corr.push(lines[i : i + b]))
+        i += b
+        if flush_every and k % flush_every == 0:
+            out.append(corr.flush())
+    assert i == len(lines)
+    out.append(corr.flush())
+    return np.concatenate(out)
+
+
+@pytest.mark.parametrize(
+    "n, head, tail",
+    [(512, 16, 128), (512, 8, 64), (64, 4, 16), (100, 8, 32), (37, 4, 8), (16, 16, 16), (2, 1, 1)],
+)
+def test_plan_covers_the_mask_and_every_tail_block_is_early_enough(n, head, tail):
+    segs = plan_segments(n, head, min(tail, n))
+    assert segs[0][0] == 0 and segs[0][2] == head
+    first = 0
+    for s, (d, t, b) in enumerate(segs):
+        assert d == first and t >= 1
+        # A tail block completes before the last pulse of the lines it serves arrives.
+        assert s == 0 or d >= b
+        first += t
+    assert first == n
+
+
+@pytest.mark.parametrize("threaded", [False, True])
+@pytest.mark.parametrize("n, head, tail, bins", [(64, 4, 16, 9), (100, 8, 32, 5), (37, 2, 8, 3)])
+def test_matches_the_float64_reference(n, head, tail, bins, threaded, rng):
+    mask = crandn(rng, n, bins) / n
+    lines = crandn(rng, 7 * n + 5, bins, dtype=np.complex64)
+    ref = correlate_reference(lines, mask)
+    corr = NonUniformCorrelator(mask, head, tail, threaded=threaded)
+    got = _stream(corr, lines, [len(lines)])
+    assert got.shape == ref.shape and got.dtype == np.complex64
+    assert relative_rms(got, ref) < TOL
+    assert corr.pulses_in == len(lines) and corr.lines_out == len(ref)
+    corr.close()
+
+
+def test_output_is_bit_identical_whatever_the_pushes_and_the_thread(rng):
+    n, nr, p = 64, 7, 901
+    mask, lines = crandn(rng, n, nr) / n, crandn(rng, p, nr, dtype=np.complex64)
+    one = _stream(NonUniformCorrelator(mask, 4, 32, threaded=False), lines, [p])
+    sizes = [1] * 40 + [5, 3, 200, 1, 7, 131] + [1] * 10
+    sizes.append(p - sum(sizes))
+    for threaded in (False, True):
+        by_line = _stream(NonUniformCorrelator(mask, 4, 32, threaded=threaded), lines, [1] * p)
+        odd = _stream(NonUniformCorrelator(mask, 4, 32, threaded=threaded), lines, sizes)
+        assert np.array_equal(by_line, one) and np.array_equal(odd, one)
+
+
+def test_flush_gives_every_complete_line_and_the_stream_goes_on(rng):
+    n, nr = 64, 5
+    mask, lines = crandn(rng, n, nr) / n, crandn(rng, 500, nr, dtype=np.complex64)
+    ref = correlate_reference(lines, mask)
+    corr = NonUniformCorrelator(mask, 4, 16)
+    assert len(corr.push(lines[: n - 1])) == 0 and len(corr.flush()) == 0
+    sizes = [3, 50, 1, 1, 2, 77, 9, 300 - n + 1]
+    sizes.append(len(lines) - (n - 1) - sum(sizes))
+    got = _stream(corr, lines[n - 1 :], sizes, flush_every=1)
+    assert got.shape == ref.shape and corr.lines_out == len(ref)
+    assert relative_rms(got, ref) < TOL
+
+
+def test_lines_leave_in_head_blocks(rng):
+    """The head block sets the latency: a line leaves once its head block is complete, as in
+    the uniform correlator with that block."""
+    n, nr, head = 64, 3, 8
+    mask, lines = crandn(rng, n, nr) / n, crandn(rng, 300, nr, dtype=np.complex64)
+    nonuni, uni = NonUniformCorrelator(mask, head, 32), PartitionedCorrelator(mask, head)
+    for p in range(len(lines)):
+        a, b = nonuni.push(lines[p : p + 1]), uni.push(lines[p : p + 1])
+        assert len(a) == len(b), p
+        if len(a):
+            assert relative_rms(a, b) < TOL
+
+
+def test_fewer_multiply_adds_than_the_uniform_partition(rng):
+    corr = NonUniformCorrelator(crandn(rng, 512, 2) / 512, 16, 128)
+    assert corr.partitions == 9  # 2 × (16, 32, 64) + 128 × 3 (the rest): 2·9 = 18 MACs per line
+    assert PartitionedCorrelator(crandn(rng, 512, 2), 16).partitions == 32  # 2·32 = 64
+
+
+def test_chosen_by_the_configuration(rng):
+    from rtsar.lens.plan import make_plan
+    from rtsar.presets import preset
+
+    cfg = preset("tiny")
+    proc = Processor(
+        **{**cfg.processor.__dict__, "correlator": "nonuniform", "tail_block_lines": 16}
+    )
+    cfg = type(cfg)(**{**cfg.__dict__, "processor": proc})
+    ccd = make_ccd(cfg, make_plan(cfg).range_m)
+    assert isinstance(ccd, NonUniformCorrelator) and ccd.segments[-1][2] <= 16
+    with pytest.raises(ValueError, match="tail_block_lines"):
+        Processor(aperture_pulses=64, range_bins=8, tail_block_lines=3)
+    assert isinstance(make_correlator("nonuniform", crandn(rng, 32, 2)), NonUniformCorrelator)
+
+
+def test_a_failing_tail_is_reported_not_hung(rng):
+    corr = NonUniformCorrelator(crandn(rng, 64, 3) / 64, 4, 16, threaded=True)
+
+    def broken(lines):
+        raise MemoryError("no room")
+
+    corr._tail.correlators[0].push = broken
+    with pytest.raises(RuntimeError, match="tail thread failed: no room"):
+        corr.push(crandn(rng, 100, 3, dtype=np.complex64))

@@ -14,10 +14,11 @@ from ...lens import range_axis_m
 from ...presets import PRESETS, preset
 from ...scene import Simulator, load_scene
 from ...sinks.image_file import ImageWriter, read_heights, read_image
-from ...sinks.io import RecordingWriter, open_recording, replace_when_complete
+from ...sinks.io import RecordingWriter, replace_when_complete
 from ...stream.engine import StreamProcessor
 from ..progress import Progress
 from ..quicklook import save_height_quicklook, save_quicklook
+from .inputs import open_input
 from .options import (
     add_correlator_option,
     add_height_options,
@@ -120,7 +121,7 @@ def simulate_to(scene, output) -> None:
 
 
 def cmd_process(args) -> int:
-    with open_recording(args.recording) as rec:
+    with open_input(args.recording) as rec:
         cfg = processor_changes(args, rec.config)
         scene = rec.scene_object()
         chain = correction_chain(args, cfg, scene, rec.start_along_track_m, rec)

@@ -14,7 +14,6 @@ from ... import __version__
 from ...presets import preset
 from ...scene import DEMO_SCENE, load_scene
 from ...scene.files import BUILT_IN
-from ...sinks.io import open_recording
 from ...sinks.publish import DEFAULT_ENDPOINT
 from ...sources.channel_map import ChannelMap
 from ...sources.replay import ReplaySource
@@ -24,6 +23,7 @@ from ..live import run_stream
 from ..subscribe import subscribe
 from ..view import view
 from .files import simulate_to
+from .inputs import open_input
 from .options import (
     add_pipeline_options,
     add_subscriber_options,
@@ -132,7 +132,7 @@ def cmd_run(args) -> int:
 
 
 def cmd_replay(args) -> int:
-    with open_recording(args.recording) as rec:
+    with open_input(args.recording) as rec:
         cfg = processor_changes(args, rec.config)
         strip_lines(args, cfg.geometry.prf_hz)
         batch = args.max_batch or cfg.processor.micro_batch

@@ -1,0 +1,87 @@
+"""``rtsar export``: recordings to CPHD 1.0.1 and SigMF, images to SICD (README "Standard
+formats").  The writers are rtsar.sinks.exports; they need the optional extra ``formats``."""
+
+from __future__ import annotations
+
+import time
+
+from ...sinks.exports.cphd import write_cphd
+from ...sinks.exports.sicd import write_sicd
+from ...sinks.exports.sigmf_export import write_sigmf
+from ...sinks.io import check_writable
+from ...sources.formats.geometry import LocalFrame
+from .inputs import open_input
+from .options import die
+
+
+def _frame(text: str) -> LocalFrame:
+    try:
+        lat, lon = (float(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(f"--origin must be LAT,LON in degrees, got {text!r}") from None
+    if not (-90 <= lat <= 90 and -180 <= lon <= 360):
+        raise ValueError(f"--origin {text!r} is not a latitude,longitude in degrees")
+    return LocalFrame(lat, lon)
+
+
+def cmd_export(args) -> int:
+    outputs = [o for o in (args.cphd, args.sigmf, args.sicd) if o]
+    if not outputs:
+        return die("export: say what to write: --cphd OUT.cphd, --sigmf OUT or --sicd OUT.nitf")
+    for out in outputs:
+        check_writable(out)
+    frame = _frame(args.origin)
+    t0 = time.perf_counter()
+    if args.sicd:
+        if args.cphd or args.sigmf:
+            return die("--sicd takes an image file; --cphd and --sigmf take a recording")
+        info = write_sicd(args.input, args.sicd, frame)
+        print(
+            f"wrote {args.sicd}: SICD {info['version']}, {info['rows']} × {info['cols']} "
+            f"pixels ({time.perf_counter() - t0:.1f} s)"
+        )
+        return 0
+    with open_input(args.input) as rec:
+        if args.cphd:
+            info = write_cphd(rec, args.cphd, frame)
+            print(
+                f"wrote {args.cphd}: CPHD 1.0.1, {info['vectors']} vectors × {info['samples']} "
+                f"samples, {info['domain']} domain ({time.perf_counter() - t0:.1f} s)"
+            )
+        if args.sigmf:
+            info = write_sigmf(rec, args.sigmf)
+            more = f" + channels {', '.join(info['channels'])}" if info["channels"] else ""
+            print(
+                f"wrote {info['base']}.sigmf-meta/-data: {info['shots']} shots{more} "
+                f"({time.perf_counter() - t0:.1f} s)"
+            )
+    return 0
+
+
+def add_parsers(sub) -> None:
+    s = sub.add_parser(
+        "export",
+        help="a recording as CPHD or SigMF, an image as SICD",
+        description="Write a recording (rtsar .h5, or a CPHD / SigMF file rtsar reads) as "
+        "CPHD 1.0.1 (NGA phase history: FX domain, per-pulse positions, the scene reference "
+        "point on the centre line) and/or SigMF (one capture, one annotation per shot, every "
+        "channel), or an image file as SICD (NITF).  Needs the optional packages: "
+        'pip install "rtsar[formats]".  Fields filled: README "Standard formats".',
+    )
+    s.add_argument("input", help="recording (.h5, .cphd, .sigmf-meta) or, with --sicd, image (.h5)")
+    s.add_argument("--cphd", metavar="OUT.cphd", help="write the recording as CPHD 1.0.1")
+    s.add_argument(
+        "--sigmf",
+        metavar="OUT",
+        help="write the recording as SigMF: OUT.sigmf-meta + OUT.sigmf-data (+ OUT.NAME.* per "
+        "auxiliary channel)",
+    )
+    s.add_argument("--sicd", metavar="OUT.nitf", help="write the image file as SICD 1.3 (NITF)")
+    s.add_argument(
+        "--origin",
+        default="0,0",
+        metavar="LAT,LON",
+        help="where rtsar's local frame (x east along track, y north, z up) sits on the WGS-84 "
+        "ellipsoid, in degrees (default 0,0)",
+    )
+    s.set_defaults(func=cmd_export)

@@ -1,0 +1,126 @@
+"""Export a recording as SigMF (Signal Metadata Format 1.x, sigmf.org), with the sigmf package.
+
+``OUT.sigmf-data`` holds the main channel's shots one after the other, ``cf32_le`` (bit for bit
+the recording's complex64), ``OUT.sigmf-meta`` one capture (sample 0, the carrier as
+``core:frequency``, ≤ 1 THz by SigMF's schema, and as ``rtsar:carrier_hz``) and one annotation per shot (``core:sample_start`` = p·S,
+``core:sample_count`` = S) under the ``rtsar`` extension namespace: ``rtsar:pulse_index``,
+``rtsar:time_s``, ``rtsar:along_track_m`` and, where recorded, ``rtsar:position_m``.  The global
+object carries ``rtsar:prf_hz``, ``rtsar:chirp`` (kind, bandwidth, duration, rate),
+``rtsar:samples_per_shot``, ``rtsar:config`` and ``rtsar:scene`` (JSON objects), and
+``rtsar:channels``: every auxiliary channel of a version 2 recording is a SigMF recording of its
+own beside it, ``OUT.NAME.sigmf-data``/``-meta`` (its own sample rate and shot length), listed
+there by name and file.  rtsar.sources.formats.sigmf_reader reads all of it back.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ... import __version__
+from ...sources.formats.requirements import require_formats
+from ...sources.formats.sigmf_reader import RTSAR_EXTENSION, sigmf_base
+
+try:
+    from sigmf import SigMFFile
+except ImportError:  # the optional extra "formats"
+    SigMFFile = None
+
+BLOCK = 4096  # shots copied at a time
+SIGMF_MAX_FREQUENCY_HZ = 1e12  # the schema's bound on core:frequency
+
+
+def _chirp(cfg) -> dict:
+    wf = cfg.waveform
+    duration = getattr(wf, "pulse_duration_s", None) or wf.chirp_duration_s
+    return {
+        "kind": wf.kind,
+        "bandwidth_hz": wf.bandwidth_hz,
+        "duration_s": duration,
+        "rate_hz_per_s": wf.chirp_rate_hz_per_s,
+    }
+
+
+def _write_channel(base: Path, shots, sample_rate_hz, global_extra, annotations, rec) -> None:
+    data = base.with_name(base.name + ".sigmf-data")
+    with open(data, "wb") as f:
+        for i in range(0, rec.pulses, BLOCK):
+            np.asarray(shots[i : i + BLOCK], "<c8").tofile(f)
+    meta = SigMFFile(
+        data_file=str(data),
+        global_info={
+            "core:datatype": "cf32_le",
+            "core:sample_rate": float(sample_rate_hz),
+            "core:recorder": f"rtsar {__version__}",
+            "core:description": f"rtsar recording {rec.path.name}",
+            "core:extensions": [RTSAR_EXTENSION],
+            **global_extra,
+        },
+        skip_checksum=True,
+    )
+    carrier = rec.config.geometry.carrier_hz
+    # SigMF's schema bounds core:frequency to 1 THz: an optical carrier (lidar) is given only
+    # as rtsar:carrier_hz.
+    capture = {"rtsar:carrier_hz": carrier}
+    if carrier <= SIGMF_MAX_FREQUENCY_HZ:
+        capture["core:frequency"] = carrier
+    meta.add_capture(0, metadata=capture)
+    for start, length, md in annotations:
+        meta.add_annotation(start, length, md)
+    meta.tofile(str(base.with_name(base.name + ".sigmf-meta")), overwrite=True)
+
+
+def write_sigmf(rec, path: str | Path) -> dict:
+    """Write recording ``rec`` (rtsar.sinks.io.Recording) as SigMF at ``path`` (the base name,
+    or a name ending in .sigmf-meta/.sigmf-data); returns the files written."""
+    require_formats(SigMFFile, "SigMF export")
+    base = sigmf_base(Path(path)) or Path(path)
+    cfg = rec.config
+    s = cfg.waveform.samples_per_shot
+    index = np.asarray(rec.pulse_index, np.int64)
+    time_s = np.asarray(rec.time_s, np.float64)
+    along = rec.start_along_track_m + cfg.geometry.along_track_step_m * np.arange(rec.pulses)
+    position = rec.position_m
+    channels = []
+    for name, ds in rec.channels.items():
+        width = ds.shape[1]
+        cbase = base.with_name(f"{base.name}.{name}")
+        rate = cfg.waveform.sample_rate_hz * width / s
+        _write_channel(
+            cbase,
+            ds,
+            rate,
+            {"rtsar:channel": name, "rtsar:samples_per_shot": int(width)},
+            [(p * width, width, {"rtsar:pulse_index": int(index[p])}) for p in range(rec.pulses)],
+            rec,
+        )
+        channels.append({"name": name, "file": cbase.name, "samples_per_shot": int(width)})
+    annotations = []
+    for p in range(rec.pulses):
+        md = {
+            "rtsar:pulse_index": int(index[p]),
+            "rtsar:time_s": float(time_s[p]),
+            "rtsar:along_track_m": float(along[p]),
+        }
+        if position is not None:
+            md["rtsar:position_m"] = [float(v) for v in position[p]]
+        annotations.append((p * s, s, md))
+    _write_channel(
+        base,
+        rec.shots,
+        cfg.waveform.sample_rate_hz,
+        {
+            "rtsar:prf_hz": cfg.geometry.prf_hz,
+            "rtsar:chirp": _chirp(cfg),
+            "rtsar:samples_per_shot": int(s),
+            "rtsar:config": cfg.to_dict(),
+            "rtsar:scene": json.loads(json.dumps(rec.scene or {})),
+            "rtsar:start_along_track_m": float(rec.start_along_track_m),
+            "rtsar:channels": channels,
+        },
+        annotations,
+        rec,
+    )
+    return {"base": str(base), "shots": rec.pulses, "channels": [c["name"] for c in channels]}

@@ -1,0 +1,127 @@
+"""Read a CPHD file (NGA.STND.0068-1, 1.0.1 or 1.1.0) into rtsar's shots, with sarkit's reader.
+
+The subset rtsar's geometry covers: one FX-domain channel with fixed frequency sampling, a
+straight track at a constant step, and the processing configuration rtsar wrote into the file
+(ProductInfo parameter ``rtsar:config``, as ``rtsar export --cphd`` does).  The signal vectors go
+back to shots through the inverse of rtsar.sources.formats.phase_history; anything else (TOA
+domain, several channels, a file without the configuration) is refused in one line.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ...params import config_from_dict
+from .foreign import ForeignRecording, check_telemetry
+from .geometry import LocalFrame
+from .phase_history import fx_mapping, fx_to_shots
+from .requirements import require_formats
+
+try:
+    import sarkit.cphd as skcphd
+except ImportError:  # the optional extra "formats"
+    skcphd = None
+
+
+class _FxShots:
+    """The shots of one CPHD channel, read and transformed block by block on slicing."""
+
+    def __init__(self, reader, channel: str, mapping, vectors: int):
+        self._reader, self._channel, self._m, self._n = reader, channel, mapping, vectors
+
+    def __len__(self) -> int:
+        return self._n
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self._n, self._m.samples_per_shot)
+
+    def __getitem__(self, key) -> np.ndarray:
+        if not isinstance(key, slice) or key.step not in (None, 1):
+            raise TypeError("CPHD shots are read in contiguous blocks")
+        start, stop, _ = key.indices(self._n)
+        if stop <= start:
+            return np.zeros((0, self._m.samples_per_shot), np.complex64)
+        fx = self._reader.read_signal(self._channel, start_vector=start, stop_vector=stop)
+        return fx_to_shots(self._m, fx)
+
+
+def _parameters(tree) -> dict:
+    return {
+        p.get("name"): p.text or "" for p in tree.getroot().findall("./{*}ProductInfo/{*}Parameter")
+    }
+
+
+def open_cphd(path: str | Path) -> ForeignRecording:
+    """Open a CPHD file as a recording; ValueError naming the file and what rtsar cannot read."""
+    require_formats(skcphd, "reading CPHD")
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"{path}: no such file")
+    f = open(path, "rb")
+    try:
+        try:
+            reader = skcphd.Reader(f)
+        except Exception as exc:  # sarkit raises several kinds on a file that is not CPHD
+            raise ValueError(f"not a CPHD file ({exc})") from None
+        tree = reader.metadata.xmltree
+        root = tree.getroot()
+        if root.findtext("./{*}Global/{*}DomainType") != "FX":
+            raise ValueError("only FX-domain CPHD is read (this one is TOA domain)")
+        channels = root.findall("./{*}Data/{*}Channel")
+        if len(channels) != 1:
+            raise ValueError(f"{len(channels)} channels: rtsar reads one-channel CPHD")
+        channel = channels[0].findtext("./{*}Identifier")
+        params = _parameters(tree)
+        if "rtsar:config" not in params:
+            raise ValueError(
+                "no rtsar:config in ProductInfo: rtsar reads the CPHD it writes (`rtsar export "
+                "--cphd`); another collector's CPHD needs a processing configuration"
+            )
+        cfg = config_from_dict(json.loads(params["rtsar:config"]))
+        scene = json.loads(params.get("rtsar:scene", "{}") or "{}")
+        m = fx_mapping(cfg)
+        pvp = reader.read_pvps(channel)
+        vectors = len(pvp)
+        if int(channels[0].findtext("./{*}NumSamples")) != m.num_samples:
+            raise ValueError(
+                f"{m.num_samples} samples per vector expected from the configuration, "
+                f"the file has {channels[0].findtext('./{*}NumSamples')}"
+            )
+        if vectors and not (
+            np.allclose(pvp["SC0"], m.sc0_hz, rtol=1e-12, atol=1e-3)
+            and np.allclose(pvp["SCSS"], m.scss_hz, rtol=1e-9)
+        ):
+            raise ValueError("SC0/SCSS differ from the configuration's frequency sampling")
+        lat, lon = (float(v) for v in params.get("rtsar:origin_lat_lon_deg", "0,0").split(","))
+        local = LocalFrame(lat, lon).from_ecf(pvp["TxPos"])
+        names = pvp.dtype.names
+        index = (
+            np.asarray(pvp["rtsar_pulse_index"], np.int64)
+            if "rtsar_pulse_index" in names
+            else np.arange(vectors, dtype=np.int64)
+        )
+        time_s = np.asarray(pvp["TxTime"], np.float64)
+        along = local[:, 0]
+        check_telemetry(path, cfg, index, along)
+        start = float(params.get("rtsar:start_along_track_m", along[0] if vectors else 0.0))
+        position = local if cfg.geometry.platform_height_m > 0 else None
+    except (ValueError, KeyError, TypeError) as exc:
+        f.close()
+        raise ValueError(f"{path}: {exc}") from None
+    return ForeignRecording(
+        path,
+        cfg,
+        scene,
+        vectors,
+        start,
+        _FxShots(reader, channel, m, vectors),
+        index,
+        time_s,
+        {},
+        position,
+        f.close,
+    )

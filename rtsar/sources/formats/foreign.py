@@ -1,0 +1,71 @@
+"""A recording read from another format (CPHD, SigMF), offered as rtsar.sinks.io.Recording is:
+the same attributes and methods, so ``process`` and ``replay`` take it unchanged."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ...params import Config
+from ...scene.model import Scene, scene_from_dict
+
+
+@dataclass
+class ForeignRecording:
+    """Shots [pulse, sample] (any array-like that slices into complex64 blocks), per-pulse
+    ``pulse_index`` and ``time_s``, auxiliary ``channels`` (name → array-like), the
+    configuration and scene; ``closer`` releases the underlying file."""
+
+    path: Path
+    config: Config
+    scene: dict
+    pulses: int
+    start_along_track_m: float
+    shots: object
+    pulse_index: np.ndarray
+    time_s: np.ndarray
+    channels: dict = field(default_factory=dict)
+    position_m: np.ndarray | None = None
+    closer: object = None
+
+    def batches(self, size: int) -> Iterator[np.ndarray]:
+        for i in range(0, self.pulses, size):
+            yield np.asarray(self.shots[i : i + size], np.complex64)
+
+    def batches_with_aux(self, size: int, names=()) -> Iterator[tuple[np.ndarray, dict]]:
+        for i in range(0, self.pulses, size):
+            aux = {n: np.asarray(self.channels[n][i : i + size], np.complex64) for n in names}
+            yield np.asarray(self.shots[i : i + size], np.complex64), aux
+
+    def scene_object(self) -> Scene | None:
+        if not self.scene:
+            return None
+        try:
+            return scene_from_dict(self.scene, name=self.scene.get("name", "scene"))
+        except (ValueError, TypeError) as exc:
+            raise ValueError(f"{self.path}: the recorded scene does not parse ({exc})") from None
+
+    def close(self) -> None:
+        if self.closer is not None:
+            self.closer()
+            self.closer = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def check_telemetry(path, cfg: Config, pulse_index, along_track_m) -> None:
+    """The checks rtsar.sinks.io.open_recording makes: pulse numbers increase, positions follow
+    the configured step (the image's azimuth axis depends on it)."""
+    if len(pulse_index) > 1 and not np.all(np.diff(pulse_index) > 0):
+        raise ValueError(f"{path}: pulse numbers must increase from shot to shot")
+    if len(along_track_m) > 1:
+        steps = np.diff(along_track_m)
+        if not np.allclose(steps, cfg.geometry.along_track_step_m, rtol=1e-6, atol=1e-9):
+            raise ValueError(f"{path}: the platform does not advance by the configured step")

@@ -1,0 +1,185 @@
+"""Standard formats (issue 16): CPHD 1.0.1 and SigMF round trips, the FX phase reference, SICD
+of an image, and the one-line error without the optional packages."""
+
+import json
+
+import numpy as np
+import pytest
+
+sarkit_cphd = pytest.importorskip("sarkit.cphd")
+skver = pytest.importorskip("sarkit.verification")
+sigmf = pytest.importorskip("sigmf")
+pytest.importorskip("sarpy")
+
+from rtsar.app.cli import main  # noqa: E402
+from rtsar.params import C_M_PER_S  # noqa: E402
+from rtsar.scene.model import scene_from_dict  # noqa: E402
+from rtsar.scene.simulator import Simulator  # noqa: E402
+from rtsar.sinks.image_file import read_image  # noqa: E402
+from rtsar.sinks.io import open_recording  # noqa: E402
+from rtsar.sources.formats.cphd_reader import open_cphd  # noqa: E402
+from rtsar.sources.formats.phase_history import fx_mapping, fx_to_shots, shots_to_fx  # noqa: E402
+from rtsar.sources.formats.sigmf_reader import open_sigmf  # noqa: E402
+
+PULSED = """
+preset = "tiny"
+seed = 1
+pulses = 120
+start_along_track_m = -20.0
+[[targets]]
+along_track_m = 0.0
+slant_range_m = 2000.0
+[[targets]]
+along_track_m = 6.0
+slant_range_m = 2031.3
+amplitude = 0.7
+[[effects]]
+name = "noise"
+snr_db = 10.0
+"""
+
+FMCW = """
+preset = "crouch-sal"
+pulses = 80
+seed = 2
+[processor]
+aperture_pulses = 32
+range_bins = 128
+[geometry]
+along_track_step_m = 50e-6
+[[targets]]
+along_track_m = 0.0
+slant_range_m = 1.5002
+[[effects]]
+name = "reference_interferometer"
+"""
+
+
+def _recording(tmp_path, text, name):
+    scene = tmp_path / f"{name}.toml"
+    scene.write_text(text)
+    rec = tmp_path / f"{name}.h5"
+    assert main(["simulate", str(scene), "-o", str(rec)]) == 0
+    return rec
+
+
+@pytest.fixture(scope="module")
+def pulsed(tmp_path_factory):
+    return _recording(tmp_path_factory.mktemp("pulsed"), PULSED, "pulsed")
+
+
+def test_cphd_round_trip_consistent_and_same_image(pulsed, tmp_path):
+    out = tmp_path / "rec.cphd"
+    assert main(["export", str(pulsed), "--cphd", str(out)]) == 0
+    with open(out, "rb") as f:  # NGA's consistency checks (sarkit), reading the whole file
+        con = skver.CphdConsistency.from_file(f, thorough=True)
+        con.check()
+        assert con.passes() and not con.failures(), con.failures()
+    from sarpy.io.phase_history.converter import open_phase_history
+
+    reader = open_phase_history(str(out))  # an independent reader opens it
+    with open_recording(pulsed) as rec:
+        m = fx_mapping(rec.config)
+        fx = reader.read(None, None, index=0) if hasattr(reader, "read") else reader[:, :]
+        np.testing.assert_allclose(fx, shots_to_fx(m, rec.shots[...]), rtol=0, atol=1e-6)
+        with open_cphd(out) as back:
+            assert back.pulses == rec.pulses and back.start_along_track_m == rec.start_along_track_m
+            np.testing.assert_array_equal(back.pulse_index, rec.pulse_index)
+            np.testing.assert_array_equal(back.time_s, rec.time_s)
+            shots = rec.shots[...]
+            err = np.abs(back.shots[0 : rec.pulses] - shots).max() / np.abs(shots).max()
+            assert err < 1e-6
+    img_h5, img_cphd = tmp_path / "a.h5", tmp_path / "b.h5"
+    assert main(["process", str(pulsed), "-o", str(img_h5), "--lens", "numpy"]) == 0
+    assert main(["process", str(out), "-o", str(img_cphd), "--lens", "numpy"]) == 0
+    a, az_a, rg_a, _ = read_image(img_h5)
+    b, az_b, rg_b, _ = read_image(img_cphd)
+    np.testing.assert_array_equal(az_a, az_b)
+    np.testing.assert_array_equal(rg_a, rg_b)
+    assert np.abs(a - b).max() / np.abs(a).max() <= 1e-5
+
+
+@pytest.mark.parametrize("preset", ["tiny", "crouch-sal"])
+def test_fx_vector_is_phase_history_referenced_to_the_srp(preset):
+    """A lone scatterer Δτ beyond the SRP gives FX phase -2π f Δτ over the band (SGN = -1;
+    FMCW: plus its residual video phase πKΔτ², Crouch eq. 3.4), against a float64 reference;
+    the inverse gives the shot back."""
+    cfg = scene_from_dict({"preset": preset, "targets": []}).config
+    m = fx_mapping(cfg)
+    r_target = m.srp_range_m + 7.3 * cfg.waveform.range_resolution_m
+    d = {"preset": preset, "pulses": 1, "targets": [{"along_track_m": 0.0, "slant_range_m": 1.0}]}
+    d["targets"][0]["slant_range_m"] = r_target
+    shot = Simulator(scene_from_dict(d)).echo(np.array([r_target]), np.array([1.0 + 0j]))
+    fx = shots_to_fx(m, shot[None, :])[0].astype(np.complex128)
+    f = m.frequency_hz
+    width = m.fx2_hz - m.fx1_hz
+    band = (f >= m.fx1_hz + 0.1 * width) & (f <= m.fx2_hz - 0.1 * width)
+    dtau = 2.0 * (r_target - m.srp_range_m) / C_M_PER_S
+    expected = np.exp(-2j * np.pi * np.mod(f[band] * dtau, 1.0))
+    residual = np.unwrap(np.angle(fx[band] * np.conj(expected)))
+    rvp = 0.0 if m.pulsed else np.pi * cfg.waveform.chirp_rate_hz_per_s * dtau**2
+    # Flat: the phase slope over frequency is -2πΔτ (one sample of delay off would tilt it by
+    # ~4 rad over the band); what is left is the chirp spectrum's Fresnel ripple of a
+    # fractionally delayed echo (±0.1 rad).
+    assert np.ptp(residual) < 0.3 and np.std(residual) < 0.06
+    assert abs(np.angle(np.exp(1j * (np.mean(residual) - rvp)))) < 0.05
+    back = fx_to_shots(m, fx[None, :])
+    assert np.abs(back - shot).max() < 1e-5 * np.abs(shot).max()
+
+
+def test_sigmf_round_trip_bit_identical_with_channels(tmp_path):
+    rec_path = _recording(tmp_path, FMCW, "fmcw")
+    base = tmp_path / "out"
+    assert main(["export", str(rec_path), "--sigmf", str(base)]) == 0
+    meta = json.loads((tmp_path / "out.sigmf-meta").read_text())
+    handle = sigmf.sigmffile.fromfile(str(tmp_path / "out.sigmf-meta"))
+    handle.validate()  # the SigMF schema
+    assert meta["global"]["rtsar:prf_hz"] > 0 and len(meta["captures"]) == 1
+    assert {"rtsar:pulse_index", "rtsar:time_s"} <= set(meta["annotations"][0])
+    with open_recording(rec_path) as rec, open_sigmf(tmp_path / "out.sigmf-meta") as back:
+        assert back.config == rec.config
+        np.testing.assert_array_equal(back.shots[...], rec.shots[...])
+        np.testing.assert_array_equal(back.pulse_index, rec.pulse_index)
+        np.testing.assert_array_equal(back.time_s, rec.time_s)
+        assert set(back.channels) == set(rec.channels) == {"reference_interferometer"}
+        for name, ds in rec.channels.items():
+            np.testing.assert_array_equal(back.channels[name], ds[...])
+    a, b = tmp_path / "a.h5", tmp_path / "b.h5"
+    assert main(["process", str(rec_path), "-o", str(a), "--lens", "numpy"]) == 0
+    assert main(["process", str(base) + ".sigmf-meta", "-o", str(b), "--lens", "numpy"]) == 0
+    np.testing.assert_array_equal(read_image(a)[0], read_image(b)[0])
+
+
+def test_sicd_of_an_image_opens_in_sarpy(pulsed, tmp_path):
+    img, out = tmp_path / "img.h5", tmp_path / "img.nitf"
+    assert main(["process", str(pulsed), "-o", str(img), "--lens", "numpy"]) == 0
+    assert main(["export", str(img), "--sicd", str(out)]) == 0
+    from sarpy.io.complex.converter import open_complex
+
+    reader = open_complex(str(out))
+    sicd = reader.get_sicds_as_tuple()[0]
+    image, az, rg, _ = read_image(img)
+    np.testing.assert_array_equal(reader[:, :], image.T)  # rows range, columns along track
+    assert sicd.Grid.Row.SS == pytest.approx(rg[1] - rg[0], rel=1e-12)
+    assert sicd.Grid.Col.SS == pytest.approx(az[1] - az[0], rel=1e-12)
+    assert sicd.SCPCOA.SideOfTrack == "R"
+    assert sicd.Grid.Row.ImpRespBW == pytest.approx(2 * 40e6 / C_M_PER_S)
+
+
+def test_missing_packages_named_in_one_line(pulsed, tmp_path, monkeypatch, capsys):
+    import rtsar.sinks.exports.cphd as cphd
+
+    monkeypatch.setattr(cphd, "skcphd", None)
+    assert main(["export", str(pulsed), "--cphd", str(tmp_path / "x.cphd")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and 'pip install "rtsar[formats]"' in err[0]
+
+
+def test_cphd_not_from_rtsar_refused_in_one_line(pulsed, tmp_path):
+    out = tmp_path / "rec.cphd"
+    assert main(["export", str(pulsed), "--cphd", str(out)]) == 0
+    raw = out.read_bytes().replace(b'name="rtsar:config"', b'name="other:config"')
+    other = tmp_path / "other.cphd"
+    other.write_bytes(raw)
+    with pytest.raises(ValueError, match="no rtsar:config"):
+        open_cphd(other)

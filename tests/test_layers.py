@@ -50,6 +50,8 @@ LAZY_ALLOWED = {
     ("rtsar.lens.base", "rtsar.lens.cl_loader"): "pyopencl loads slowly; probed for --lens auto",
     ("rtsar.app.bench", "rtsar.lens.cl_loader"): "bench runs without pyopencl where OpenCL fails",
     ("rtsar.ccd", "rtsar.ccd.physical"): "the physical CCD's numba kernels, physical mode only",
+    ("rtsar.app.cli.formats", "rtsar.sinks.exports.sicd"): "sarpy loads in ~1 s; --sicd only",
+    ("rtsar.app.cli.streaming", "rtsar.sinks.exports.sicd"): "sarpy loads in ~1 s; --sicd only",
 }
 MAX_LINES = 500
 

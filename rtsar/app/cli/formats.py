@@ -6,7 +6,6 @@ from __future__ import annotations
 import time
 
 from ...sinks.exports.cphd import write_cphd
-from ...sinks.exports.sicd import write_sicd
 from ...sinks.exports.sigmf_export import write_sigmf
 from ...sinks.io import check_writable
 from ...sources.formats.geometry import LocalFrame
@@ -35,6 +34,9 @@ def cmd_export(args) -> int:
     if args.sicd:
         if args.cphd or args.sigmf:
             return die("--sicd takes an image file; --cphd and --sigmf take a recording")
+        # Here, not above: sarpy takes ~1 s to load and only --sicd needs it.
+        from ...sinks.exports.sicd import write_sicd
+
         info = write_sicd(args.input, args.sicd, frame)
         print(
             f"wrote {args.sicd}: SICD {info['version']}, {info['rows']} × {info['cols']} "

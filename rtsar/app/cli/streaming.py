@@ -14,6 +14,7 @@ from ... import __version__
 from ...presets import preset
 from ...scene import DEMO_SCENE, load_scene
 from ...scene.files import BUILT_IN
+from ...sinks.io import check_writable
 from ...sinks.publish import DEFAULT_ENDPOINT
 from ...sources.channel_map import ChannelMap
 from ...sources.replay import ReplaySource
@@ -179,9 +180,18 @@ def cmd_demo(args) -> int:
 def cmd_subscribe(args) -> int:
     if args.timeout is not None and args.timeout <= 0:
         return die(f"--timeout must be > 0 seconds, got {args.timeout}")
-    return subscribe(
+    if args.sicd:
+        check_writable(args.sicd)
+    status = subscribe(
         args.endpoint, args.output, args.curve_server_key, args.timeout, args.curve_client_key
     )
+    if args.sicd and Path(args.output).exists():
+        # Here, not above: sarpy takes ~1 s to load and only --sicd needs it.
+        from ...sinks.exports.sicd import write_sicd
+
+        info = write_sicd(args.output, args.sicd)
+        print(f"wrote {args.sicd}: SICD of {args.output}, {info['rows']} × {info['cols']} pixels")
+    return status
 
 
 def cmd_view(args) -> int:
@@ -321,6 +331,12 @@ def add_parsers(sub) -> None:
     add_subscriber_options(s)
     s.add_argument("-o", "--output", required=True, help="image file to write (.h5)")
     s.add_argument("--timeout", type=float, help="stop after this many seconds of silence")
+    s.add_argument(
+        "--sicd",
+        metavar="OUT.nitf",
+        help="at the end of the stream, also write the image as SICD (NITF; needs "
+        'pip install "rtsar[formats]"; default: none)',
+    )
     s.set_defaults(func=cmd_subscribe)
 
     s = sub.add_parser(

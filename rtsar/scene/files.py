@@ -15,10 +15,13 @@ Crouch's coin relief) can be simulated, recorded and processed from the command 
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
-from .model import Scene, scene_from_dict, scene_settings
+from .model import MAX_TARGETS, Scene, scan_extent, scene_from_dict, scene_settings
+from .picture import picture_levels, picture_targets, text_rows
 from .relief import default_spacing_m, penny_relief, ridge, slanted_plane, sphere_cap, surface_scene
+from .surfaces import combine_targets
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -32,10 +35,21 @@ SHAPES = {
     "coin": penny_relief,
 }
 _SURFACE_KEYS = {"shape", "lines", "scatterers_per_cell"}
+_PICTURE_KEYS = {
+    "text",
+    "rows",
+    "along_track_m",
+    "slant_range_m",
+    "cell_power",
+    "cells_per_scatterer",
+    "magnitude",
+}
 
 
 def scene_from_table(d: dict, name: str = "scene") -> Scene:
-    """A Scene from a parsed scene file: point targets, or a ``[surface]``."""
+    """A Scene from a parsed scene file: point targets and pictures, or a ``[surface]``."""
+    if "pictures" in d:
+        return _with_pictures(d, name)
     if "surface" not in d:
         return scene_from_dict(d, name)
     table = d["surface"]
@@ -76,6 +90,53 @@ def scene_from_table(d: dict, name: str = "scene") -> Scene:
         effects=effects,
         name=d.get("name", name),
     ).scene
+
+
+def _with_pictures(d: dict, name: str) -> Scene:
+    """Point targets plus ``[[pictures]]`` (rtsar.scene.picture): diffuse scatterers drawn from
+    text or rows of characters, seeded by the scene's seed and the picture's index."""
+    rest = {k: v for k, v in d.items() if k != "pictures"}
+    if "surface" in rest:
+        raise ValueError("a scene has [surface] or [[pictures]], not both")
+    points = scene_from_dict(rest, name)
+    cfg = points.config
+    parts = [points.targets]
+    tables = d["pictures"]
+    if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
+        raise ValueError("'pictures' must be an array of tables: write [[pictures]]")
+    for i, t in enumerate(tables):
+        unknown = set(t) - _PICTURE_KEYS
+        if unknown:
+            raise ValueError(f"pictures[{i}]: unknown keys {sorted(unknown)}")
+        if ("text" in t) == ("rows" in t):
+            raise ValueError(f"pictures[{i}]: give exactly one of text, rows")
+        for key in ("along_track_m", "slant_range_m"):
+            if key not in t:
+                raise ValueError(f"pictures[{i}]: {key} = [low, high] is required")
+        try:
+            levels = picture_levels(text_rows(t["text"]) if "text" in t else t["rows"])
+            power = t.get("cell_power", 1.0)
+            if isinstance(power, bool) or not isinstance(power, (int, float)):
+                raise ValueError(f"picture.cell_power must be a number, got {power!r}")
+            parts.append(
+                picture_targets(
+                    cfg,
+                    levels,
+                    t["along_track_m"],
+                    t["slant_range_m"],
+                    float(power),
+                    t.get("cells_per_scatterer", (1.0, 1.0)),
+                    t.get("magnitude", "rayleigh"),
+                    seed=(points.seed, i),
+                )
+            )
+        except ValueError as exc:
+            raise ValueError(f"pictures[{i}]: {exc}") from None
+    targets = combine_targets(*parts)
+    if len(targets) > MAX_TARGETS:
+        raise ValueError(f"scene: {len(targets)} scatterers exceed {MAX_TARGETS}")
+    start, pulses = scan_extent(cfg, targets, d.get("start_along_track_m"), d.get("pulses"))
+    return replace(points, targets=targets, pulses=pulses, start_along_track_m=start)
 
 
 BUILT_IN = Path(__file__).with_name("scenes")  # demo.toml, insal-ridge.toml, ...

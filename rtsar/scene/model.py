@@ -226,7 +226,7 @@ def _targets(rows: list, cfg: Config) -> Targets:
     return replace(targets, ground_range_m=np.array(ground), height_m=np.array(heights))
 
 
-def _scan_extent(cfg: Config, targets: Targets, start, pulses) -> tuple[float, int]:
+def scan_extent(cfg: Config, targets: Targets, start, pulses) -> tuple[float, int]:
     """Default scan: from A/2 plus a margin before the first target to as far after the last."""
     step = cfg.geometry.along_track_step_m
     n = cfg.processor.aperture_pulses
@@ -254,7 +254,7 @@ def scene_from_dict(d: dict, name: str = "scene") -> Scene:
         raise ValueError(f"scene: unknown keys {sorted(unknown)}; known: {sorted(_TOP_KEYS)}")
     cfg, effects, seed = scene_settings(d)
     targets = _targets(_table_list(d, "targets"), cfg)
-    start, pulses = _scan_extent(cfg, targets, d.get("start_along_track_m"), d.get("pulses"))
+    start, pulses = scan_extent(cfg, targets, d.get("start_along_track_m"), d.get("pulses"))
     return Scene(cfg, targets, pulses, start, seed, effects, d.get("name", name))
 
 
@@ -297,7 +297,7 @@ def point_scene(
     if not (x.shape == r.shape == a.shape):
         raise ValueError("along_track_m, slant_range_m and amplitude must have one length")
     targets = Targets(x, r, a)
-    start, pulses = _scan_extent(cfg, targets, start_along_track_m, pulses)
+    start, pulses = scan_extent(cfg, targets, start_along_track_m, pulses)
     return Scene(cfg, targets, pulses, start, seed, tuple((n, dict(p)) for n, p in effects), name)
 
 

@@ -31,7 +31,8 @@ from ..lens.plan import receive_window_open_s
 from ..params import C_M_PER_S, FMCWChirp, PulsedChirp
 from .effects import load_effects
 from .effects.base import Effect, PulseContext
-from .model import Scene
+from .model import Scene, Targets
+from .tones import pulsed_returns, quadratic_phasor, tone_sum
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,6 +58,7 @@ class Simulator:
         self._position_effects = self._overriding("along_track_error_m")
         self._aux_effects = self._overriding("aux_channels")
         self._rng = np.random.default_rng(scene.seed)
+        self._seen = self._visible_targets()
         self._next = 0
         wf = cfg.waveform
         self.samples_per_shot = wf.samples_per_shot
@@ -64,6 +66,8 @@ class Simulator:
         if isinstance(wf, PulsedChirp):
             self._t_open = receive_window_open_s(cfg)
             self._t = self._t_open + n / wf.sample_rate_hz
+            fs = wf.sample_rate_hz
+            self._chirp_q = quadratic_phasor(n.size, 0.5 * wf.chirp_rate_hz_per_s / (fs * fs))
         elif isinstance(wf, FMCWChirp):
             self._t = (n - self.samples_per_shot / 2) / wf.sample_rate_hz
         else:  # pragma: no cover - params validation prevents it
@@ -73,6 +77,23 @@ class Simulator:
         """The effects that implement ``hook`` (the others are never called for it)."""
         return [e for e in self.effects if getattr(type(e), hook) is not getattr(Effect, hook)]
 
+    def _visible_targets(self):
+        """(targets sorted along track, half-width of the offsets any gain leaves non-zero), or
+        None: every scatterer is synthesised on every pulse.  Scatterers outside the half-width
+        have gain exactly 0, which both echo paths skip, so skipping them first changes no
+        sample; auxiliary channels see all targets (their effects may have gains of their own)."""
+        tg = self.scene.targets
+        if self._aux_effects or len(tg) == 0:
+            return None
+        r_max = float(tg.slant_range_m.max())
+        bounds = [e.along_track_support_m(r_max) for e in self._gain_effects]
+        bounds = [b for b in bounds if b is not None]
+        if not bounds:
+            return None
+        order = np.argsort(tg.along_track_m, kind="stable")
+        sorted_tg = Targets(tg.along_track_m[order], tg.slant_range_m[order], tg.amplitude[order])
+        return sorted_tg, min(bounds)
+
     # -- one shot -------------------------------------------------------------------------
     def echo(self, range_m, gain, deviation=None, lo_range_m=None) -> np.ndarray:
         """Returns from scatterers at ranges ``range_m`` with complex ``gain`` (complex128 samples).
@@ -81,8 +102,15 @@ class Simulator:
         half-path) ranges; ``deviation`` is the chirp deviation e(u) in cycles (None: ideal chirp)
         and ``lo_range_m`` the FMCW LO delay as a range (None: the waveform's reference range).
         """
-        out = np.zeros(self.samples_per_shot, np.complex128)
+        if deviation is None:
+            return self._tone_echo(range_m, gain, lo_range_m)
+        return self.direct_echo(range_m, gain, deviation, lo_range_m)
+
+    def direct_echo(self, range_m, gain, deviation=None, lo_range_m=None) -> np.ndarray:
+        """``echo`` evaluated by the formula of the module docstring, an exponential per scatterer
+        and sample (the reference of the tone path; the path taken with a chirp deviation)."""
         wf = self.config.waveform
+        out = np.zeros(self.samples_per_shot, np.complex128)
         lam = self.config.geometry.wavelength_m
         if isinstance(wf, PulsedChirp):
             fs, k, tp = wf.sample_rate_hz, wf.chirp_rate_hz_per_s, wf.pulse_duration_s
@@ -123,6 +151,44 @@ class Simulator:
             out += gj @ np.exp(2j * math.pi * np.mod(cycles, 1.0))
         return out
 
+    def _tone_echo(self, range_m, gain, lo_range_m=None) -> np.ndarray:
+        """``echo`` with an ideal chirp, as windowed tones (rtsar.scene.tones; same samples to
+        ~1e-13 of each amplitude, one multiply-add per scatterer and sample)."""
+        wf = self.config.waveform
+        lam = self.config.geometry.wavelength_m
+        r = np.atleast_1d(np.asarray(range_m, np.float64))
+        g = np.atleast_1d(np.asarray(gain, np.complex128))
+        if r.shape != g.shape:
+            raise ValueError(f"echo: {r.shape[0]} ranges but {g.shape[0]} gains")
+        keep = g != 0
+        r, g = r[keep], g[keep]
+        s = self.samples_per_shot
+        if isinstance(wf, PulsedChirp):
+            return pulsed_returns(
+                s,
+                r,
+                g,
+                self._t_open,
+                wf.sample_rate_hz,
+                wf.chirp_rate_hz_per_s,
+                wf.pulse_duration_s,
+                lam,
+                C_M_PER_S,
+                self._chirp_q,
+            )
+        k = wf.chirp_rate_hz_per_s
+        fs = wf.sample_rate_hz
+        r_lo = wf.reference_range_m if lo_range_m is None else float(lo_range_m)
+        tau = 2.0 * r / C_M_PER_S
+        tau_ref = 2.0 * r_lo / C_M_PER_S
+        dtau = 2.0 * (r - r_lo) / C_M_PER_S
+        const = np.fmod(-2.0 * (r - r_lo) / lam + 0.5 * k * dtau * (tau + tau_ref), 1.0)
+        # t_n = (n - S/2)/fs: -K Δτ t_n = K Δτ S/(2 fs) - (K Δτ/fs) n
+        alpha = const + np.fmod(k * dtau * (0.5 * s / fs), 1.0)
+        beta = np.fmod(-k * dtau / fs, 1.0)
+        zeros = np.zeros(len(r), np.int64)
+        return tone_sum(s, zeros, zeros + s, alpha, beta, g)
+
     def _deviation(self, pulse: int):
         """The summed chirp deviation of the effects for this pulse, e(u) in cycles, or None."""
         if not self._chirp_effects:
@@ -148,6 +214,12 @@ class Simulator:
     def _echo(self, pulse: int) -> tuple[np.ndarray, dict]:
         tg = self.scene.targets
         x_p = self.platform_along_track_m(pulse)
+        if self._seen is not None:
+            by_x, half_m = self._seen
+            i0, i1 = np.searchsorted(by_x.along_track_m, (x_p - half_m, x_p + half_m))
+            tg = Targets(
+                by_x.along_track_m[i0:i1], by_x.slant_range_m[i0:i1], by_x.amplitude[i0:i1]
+            )
         offset = tg.along_track_m - x_p
         r = np.sqrt(tg.slant_range_m**2 + offset**2)
         gain = tg.amplitude.copy()

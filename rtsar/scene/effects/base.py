@@ -8,6 +8,9 @@ chirp_deviation_cycles  transmitted-phase deviation from the ideal linear chirp,
                      pulse centre).  Each echo delayed by τ carries e(u - τ); an FMCW LO delayed by
                      τ_ref subtracts e(u - τ_ref) (the deviation passes through dechirp; Crouch 3.2)
 target_gain          complex gain per scatterer (e.g. the antenna pattern)
+along_track_support_m  (not per pulse) the half-width of the along-track offsets outside which
+                     target_gain is exactly 0 for every range up to the one given, or None (no
+                     such bound): the simulator then skips those scatterers unseen
 apply_to_shot        modifies the main channel's complex samples in place (noise, piston phase)
 aux_channels         extra receive channels of this pulse (reference interferometer, HCN cell,
                      second receiver, ...): returns {name: complex samples}; the PulseContext
@@ -54,6 +57,9 @@ class Effect:
     def target_gain(
         self, pulse: int, along_offset_m: np.ndarray, slant_range_m: np.ndarray
     ) -> np.ndarray | None:
+        return None
+
+    def along_track_support_m(self, max_slant_range_m: float) -> float | None:
         return None
 
     def apply_to_shot(self, pulse: int, samples: np.ndarray, rng: np.random.Generator) -> None:

@@ -1,9 +1,14 @@
-"""Simulator cost per pulse with and without each effect, measured in one run.
+"""Simulator cost per pulse with and without each effect, or of a whole scene against its PRF.
 
     python tools/sim_cost.py [--preset psaltis-jpl] [--targets 16] [--pulses 2000]
+    python tools/sim_cost.py --scene demo [--pulses N]
 
-Best of three interleaved rounds.  Shows that an effect the scene does not name costs nothing:
-the "none" row is the baseline and each effect row adds only that effect.
+Without ``--scene``: best of three interleaved rounds; shows that an effect the scene does not
+name costs nothing (the "none" row is the baseline, each effect row adds only that effect).
+With ``--scene``: the scene's shots in order (all of them, or the first N), timed per second of
+flight in the simulating thread's CPU time (what the live source spends, whatever else the
+machine runs) and in wall time; the cost per pulse against the PRF's period says whether the
+scene can be simulated live, and what share of one core it takes.
 """
 
 from __future__ import annotations
@@ -16,7 +21,7 @@ import numpy as np
 
 from ...lens.plan import range_axis_m
 from ...presets import preset
-from ...scene import Simulator, point_scene
+from ...scene import Simulator, load_scene, point_scene
 from ...scene.effects import REGISTRY
 
 PARAMS = {"noise": {"snr_db": 0.0}, "antenna_pattern": {}}
@@ -35,14 +40,74 @@ def cost_us(cfg, n_targets, pulses, effects) -> float:
     return 1e6 * (time.perf_counter() - t0) / (pulses - 16)
 
 
+def scene_cost(scene, pulses: int | None = None) -> dict:
+    """Cost of simulating ``scene``'s first ``pulses`` shots (all by default), per second of
+    flight: thread CPU µs/pulse (mean, worst second) and wall µs/pulse, against 1/PRF."""
+    prf = scene.config.geometry.prf_hz
+    total = scene.pulses if pulses is None else min(pulses, scene.pulses)
+    sim = Simulator(scene)
+    second = max(1, int(round(prf)))
+    cpu, wall, done = [], [], 0
+    while done < total:
+        count = min(second, total - done)
+        t0, c0 = time.perf_counter(), time.thread_time()
+        sim.block(count)
+        cpu.append(1e6 * (time.thread_time() - c0) / count)
+        wall.append(1e6 * (time.perf_counter() - t0) / count)
+        done += count
+    # The first second includes numba's load from its cache; report it apart.
+    steady = cpu[1:] or cpu
+    return {
+        "scene": scene.name,
+        "scatterers": len(scene.targets),
+        "pulses": total,
+        "prf_hz": prf,
+        "period_us": 1e6 / prf,
+        "first_second_cpu_us_per_pulse": cpu[0],
+        "cpu_us_per_pulse": float(np.mean(steady)),
+        "worst_second_cpu_us_per_pulse": float(np.max(steady)),
+        "wall_us_per_pulse": float(np.mean(wall[1:] or wall)),
+    }
+
+
+def print_scene_cost(c: dict) -> None:
+    share = c["cpu_us_per_pulse"] / c["period_us"]
+    worst = c["worst_second_cpu_us_per_pulse"] / c["period_us"]
+    print(
+        f"simulator cost, scene {c['scene']!r}: {c['scatterers']} scatterers, "
+        f"{c['pulses']} pulses at {c['prf_hz']:g} Hz (period {c['period_us']:.1f} µs)"
+    )
+    print(
+        f"  CPU   {c['cpu_us_per_pulse']:9.1f} µs/pulse  ({100 * share:.0f} % of the period; "
+        f"worst second {c['worst_second_cpu_us_per_pulse']:.1f} µs, {100 * worst:.0f} %)"
+    )
+    print(f"  wall  {c['wall_us_per_pulse']:9.1f} µs/pulse  (with what else the machine runs)")
+    print(f"  first second {c['first_second_cpu_us_per_pulse']:.1f} µs/pulse CPU (numba load)")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    ap.add_argument("--preset", default="psaltis-jpl")
-    ap.add_argument("--targets", type=int, default=16)
-    ap.add_argument("--pulses", type=int, default=2000)
+    ap.add_argument("--preset", default="psaltis-jpl", help="preset (default psaltis-jpl)")
+    ap.add_argument("--targets", type=int, default=16, help="random point targets (default 16)")
+    ap.add_argument(
+        "--pulses",
+        type=int,
+        help="pulses timed (default 2000; with --scene all of the scene's)",
+    )
+    ap.add_argument("--scene", help="a scene file or built-in scene name: its cost against its PRF")
     args = ap.parse_args(argv)
+    if args.scene:
+        try:
+            scene = load_scene(args.scene)
+        except ValueError as exc:
+            print(f"sim_cost: {exc}", file=sys.stderr)
+            return 2
+        print_scene_cost(scene_cost(scene, args.pulses))
+        return 0
+    args.pulses = args.pulses or 2000
     cfg = preset(args.preset)
     cases = [("none", [])] + [(n, [(n, PARAMS.get(n, {}))]) for n in REGISTRY]
     cases.append(("all", [(n, PARAMS.get(n, {})) for n in REGISTRY]))

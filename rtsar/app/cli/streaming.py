@@ -20,6 +20,7 @@ from ...sources.channel_map import ChannelMap
 from ...sources.replay import ReplaySource
 from ...sources.serial import SerialSource
 from ...sources.sim import SimSource
+from ...sources.zmq_in import ZmqSource
 from ..live import run_stream
 from ..subscribe import subscribe
 from ..view import view
@@ -69,7 +70,7 @@ def warn_slow_first_line(scene, name) -> None:
 def cmd_run(args) -> int:
     if args.duration is not None and args.duration <= 0:
         return die(f"--duration must be > 0 seconds, got {args.duration}")
-    if args.serial:
+    if args.serial or args.zmq_in:
         # Pulse 0's along-track position: the scene's (the instrument scans the scene the file
         # describes, as the fake instrument does); a bare preset starts at 0 m.
         start_m, described = 0.0, None
@@ -80,14 +81,23 @@ def cmd_run(args) -> int:
             cfg, start_m = described.config, described.start_along_track_m
         cfg = processor_changes(args, cfg)
         strip_lines(args, cfg.geometry.prf_hz)
-        source = SerialSource(
-            args.serial,
-            cfg.waveform.samples_per_shot,
-            baudrate=args.baudrate,
-            idle_timeout_s=args.duration,
-            reconnect=args.reconnect,
-            channel_map=channel_map(args, described),
-        )
+        if args.zmq_in:  # a GNU Radio flowgraph's ZMQ PUB Sink (rtsar.sources.zmq_in)
+            source = ZmqSource(
+                args.zmq_in,
+                cfg.waveform.samples_per_shot,
+                cfg.waveform.sample_rate_hz,
+                cfg.geometry.prf_hz,
+                idle_timeout_s=args.duration,
+            )
+        else:
+            source = SerialSource(
+                args.serial,
+                cfg.waveform.samples_per_shot,
+                baudrate=args.baudrate,
+                idle_timeout_s=args.duration,
+                reconnect=args.reconnect,
+                channel_map=channel_map(args, described),
+            )
         return run_stream(
             cfg,
             source,
@@ -259,6 +269,13 @@ def add_parsers(sub) -> None:
         metavar="URL",
         help="read framed shots from an instrument: a "
         "serial port, a pty, or socket://HOST:PORT (frame format: README)",
+    )
+    src.add_argument(
+        "--zmq-in",
+        metavar="ENDPOINT",
+        help="read shots from a GNU Radio ZMQ PUB Sink at ENDPOINT (e.g. tcp://127.0.0.1:5600): "
+        "complex64 vector items of one shot each, or a flat stream cut by packet_len tags "
+        "(pass tags on); processed with --preset or --scene like --serial (README 'GNU Radio')",
     )
     src.add_argument("--preset", help="with --serial: processing configuration preset")
     src.add_argument(

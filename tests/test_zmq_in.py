@@ -1,0 +1,104 @@
+"""GNU Radio ZMQ input (issue 16): frames built to GNU Radio's wire format (gr-zeromq
+tag_headers.cc, pmt_serialize.cc) are cut into shots with their numbers and times."""
+
+import struct
+
+import numpy as np
+import pytest
+import zmq
+
+from rtsar.sources.gr_tags import (
+    PmtError,
+    parse_tag_header,
+    pmt_long,
+    pmt_rx_time,
+    pmt_symbol,
+    read_pmt,
+    tag_header,
+)
+from rtsar.sources.zmq_in import ZmqSource
+
+S = 16
+
+
+def _shots(rng, n):
+    return (rng.standard_normal((n, S)) + 1j * rng.standard_normal((n, S))).astype(np.complex64)
+
+
+def test_pmt_and_header_parse_by_hand():
+    # Bytes written out by hand from the documented layout, not by our writer.
+    key = b"\x02\x00\x0apacket_len"
+    value = b"\x03\x00\x00\x00\x10"
+    rx_key = b"\x02\x00\x07rx_time"
+    rx_val = (
+        b"\x0c\x00\x00\x00\x02\x0b"
+        + struct.pack(">Q", 1700000000)
+        + b"\x04"
+        + struct.pack(">d", 0.25)
+    )
+    head = struct.pack("<HBQQ", 0x5FF0, 1, 32, 2)
+    head += struct.pack("<Q", 32) + key + value + b"\x01"
+    head += struct.pack("<Q", 32) + rx_key + rx_val + b"\x01"
+    offset, tags, length = parse_tag_header(head + b"\0" * 8)
+    assert (offset, length) == (32, len(head))
+    assert [(t.offset, t.key, t.value) for t in tags] == [
+        (32, "packet_len", 16),
+        (32, "rx_time", (1700000000, 0.25)),
+    ]
+    assert read_pmt(pmt_long(1 << 40), 0) == (1 << 40, 9)
+    with pytest.raises(PmtError):
+        parse_tag_header(struct.pack("<HBQQ", 0x5FF1, 1, 0, 0))
+    with pytest.raises(PmtError):
+        parse_tag_header(head[:-3])
+
+
+def test_flat_stream_sliced_by_packet_len_with_gap_and_wrong_length(rng):
+    shots = _shots(rng, 6)
+    flat = shots.reshape(-1)
+    src = ZmqSource("tcp://127.0.0.1:1", S, item_rate_hz=1000.0, shot_rate_hz=10.0)
+    tags = [(p * S, pmt_symbol("packet_len"), pmt_long(S)) for p in range(6)]
+    tags[0:0] = [(0, pmt_symbol("rx_time"), pmt_rx_time(100, 0.5))]
+    # Messages cut across shots: [0, 24), [24, 56), (lost: [56, 72)), [72, 96)
+    out = []
+    for a, b in ((0, 24), (24, 56), (72, 96)):
+        mine = [t for t in tags if a <= t[0] < b]
+        out += src.decode(tag_header(a, mine) + flat[a:b].tobytes())
+    seqs = [s for s, _, _ in out]
+    assert seqs == [0, 1, 2, 5]  # shots 3 and 4 lost in part with the lost message
+    for seq, t, samples in out:
+        np.testing.assert_array_equal(samples, shots[seq])
+        assert t == pytest.approx(100.5 + seq * S / 1000.0)
+    # The 8 samples of shot 3 that arrived, and the 8 of shot 4 after the lost message.
+    assert src.counters["partial_samples"] == 16
+    bad = tag_header(96, [(96, pmt_symbol("packet_len"), pmt_long(S + 1))])
+    assert src.decode(bad + np.zeros(S + 1, np.complex64).tobytes()) == []
+    assert src.counters["wrong_length"] == 1
+
+
+def test_vector_items_over_a_socket(rng):
+    shots = _shots(rng, 5)
+    ctx = zmq.Context()
+    pub = ctx.socket(zmq.PUB)
+    port = pub.bind_to_random_port("tcp://127.0.0.1")
+    src = ZmqSource(f"tcp://127.0.0.1:{port}", S, 1e3, 10.0, idle_timeout_s=0.5, context=ctx)
+    got = []
+    it = iter(src)
+    import threading
+
+    def send():
+        import time
+
+        time.sleep(0.3)  # the subscriber connects first (slow joiner)
+        pub.send(tag_header(10, []) + shots[:2].tobytes())  # vector items 10, 11
+        pub.send(tag_header(13, []) + shots[3:].tobytes())  # 12 lost on the way
+        pub.send(b"\xf0\x5f\x01garbage")
+
+    threading.Thread(target=send, daemon=True).start()
+    for batch in it:
+        got.append(batch)
+    seq = np.concatenate([b.seq for b in got])
+    np.testing.assert_array_equal(seq, [10, 11, 13, 14])
+    np.testing.assert_array_equal(np.concatenate([b.samples for b in got]), shots[[0, 1, 3, 4]])
+    assert src.counters["bad_messages"] == 1 and src.stop_reason == "idle"
+    pub.close()
+    ctx.term()

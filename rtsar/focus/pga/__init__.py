@@ -5,25 +5,35 @@ correction stage), ``reference`` (the float64 batch version on a recording).
 """
 
 from .estimator import (
+    COULD_NOT_ESTIMATE,
     ESTIMATED,
+    NOTHING_TO_CORRECT,
     REASONS,
     BlockReport,
     PGASettings,
+    curvature_m,
     deramp_cycles,
     estimate_block,
+    migration_corrected,
     remove_linear,
+    row_half_width,
 )
 from .reference import pga_batch
 from .stream import PGACounters, PGAStage
 
 __all__ = [
+    "COULD_NOT_ESTIMATE",
     "ESTIMATED",
+    "NOTHING_TO_CORRECT",
     "REASONS",
     "BlockReport",
     "PGACounters",
     "PGASettings",
     "PGAStage",
+    "curvature_m",
     "deramp_cycles",
+    "migration_corrected",
+    "row_half_width",
     "estimate_block",
     "pga_batch",
     "remove_linear",

@@ -46,12 +46,18 @@ def align_blocks(delta: np.ndarray) -> tuple[float, float]:
 
 
 class Stitcher:
-    """Turns block estimates into one continuous per-pulse phase (the layout of the docstring)."""
+    """Turns block estimates into one continuous per-pulse phase (the layout of the docstring).
 
-    def __init__(self, block: int, hop: int, doppler_gain: float):
+    PGA adds no linear phase of its own: each block's estimate has its constant and slope
+    removed (rtsar.focus.pga.estimator), and the stitching only gives it the constant and slope
+    that continue the previous block's phase over their common pulses.  The first estimated
+    block therefore sets the stream's reference (no slope over it); after a block without an
+    estimate (its phase held constant) the next is joined by a constant alone.
+    """
+
+    def __init__(self, block: int, hop: int):
         self.block, self.hop = block, hop
         self.margin = (block - hop) // 2
-        self.doppler_gain = doppler_gain
         self.committed = 0  # pulses whose phase is final
         self.last_phase = 0.0  # phase of the last committed pulse (held on failure)
         self.prev_start = None  # previous block's first pulse and its aligned phase
@@ -64,9 +70,8 @@ class Stitcher:
     def add(self, start: int, phase: np.ndarray, report: BlockReport, stop: int) -> np.ndarray:
         """Align a block's phase to the previous block's; return phases of [committed, stop).
 
-        Over the common pulses δ = previous - phase is fitted by a + c·i (``align_blocks``).  A
-        block anchored on its own Doppler centroid keeps (1 - doppler_gain)·c of the slope (the rest
-        is its centroid's); the constant is refitted for the slope kept.
+        Over the common pulses δ = previous - phase is fitted by a + c·i (``align_blocks``);
+        c is taken only when the previous block had an estimate of its own.
         """
         n = phase.size
         if not report.estimated:
@@ -80,13 +85,10 @@ class Stitcher:
                 self.prev_phase[start - self.prev_start :]
                 - phase[: self.prev_start + self.prev_phase.size - start]
             )
-            a, c = align_blocks(delta)
-            if report.doppler_anchored:
-                # After a block that could not be estimated the overlap holds a constant, not a
-                # slope: take the centroid's slope whole.
-                c *= (1.0 - self.doppler_gain) if self.prev_estimated else 0.0
-                i = np.arange(delta.size)
-                a = float(np.angle(np.sum(np.exp(1j * (delta - c * i)))))
+            if self.prev_estimated:
+                a, c = align_blocks(delta)
+            else:
+                a, c = float(np.angle(np.sum(np.exp(1j * delta)))), 0.0
             aligned = phase + a + c * np.arange(n)
         self.prev_estimated = report.estimated
         self.prev_start, self.prev_phase = start, aligned

@@ -2,38 +2,51 @@
 
 The error: a phase φ(p) common to every range bin of pulse p (piston, Crouch eq. 4.12).  Pulse p
 is taken to carry exp(+iφ(p)); the correction multiplies it by exp(-iφ̂(p)).  Constant and linear
-phase are invisible to PGA (a constant changes nothing, a slope only shifts the image), so PGA
-removes both, and residuals are quoted with both removed (rtsar.analysis.phase_residual).
+phase are invisible to PGA (a constant changes nothing, a slope only shifts the image), so every
+block estimate has both removed and PGA never adds one of its own (rtsar.focus.pga.blocks only
+continues the previous blocks' phase across the overlap).
 
 Why blocks of deramped pulses.  Crouch's PGA (ch. 4, eqs. 4.14-4.17; App. A ``PGAforSAL``) works
-on an image one DFT away from the range-compressed shots (his linearised Fourier kernel, the
-quadratic phase neglected), so the error of shot m is a phase of DFT sample m.  A strip-map CCD
-has no such image: it correlates with a range-dependent chirp and each line integrates its own N
-pulses.  The faithful equivalent is to deramp a block of P ≥ N pulses with the conjugate history
-of a scatterer at the block centre (Psaltis & Wagner eq. 2, exact range; the CCD mask's phase):
+on an image one DFT away from the range-compressed shots (his linearised Fourier kernel, "a SAL
+scene that has already had its range migration fixed"), so the error of shot m is a phase of DFT
+sample m.  A strip-map CCD has no such image: it correlates with a range-dependent chirp and each
+line integrates its own N pulses.  The faithful equivalent is to deramp a block of P pulses with
+the conjugate history of a scatterer at the block centre (Psaltis & Wagner eq. 2, exact range):
 
-    exp(+i 4π/λ · (sqrt(R_r² + x_p²) - R_r)),   x_p = (p - (P-1)/2) d.                    (1)
+    exp(+i 4π/λ · ΔR_p),   ΔR_p = sqrt(R_r² + x_p²) - R_r,   x_p = (p - (P-1)/2) d.        (1)
 
-A scatterer u along track from the block centre becomes the tone exp(i 4π u x_p/(λR))·exp(iφ(p))
-(to fourth order in x): Crouch's kernel E_n ∝ exp[-iφ(n)] Σ_j exp(-iμu_j), and the DFT across
-the block is a SPECAN image of the whole beam.  Crouch's steps then apply unchanged:
+A scatterer u along track from the block centre becomes the tone exp(i 4π u x_p/(λR))·exp(iφ(p)):
+Crouch's kernel E_n ∝ exp[-iφ(n)] Σ_j exp(-iμu_j), and the DFT across the block is his image.
 
-* choose range bins with a bright point (his rows ``lr:ur``): bins whose energy is
-  ``bright_threshold_db`` above the median bin in each of ``segments`` stretches of the block
-  (the point lit across the block; energy does not depend on the defocus);
+Range migration inside a block.  The same ΔR_p moves the echo in range: at crouch-sal (d = 10 µm,
+R = 1.5 m, cells of 50 µm) by 0.7 cell over N = 2048 pulses and 2.8 cells over 2N.  A per-bin
+history is then cut into pieces, each bin centres its own piece (eq. 4.14) and nothing ties the
+pieces' frequencies together: PGA converges to a sharp but wrong, piecewise-linear phase (measured:
+hundreds of radians rms off over a 2N block).  Where the block-edge ΔR exceeds
+``migration_cells`` of a range cell, each pulse is first moved back by ΔR_p (a sub-cell shift: a
+linear phase across the range DFT of the line, zero-padded ×2 so nothing wraps), so a point at the
+block centre stays in one bin; one u from it still walks u·x/R, so Crouch's rows become coherent
+sums of 2w+1 neighbouring bins (``row_half_width``) that hold a point inside the block's own
+extent for the whole block (the range-compressed peak has one phase across its main lobe, so the
+sum keeps it).  Crouch's steps then apply unchanged:
+
+* rows with a bright point (his rows ``lr:ur``): the brightest ≤ ``max_range_bins`` whose energy
+  is ``bright_threshold_db`` above the median row's in each of ``segments`` stretches, none
+  under ``min_row_fill`` of the fullest (the point stays in the row);
 * circularly shift each bin's brightest pixel to the centre, keep a window W ξ^-q (eq. 4.14,
   ξ = 1.1, W = the block); inverse DFT (eq. 4.15); phasor sum of the phase differences over the
   bins (eq. 4.16); integrate from φ(0) = 0 (eq. 4.17); remove the slope (as ``PGAforSAL``);
-* iterate until the step's peak to peak is below π/10 (Crouch), the window falls below
-  ``min_window_bins``, or ``max_iterations``.
+* iterate until the step's peak to peak is below ``stop_rad`` (Crouch π/10; 0.01 here), the
+  window falls below ``min_window_bins``, or ``max_iterations``.
 
-The slope PGA cannot see is set by the clutter's Doppler centroid (``_doppler_slope``): in
-strip-map a slope moves the image against the antenna beam, so it matters.  Failures are
-harmless (Crouch: PGA cannot focus scenes without prominent points): no bin stands out →
-"no_bright_points"; the corrected block image is not sharper (Σ|G|⁴/(Σ|G|²)²) → "not_sharper".
-Either way the last committed phase is held, the block is counted and its report says why; no
-step can make a NaN (empty sums give angle(0) = 0).  INO phase-error patent: remove the bulk with
-the reference region first, PGA for the residual — put this stage after that correction.
+Safety (PGA must never harm a focused image; Crouch: it cannot focus scenes without prominent
+points).  The block's estimate is not used, and its phase is zero, when: its first step is
+already below ``focused_rad`` = π/10 ("nothing_to_correct": the bright points are focused); no
+row stands out ("no_bright_points"); or the corrected block image is not sharper by
+``min_sharpness_gain`` = 25 % (Σ|G|⁴/(Σ|G|²)², "not_sharper": at crouch-sal a focused block
+gains ≤ 7 % from PGA's own noise, a block under hundreds of radians 100× or more).  No step can
+make a NaN (empty sums give angle(0) = 0).  INO phase-error patent: remove the bulk with the
+reference region first, PGA for the residual.
 
 The block layout of the stream is rtsar.focus.pga.blocks; the stage rtsar.focus.pga.stream;
 the float64 reference on a recording rtsar.focus.pga.reference.
@@ -52,30 +65,33 @@ from ...phase import phasor
 
 #: Why a block's iterations stopped (the first three: estimate used) or why it has no estimate.
 ESTIMATED = ("converged", "window_floor", "max_iterations")
-REASONS = (*ESTIMATED, "no_bright_points", "not_sharper", "short_block")
+#: Blocks left as they came: already focused, or nothing PGA can estimate from.
+NOTHING_TO_CORRECT = ("nothing_to_correct",)
+COULD_NOT_ESTIMATE = ("no_bright_points", "not_sharper", "short_block")
+REASONS = (*ESTIMATED, *NOTHING_TO_CORRECT, *COULD_NOT_ESTIMATE)
 
 
 @dataclass(frozen=True)
 class PGASettings:
     """PGA knobs (Crouch ch. 4); ``None`` sizes follow the processor's aperture N.
 
-    block_pulses, hop_pulses  P (default 2N, ≥ max(8, N); at most the beam's dwell so points stay
-                        lit across a block) and H (default P/2, ≤ P)
+    block_pulses, hop_pulses  P (default N, ≥ max(8, N): the range walk inside a block grows as
+                        P²) and H (default P/2, ≤ P)
     xi, initial_window_bins, min_window_bins  eq. 4.14: W_q = W/ξ^q (Crouch 1.1), W default P
                         (the whole block: the fastest errors); stop when W_q < min_window_bins
     max_iterations, stop_rad  at most so many iterations; converged when the step's peak to
-                        peak is below stop_rad (Crouch: π/10)
-    max_range_bins, bright_threshold_db, segments  the brightest ≤ max_range_bins bins whose
-                        energy is bright_threshold_db above the median bin in every one of
-                        ``segments`` stretches of the block take part in eq. 4.16
-    require_sharper     discard an estimate that does not sharpen the block image
+                        peak is below stop_rad (0.01: finer than Crouch's π/10, which leaves
+                        ~0.3 rad rms at crouch-sal)
+    focused_rad         a first step below this peak to peak (Crouch's π/10): the block is
+                        already focused, "nothing_to_correct"
+    max_range_bins, bright_threshold_db, segments  the brightest ≤ max_range_bins rows whose
+                        energy is bright_threshold_db above the median row's in every one of
+                        ``segments`` stretches of the block, and in none under min_row_fill
+                        of the fullest stretch's, take part in eq. 4.16
+    migration_cells     range migration is handled (curvature removed, rows of 2w+1 bins) when
+                        the block-edge curvature ΔR exceeds this fraction of a range cell
+    min_sharpness_gain  an estimate is used only if it sharpens the block image by this fraction
     min_pulses          a shorter block (end of a short stream) is not estimated (min(P, N))
-    doppler_gain        share of each block's Doppler-centroid slope taken (0: slopes follow
-                        the overlaps; the centroid sets it on the first block and after a failed
-                        one.  > 0 bounds a slow drift of the image position on long runs at the
-                        cost of a small slope kink at each block boundary)
-    min_doppler_coherence  lag-one coherence |Σ y*(p-1)y(p)|/Σ|y|² of the clutter below which
-                        its centroid is not trusted (no clutter, noise only)
     """
 
     block_pulses: int | None = None
@@ -84,14 +100,15 @@ class PGASettings:
     initial_window_bins: int | None = None
     min_window_bins: int = 8
     max_iterations: int = 30
-    stop_rad: float = math.pi / 10
+    stop_rad: float = 0.01
+    focused_rad: float = math.pi / 10
     max_range_bins: int = 32
     bright_threshold_db: float = 6.0
     segments: int = 4
-    require_sharper: bool = True
+    min_row_fill: float = 0.1
+    migration_cells: float = 0.1
+    min_sharpness_gain: float = 0.25
     min_pulses: int | None = None
-    doppler_gain: float = 0.0
-    min_doppler_coherence: float = 0.05
 
     def __post_init__(self):
         def integer(v, allow_none):
@@ -107,9 +124,12 @@ class PGASettings:
         checks = {
             "xi": math.isfinite(self.xi) and self.xi >= 1.0,
             "stop_rad": math.isfinite(self.stop_rad) and self.stop_rad > 0,
+            "focused_rad": math.isfinite(self.focused_rad) and self.focused_rad >= 0,
             "bright_threshold_db": math.isfinite(self.bright_threshold_db),
-            "doppler_gain": 0.0 <= self.doppler_gain <= 1.0,
-            "min_doppler_coherence": 0.0 <= self.min_doppler_coherence <= 1.0,
+            "min_row_fill": 0.0 <= self.min_row_fill <= 1.0,
+            "migration_cells": math.isfinite(self.migration_cells) and self.migration_cells >= 0,
+            "min_sharpness_gain": math.isfinite(self.min_sharpness_gain)
+            and self.min_sharpness_gain >= 0,
         }
         for name, ok in checks.items():
             if not ok:
@@ -131,7 +151,8 @@ class BlockReport:
     """What PGA did on one block: where it was, whether its estimate was used (``estimated``;
     ``reason`` one of REASONS), iterations, range bins in eq. 4.16, the last step's peak to peak
     and the estimate's rms (slope removed) in radians, the block image's sharpness
-    Σ|G|⁴/(Σ|G|²)² before and after, and the Doppler-centroid slope (rad/pulse) if one was set.
+    Σ|G|⁴/(Σ|G|²)² before and after, and the half-width w of the rows (bins) where the range
+    migration was handled (0: single bins, no migration correction).
     """
 
     first_pulse: int
@@ -145,22 +166,39 @@ class BlockReport:
     correction_rms_rad: float
     sharpness_before: float
     sharpness_after: float
-    doppler_anchored: bool = False
-    doppler_slope_rad: float = 0.0
+    row_half_width: int = 0
 
 
 # ---- the estimator ---------------------------------------------------------------------------
-def deramp_cycles(config: Config, range_m: np.ndarray, pulses: int) -> np.ndarray:
-    """Eq. (1) of the module docstring in cycles mod 1: [pulses, bins] float64.
+def curvature_m(config: Config, range_m: np.ndarray, pulses: int) -> np.ndarray:
+    """ΔR_p of eq. (1) of the module docstring: [pulses, bins] float64 metres.
 
-    +2/λ · (sqrt(R² + x²) - R), x_p = (p - (P-1)/2)·d: the conjugate of the two-way history of a
-    scatterer at the block centre (Psaltis & Wagner eq. 2, exact range), formed in float64.
+    sqrt(R² + x²) - R, x_p = (p - (P-1)/2)·d: the excess range of a scatterer at the block
+    centre (Psaltis & Wagner eq. 2, exact range), written without cancellation for x ≪ R.
     """
     g = config.geometry
     x = ((np.arange(pulses) - 0.5 * (pulses - 1)) * g.along_track_step_m)[:, None]
     r = np.asarray(range_m, dtype=np.float64)[None, :]
-    excess_m = x * x / (np.sqrt(r * r + x * x) + r)  # no cancellation for x ≪ R
-    return np.mod(2.0 * excess_m / g.wavelength_m, 1.0)
+    return x * x / (np.sqrt(r * r + x * x) + r)
+
+
+def deramp_cycles(config: Config, range_m: np.ndarray, pulses: int) -> np.ndarray:
+    """Eq. (1) of the module docstring in cycles mod 1: [pulses, bins] float64 (2ΔR_p/λ)."""
+    return np.mod(2.0 * curvature_m(config, range_m, pulses) / config.geometry.wavelength_m, 1.0)
+
+
+def migration_corrected(x: np.ndarray, shift_cells: np.ndarray) -> np.ndarray:
+    """Each pulse x[p, :] moved by -shift_cells[p] range cells (x[p, k + s_p] → bin k).
+
+    A sub-cell shift of a band-limited range line: a linear phase across its DFT, the line
+    zero-padded to twice its length so that nothing wraps round into the swath.  float64.
+    """
+    p, bins = x.shape
+    m = 2 * bins
+    spec = np.fft.fft(x, m, axis=1)
+    f = np.fft.fftfreq(m)[None, :]  # cycles per cell
+    cycles = np.mod(f * np.asarray(shift_cells, np.float64)[:, None], 1.0)
+    return np.fft.ifft(spec * np.exp(2j * math.pi * cycles), axis=1)[:, :bins]
 
 
 def remove_linear(phase_rad: np.ndarray) -> np.ndarray:
@@ -181,48 +219,86 @@ def _sharpness(image: np.ndarray) -> float:
 
 
 def _bright_bins(power: np.ndarray, settings: PGASettings) -> np.ndarray:
-    """Range bins standing ``bright_threshold_db`` above the median bin in every segment.
+    """Rows whose energy stands ``bright_threshold_db`` above the median row's in every segment.
 
-    power[pulse, bin] = |line|².  The block is cut into ``segments`` stretches of pulses; a bin
-    qualifies when its energy exceeds the median bin's by the threshold in each of them, so its
-    bright point is lit (inside the antenna footprint) across the whole block.  Brightest first.
+    power[pulse, row] = |row|².  The block is cut into ``segments`` stretches of pulses; a row
+    qualifies when it is bright in each of them and none holds less than ``min_row_fill`` of the
+    fullest's energy, so its point stays in it (lit, and inside the row's range span) across the
+    whole block.  Brightest first, at most ``max_range_bins``.
     """
     factor = 10.0 ** (settings.bright_threshold_db / 10.0)
-    ok = np.ones(power.shape[1], bool)
-    for part in np.array_split(power, min(settings.segments, power.shape[0]), axis=0):
-        energy = part.sum(axis=0)
-        ok &= (energy > factor * float(np.median(energy))) & (energy > 0)
+    parts = np.array_split(power, min(settings.segments, power.shape[0]), axis=0)
+    energy = np.stack([part.sum(axis=0) for part in parts])  # [segment, row]
+    ok = (energy > factor * np.median(energy, axis=1, keepdims=True)).all(axis=0)
+    # Its point stays in the row: no stretch holds less than min_row_fill of the fullest's.
+    ok &= energy.min(axis=0) >= settings.min_row_fill * energy.max(axis=0)
     candidates = np.flatnonzero(ok)
-    order = np.argsort(power[:, candidates].sum(axis=0))[::-1]
+    order = np.argsort(power[:, candidates].sum(axis=0), kind="stable")[::-1]
     return candidates[order[: settings.max_range_bins]]
 
 
-def _pga_iterations(g0: np.ndarray, window_bins: int, settings: PGASettings):
-    """Crouch eqs. 4.14-4.17 on deramped pulses g0[pulse, bin] → (φ, iterations, step, reason)."""
+def _pga_step(g0: np.ndarray, phi: np.ndarray, width: float) -> np.ndarray:
+    """One pass of Crouch eqs. 4.14-4.17 on deramped pulses g0[pulse, bin] corrected by φ."""
     p = g0.shape[0]
-    phi = np.zeros(p)
     n = np.arange(p)
     centred = np.minimum(n, p - n)  # circular distance of image bin n from bin 0
+    image = np.fft.fft(g0 * phasor(-phi)[:, None], axis=0)  # block image G[n, k]
+    brightest = np.argmax(image.real**2 + image.imag**2, axis=0)
+    rows = (n[:, None] + brightest[None, :]) % p  # circular shift: brightest → bin 0
+    shifted = np.take_along_axis(image, rows, axis=0)
+    shifted[centred > 0.5 * width] = 0  # eq. 4.14, rect(n ξ^q / W) about the centre
+    h = np.fft.ifft(shifted, axis=0)  # eq. 4.15, back to pulses
+    dphi = np.angle(np.sum(np.conj(h[:-1]) * h[1:], axis=1))  # eq. 4.16
+    return remove_linear(np.concatenate(([0.0], np.cumsum(dphi))))  # eq. 4.17
+
+
+def _pga_iterations(g0: np.ndarray, window_bins: int, settings: PGASettings):
+    """Iterated eqs. 4.14-4.17 → (φ, iterations, last step's peak to peak, reason)."""
+    phi = np.zeros(g0.shape[0])
     width = float(window_bins)
-    step_pp, it, reason = 0.0, 0, "max_iterations"
+    step_pp = 0.0
     for it in range(1, settings.max_iterations + 1):
-        g = g0 * phasor(-phi)[:, None]
-        image = np.fft.fft(g, axis=0)  # block image G[n, k] (Crouch's g(k, n))
-        brightest = np.argmax(image.real**2 + image.imag**2, axis=0)
-        rows = (n[:, None] + brightest[None, :]) % p  # circular shift: brightest → bin 0
-        shifted = np.take_along_axis(image, rows, axis=0)
-        shifted[centred > 0.5 * width] = 0  # eq. 4.14, rect(n ξ^q / W) about the centre
-        h = np.fft.ifft(shifted, axis=0)  # eq. 4.15, back to pulses
-        dphi = np.angle(np.sum(np.conj(h[:-1]) * h[1:], axis=1))  # eq. 4.16
-        step = remove_linear(np.concatenate(([0.0], np.cumsum(dphi))))  # eq. 4.17
-        phi += step
+        step = _pga_step(g0, phi, width)
         step_pp = float(step.max() - step.min())
+        if it == 1 and step_pp < settings.focused_rad:
+            return phi, it, step_pp, "nothing_to_correct"
         if step_pp < settings.stop_rad:
             return phi, it, step_pp, "converged"
+        phi += step
         width /= settings.xi
         if width < settings.min_window_bins:
             return phi, it, step_pp, "window_floor"
-    return phi, it, step_pp, reason
+    return phi, settings.max_iterations, step_pp, "max_iterations"
+
+
+def row_half_width(config: Config, range_m: np.ndarray, pulses: int, cells: float) -> int:
+    """w of the rows (2w+1 bins summed) that hold a migrating point across a block; 0: none.
+
+    After the block centre's curvature is removed, a point u along track from the centre walks
+    u·x/R in range; for |u| ≤ P·d/2 (a point inside the block's own extent) that is at most
+    4ΔR_edge over the block, so rows of ±w = ceil(2ΔR_edge / cell) + 1 bins keep it (the +1:
+    the main lobe's half-width).  0 when the
+    block-edge curvature ΔR_edge is below ``cells`` of a range cell (no migration to handle).
+    """
+    r = np.asarray(range_m, dtype=np.float64)
+    if r.size < 2:
+        return 0
+    edge_cells = float(curvature_m(config, r[:1], pulses)[0, 0]) / abs(r[1] - r[0])
+    if not edge_cells > cells:
+        return 0
+    return min(int(math.ceil(2.0 * edge_cells)) + 1, (r.size - 1) // 2)
+
+
+def _rows(x: np.ndarray, w: int) -> np.ndarray:
+    """Coherent sums of 2w+1 neighbouring bins, row k centred on bin k (edges: fewer bins).
+
+    The range-compressed peak has one phase across its main lobe (a zero-phase sinc), so a point
+    walking inside a row keeps its phase and nearly its amplitude there.
+    """
+    if w == 0:
+        return x
+    c = np.cumsum(np.pad(x, ((0, 0), (w + 1, w))), axis=1)
+    return c[:, 2 * w + 1 :] - c[:, : -(2 * w + 1)]
 
 
 def estimate_block(
@@ -236,8 +312,8 @@ def estimate_block(
 
     ``lines[pulse, range_bin]`` (NaN/Inf pulses count as zero), ``range_m`` the bins'
     slant ranges (default: the AO lens plan's).  Returns (phase_rad float64[pulses], report):
-    the estimated error with the Doppler-centroid slope (zeros when not estimated); correct
-    with ``lines * exp(-1j * phase_rad)[:, None]``.
+    the estimated error, constant and slope removed (zeros when not used); correct with
+    ``lines * exp(-1j * phase_rad)[:, None]``.
     """
     settings = settings or PGASettings()
     x = np.asarray(lines)
@@ -255,49 +331,31 @@ def estimate_block(
     pulses = x.shape[0]
     min_pulses = settings.resolved(config.processor.aperture_pulses)[2]
     window_bins = min(settings.initial_window_bins or pulses, pulses)
+    w = row_half_width(config, range_m, pulses, settings.migration_cells)
 
-    def report(reason, iterations=0, bins=0, step=0.0, rms=0.0, before=0.0, after=0.0, dc=None):
+    def report(reason, iterations=0, bins=0, step=0.0, rms=0.0, before=0.0, after=0.0):
         done = (reason in ESTIMATED, reason == "converged", reason, iterations, bins, step, rms)
-        return BlockReport(first_pulse, pulses, *done, before, after, dc is not None, dc or 0.0)
+        return BlockReport(first_pulse, pulses, *done, before, after, w)
 
     zero = np.zeros(pulses)
     if pulses < max(2, min_pulses):
         return zero, report("short_block")
+    if w:  # one ΔR per pulse (the swath centre's): the curvature varies little with R
+        centre = range_m[range_m.size // 2 : range_m.size // 2 + 1]
+        cell_m = range_m[1] - range_m[0]  # signed: an axis may decrease
+        x = _rows(migration_corrected(x, curvature_m(config, centre, pulses)[:, 0] / cell_m), w)
     power = x.real**2 + x.imag**2
     bins = _bright_bins(power, settings)
     if bins.size == 0:
         return zero, report("no_bright_points")
     g0 = x[:, bins] * np.exp(2j * math.pi * deramp_cycles(config, range_m[bins], pulses))
     phi, iterations, step, reason = _pga_iterations(g0, window_bins, settings)
+    if reason == "nothing_to_correct":
+        return zero, report(reason, iterations, bins.size, step)
     phi = remove_linear(phi)
     before = _sharpness(np.fft.fft(g0, axis=0))
     after = _sharpness(np.fft.fft(g0 * phasor(-phi)[:, None], axis=0))
     rms = float(np.sqrt(np.mean(phi**2)))
-    if settings.require_sharper and not after > before:
+    if not after > before * (1.0 + settings.min_sharpness_gain):
         return zero, report("not_sharper", iterations, bins.size, step, rms, before, after)
-    dc = _doppler_slope(x, power, phi, settings)
-    if dc is not None:
-        phi = phi + dc * (np.arange(pulses) - 0.5 * (pulses - 1))
-    return phi, report(reason, iterations, bins.size, step, rms, before, after, dc)
-
-
-def _doppler_slope(x, power, phi, settings: PGASettings) -> float | None:
-    """Linear phase (rad/pulse) that centres the clutter's Doppler spectrum on zero, or None.
-
-    PGA cannot see a linear phase (it only shifts the block image), but the antenna beam can:
-    broadside, the clutter's Doppler spectrum is symmetric about zero, so the lag-one
-    correlation Σ_r Σ_p y*(p-1, r) y(p, r) of the corrected pulses y = x·e^{-iφ} is real and
-    positive, and its angle is the residual slope (the correlation Doppler-centroid estimator).
-    Only clutter bins (energy at most twice the median bin) take part: a bright point's Doppler
-    is its position, not the beam's centre.  None when the coherence is below
-    ``min_doppler_coherence`` (no clutter, or noise only).
-    """
-    energy = power.sum(axis=0)
-    clutter = (energy <= 2.0 * float(np.median(energy))).astype(np.float64)
-    # Σ_p e^{-i(φ_p - φ_{p-1})} Σ_r x*(p-1, r) x(p, r): the lag products once, then the phase.
-    lag = np.einsum("pr,pr,r->p", np.conj(x[:-1]), x[1:], clutter)
-    z = complex(np.sum(lag * phasor(-np.diff(phi))))
-    total = float(energy @ clutter)
-    if not total > 0 or abs(z) < settings.min_doppler_coherence * total:
-        return None
-    return math.atan2(z.imag, z.real)
+    return phi, report(reason, iterations, bins.size, step, rms, before, after)

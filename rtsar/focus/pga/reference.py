@@ -33,7 +33,7 @@ def pga_batch(
         range_m = range_axis_m(config)
     block, hop, _ = settings.resolved(config.processor.aperture_pulses)
     total = x.shape[0]
-    st = Stitcher(block, hop, settings.doppler_gain)
+    st = Stitcher(block, hop)
     phases, reports = [], []
     b = 0
     while st.next_start(b) + block <= total:

@@ -59,7 +59,7 @@ class PGAStage(CorrectionStage):
         self._buf = np.zeros((self.block + self.hop, self.bins), np.complex128)
         self._buf_start = 0  # stream index of _buf[0]
         self._buf_len = 0
-        self._stitch = Stitcher(self.block, self.hop, self.settings.doppler_gain)
+        self._stitch = Stitcher(self.block, self.hop)
         self._next_block = 0
         self.reports: deque[BlockReport] = deque(maxlen=keep_reports)
         self.counters = PGACounters()

@@ -32,9 +32,13 @@ Latency of an image line: from the arrival of the last pulse that contributes to
 j + N - 1 for line j, Psaltis & Wagner 1981: the row leaves the CCD after N shifts) to the
 publication of the strip holding it.
 
+``swath_workers`` = K: lens and CCD run in K processes, a range slice each
+(rtsar.stream.swath); the lens thread sends them the pulses, the CCD thread merges their lines.
+
 This module holds the threads and their wiring only; the pieces are: rtsar.stream.queue (bounded
 queues), ingest (sequence checks), engine (lens and CCD), hold (metadata of held pulses), timing
-(arrivals and flags of lines), height (the second receiver), strips (strips, sinks) and stats.
+(arrivals and flags of lines), height (the second receiver), strips (strips, sinks), swath
+(worker processes) and stats.
 """
 
 from __future__ import annotations
@@ -42,6 +46,7 @@ from __future__ import annotations
 import threading
 import time
 import uuid
+from collections import deque
 from dataclasses import dataclass
 
 from ..params import Config
@@ -54,6 +59,7 @@ from .memory import check_memory
 from .queue import BoundedQueue
 from .stats import PipelineStats
 from .strips import LineBlock, StreamInfo, StripAssembler, StripSink
+from .swath import SwathWorkers
 from .timing import LineTiming
 
 STAGE_LAYOUTS = ("split", "fused")
@@ -78,12 +84,17 @@ class PipelineSettings:
     max_batch: int = 0  # most pulses per lens launch / CCD push (0: config micro_batch)
     max_gap_pulses: int = 0  # longest zero-filled gap; beyond it a restart (0: one aperture)
     deadline: bool = False  # the run has a deadline: once the source ends, nobody is waited on
+    swath_workers: int = 0  # > 0: lens + CCD in that many processes, a range slice each (swath)
+    swath_spawn: bool = True  # start them here (False: they connect from elsewhere)
+    swath_bind: str = "127.0.0.1"  # HOST or tcp://HOST:PORT: where the coordinator listens
 
     def __post_init__(self):
         if self.stages not in STAGE_LAYOUTS:
             raise ValueError(f"stages must be one of {STAGE_LAYOUTS}, got {self.stages!r}")
         if self.strip_lines < 1:
             raise ValueError("strip_lines must be >= 1")
+        if self.swath_workers and self.stages == "fused":
+            raise ValueError("--swath-workers runs lens and CCD in the workers: not with fused")
 
 
 class Pipeline:
@@ -164,6 +175,14 @@ class Pipeline:
             height_kind="" if height is None else height.kind,
         )
         self.strips = StripAssembler(self.info)
+        self.swath = None  # lens + CCD in worker processes (rtsar.stream.swath)
+        if s.swath_workers:
+            if corrections or physical is not None or height is not None:
+                raise ValueError("--swath-workers runs without --correct, --physical, --height")
+            self.swath = SwathWorkers(
+                config, s.swath_workers, s.lens_backend, s.device, s.swath_spawn, s.swath_bind
+            )
+            self._sent = deque()  # metadata of the pulse blocks sent to the workers
 
     @property
     def stream_id(self) -> str:
@@ -201,12 +220,17 @@ class Pipeline:
                 busy += time.perf_counter() - t
                 for block in _groups(blocks, self.max_batch):
                     t = time.perf_counter()
+                    if self.swath is not None:
+                        self._to_workers(block)
+                        continue
                     out = self._range(block)
                     busy += time.perf_counter() - t
                     self.stats.busy_s[key] = busy  # live in every stats message
                     self._forward(out)
                 if batches is None:
                     break
+            if self.swath is not None:
+                self.swath.end()
             if self._holding:
                 self._forward(self._held.release(self.engine.flush_range()))
             if self.settings.stages == "fused":
@@ -235,6 +259,28 @@ class Pipeline:
             self._put_image(self._ccd_step([block]))
         else:
             self.q_lines.put(block)
+
+    def _to_workers(self, block: PulseBlock) -> None:
+        meta = PulseBlock(block.first_pulse, block.samples[:, :0], block.arrival_s, block.flagged)
+        self._sent.append(meta)  # before the send: its lines cannot come back before it
+        self.swath.send(block.first_pulse, block.samples, bool(block.flagged.all()))
+
+    def _swath_stage(self) -> None:
+        """The CCD stage when workers run lens and CCD: their merged lines become line blocks."""
+        try:
+            while not self._stop.is_set():
+                out = self.swath.receive(0.05)
+                while self._sent:
+                    meta = self._sent.popleft()
+                    self.timing.record(meta)
+                    self.own["pulses_processed"] += len(meta)
+                if out is not None:
+                    self._put_image(self._line_block(out))
+                elif self.swath.finished:
+                    break
+        finally:
+            self.swath.close()
+            self.q_image.close()
 
     def _put_image(self, block: LineBlock | None) -> None:
         if block is not None:
@@ -374,7 +420,7 @@ class Pipeline:
         self.stats.started_s = time.perf_counter()
         stages = [self._source_stage, self._lens_stage, self._strip_stage]
         if self.settings.stages == "split":
-            stages.insert(2, self._ccd_stage)
+            stages.insert(2, self._ccd_stage if self.swath is None else self._swath_stage)
         for target in stages:
             t = threading.Thread(
                 target=self._guard(target), name=f"rtsar-{target.__name__[1:]}", daemon=True

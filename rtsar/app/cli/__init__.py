@@ -1,8 +1,8 @@
 """The ``rtsar`` command.  ``rtsar COMMAND --help`` explains each command.
 
 One module per command group: ``files`` (presets, simulate, process, quicklook), ``streaming``
-(run, replay, subscribe, view, keygen), ``measure`` (bench, tradeoff, table1), ``batch``;
-``options`` declares the options they share.
+(run, replay, subscribe, view, keygen), ``measure`` (bench, tradeoff, table1), ``batch``,
+``swath`` (swath-worker); ``options`` declares the options they share.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import warnings
 from ... import __version__
 from ...sinks.publish import DEFAULT_ENDPOINT
 from .. import signals
-from . import batch, files, formats, measure, streaming
+from . import batch, files, formats, measure, streaming, swath
 from .options import die
 
 EPILOG = f"""examples:
@@ -51,6 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
     measure.add_parsers(sub)
     formats.add_parsers(sub)
     batch.add_parsers(sub)
+    swath.add_parsers(sub)
     return p
 
 

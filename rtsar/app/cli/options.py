@@ -166,6 +166,22 @@ def add_pipeline_options(s, delivery: str) -> None:
         help="longest run of missing sequence numbers that is zero-filled; a longer jump that "
         "the next shot confirms is a restart (default: one aperture)",
     )
+    g.add_argument(
+        "--swath-workers",
+        type=int,
+        default=0,
+        metavar="K",
+        help="run lens and CCD in K processes, each on 1/K of the range bins, merged here "
+        "(README 'The swath across processes'; default 0: in this process)",
+    )
+    g.add_argument(
+        "--swath-bind",
+        default="127.0.0.1",
+        metavar="HOST|tcp://HOST:PORT",
+        help="where the swath workers connect; with a PORT the workers are not started here: "
+        "run `rtsar swath-worker --connect tcp://HOST:PORT --index k` for k = 0 … K-1 "
+        "(default 127.0.0.1: K local workers on random loopback ports)",
+    )
     add_processing_knobs(g)
     add_height_options(g)
     g = s.add_argument_group("publication (ZeroMQ; wire format in README 'Strip protocol')")
@@ -313,6 +329,9 @@ def pipeline_settings(args, deadline: bool = False) -> PipelineSettings:
         max_batch=args.max_batch or 0,
         max_gap_pulses=args.max_gap_pulses or 0,
         deadline=deadline,
+        swath_workers=max(0, args.swath_workers),
+        swath_spawn=not args.swath_bind.startswith("tcp://"),
+        swath_bind=args.swath_bind,
     )
 
 

@@ -1,0 +1,366 @@
+"""The range swath split across processes: each worker runs the AO lens and the shifting CCD of
+its own range columns; the coordinator merges their lines.
+
+Range bins are independent in the azimuth correlation (Psaltis & Wagner 1981, eq. 5: every CCD
+column integrates its own range cell behind its own mask column), so K workers, each with the
+CCD columns [b_k, b_{k+1}) of the mask, together compute exactly the single process's image.
+Every worker compresses whole pulses (the range FFT needs all samples) and keeps its columns;
+the lens is the cheap half (README "Throughput"), the CCD the expensive one.
+
+Transport (ZeroMQ, one context per process):
+
+* coordinator → worker k: a PUSH socket the coordinator binds, one per worker, so every worker
+  gets every pulse block.  Its high-water mark (``HWM_MESSAGES``) is the flow control: when a
+  worker falls behind, the coordinator's send blocks, the pipeline's shot queue fills and a live
+  source drops (counted) as it does in one process.
+* workers → coordinator: one PULL socket the coordinator binds; each worker PUSHes its lines.
+
+Messages are multipart: ``[b"setup", JSON]`` (configuration, columns, lens choice), ``[b"block",
+JSON {first_pulse, count, zero}, samples]``, ``[b"end"]``; back: ``[b"ready", JSON]``,
+``[b"lines", JSON {index, first_line, count}, lines]``, ``[b"done", JSON]``, ``[b"error", JSON]``.
+The same worker loop (:func:`serve`) runs in a local process (``rtsar run --swath-workers K``
+spawns them) or on another host (``rtsar swath-worker --connect``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from collections import deque
+
+import numpy as np
+import zmq
+
+from ..ccd import make_correlator
+from ..ccd.base import design_mask
+from ..lens import make_lens, make_plan
+from ..params import Config, config_from_dict
+from ..samples import precision_dtype
+from .engine import Lines
+
+HWM_MESSAGES = 8  # pulse blocks in flight per worker before the coordinator waits
+READY_TIMEOUT_S = 120.0  # a worker's first start compiles numba kernels and builds OpenCL
+
+
+def split_columns(range_bins: int, workers: int) -> list[tuple[int, int]]:
+    """[b_k, b_{k+1}) of each worker: contiguous, as equal as possible, none empty."""
+    if not 1 <= workers <= range_bins:
+        raise ValueError(f"swath workers must be 1 … {range_bins} (the range bins), got {workers}")
+    edges = np.linspace(0, range_bins, workers + 1).round().astype(int)
+    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+
+
+def parse_bind(bind: str) -> tuple[str, int | None]:
+    """``HOST`` → (HOST, None); ``tcp://HOST:PORT`` → (HOST, PORT)."""
+    if not bind.startswith("tcp://"):
+        return bind, None
+    host, _, port = bind[len("tcp://") :].rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65535:
+        raise ValueError(f"swath endpoint must be HOST or tcp://HOST:PORT, got {bind!r}")
+    return host, int(port)
+
+
+def worker_endpoints(connect: str, index: int) -> tuple[str, str]:
+    """(pulses, results) endpoints of worker ``index`` of a coordinator bound at tcp://H:P."""
+    host, port = parse_bind(connect)
+    if port is None:
+        raise ValueError(f"--connect needs tcp://HOST:PORT, got {connect!r}")
+    return f"tcp://{host}:{port + 1 + index}", f"tcp://{host}:{port}"
+
+
+def _bind(socket, host: str, port: int | None) -> str:
+    if port is None:
+        port = socket.bind_to_random_port(f"tcp://{host}")
+    else:
+        socket.bind(f"tcp://{host}:{port}")
+    return f"tcp://{host}:{port}"
+
+
+def check_splittable(config: Config) -> None:
+    """The configurations a swath split computes exactly; ValueError for the rest."""
+    if config.processor.range_migration_taps:
+        raise ValueError(
+            "--swath-workers with range_migration_taps > 0 is not supported: the migration "
+            "mask couples neighbouring range columns across the workers' boundaries"
+        )
+
+
+class SwathEngine:
+    """One worker's half: the full AO lens, then the CCD of columns [b0, b1)."""
+
+    def __init__(self, config: Config, columns: tuple[int, int], lens_backend="auto", device=None):
+        check_splittable(config)
+        self.plan = make_plan(config)
+        self.lens = make_lens(self.plan, lens_backend, device, config.processor.precision)
+        b0, b1 = columns
+        p = config.processor
+        mask = design_mask(config, self.plan.range_m)[:, b0:b1]
+        self.correlator = make_correlator(
+            p.correlator,
+            mask,
+            p.fft_length,
+            partition_lines=p.partition_lines,
+            precision=p.precision,
+            tail_block_lines=p.tail_block_lines,
+        )
+        self.columns = (b0, b1)
+        self.lines_out = 0
+
+    def push(self, shots: np.ndarray | None, count: int) -> Lines:
+        """``count`` pulses (``shots`` None: zero pulses, no lens launch) → the lines completed."""
+        b0, b1 = self.columns
+        if shots is None:
+            lines = np.zeros((count, b1 - b0), self.lens.dtype)
+        else:
+            lines = np.ascontiguousarray(self.lens.compress(shots)[:, b0:b1])
+        return self._emit(self.correlator.push(lines))
+
+    def flush(self) -> Lines:
+        return self._emit(self.correlator.flush())
+
+    def _emit(self, lines: np.ndarray) -> Lines:
+        out = Lines(self.lines_out, lines)
+        self.lines_out += len(lines)
+        return out
+
+
+def _json(frame: bytes) -> dict:
+    return json.loads(frame.decode("utf-8"))
+
+
+def serve(
+    shots_endpoint: str, results_endpoint: str, index: int, log=None, parent_pid: int | None = None
+) -> int:
+    """A worker: connect, take the setup, process blocks until "end"; 0 on a clean end.
+
+    ``parent_pid``: a worker started by a coordinator ends when that process is gone.
+    """
+    ctx = zmq.Context()
+    pull, push = ctx.socket(zmq.PULL), ctx.socket(zmq.PUSH)
+    pull.setsockopt(zmq.RCVHWM, HWM_MESSAGES)
+    push.setsockopt(zmq.LINGER, 10_000)
+    pull.connect(shots_endpoint)
+    push.connect(results_endpoint)
+    engine = None
+    try:
+        while True:
+            if not pull.poll(1000):
+                if parent_pid is not None and os.getppid() != parent_pid:
+                    return 1  # the coordinator died without its "end"
+                continue
+            frames = pull.recv_multipart(copy=True)
+            kind = frames[0]
+            if kind == b"setup":
+                setup = _json(frames[1])
+                config = config_from_dict(setup["config"])
+                engine = SwathEngine(
+                    config, tuple(setup["columns"]), setup["lens_backend"], setup["device"]
+                )
+                shape = (config.waveform.samples_per_shot,)
+                push.send_multipart(
+                    [b"ready", json.dumps({"index": index, "lens": engine.lens.backend}).encode()]
+                )
+            elif kind == b"block":
+                head = _json(frames[1])
+                count = int(head["count"])
+                shots = None
+                if not head["zero"]:
+                    dtype = np.dtype(head["dtype"])
+                    shots = np.frombuffer(frames[2], dtype).reshape(count, *shape)
+                _send_lines(push, index, engine.push(shots, count))
+            elif kind == b"end":
+                _send_lines(push, index, engine.flush())
+                push.send_multipart([b"done", json.dumps({"index": index}).encode()])
+                return 0
+    except Exception as exc:  # told to the coordinator, which stops the run with it
+        push.send_multipart([b"error", json.dumps({"index": index, "message": f"{exc}"}).encode()])
+        if log:
+            log(f"swath worker {index}: {exc}")
+        return 1
+    finally:
+        pull.close(0)
+        push.close()
+        ctx.term()
+
+
+def _send_lines(push, index: int, out: Lines) -> None:
+    if len(out.lines):
+        head = {"index": index, "first_line": out.first_line, "count": len(out.lines)}
+        push.send_multipart([b"lines", json.dumps(head).encode(), out.lines.tobytes()])
+
+
+class SwathWorkers:
+    """The coordinator's end: send every pulse block to K workers, merge their lines.
+
+    ``bind``: ``HOST`` (random ports) or ``tcp://HOST:PORT``: the results socket on PORT and
+    worker k's pulse socket on PORT + 1 + k, so workers on other hosts know where to connect
+    (``rtsar swath-worker --connect tcp://HOST:PORT --index k``).  ``spawn``: start the K
+    workers here (``python -m rtsar swath-worker``), over loopback.  ``timeout_s``: the longest
+    wait for a worker to take pulses, or to finish after the end, before the run stops with an
+    error.
+    """
+
+    def __init__(
+        self,
+        config: Config,
+        workers: int,
+        lens_backend: str = "auto",
+        device: str | None = None,
+        spawn: bool = True,
+        bind: str = "127.0.0.1",
+        timeout_s: float = 10.0,
+    ):
+        check_splittable(config)
+        self.config = config
+        self.columns = split_columns(config.processor.range_bins, workers)
+        self.timeout_s = timeout_s
+        self.dtype = np.dtype(precision_dtype(config.processor.precision))
+        self._ctx = zmq.Context()
+        host, base = parse_bind(bind)
+        self._results = self._ctx.socket(zmq.PULL)
+        self.results_endpoint = _bind(self._results, host, base)
+        self._pushes, self.shot_endpoints = [], []
+        for k in range(len(self.columns)):
+            s = self._ctx.socket(zmq.PUSH)
+            s.setsockopt(zmq.SNDHWM, HWM_MESSAGES)
+            s.setsockopt(zmq.SNDTIMEO, int(1000 * timeout_s))
+            s.setsockopt(zmq.LINGER, 0)
+            self._pushes.append(s)
+            self.shot_endpoints.append(_bind(s, host, base and base + 1 + k))
+        self._procs: list[subprocess.Popen] = []
+        if spawn:
+            for k, endpoint in enumerate(self.shot_endpoints):
+                cmd = [sys.executable, "-m", "rtsar", "swath-worker", "--shots", endpoint]
+                cmd += ["--results", self.results_endpoint, "--index", str(k)]
+                cmd += ["--parent-pid", str(os.getpid())]
+                self._procs.append(subprocess.Popen(cmd, stdin=subprocess.DEVNULL))
+        self._pending = [deque() for _ in self.columns]  # per worker: Lines not merged yet
+        self._done = [False] * len(self.columns)
+        self._heard_at, self._ended_at = time.monotonic(), None
+        self.lines_out = 0
+        self.lens_backend = ""
+        setup = {"config": config.to_dict(), "lens_backend": lens_backend, "device": device}
+        for (b0, b1), s in zip(self.columns, self._pushes, strict=True):
+            s.send_multipart([b"setup", json.dumps({**setup, "columns": [b0, b1]}).encode()])
+        ready = 0
+        deadline = time.monotonic() + READY_TIMEOUT_S
+        while ready < len(self.columns):
+            frames = self._recv(deadline, "to start")
+            if frames[0] == b"ready":
+                ready += 1
+                self.lens_backend = _json(frames[1])["lens"]
+
+    def endpoints(self) -> list[str]:
+        return self.shot_endpoints
+
+    def send(self, first_pulse: int, samples: np.ndarray, zero: bool) -> None:
+        """One block of pulses to every worker (waits while a worker is HWM blocks behind)."""
+        samples = np.ascontiguousarray(samples)
+        head = {"first_pulse": first_pulse, "count": len(samples), "zero": zero}
+        head["dtype"] = samples.dtype.str
+        frames = [b"block", json.dumps(head).encode()]
+        if not zero:
+            frames.append(samples.tobytes())
+        for k, s in enumerate(self._pushes):
+            try:
+                s.send_multipart(frames, copy=False)
+            except zmq.Again:
+                raise RuntimeError(
+                    f"swath worker {k} took no pulses for {self.timeout_s:g} s (stalled or gone)"
+                ) from None
+
+    def end(self) -> None:
+        """No more pulses: the workers flush their CCDs and say they are done."""
+        for s in self._pushes:
+            s.send_multipart([b"end"])
+        self._ended_at = time.monotonic()
+
+    @property
+    def finished(self) -> bool:
+        return all(self._done)
+
+    def receive(self, timeout_s: float = 0.1) -> Lines | None:
+        """Merged lines that every worker has delivered (None: none new within ``timeout_s``)."""
+        if self._results.poll(int(1000 * timeout_s)):
+            while True:
+                self._take(self._results.recv_multipart())
+                if not self._results.poll(0):
+                    break
+            self._heard_at = time.monotonic()
+        else:
+            self._check_alive()
+            quiet_s = time.monotonic() - max(self._heard_at, self._ended_at or 0.0)
+            if self._ended_at is not None and not self.finished and quiet_s > self.timeout_s:
+                raise RuntimeError(
+                    f"swath workers did not finish within {self.timeout_s:g} s of the end"
+                )
+        return self._merge()
+
+    def _take(self, frames: list[bytes]) -> None:
+        kind = frames[0]
+        if kind == b"lines":
+            head = _json(frames[1])
+            k, count = int(head["index"]), int(head["count"])
+            b0, b1 = self.columns[k]
+            lines = np.frombuffer(frames[2], self.dtype).reshape(count, b1 - b0)
+            self._pending[k].append(Lines(int(head["first_line"]), lines))
+        elif kind == b"done":
+            self._done[int(_json(frames[1])["index"])] = True
+        elif kind == b"error":
+            err = _json(frames[1])
+            raise RuntimeError(f"swath worker {err['index']} failed: {err['message']}")
+
+    def _merge(self) -> Lines | None:
+        """The lines every worker has, columns side by side, in worker order."""
+        if any(not q for q in self._pending):
+            return None
+        first = self.lines_out
+        count = min(sum(len(x.lines) for x in q) for q in self._pending)
+        if count == 0:
+            return None
+        out = np.empty((count, self.config.processor.range_bins), self.dtype)
+        for (b0, b1), q in zip(self.columns, self._pending, strict=True):
+            row = 0
+            while row < count:
+                part = q[0]
+                if part.first_line != first + row:
+                    raise RuntimeError("swath workers delivered lines out of order")
+                take = min(count - row, len(part.lines))
+                out[row : row + take, b0:b1] = part.lines[:take]
+                if take == len(part.lines):
+                    q.popleft()
+                else:
+                    q[0] = Lines(part.first_line + take, part.lines[take:])
+                row += take
+        self.lines_out += count
+        return Lines(first, out)
+
+    def _recv(self, deadline: float, what: str) -> list[bytes]:
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise RuntimeError(f"swath workers did not answer {what} in time")
+            if self._results.poll(int(1000 * min(left, 0.5))):
+                frames = self._results.recv_multipart()
+                if frames[0] == b"error":
+                    self._take(frames)
+                return frames
+            self._check_alive()
+
+    def _check_alive(self) -> None:
+        for k, p in enumerate(self._procs):
+            if p.poll() is not None and not self._done[k]:
+                raise RuntimeError(f"swath worker {k} exited with status {p.returncode}")
+
+    def close(self) -> None:
+        for p in self._procs:
+            try:
+                p.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        for s in (*self._pushes, self._results):
+            s.close(0)
+        self._ctx.term()

@@ -1,0 +1,174 @@
+"""The swath split: K workers, a range slice each, give the single process's image."""
+
+import json
+import socket
+import threading
+
+import numpy as np
+import pytest
+import zmq
+from conftest import crandn
+
+from rtsar.app.cli import main
+from rtsar.ccd import make_ccd
+from rtsar.lens import make_lens, make_plan
+from rtsar.presets import preset
+from rtsar.scene import Simulator
+from rtsar.scene.model import point_scene
+from rtsar.sinks.image_file import read_image
+from rtsar.sources.replay import ReplaySource
+from rtsar.stream.pipeline import Pipeline, PipelineSettings
+from rtsar.stream.strips import StripSink
+from rtsar.stream.swath import (
+    SwathEngine,
+    SwathWorkers,
+    parse_bind,
+    serve,
+    split_columns,
+    worker_endpoints,
+)
+
+
+class Collect(StripSink):
+    def __init__(self):
+        self.strips = []
+
+    def strip(self, strip, info):
+        self.strips.append(strip)
+
+    def image(self):
+        return np.concatenate([s.lines for s in self.strips])
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def tiny():
+    cfg = preset("tiny")
+    r0 = cfg.geometry.slant_range_m
+    scene = point_scene(cfg, [0.0, 4.0, -3.0], [r0, r0 + 25.0, r0 - 30.0])
+    return cfg, Simulator(scene).block(scene.pulses)
+
+
+def _run(cfg, shots, **settings):
+    seq = np.arange(len(shots))
+    src = ReplaySource(shots, seq, seq / cfg.geometry.prf_hz, cfg.geometry.prf_hz, "max", 16)
+    sink = Collect()
+    Pipeline(cfg, src, [sink], PipelineSettings(lens_backend="numpy", **settings)).run()
+    return sink.image()
+
+
+def test_columns_split_evenly_and_completely():
+    assert split_columns(10, 3) == [(0, 3), (3, 7), (7, 10)]
+    assert split_columns(5, 5)[-1] == (4, 5)
+    with pytest.raises(ValueError, match="swath workers"):
+        split_columns(4, 5)
+    assert parse_bind("tcp://10.0.0.2:5600") == ("10.0.0.2", 5600)
+    assert worker_endpoints("tcp://h:5600", 2) == ("tcp://h:5603", "tcp://h:5600")
+    with pytest.raises(ValueError, match="HOST:PORT"):
+        parse_bind("tcp://h:port")
+
+
+@pytest.mark.parametrize("kind", ["direct", "fft", "partitioned", "nonuniform"])
+def test_slices_side_by_side_are_the_whole_ccd(kind, tiny, rng):
+    """The engines of three slices, their lines side by side, equal the full lens + CCD."""
+    cfg, shots = tiny
+    cfg = cfg.with_processor(correlator=kind, partition_lines=8, tail_block_lines=32)
+    plan = make_plan(cfg)
+    lens, ccd = make_lens(plan, "numpy"), make_ccd(cfg, plan.range_m)
+    want = np.concatenate([ccd.push(lens.compress(shots)), ccd.flush()])
+    parts = []
+    for cols in split_columns(cfg.processor.range_bins, 3):
+        eng = SwathEngine(cfg, cols, "numpy")
+        got = [eng.push(shots[i : i + 50], len(shots[i : i + 50])).lines for i in range(0, 400, 50)]
+        got += [eng.push(shots[400:], len(shots) - 400).lines, eng.flush().lines]
+        parts.append(np.concatenate(got))
+    got = np.concatenate(parts, axis=1)
+    assert got.shape == want.shape
+    assert np.abs(got - want).max() <= 1e-6 * np.abs(want).max()
+
+
+def _threads(bind, count):
+    threads = []
+    for k in range(count):
+        shots_ep, results_ep = worker_endpoints(bind, k)
+        t = threading.Thread(target=serve, args=(shots_ep, results_ep, k), daemon=True)
+        t.start()
+        threads.append(t)
+    return threads
+
+
+def test_workers_elsewhere_connect_to_the_bound_port(tiny):
+    """The multi-host layout, on loopback: workers started by hand connect to tcp://HOST:PORT."""
+    cfg, shots = tiny
+    bind = f"tcp://127.0.0.1:{_free_port()}"
+    threads = _threads(bind, 3)
+    got = _run(cfg, shots, swath_workers=3, swath_spawn=False, swath_bind=bind)
+    for t in threads:
+        t.join(5)
+        assert not t.is_alive()
+    one = _run(cfg, shots)
+    assert np.abs(got - one).max() <= 1e-6 * np.abs(one).max()
+
+
+def _fake_worker(results_ep, shots_ep, behaviour):
+    ctx = zmq.Context.instance()
+    pull, push = ctx.socket(zmq.PULL), ctx.socket(zmq.PUSH)
+    pull.setsockopt(zmq.RCVHWM, 1)
+    pull.connect(shots_ep)
+    push.connect(results_ep)
+    pull.recv_multipart()  # the setup
+    push.send_multipart([b"ready", json.dumps({"index": 0, "lens": "numpy"}).encode()])
+    if behaviour == "error":
+        pull.recv_multipart()
+        push.send_multipart([b"error", json.dumps({"index": 0, "message": "disk full"}).encode()])
+    return pull, push  # "stall": connected, never reads again
+
+
+@pytest.mark.parametrize("behaviour, message", [("error", "disk full"), ("stall", "took no")])
+def test_a_failing_or_stalled_worker_stops_the_run_with_its_reason(behaviour, message, rng):
+    cfg = preset("tiny")
+    bind = f"tcp://127.0.0.1:{_free_port()}"
+    shots_ep, results_ep = worker_endpoints(bind, 0)
+    box = {}
+    t = threading.Thread(
+        target=lambda: box.update(s=_fake_worker(results_ep, shots_ep, behaviour)), daemon=True
+    )
+    t.start()
+    workers = SwathWorkers(cfg, 1, "numpy", spawn=False, bind=bind, timeout_s=0.5)
+    block = crandn(rng, 64, cfg.waveform.samples_per_shot, dtype=np.complex64)
+    with pytest.raises(RuntimeError, match=message):
+        for i in range(200):
+            workers.send(64 * i, block, False)
+            workers.receive(0.01)
+    workers.close()
+
+
+def test_replay_command_with_swath_workers(tmp_path):
+    scene = tmp_path / "s.toml"
+    scene.write_text(
+        'preset = "tiny"\nseed = 2\n[[targets]]\nalong_track_m = 0.0\nslant_range_m = 2000.0\n'
+    )
+    rec = tmp_path / "r.h5"
+    assert main(["simulate", str(scene), "-o", str(rec)]) == 0
+    common = [
+        "replay",
+        str(rec),
+        "--rate",
+        "max",
+        "--lens",
+        "numpy",
+        "--endpoint",
+        f"tcp://127.0.0.1:{_free_port()}",
+    ]
+    assert main([*common, "-o", str(tmp_path / "one.h5")]) == 0
+    common[-1] = f"tcp://127.0.0.1:{_free_port()}"
+    assert main([*common, "--swath-workers", "2", "-o", str(tmp_path / "two.h5")]) == 0
+    one, two = read_image(tmp_path / "one.h5")[0], read_image(tmp_path / "two.h5")[0]
+    assert one.shape == two.shape and np.abs(one - two).max() <= 1e-6 * np.abs(one).max()
+    with pytest.raises(SystemExit):
+        main(["swath-worker", "--help"])

@@ -36,6 +36,8 @@ FLOORS = [
     {"rtsar.focus"},
     {"rtsar.topo"},
     {"rtsar.scene"},
+    # spotlight: simulates with the scene model's synthesis, forms images with numpy only
+    {"rtsar.spot"},
     {"rtsar.sources"},
     {"rtsar.stream"},
     {"rtsar.sinks"},

@@ -10,7 +10,9 @@ Not a test.  For a preset it measures, on the same simulated shots held in memor
 * a plain NumPy batch range-Doppler processor (FFT matched filter in range, FFT fast convolution
   in azimuth over the whole block) on the same shots, as a ratio;
 * the CCD stage's rate inside the pipeline (its busy time) as a fraction of the same correlator
-  pushed alone.
+  pushed alone;
+* placement: lens and CCD in two worker processes, a range half each (``--swath-workers 2``),
+  at max and at real rate, for the partitioned and the nonuniform correlators.
 
 Strips go to a ZeroMQ publisher on a loopback port with no subscriber (publication is part of
 the measured path), or, with ``stalled_subscriber``, with a subscriber that never reads.
@@ -244,6 +246,11 @@ def bench_pipeline(name: str, cfg: Config, seconds: float, real_seconds: float, 
     result["stalled_subscriber_over_none"] = stalled["pulses_per_s"] / none["pulses_per_s"]
     for mb in (8, 16, 256):
         run(f"partitioned: max rate, max batch {mb}", part, "max", seconds, max_batch=mb)
+    # Placement: lens + CCD in two worker processes, a range half each (rtsar.stream.swath).
+    for kind in ("partitioned", "nonuniform"):
+        c = cfg.with_processor(correlator=kind)
+        run(f"{kind}: max rate, 2 swath processes", c, "max", seconds, swath_workers=2)
+        run(f"{kind}: real rate, 2 swath processes", c, "real", real_seconds, swath_workers=2)
     rd = bench_numpy_range_doppler(cfg, np.concatenate([shots] * 2))
     result["numpy_range_doppler_pulses_per_s"] = rd
     result["pipeline_over_numpy_range_doppler"] = {

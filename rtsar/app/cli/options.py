@@ -117,7 +117,8 @@ def add_height_options(g) -> None:
         help="3D: height strips, published on the 'height' topic and written beside the image: "
         "insal (a second receiver, Zhao 2014; the scene's interferometric_receivers effect) or "
         "sam (cosine/sine-masked channels S1, S2, the INO 3D patent; the scene's "
-        "amplitude_modulation_3d effect)",
+        "amplitude_modulation_3d effect) (default: none, no height strips; insal in `rtsar "
+        "demo`)",
     )
     g.add_argument(
         "--height-strip-lines",

@@ -128,12 +128,13 @@ def markdown(rows: list[dict], pulses: int, bins: int) -> str:
         "|" + "---|" * 9,
     ]
     for r in rows:
+        reasons = ", ".join(f"{k} {v}" for k, v in r["reasons"].items())
         out.append(
             f"| {r['seed'] if r['seed'] is not None else 'none (error-free)'} | "
             f"{r['piston_ptp_rad']:.0f} | {min(r['irw_ratio']):.3f} … {max(r['irw_ratio']):.3f} | "
             f"≤ {100 * max(r['pslr_rel_dev']):.1f} % | {min(r['peak_ratio']):.3f} … "
             f"{max(r['peak_ratio']):.3f} | {r['shift_lines'][0]:.1f} "
-            f"({r['shift_spread_lines']:.2f}) | {', '.join(f'{k} {v}' for k, v in r['reasons'].items())}"
+            f"({r['shift_spread_lines']:.2f}) | {reasons}"
             f"{' (input returned)' if r['unchanged'] else ''} | {r['stream_vs_batch_max']:.1e} | "
             f"{r['pulses_per_s']:.0f} |"
         )

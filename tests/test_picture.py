@@ -1,6 +1,8 @@
 """Extended scenes drawn from pictures, and the fast tone synthesis that simulates them live."""
 
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -169,3 +171,18 @@ def test_scene_files_with_pictures(tmp_path):
     )
     with pytest.raises(ValueError, match="colour"):
         load_scene(bad)
+
+
+def test_a_simulated_source_readies_its_kernels_before_the_schedule():
+    """SimSource.prepare (called by `rtsar run` while it says "preparing …") leaves the tone
+    kernels compiled or loaded, so the first live shot does not wait for numba."""
+    code = (
+        "from rtsar.scene import load_scene, tones\n"
+        "from rtsar.sources.sim import SimSource\n"
+        "src = SimSource(load_scene('demo'), 16)\n"
+        "assert not tones._tone_sum.signatures\n"
+        "src.prepare()\n"
+        "assert tones._tone_sum.signatures and tones._pulsed_tones.signatures\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr

@@ -193,6 +193,8 @@ def run_stream(
     interrupted = None
     try:
         print("rtsar: preparing the lens and the correlator …", file=stream, flush=True)
+        if hasattr(source, "prepare"):  # a simulated source readies its kernels too
+            source.prepare()
         pipe = Pipeline(
             config,
             source,

@@ -73,6 +73,11 @@ class Simulator:
         else:  # pragma: no cover - params validation prevents it
             raise TypeError(type(wf).__name__)
 
+    def prepare(self) -> None:
+        """Compile (first run) or load from numba's cache the synthesis kernels now, not on the
+        first shot of a live stream (a few seconds the first time, ~1 s after)."""
+        self._tone_echo(np.zeros(1), np.zeros(1))  # zero gain: the kernels run on no scatterer
+
     def _overriding(self, hook: str) -> list[Effect]:
         """The effects that implement ``hook`` (the others are never called for it)."""
         return [e for e in self.effects if getattr(type(e), hook) is not getattr(Effect, hook)]

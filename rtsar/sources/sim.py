@@ -34,6 +34,11 @@ class SimSource(Source):
         self.counters = {"late_releases": 0}
         self.description = f"simulated scene '{scene.name}' at {self.prf_hz:g} Hz"
 
+    def prepare(self) -> None:
+        """Ready the simulator's kernels before the schedule starts (rtsar.app.live calls it
+        while it says "preparing …")."""
+        self.sim.prepare()
+
     def __iter__(self) -> Iterator[ShotBatch]:
         pacer = Pacer(self.prf_hz)
         p = 0

@@ -34,9 +34,16 @@ turn puts z where x was, which projective SAL exploits.
 from __future__ import annotations
 
 import math
+import sys
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
 
 from ..params import Config, FMCWChirp
 from ..presets import preset
@@ -213,3 +220,24 @@ def reduced_spotlight(
     cfg = Config(wf, geo_cfg, replace(base.processor, aperture_pulses=2, range_bins=samples))
     pulses = int(round(math.radians(sweep_deg) / step_rad)) + 1
     return cfg, SpotlightGeometry(r0, step_rad * r0, pulses, **bistatic)
+
+
+BUILT_IN_SPOT_SCENES = ("spotlight-scene",)
+
+
+def load_spot_scene(source: str | Path | None) -> SpotScene:
+    """A spotlight scene from a TOML file, or the built-in "spotlight-scene" (None: that one)."""
+    if source is None or str(source) in BUILT_IN_SPOT_SCENES:
+        return default_spot_scene()
+    path = Path(source)
+    try:
+        with path.open("rb") as f:
+            d = tomllib.load(f)
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read the spotlight scene ({exc.strerror})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{path}: not valid TOML ({exc})") from None
+    try:
+        return spot_scene_from_dict(d, name=path.stem)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None

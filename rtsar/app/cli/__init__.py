@@ -14,7 +14,7 @@ import warnings
 from ... import __version__
 from ...sinks.publish import DEFAULT_ENDPOINT
 from .. import signals
-from . import batch, files, formats, measure, streaming, swath
+from . import batch, files, formats, measure, spot, streaming, swath
 from .options import die
 
 EPILOG = f"""examples:
@@ -31,6 +31,7 @@ EPILOG = f"""examples:
   rtsar bench                                lens and correlator throughput in one run
   rtsar tradeoff                             what accuracy costs in time: every knob, one run
   rtsar table1                               Psaltis & Wagner's Table 1 from the physical emulation
+  rtsar spotlight --live --every 200 --publish   spotlight SAL: progressive images on topic 'spot'
   rtsar export rec.h5 --cphd rec.cphd        a recording as CPHD (also --sigmf; images: --sicd)
 """
 
@@ -52,6 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
     formats.add_parsers(sub)
     batch.add_parsers(sub)
     swath.add_parsers(sub)
+    spot.add_parsers(sub)
     return p
 
 

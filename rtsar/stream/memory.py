@@ -43,7 +43,12 @@ def estimate_bytes(config: Config, queue_pulses: int = 0, aux_channels: int = 0)
     n, bins = p.aperture_pulses, p.range_bins
     m = p.fft_length or 1 << max(0, (2 * n - 1).bit_length())
     taps = max(1, p.range_migration_taps + 2) if p.range_migration_taps else 1
-    ccd = {"direct": 2 * n * bins, "fft": 5 * m * bins, "partitioned": 6 * n * bins}
+    ccd = {
+        "direct": 2 * n * bins,
+        "fft": 5 * m * bins,
+        "partitioned": 6 * n * bins,
+        "nonuniform": 8 * n * bins,  # segments padded to whole partitions, their block buffers
+    }
     engine = taps * ccd[p.correlator] * item + 4 * p.micro_batch * max(s, bins) * item
     queues = queue_pulses * ((1 + aux_channels) * s + 2 * bins) * item
     return float(engine + queues)

@@ -274,8 +274,13 @@ class SwathWorkers:
 
     def end(self) -> None:
         """No more pulses: the workers flush their CCDs and say they are done."""
-        for s in self._pushes:
-            s.send_multipart([b"end"])
+        for k, s in enumerate(self._pushes):
+            try:
+                s.send_multipart([b"end"])
+            except zmq.Again:
+                raise RuntimeError(
+                    f"swath worker {k} took no pulses for {self.timeout_s:g} s (stalled or gone)"
+                ) from None
         self._ended_at = time.monotonic()
 
     @property

@@ -31,6 +31,9 @@ waiting for the stream in real time.
 A variant is on the Pareto front when no other variant of its scene is at least as good on every
 one of µs per pulse, median latency, image error, azimuth IRW and azimuth PSLR, and better on one
 (resolution and sidelobes are what the aperture and the windows buy).
+
+The spotlight rows (``spotlight``): polar format variants and fast backprojection against the
+exact backprojection, error by ring around the scene centre and time per image.
 """
 
 from __future__ import annotations
@@ -47,6 +50,7 @@ from ...lens.base import opencl_unavailable
 from .measure import measure_cost, measure_quality, reference_image, trace_latency_s
 from .report import markdown, pareto_front, plot
 from .scenes import TradeoffScene, Variant, default_scenes, make_scene, simulate
+from .spotlight import run_spotlight, spotlight_markdown
 
 __all__ = [
     "TradeoffScene",
@@ -174,6 +178,9 @@ def run(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     rows = run_tradeoff(scenes, device=args.device, repeats=args.repeats)
+    spot_rows, spot_scene = run_spotlight(
+        args.quick, args.repeats, lambda m: print(m, file=sys.stderr, flush=True)
+    )
     doc = {
         "generated_by": "rtsar tradeoff" + (" --quick" if args.quick else ""),
         "seconds": time.perf_counter() - t0,
@@ -186,11 +193,15 @@ def run(args) -> int:
             for s in scenes
         },
         "rows": rows,
+        "spotlight": {**spot_scene, "rows": spot_rows},
     }
     (out / "tradeoff.json").write_text(json.dumps(doc, indent=1, default=float))
-    (out / "tradeoff.md").write_text(markdown(rows, scenes))
+    (out / "tradeoff.md").write_text(
+        markdown(rows, scenes) + "\n" + spotlight_markdown(spot_rows, spot_scene)
+    )
     plot(rows, scenes, out / "tradeoff.png")
     print(markdown(rows, scenes))
+    print(spotlight_markdown(spot_rows, spot_scene))
     off = [f"{r['scene']}" for r in rows if r["default"] and not r["front"]]
     print(f"defaults on the Pareto front: {'yes' if not off else 'NO (' + ', '.join(off) + ')'}")
     print(

@@ -43,14 +43,16 @@ def _tone_sum(out, lo, hi, alpha, beta, gain_re, gain_im, anchor):
     # the multiplications of one chain do not wait for the previous ones.
     for j in range(lo.shape[0]):
         al, be = alpha[j], beta[j]
-        sr, si = _phasor(1.0, 0.0, 4.0 * be)
+        zr, zi = _phasor(1.0, 0.0, be)  # one sample's step
+        z2r, z2i = zr * zr - zi * zi, 2.0 * zr * zi
+        sr, si = z2r * z2r - z2i * z2i, 2.0 * z2r * z2i  # four samples' step
         n, h = lo[j], hi[j]
         while n < h:
             stop = min(h, n + anchor)
             ar, ai = _phasor(gain_re[j], gain_im[j], al + be * n)  # exact at the anchor
-            br, bi = _phasor(gain_re[j], gain_im[j], al + be * (n + 1))
-            cr, ci = _phasor(gain_re[j], gain_im[j], al + be * (n + 2))
-            dr, di = _phasor(gain_re[j], gain_im[j], al + be * (n + 3))
+            br, bi = ar * zr - ai * zi, ar * zi + ai * zr
+            cr, ci = ar * z2r - ai * z2i, ar * z2i + ai * z2r
+            dr, di = cr * zr - ci * zi, cr * zi + ci * zr
             while n + 4 <= stop:
                 out[n] += complex(ar, ai)
                 out[n + 1] += complex(br, bi)

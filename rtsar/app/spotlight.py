@@ -145,9 +145,10 @@ def batch_image(data: np.ndarray, plan: PolarFormatPlan, method: str, upsample: 
         return polar_format(data, plan)
     if method == "backprojection":
         w = plan.polar_weights(0, len(data))
-        return backproject(
+        values = backproject(
             data, plan.config, plan.geometry, plan.scene_points(), plan.channel, w, 0, upsample
         )
+        return plan.baseband(values, 0, len(data))
     raise ValueError(f"unknown method {method!r} (pfa, backprojection)")
 
 

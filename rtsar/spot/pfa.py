@@ -16,6 +16,11 @@ frame turned by α (the look direction of the middle shot, ψ = φ - α), in thr
    (a few terms at Crouch's 5°; none for a uniform track);
 3. range: Σ_j Z[j] W_r(ky_j) exp(i ky_j y) onto the image's y pixels (chirp-z zoom).
 
+The image is returned at baseband: multiplied by exp(-i(k_x,c x + k_y,c y)) with (k_x,c, k_y,c)
+the centre of the spectral rectangle, so its spectrum sits at zero frequency as the strip-map
+images' do (the phase at a scatterer then is arg a - k_c·position; ``baseband`` applies the same
+factor to exact-phase values such as a backprojection).
+
 Only the inscribed rectangle of the polar annulus is used (k_x limits common to every k_y row),
 so the point response is separable: -3 dB widths 0.886·2π/Δk_x ≈ 0.886 λ/(2Δθ) (eq. 9.5) and
 0.886·2π/Δk_y ≈ 0.886 c/2B, times the window factor.  What PFA still approximates: the planar
@@ -150,6 +155,20 @@ class PolarFormatPlan:
             s.range_window, (self.ky - self.ky_lo) / (self.ky_hi - self.ky_lo)
         )
 
+    @property
+    def ky_centre(self) -> float:
+        return 0.5 * (self.ky_lo + self.ky_hi)
+
+    def baseband(self, values: np.ndarray, start: int, stop: int, pixels=None) -> np.ndarray:
+        """Exact scene-phase values (e.g. backprojection) at the image pixels ``pixels`` (a
+        pair of slices; None: all) brought to the PFA image's baseband: ·exp(-i(kx_c x + ky_c y))
+        with the spectral centre of shots start…stop-1."""
+        sl = (slice(None), slice(None)) if pixels is None else pixels
+        xx, yy = np.meshgrid(self.x_m[sl[0]], self.y_m[sl[1]], indexing="ij")
+        kx_c = 0.5 * sum(self.kx_limits(start, stop))
+        phase = np.mod(kx_c * xx + self.ky_centre * yy, 2 * math.pi)
+        return np.asarray(values) * np.exp(-1j * phase)
+
     def kx_limits(self, start: int, stop: int) -> tuple[float, float]:
         """k_x extent common to every k_y row for shots start…stop-1 (the inscribed rectangle)."""
         t0, t1 = self.tan_psi[start], self.tan_psi[stop - 1]
@@ -223,7 +242,10 @@ class PolarFormatPlan:
         for c0 in range(0, len(x), ROW_CHUNK):
             cols = slice(c0, c0 + ROW_CHUNK)
             img[cols] = zoom_dtft(zr[cols], self.dky * y[0], self.dky * self.dy, len(y))
-        img *= np.exp(1j * np.mod(self.ky_lo * y, 2 * math.pi))[None, :]
+        # the k_y sum started at ky_lo; the image is returned at baseband (module docstring)
+        img *= np.exp(1j * np.mod((self.ky_lo - self.ky_centre) * y, 2 * math.pi))[None, :]
+        kx_centre = 0.5 * sum(self.kx_limits(start, stop))
+        img *= np.exp(-1j * np.mod(kx_centre * x, 2 * math.pi))[:, None]
         if self.settings.curvature_phase:
             img *= np.exp(1j * self.curvature_rad)
         return img / np.sum(w * self.range_weights[None, :])

@@ -73,7 +73,8 @@ def run_spotlight(quick: bool = False, repeats: int = 2, log=None) -> tuple[list
     for name, method, knobs in VARIANTS:
         settings = PfaSettings(extent_m=box, **knobs)
         plan = PolarFormatPlan(cfg, geo, settings=settings)
-        weights = plan.polar_weights(0, geo.pulses)
+        n = geo.pulses
+        weights = plan.polar_weights(0, n)
         pts = plan.scene_points()
         pixels = pts.shape[0] * pts.shape[1]
         chips = [_chip(plan, plan.to_frame(p)[0], CHIP) for p in targets]
@@ -98,7 +99,8 @@ def run_spotlight(quick: bool = False, repeats: int = 2, log=None) -> tuple[list
             inner = _chip(plan, xy, 4)
             key = (settings.oversampling, inner[0].start, inner[1].start)
             if key not in refs:
-                refs[key] = backproject_exact(data, cfg, geo, pts[inner], "main", weights)
+                exact = backproject_exact(data, cfg, geo, pts[inner], "main", weights)
+                refs[key] = plan.baseband(exact, 0, n, inner)
             ref = refs[key]
             local = (
                 slice(inner[0].start - c[0].start, inner[0].stop - c[0].start),

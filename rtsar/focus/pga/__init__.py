@@ -4,6 +4,7 @@
 correction stage), ``reference`` (the float64 batch version on a recording).
 """
 
+from .doppler import CentroidLags, antenna_coherence, centroid_lags, centroid_std_rad
 from .estimator import (
     COULD_NOT_ESTIMATE,
     ESTIMATED,
@@ -27,9 +28,13 @@ __all__ = [
     "NOTHING_TO_CORRECT",
     "REASONS",
     "BlockReport",
+    "CentroidLags",
     "PGACounters",
     "PGASettings",
     "PGAStage",
+    "antenna_coherence",
+    "centroid_lags",
+    "centroid_std_rad",
     "curvature_m",
     "deramp_cycles",
     "migration_corrected",

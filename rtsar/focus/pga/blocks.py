@@ -13,9 +13,11 @@ the CCD; a per-pulse phase commutes with range compression, so raw shots could t
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
+from .doppler import CentroidLags
 from .estimator import BlockReport
 
 
@@ -55,8 +57,13 @@ class Stitcher:
     estimate (its phase held constant) the next is joined by a constant alone.
     """
 
-    def __init__(self, block: int, hop: int):
+    def __init__(self, block: int, hop: int, doppler_gain: float = 0.0,
+                 min_doppler_coherence: float = 0.05):  # fmt: skip
         self.block, self.hop = block, hop
+        self.doppler_gain, self.min_doppler_coherence = doppler_gain, min_doppler_coherence
+        self.doppler_slope_rad = 0.0  # the last anchored block's residual slope (rad/pulse)
+        self.doppler_anchored = False  # whether the last block was anchored
+        self.prev_anchored = False
         self.margin = (block - hop) // 2
         self.committed = 0  # pulses whose phase is final
         self.last_phase = 0.0  # phase of the last committed pulse (held on failure)
@@ -67,11 +74,22 @@ class Stitcher:
     def next_start(self, index: int) -> int:
         return index * self.hop
 
-    def add(self, start: int, phase: np.ndarray, report: BlockReport, stop: int) -> np.ndarray:
+    def add(
+        self,
+        start: int,
+        phase: np.ndarray,
+        report: BlockReport,
+        stop: int,
+        lags: CentroidLags | None = None,
+    ) -> np.ndarray:
         """Align a block's phase to the previous block's; return phases of [committed, stop).
 
         Over the common pulses δ = previous - phase is fitted by a + c·i (``align_blocks``);
-        c is taken only when the previous block had an estimate of its own.
+        c is taken only when the previous block had an estimate of its own.  Then the Doppler
+        anchor (rtsar.focus.pga.doppler): on an estimated block whose clutter ``lags`` are
+        coherent (≥ ``min_doppler_coherence`` and half the antenna's ρ(1)), ``doppler_gain`` of
+        the residual centroid slope s is added as s·(i - i₀), i₀ the first uncommitted pulse,
+        so the committed phase stays continuous and the next block inherits the slope.
         """
         n = phase.size
         if not report.estimated:
@@ -90,9 +108,26 @@ class Stitcher:
             else:
                 a, c = float(np.angle(np.sum(np.exp(1j * delta)))), 0.0
             aligned = phase + a + c * np.arange(n)
+        self.prev_anchored = self.doppler_anchored and self.prev_estimated
+        self.doppler_anchored = False
+        if report.estimated and lags is not None:
+            slope, coherence = lags.residual(aligned)
+            floor = max(self.min_doppler_coherence, 0.5 * lags.expected_coherence)
+            if lags.expected_coherence > 0 and coherence >= floor:
+                pivot = max(self.committed - start, 0)
+                # The first anchored block (or the first after one without an estimate) takes
+                # the whole slope; later ones doppler_gain of it (a first-order tracking loop).
+                gain = self.doppler_gain if self.prev_anchored else 1.0
+                aligned = aligned + gain * slope * (np.arange(n) - pivot)
+                self.doppler_slope_rad, self.doppler_anchored = slope, True
         self.prev_estimated = report.estimated
         self.prev_start, self.prev_phase = start, aligned
         return self.extend(stop)
+
+    def annotate(self, report: BlockReport) -> BlockReport:
+        """The block's report with what the Doppler anchor did on it (the last ``add``)."""
+        slope = self.doppler_slope_rad if self.doppler_anchored else 0.0
+        return replace(report, doppler_anchored=self.doppler_anchored, doppler_slope_rad=slope)
 
     def extend(self, stop: int) -> np.ndarray:
         """Commit pulses [committed, stop) from the last block's aligned phase."""

@@ -92,6 +92,12 @@ class PGASettings:
                         the block-edge curvature ΔR exceeds this fraction of a range cell
     min_sharpness_gain  an estimate is used only if it sharpens the block image by this fraction
     min_pulses          a shorter block (end of a short stream) is not estimated (min(P, N))
+    doppler_anchor      set the slope PGA cannot see from the clutter's Doppler centroid
+                        (rtsar.focus.pga.doppler); False: the error's own slope stays
+    doppler_gain        the first anchored block takes its whole residual centroid slope,
+                        later ones this share (a tracking loop over ~1/gain blocks)
+    min_doppler_coherence  the clutter's lag-one coherence below which its centroid is not
+                        used (also below half the antenna's expected ρ(1))
     """
 
     block_pulses: int | None = None
@@ -109,6 +115,9 @@ class PGASettings:
     migration_cells: float = 0.1
     min_sharpness_gain: float = 0.25
     min_pulses: int | None = None
+    doppler_anchor: bool = True
+    doppler_gain: float = 0.25
+    min_doppler_coherence: float = 0.05
 
     def __post_init__(self):
         def integer(v, allow_none):
@@ -130,6 +139,9 @@ class PGASettings:
             "migration_cells": math.isfinite(self.migration_cells) and self.migration_cells >= 0,
             "min_sharpness_gain": math.isfinite(self.min_sharpness_gain)
             and self.min_sharpness_gain >= 0,
+            "doppler_gain": 0.0 <= self.doppler_gain <= 1.0,
+            "doppler_anchor": isinstance(self.doppler_anchor, bool),
+            "min_doppler_coherence": 0.0 <= self.min_doppler_coherence <= 1.0,
         }
         for name, ok in checks.items():
             if not ok:
@@ -151,8 +163,9 @@ class BlockReport:
     """What PGA did on one block: where it was, whether its estimate was used (``estimated``;
     ``reason`` one of REASONS), iterations, range bins in eq. 4.16, the last step's peak to peak
     and the estimate's rms (slope removed) in radians, the block image's sharpness
-    Σ|G|⁴/(Σ|G|²)² before and after, and the half-width w of the rows (bins) where the range
-    migration was handled (0: single bins, no migration correction).
+    Σ|G|⁴/(Σ|G|²)² before and after, the half-width w of the rows (bins) where the range
+    migration was handled (0: single bins, no migration correction), and whether the Doppler
+    anchor set its slope (rtsar.focus.pga.doppler) with the residual slope it found (rad/pulse).
     """
 
     first_pulse: int
@@ -167,6 +180,8 @@ class BlockReport:
     sharpness_before: float
     sharpness_after: float
     row_half_width: int = 0
+    doppler_anchored: bool = False
+    doppler_slope_rad: float = 0.0
 
 
 # ---- the estimator ---------------------------------------------------------------------------

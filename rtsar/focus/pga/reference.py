@@ -9,6 +9,7 @@ from ...params import Config
 from ...phase import phasor
 from ...samples import zero_nonfinite_rows
 from .blocks import Stitcher
+from .doppler import antenna_coherence, centroid_lags
 from .estimator import BlockReport, PGASettings, estimate_block
 
 
@@ -33,15 +34,20 @@ def pga_batch(
         range_m = range_axis_m(config)
     block, hop, _ = settings.resolved(config.processor.aperture_pulses)
     total = x.shape[0]
-    st = Stitcher(block, hop)
+    st = Stitcher(block, hop, settings.doppler_gain, settings.min_doppler_coherence)
+    anchor = settings.doppler_anchor and antenna_coherence(config) > 0
+
+    def lags(lines):
+        return centroid_lags(config, lines) if anchor else None
+
     phases, reports = [], []
     b = 0
     while st.next_start(b) + block <= total:
         s = st.next_start(b)
         stop = s + st.margin + hop
         phi, rep = estimate_block(config, x[s : s + block], range_m, settings, s)
-        phases.append(st.add(s, phi, rep, stop))
-        reports.append(rep)
+        phases.append(st.add(s, phi, rep, stop, lags(x[s : s + block])))
+        reports.append(st.annotate(rep))
         b += 1
     if st.committed < total:
         s = max(0, total - block)
@@ -49,7 +55,7 @@ def pga_batch(
             phases.append(st.extend(total))
         else:
             phi, rep = estimate_block(config, x[s:], range_m, settings, s)
-            phases.append(st.add(s, phi, rep, total))
-            reports.append(rep)
+            phases.append(st.add(s, phi, rep, total, lags(x[s:])))
+            reports.append(st.annotate(rep))
     phase = np.concatenate(phases) if phases else np.zeros(0)
     return x * phasor(-phase)[:, None], phase, reports

@@ -17,6 +17,7 @@ from ...phase import phasor
 from ...samples import zero_nonfinite_rows
 from ..stage import CorrectionStage
 from .blocks import Stitcher
+from .doppler import antenna_coherence, centroid_lags
 from .estimator import REASONS, BlockReport, PGASettings, estimate_block
 
 
@@ -27,6 +28,7 @@ class PGACounters:
     blocks_estimated: int = 0
     blocks_not_estimated: int = 0
     blocks_converged: int = 0
+    blocks_doppler_anchored: int = 0  # blocks whose slope the antenna's Doppler centroid set
     nonfinite_pulses: int = 0  # pulses holding NaN/Inf: zeroed, never reach the output
     reasons: dict = field(default_factory=lambda: {r: 0 for r in REASONS})
 
@@ -59,7 +61,9 @@ class PGAStage(CorrectionStage):
         self._buf = np.zeros((self.block + self.hop, self.bins), np.complex128)
         self._buf_start = 0  # stream index of _buf[0]
         self._buf_len = 0
-        self._stitch = Stitcher(self.block, self.hop)
+        st = self.settings
+        self._stitch = Stitcher(self.block, self.hop, st.doppler_gain, st.min_doppler_coherence)
+        self._anchor = st.doppler_anchor and antenna_coherence(config) > 0
         self._next_block = 0
         self.reports: deque[BlockReport] = deque(maxlen=keep_reports)
         self.counters = PGACounters()
@@ -77,8 +81,13 @@ class PGAStage(CorrectionStage):
         reasons = c.pop("reasons")
         return {**c, **{f"reasons.{k}": v for k, v in reasons.items()}}
 
+    def _lags(self, block: np.ndarray):
+        return centroid_lags(self.config, block) if self._anchor else None
+
     def _count(self, rep: BlockReport) -> None:
+        rep = self._stitch.annotate(rep)
         c = self.counters
+        c.blocks_doppler_anchored += rep.doppler_anchored
         c.reasons[rep.reason] += 1
         if rep.estimated:
             c.blocks_estimated += 1
@@ -127,9 +136,9 @@ class PGAStage(CorrectionStage):
             if take == need:  # block complete
                 block = self._buf[s - self._buf_start : s - self._buf_start + self.block]
                 phi, rep = estimate_block(self.config, block, self.range_m, self.settings, s)
-                self._count(rep)
                 stop = s + self._stitch.margin + self.hop
-                ph = self._stitch.add(s, phi, rep, stop)
+                ph = self._stitch.add(s, phi, rep, stop, self._lags(block))
+                self._count(rep)
                 outs.append(self._release(stop, ph))
                 phases.append(ph)
                 self._next_block += 1
@@ -148,8 +157,8 @@ class PGAStage(CorrectionStage):
             else:
                 block = self._buf[s - self._buf_start : self._buf_len]
                 phi, rep = estimate_block(self.config, block, self.range_m, self.settings, s)
+                ph = self._stitch.add(s, phi, rep, total, self._lags(block))
                 self._count(rep)
-                ph = self._stitch.add(s, phi, rep, total)
             outs.append(self._release(total, ph))
             phases.append(ph)
         self._buf_len = 0

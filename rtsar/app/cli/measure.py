@@ -25,7 +25,8 @@ def add_parsers(sub) -> None:
         "range migration, physical CCD) and each correction on scenes whose targets stress it; "
         "measures image error against a float64 reference, IRW/PSLR/ISLR/position of point "
         "targets, pulses/s and the line latency at the PRF, in one run.  Writes JSON, Markdown "
-        "and a Pareto plot (PNG).  Not a test: about 4 minutes on 2 cores (--quick: seconds).",
+        "and a Pareto plot (PNG).  Not a test: about 4 minutes on 2 cores (--quick: about a "
+        "minute).",
     )
     tradeoff.add_arguments(s)
     s.set_defaults(func=tradeoff.run)
@@ -37,7 +38,7 @@ def add_parsers(sub) -> None:
         "emulation: range resolution and cells (halved with the carrier in range), azimuth "
         "resolution L/N (N halved with the carrier in azimuth), and the dynamic range measured "
         "on emulated images (largest undistorted point target / noise floor of an empty scene), "
-        "beside the paper's values.  About 20 s.",
+        "beside the paper's values.  About 20–35 s on 2 cores.",
     )
     table1.add_arguments(s)
     s.set_defaults(func=table1.run)

@@ -322,8 +322,8 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "demo",
-        help="the 3D demo: InSAL heights of Zhao's ridge, published live (about 20 s)",
-        description="Simulate the built-in scene insal-ridge once (about 10 s; the recording "
+        help="the 3D demo: InSAL heights of Zhao's ridge, published live (about 15 s)",
+        description="Simulate the built-in scene insal-ridge once (a few seconds; the recording "
         f"is cached in {DEMO_CACHE}), then replay it at --rate times its PRF through the "
         "pipeline with height strips (--height insal), publishing image and height strips "
         "like `rtsar replay`. Watch with `rtsar subscribe -o demo.h5` and draw with `rtsar "

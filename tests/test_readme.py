@@ -26,7 +26,7 @@ README = (ROOT / "README.md").read_text(encoding="utf-8")
 RULES = [
     (r"^python3 -m venv|pip install", "skip", "installs a venv: CI does exactly this"),
     (r"-m pytest", "skip", "the test suite itself"),
-    (r"^rtsar run\b(?!.*--serial)", "run", "live demo, shortened to --duration 0.5 (800 pulses: 289 lines)"),
+    (r"^rtsar run\b(?!.*--serial)", "run", "live demo, shortened: --duration 0.5, 289 lines"),
     (r"^rtsar run .*--serial", "help", "needs an instrument (tests/test_serial.py runs it)"),
     (r"^rtsar (view|subscribe)\b", "help", "needs a live publisher (tests/test_publish.py)"),
     (r"^rtsar (simulate|process|quicklook) ", "run", "quick on the README's scenes"),

@@ -45,14 +45,16 @@ from .geometry import SpotlightGeometry, echo_cycles, sample_times_s, wavenumber
 
 MAX_TAYLOR_TERMS = 40
 ROW_CHUNK = 64  # rows per chirp-z batch (bounded memory)
-MAX_PIXELS = 1 << 26
+MAX_PIXELS = 1 << 25
+DEFAULT_AXIS_PIXELS = 4096
 
 
 @dataclass(frozen=True)
 class PfaSettings:
     """oversampling: pixels per natural resolution cell (2π/Δk) along each axis;
     extent_m: (cross-range, range) image extent (None: the alias-free extents, λ/(2·step
-    angle) and the range window); windows: rtsar.params.WINDOWS over k_x and k_y;
+    angle) and the range window, each cut to 4096 pixels); windows: rtsar.params.WINDOWS over
+    k_x and k_y;
     tolerance: the last Taylor term kept in the azimuth zoom (relative);
     curvature_phase: remove the wavefront-curvature phase of each pixel at the middle shot and
     centre frequency (exact path minus its planar approximation; without it a pixel at x from
@@ -136,14 +138,15 @@ class PolarFormatPlan:
         span_kx = self.kx_limits(0, len(self.psi))
         cell_x = 2 * math.pi / (span_kx[1] - span_kx[0])
         cell_y = 2 * math.pi / (self.ky_hi - self.ky_lo)
-        if s.extent_m is None:
+        self.dx, self.dy = cell_x / s.oversampling, cell_y / s.oversampling
+        if s.extent_m is None:  # alias-free extents, at most DEFAULT_AXIS_PIXELS per axis
+            step = float(np.median(np.diff(self.tan_psi)))
             ext = (
-                2 * math.pi / (self.ky_lo * np.median(np.diff(self.tan_psi))),
-                2 * math.pi / self.dky,
+                min(2 * math.pi / (self.ky_lo * step), DEFAULT_AXIS_PIXELS * self.dx),
+                min(2 * math.pi / self.dky, DEFAULT_AXIS_PIXELS * self.dy),
             )
         else:
             ext = s.extent_m
-        self.dx, self.dy = cell_x / s.oversampling, cell_y / s.oversampling
         nx = max(2, int(math.ceil(ext[0] / self.dx)))
         ny = max(2, int(math.ceil(ext[1] / self.dy)))
         if nx * ny > MAX_PIXELS:

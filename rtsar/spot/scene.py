@@ -200,8 +200,8 @@ def default_spot_scene() -> SpotScene:
         {"x_m": 0.0, "y_m": 0.0},
         {"x_m": 4e-3, "y_m": 2e-3, "amplitude": 0.8},
         {"x_m": -6e-3, "y_m": -3e-3, "amplitude": 0.8},
-        {"x_m": 9e-3, "y_m": -8e-3, "amplitude": 0.6},
-        {"x_m": -10e-3, "y_m": 9e-3, "amplitude": 0.6},
+        {"x_m": 7e-3, "y_m": -6e-3, "amplitude": 0.6},
+        {"x_m": -8e-3, "y_m": 7e-3, "amplitude": 0.6},
     ]
     return spot_scene_from_dict({"targets": pts}, name="spotlight-scene")
 

@@ -83,7 +83,8 @@ def add_parsers(sub) -> None:
         type=float,
         nargs=2,
         metavar=("X", "Y"),
-        help="image extent, cross-range and range, mm (default: the alias-free extents)",
+        help="image extent, cross-range and range, mm (default: the alias-free extents, at "
+        "most 4096 pixels each)",
     )
     s.add_argument(
         "--window", default="rect", help="taper over k_x and k_y: rect (default), hann, taylor"

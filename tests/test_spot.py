@@ -151,3 +151,14 @@ def test_spot_scene_file_is_strict():
         SpotlightSimulator(spot_scene_from_dict({"effects": [{"name": "antenna_pattern"}]}))
     scene = spot_scene_from_dict({"spotlight": {"sweep_deg": 1.0}, "targets": [{"x_m": 1e-3}]})
     assert scene.geometry.pulses == round(math.radians(1.0) * 4.6 / 50e-6) + 1
+
+
+def test_a_squinted_first_few_shots_wait_for_more(five_degrees):
+    cfg, geo, data = five_degrees
+    stream = ProgressivePolarFormat(PolarFormatPlan(cfg, geo, settings=PfaSettings()))
+    stream.push(data[:3])
+    assert not stream.ready()
+    with pytest.raises(ValueError, match="no image yet"):
+        stream.image()
+    stream.push(data[3:40])
+    assert stream.ready() and np.isfinite(stream.image()).all()

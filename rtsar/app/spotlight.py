@@ -127,7 +127,7 @@ def progressive(blocks, plan: PolarFormatPlan, every: int, publish=None) -> np.n
     for block in blocks:
         for i in range(0, len(block), every):
             stream.push(block[i : i + every])
-            if stream.count >= next_at or stream.count == total:
+            if (stream.count >= next_at and stream.ready()) or stream.count == total:
                 image = stream.image()
                 final = stream.count == total
                 if publish is not None:

@@ -202,7 +202,10 @@ class PolarFormatPlan:
         """W[n, j]: the azimuth window over the inscribed k_x extent of shots start…stop-1."""
         lo, hi = self.kx_limits(start, stop)
         if hi <= lo:
-            raise ValueError("PFA needs at least two shots")
+            raise ValueError(
+                f"shots {start}…{stop - 1} span no k_x extent common to every k_y row (too few "
+                "shots for their squint): no image yet"
+            )
         kx = self.tan_psi[start:stop, None] * self.ky[None, :]
         return window_at(self.settings.azimuth_window, (kx - lo) / (hi - lo))
 
@@ -321,6 +324,13 @@ class ProgressivePolarFormat:
     def sweep_rad(self) -> float:
         """Look-angle span of the shots so far."""
         return float(self.plan.psi[self.count - 1] - self.plan.psi[0]) if self.count else 0.0
+
+    def ready(self) -> bool:
+        """True once the shots so far span a k_x extent common to every k_y row."""
+        if self.count < 2:
+            return False
+        lo, hi = self.plan.kx_limits(0, self.count)
+        return hi > lo
 
     def image(self) -> np.ndarray:
         if self.count < 2:

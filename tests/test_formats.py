@@ -78,10 +78,12 @@ def test_cphd_round_trip_consistent_and_same_image(pulsed, tmp_path):
     from sarpy.io.phase_history.converter import open_phase_history
 
     reader = open_phase_history(str(out))  # an independent reader opens it
+    with open(out, "rb") as f, sarkit_cphd.Reader(f) as sk:
+        np.testing.assert_array_equal(reader[:, :], sk.read_signal("rtsar-main"))
+        pvp = sk.read_pvps("rtsar-main")
+    srp = pvp["SRPPos"]
+    assert np.ptp(srp, axis=0).max() == 0  # one SRP, on the centre line at the scene centre
     with open_recording(pulsed) as rec:
-        m = fx_mapping(rec.config)
-        fx = reader.read(None, None, index=0) if hasattr(reader, "read") else reader[:, :]
-        np.testing.assert_allclose(fx, shots_to_fx(m, rec.shots[...]), rtol=0, atol=1e-6)
         with open_cphd(out) as back:
             assert back.pulses == rec.pulses and back.start_along_track_m == rec.start_along_track_m
             np.testing.assert_array_equal(back.pulse_index, rec.pulse_index)

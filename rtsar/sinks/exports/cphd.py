@@ -25,6 +25,7 @@ import numpy as np
 
 from ... import __version__
 from ...params import C_M_PER_S
+from ...sources.formats.cphd_reader import srp_delay_s
 from ...sources.formats.geometry import LocalFrame, platform_height_m, platform_positions_m
 from ...sources.formats.phase_history import fx_mapping, shots_to_fx
 from ...sources.formats.requirements import require_formats
@@ -62,9 +63,9 @@ ADDED_PVP = ("rtsar_pulse_index", 1, "I8")
 
 
 def collection_geometry(rec, frame: LocalFrame) -> dict:
-    """Per-pulse platform and SRP positions and velocities (local frame and ECF) of a
-    recording, and the image area's extent; the SRP of pulse p is the centre-line point
-    broadside of it: (x_p, y_c, 0) with |ARP - SRP| = R_c."""
+    """Per-pulse platform positions and velocities (local frame) of a recording, and the scene
+    reference point (SRP): on the swath's centre line (slant range R_c at closest approach),
+    abeam of the middle of the image."""
     cfg = rec.config
     geo = cfg.geometry
     r_c = cfg.processor.range_centre_m or geo.slant_range_m
@@ -75,36 +76,48 @@ def collection_geometry(rec, frame: LocalFrame) -> dict:
         vel = np.gradient(pos, np.asarray(rec.time_s, np.float64), axis=0)
     else:
         vel = np.array([[geo.speed_mps, 0.0, 0.0]])
-    heights = pos[:, 2]
-    if np.any(heights >= r_c):
+    if np.any(pos[:, 2] >= r_c):
         raise ValueError("the platform is higher than the centre range: no ground to image")
-    srp = np.stack([pos[:, 0], pos[:, 1] + np.sqrt(r_c**2 - heights**2), 0 * heights], axis=-1)
-    return {"pos": pos, "vel": vel, "srp": srp, "height_m": h, "range_centre_m": r_c}
+    n = cfg.processor.aperture_pulses
+    x_first = rec.start_along_track_m + 0.5 * (n - 1) * geo.along_track_step_m
+    x_last = rec.start_along_track_m + (rec.pulses - 1 - 0.5 * (n - 1)) * geo.along_track_step_m
+    x_c = 0.5 * (x_first + x_last)
+    y_c = float(np.sqrt(r_c**2 - h**2))
+    srp = np.array([x_c, y_c, 0.0])
+    return {
+        "pos": pos,
+        "vel": vel,
+        "srp": srp,
+        "height_m": h,
+        "range_centre_m": r_c,
+        "x_first": x_first,
+        "x_last": x_last,
+    }
 
 
-def _pvps(rec, m, g: dict, frame: LocalFrame, dtype) -> np.ndarray:
+def _pvps(rec, m, g: dict, frame: LocalFrame, dtype, dtau: np.ndarray) -> np.ndarray:
     pv = np.zeros(rec.pulses, dtype)
     tx = np.asarray(rec.time_s, np.float64)
     pos, vel, srp = frame.to_ecf(g["pos"]), frame.vectors_to_ecf(g["vel"]), frame.to_ecf(g["srp"])
-    r = np.linalg.norm(pos - srp, axis=-1)
-    pv["TxTime"], pv["RcvTime"] = tx, tx + 2.0 * r / C_M_PER_S
     pv["TxPos"] = pv["RcvPos"] = pos
     pv["TxVel"] = pv["RcvVel"] = vel
     pv["SRPPos"] = srp
+    r = np.linalg.norm(pv["TxPos"] - pv["SRPPos"], axis=-1)
+    pv["TxTime"], pv["RcvTime"] = tx, tx + 2.0 * r / C_M_PER_S
     unit = (pos - srp) / r[:, None]
     pv["aFDOP"] = -2.0 / C_M_PER_S * np.sum(vel * unit, axis=-1)  # CPHD 1.0.1 §6.3: -2 Ṙ/c
     wf = rec.config.waveform
     afrr2 = 2.0 / (C_M_PER_S * wf.chirp_rate_hz_per_s)
     pv["aFRR2"], pv["aFRR1"] = afrr2, m.fxc_hz * afrr2
     pv["FX1"], pv["FX2"] = m.fx1_hz, m.fx2_hz
-    pv["TOA1"], pv["TOA2"] = m.toa1_s, m.toa2_s
+    pv["TOA1"], pv["TOA2"] = m.toa1_s - dtau, m.toa2_s - dtau  # the range window, per vector
     pv["TDTropoSRP"] = 0.0
     pv["SC0"], pv["SCSS"] = m.sc0_hz, m.scss_hz
     pv[ADDED_PVP[0]] = np.asarray(rec.pulse_index, np.int64)
     return pv
 
 
-def build_xml(rec, m, g: dict, frame: LocalFrame, core_name: str):
+def build_xml(rec, m, g: dict, frame: LocalFrame, core_name: str, dtau: np.ndarray):
     """The CPHD XML (without ReferenceGeometry) of a recording."""
     cfg = rec.config
     geo, proc = cfg.geometry, cfg.processor
@@ -120,7 +133,8 @@ def build_xml(rec, m, g: dict, frame: LocalFrame, core_name: str):
         "Classification": "UNCLASSIFIED",
         "ReleaseInfo": "UNRESTRICTED",
     }
-    tau_span = (m.toa1_s, m.toa2_s)
+    toa1, toa2 = m.toa1_s - dtau, m.toa2_s - dtau  # per vector: the SRP's delay varies
+    tau_span = (float(toa1.min()), float(toa2.max()))
     ew["Global"] = {
         "DomainType": "FX",
         "SGN": -1,
@@ -141,7 +155,9 @@ def build_xml(rec, m, g: dict, frame: LocalFrame, core_name: str):
     h = g["height_m"]
     ground = np.sqrt(
         np.maximum(
-            np.array([m.srp_range_m + 0.5 * C_M_PER_S * t for t in tau_span]) ** 2 - h**2, 0.0
+            np.array([m.srp_range_m + 0.5 * C_M_PER_S * t for t in (m.toa1_s, m.toa2_s)]) ** 2
+            - h**2,
+            0.0,
         )
     )
     y_c = float(np.sqrt(m.srp_range_m**2 - h**2))
@@ -193,19 +209,19 @@ def build_xml(rec, m, g: dict, frame: LocalFrame, core_name: str):
     ew["Channel"] = {
         "RefChId": CHANNEL,
         "FXFixedCPHD": True,
-        "TOAFixedCPHD": True,
-        "SRPFixedCPHD": rec.pulses == 1,
+        "TOAFixedCPHD": rec.pulses == 1,
+        "SRPFixedCPHD": True,
         "Parameters": [
             {
                 "Identifier": CHANNEL,
                 "RefVectorIndex": rec.pulses // 2,
                 "FXFixed": True,
-                "TOAFixed": True,
-                "SRPFixed": rec.pulses == 1,
+                "TOAFixed": rec.pulses == 1,
+                "SRPFixed": True,
                 "Polarization": {"TxPol": "UNSPECIFIED", "RcvPol": "UNSPECIFIED"},
                 "FxC": m.fxc_hz,
                 "FxBW": m.fx2_hz - m.fx1_hz,
-                "TOASaved": m.toa2_s - m.toa1_s,
+                "TOASaved": tau_span[1] - tau_span[0],
                 "DwellTimes": {"CODId": "cod", "DwellId": "dwell"},
             }
         ],
@@ -262,8 +278,14 @@ def write_cphd(rec, path: str | Path, frame: LocalFrame | None = None) -> dict:
         raise ValueError(f"{rec.path}: no shots to export")
     m = fx_mapping(rec.config)
     g = collection_geometry(rec, frame)
-    tree = build_xml(rec, m, g, frame, Path(path).stem)
-    pvps = _pvps(rec, m, g, frame, skcphd.get_pvp_dtype(tree))
+    pos = frame.to_ecf(g["pos"])
+    dtau = srp_delay_s(  # as the reader will compute it from the stored PVPs
+        {"TxPos": pos, "RcvPos": pos, "SRPPos": frame.to_ecf(g["srp"])[None, :]}, m.srp_range_m
+    )
+    tree = build_xml(rec, m, g, frame, Path(path).stem, dtau)
+    pvps = _pvps(rec, m, g, frame, skcphd.get_pvp_dtype(tree), dtau)
+    if not np.array_equal(srp_delay_s(pvps, m.srp_range_m), dtau):
+        raise RuntimeError("CPHD export: the stored PVPs do not reproduce the SRP delays")
     root = tree.getroot()
     root.append(skcphd.compute_reference_geometry(tree, pvps))
     # ReferenceGeometry's place in the schema's sequence: before SupportArray/…/ProductInfo.
@@ -272,7 +294,7 @@ def write_cphd(rec, path: str | Path, frame: LocalFrame | None = None) -> dict:
     root.append(info)
     signal = np.empty((rec.pulses, m.num_samples), np.complex64)
     for i in range(0, rec.pulses, 1024):
-        signal[i : i + 1024] = shots_to_fx(m, rec.shots[i : i + 1024])
+        signal[i : i + 1024] = shots_to_fx(m, rec.shots[i : i + 1024], dtau[i : i + 1024])
     meta = skcphd.Metadata(xmltree=tree)
     with open(path, "wb") as f, skcphd.Writer(f, meta) as w:
         w.write_signal(CHANNEL, signal)

@@ -1,11 +1,12 @@
 """Export a recording as SigMF (Signal Metadata Format 1.x, sigmf.org), with the sigmf package.
 
 ``OUT.sigmf-data`` holds the main channel's shots one after the other, ``cf32_le`` (bit for bit
-the recording's complex64), ``OUT.sigmf-meta`` one capture (sample 0, the carrier as
-``core:frequency``, ≤ 1 THz by SigMF's schema, and as ``rtsar:carrier_hz``) and one annotation per shot (``core:sample_start`` = p·S,
-``core:sample_count`` = S) under the ``rtsar`` extension namespace: ``rtsar:pulse_index``,
-``rtsar:time_s``, ``rtsar:along_track_m`` and, where recorded, ``rtsar:position_m``.  The global
-object carries ``rtsar:prf_hz``, ``rtsar:chirp`` (kind, bandwidth, duration, rate),
+the recording's complex64).  ``OUT.sigmf-meta`` has one capture (sample 0; the carrier as
+``core:frequency``, at most 1 THz by SigMF's schema, and as ``rtsar:carrier_hz``) and one
+annotation per shot (``core:sample_start`` = p·S, ``core:sample_count`` = S) under the
+``rtsar`` extension namespace: ``rtsar:pulse_index``, ``rtsar:time_s``,
+``rtsar:along_track_m`` and, where recorded, ``rtsar:position_m``.  The global object carries
+``rtsar:prf_hz``, ``rtsar:chirp`` (kind, bandwidth, duration, rate),
 ``rtsar:samples_per_shot``, ``rtsar:config`` and ``rtsar:scene`` (JSON objects), and
 ``rtsar:channels``: every auxiliary channel of a version 2 recording is a SigMF recording of its
 own beside it, ``OUT.NAME.sigmf-data``/``-meta`` (its own sample rate and shot length), listed

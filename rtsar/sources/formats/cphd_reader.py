@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...params import config_from_dict
+from ...params import C_M_PER_S, config_from_dict
 from .foreign import ForeignRecording, check_telemetry
 from .geometry import LocalFrame
 from .phase_history import fx_mapping, fx_to_shots
@@ -26,11 +26,20 @@ except ImportError:  # the optional extra "formats"
     skcphd = None
 
 
+def srp_delay_s(pvp, srp_range_m: float) -> np.ndarray:
+    """Each vector's two-way delay to its SRP minus 2 R_c / c (float64[vector]), from the PVPs
+    (the exporter and the reader compute it alike, from the same stored numbers)."""
+    tx = np.linalg.norm(pvp["TxPos"] - pvp["SRPPos"], axis=-1)
+    rcv = np.linalg.norm(pvp["RcvPos"] - pvp["SRPPos"], axis=-1)
+    return (tx + rcv - 2.0 * srp_range_m) / C_M_PER_S
+
+
 class _FxShots:
     """The shots of one CPHD channel, read and transformed block by block on slicing."""
 
-    def __init__(self, reader, channel: str, mapping, vectors: int):
+    def __init__(self, reader, channel: str, mapping, vectors: int, dtau_s: np.ndarray):
         self._reader, self._channel, self._m, self._n = reader, channel, mapping, vectors
+        self._dtau = dtau_s
 
     def __len__(self) -> int:
         return self._n
@@ -46,7 +55,7 @@ class _FxShots:
         if stop <= start:
             return np.zeros((0, self._m.samples_per_shot), np.complex64)
         fx = self._reader.read_signal(self._channel, start_vector=start, stop_vector=stop)
-        return fx_to_shots(self._m, fx)
+        return fx_to_shots(self._m, fx, self._dtau[start:stop])
 
 
 def _parameters(tree) -> dict:
@@ -118,7 +127,7 @@ def open_cphd(path: str | Path) -> ForeignRecording:
         scene,
         vectors,
         start,
-        _FxShots(reader, channel, m, vectors),
+        _FxShots(reader, channel, m, vectors, srp_delay_s(pvp, m.srp_range_m)),
         index,
         time_s,
         {},

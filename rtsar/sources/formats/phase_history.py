@@ -19,8 +19,10 @@ same shots (to float32 rounding) and ``rtsar process`` of the CPHD gives the rec
   factor; at rtsar's swaths it is below 0.03 rad for the lidar presets).  SC0 = f_0,
   SCSS = K/fs, NumSamples = S.
 
-τ_srp = 2 R_c / c with R_c the processor's range centre (the SRP on the centre line, broadside).
-Every phase is formed in float64 in cycles and reduced mod 1 before the complex exponential.
+The mapping is built for τ_c = 2 R_c / c, R_c the processor's range centre; a vector whose SRP
+lies at another two-way delay τ_srp (a fixed SRP seen from a moving platform) takes the extra
+factor e^{+i2π f (τ_srp - τ_c)} (``dtau_s``).  Every phase is formed in float64 in cycles and
+reduced mod 1 before the complex exponential.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ class FxMapping:
     fx2_hz: float
     toa1_s: float  # the processor's range window as delays relative to the SRP
     toa2_s: float
-    srp_range_m: float  # R_c: slant range of the SRP (on the centre line, broadside)
+    srp_range_m: float  # R_c: the processor's range centre (τ_c = 2 R_c / c)
     rotation: np.ndarray  # complex128[num_samples]: FX = transform(shot) · rotation
     pulsed: bool
 
@@ -121,21 +123,33 @@ def fx_mapping(cfg: Config) -> FxMapping:
     raise TypeError(f"unsupported waveform {type(wf).__name__}")
 
 
-def shots_to_fx(m: FxMapping, shots: np.ndarray) -> np.ndarray:
-    """FX vectors complex64[pulse, num_samples] of shots [pulse, samples_per_shot]."""
+def _srp_shift(m: FxMapping, dtau_s) -> np.ndarray | float:
+    """e^{+i2π f (τ_srp - τ_c)} per vector [pulse, sample] (1.0 where ``dtau_s`` is None)."""
+    if dtau_s is None:
+        return 1.0
+    dtau = np.asarray(dtau_s, np.float64)[:, None]
+    return _cis(
+        np.mod(m.sc0_hz * dtau, 1.0) + np.mod(m.scss_hz * np.arange(m.num_samples) * dtau, 1.0)
+    )
+
+
+def shots_to_fx(m: FxMapping, shots: np.ndarray, dtau_s=None) -> np.ndarray:
+    """FX vectors complex64[pulse, num_samples] of shots [pulse, samples_per_shot]; ``dtau_s``
+    [pulse]: each vector's SRP delay minus τ_c (None: 0)."""
     shots = np.asarray(shots, np.complex128)
     if m.pulsed:
         spec = np.fft.fftshift(np.fft.fft(shots, m.num_samples, axis=-1), axes=-1)
-        return (spec * m.rotation).astype(np.complex64)
-    return (shots * m.rotation).astype(np.complex64)
+    else:
+        spec = shots
+    return (spec * m.rotation * _srp_shift(m, dtau_s)).astype(np.complex64)
 
 
-def fx_to_shots(m: FxMapping, fx: np.ndarray) -> np.ndarray:
+def fx_to_shots(m: FxMapping, fx: np.ndarray, dtau_s=None) -> np.ndarray:
     """The inverse of :func:`shots_to_fx`: shots complex64[pulse, samples_per_shot]."""
     fx = np.asarray(fx, np.complex128)
     if fx.shape[-1] != m.num_samples:
         raise ValueError(f"FX vectors of {fx.shape[-1]} samples, expected {m.num_samples}")
-    spec = fx * np.conj(m.rotation)
+    spec = fx * np.conj(m.rotation * _srp_shift(m, dtau_s))
     if m.pulsed:
         x = np.fft.ifft(np.fft.ifftshift(spec, axes=-1), axis=-1)[..., : m.samples_per_shot]
         return x.astype(np.complex64)

@@ -365,7 +365,12 @@ def add_parsers(sub) -> None:
     )
     add_subscriber_options(s)
     s.add_argument("--png", metavar="FILE", help="write a snapshot PNG and exit")
-    s.add_argument("--lines", type=int, default=1024, help="lines shown (default 1024)")
+    s.add_argument(
+        "--lines",
+        type=int,
+        default=8192,
+        help="lines shown: the waterfall's length (default 8192: 5 s, 1280 m of the demo)",
+    )
     s.add_argument("--dynamic-range-db", type=float, default=50.0, help="dB shown (default 50)")
     s.add_argument(
         "--timeout",

@@ -13,7 +13,7 @@ import zmq.auth
 from ... import __version__
 from ...presets import preset
 from ...scene import DEMO_SCENE, load_scene
-from ...scene.files import BUILT_IN
+from ...scene.files import BUILT_IN, built_in_scenes
 from ...sinks.io import check_writable
 from ...sinks.publish import DEFAULT_ENDPOINT
 from ...sources.channel_map import ChannelMap
@@ -255,14 +255,16 @@ def add_parsers(sub) -> None:
         help="live processing: the demo scene (default), a scene, or a serial instrument",
         description="Stream shots live through the pipeline (ingest checks, AO lens, shifting "
         "CCD) and publish image strips over ZeroMQ. Without arguments: the built-in demo scene "
-        f"simulated at its PRF, published on {DEFAULT_ENDPOINT}. Watch it with "
-        "`rtsar view` or record it with `rtsar subscribe -o live.h5`.",
+        "(the letters SAR, an airfield and corner reflectors, 10 s of flight at 1600 pulses/s; "
+        "about 15 s in all) simulated at its PRF, published on "
+        f"{DEFAULT_ENDPOINT}. Watch it with `rtsar view` or record it with `rtsar subscribe -o "
+        "live.h5`; `-o demo.h5` keeps the image for `rtsar quicklook`.",
     )
     src = s.add_argument_group("source")
     src.add_argument(
         "--scene",
-        help="scene file to simulate live (default: the demo scene); "
-        "with --serial: the configuration to process with",
+        help=f"scene file or built-in scene name ({', '.join(built_in_scenes())}) to simulate "
+        "live (default: demo); with --serial: the configuration to process with",
     )
     src.add_argument(
         "--serial",
@@ -290,7 +292,10 @@ def add_parsers(sub) -> None:
         "map); main only without a scene",
     )
     src.add_argument(
-        "--duration", type=float, help="stop after this many seconds (serial: of silence)"
+        "--duration",
+        type=float,
+        help="stop after this many seconds (serial: of silence) (default: the whole scene, 10 s "
+        "for the demo; serial: never)",
     )
     src.add_argument(
         "--reconnect",

@@ -243,10 +243,18 @@ class SwathWorkers:
         self.lines_out = 0
         self.lens_backend = ""
         setup = {"config": config.to_dict(), "lens_backend": lens_backend, "device": device}
+        deadline = time.monotonic() + READY_TIMEOUT_S
         for (b0, b1), s in zip(self.columns, self._pushes, strict=True):
+            # A worker connects once its process has started (seconds on a loaded machine).
+            while not s.poll(500, zmq.POLLOUT):
+                self._check_alive()
+                if time.monotonic() > deadline:
+                    raise RuntimeError(
+                        f"swath workers did not connect within {READY_TIMEOUT_S:g} s "
+                        f"(pulses on {', '.join(self.shot_endpoints)})"
+                    )
             s.send_multipart([b"setup", json.dumps({**setup, "columns": [b0, b1]}).encode()])
         ready = 0
-        deadline = time.monotonic() + READY_TIMEOUT_S
         while ready < len(self.columns):
             frames = self._recv(deadline, "to start")
             if frames[0] == b"ready":

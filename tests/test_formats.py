@@ -11,6 +11,7 @@ skver = pytest.importorskip("sarkit.verification")
 sigmf = pytest.importorskip("sigmf")
 pytest.importorskip("sarpy")
 
+from rtsar.analysis.point_target import analyse_point_target  # noqa: E402
 from rtsar.app.cli import main  # noqa: E402
 from rtsar.params import C_M_PER_S  # noqa: E402
 from rtsar.scene.model import scene_from_dict  # noqa: E402
@@ -177,11 +178,44 @@ def test_missing_packages_named_in_one_line(pulsed, tmp_path, monkeypatch, capsy
     assert len(err) == 1 and 'pip install "rtsar[formats]"' in err[0]
 
 
-def test_cphd_not_from_rtsar_refused_in_one_line(pulsed, tmp_path):
+def test_cphd_from_elsewhere_is_focused_from_its_own_geometry(pulsed, tmp_path):
+    """Without rtsar:config, the configuration comes from the PVPs (an FMCW-style range
+    compression of the phase history, square resolution): the targets are where the scene put
+    them, within a tenth of a cell."""
     out = tmp_path / "rec.cphd"
     assert main(["export", str(pulsed), "--cphd", str(out)]) == 0
-    raw = out.read_bytes().replace(b'name="rtsar:config"', b'name="other:config"')
+    raw = out.read_bytes()
+    for name in (b"rtsar:config", b"rtsar:scene", b"rtsar:start_along_track_m"):
+        raw = raw.replace(b'name="' + name + b'"', b'name="x' + name[1:] + b'"')
     other = tmp_path / "other.cphd"
     other.write_bytes(raw)
-    with pytest.raises(ValueError, match="no rtsar:config"):
-        open_cphd(other)
+    img = tmp_path / "other.h5"
+    assert main(["process", str(other), "-o", str(img), "--lens", "numpy"]) == 0
+    image, az, rg, _ = read_image(img)
+    with open_recording(pulsed) as rec:  # x = 0 lies abeam of the SRP: the image's middle
+        d = rec.config.geometry.along_track_step_m
+        x_c = rec.start_along_track_m + 0.5 * (rec.pulses - 1) * d
+    for x0, r0 in ((0.0, 2000.0), (6.0, 2031.3)):
+        rep = analyse_point_target(image, az, rg, x0 - x_c, r0, (4.0, 10.0), chip=16)
+        assert abs(rep.azimuth_m - (x0 - x_c)) < 0.1 * (az[1] - az[0])
+        assert abs(rep.range_m - r0) < 0.1 * (rg[1] - rg[0])
+
+
+def test_cphd_outside_rtsar_geometry_refused():
+    from rtsar.sources.formats.cphd_geometry import derived_config
+
+    n = 64
+    dtype = [(k, "f8", (3,)) for k in ("TxPos", "RcvPos", "SRPPos")]
+    dtype += [(k, "f8") for k in ("TxTime", "SC0", "SCSS", "TOA1", "TOA2")]
+    pvp = np.zeros(n, dtype)
+    x = np.arange(n) * 0.5
+    pvp["TxPos"] = np.stack([x, 0 * x, 6378137.0 + 1000.0 + 0.05 * (x / 10) ** 2], axis=-1)
+    pvp["RcvPos"] = pvp["TxPos"]
+    pvp["SRPPos"] = [16.0, 1700.0, 6378137.0]
+    pvp["TxTime"], pvp["SC0"], pvp["SCSS"] = x / 250.0, 1.25e9, 1e5
+    pvp["TOA1"], pvp["TOA2"] = -1e-6, 1e-6
+    with pytest.raises(ValueError, match="straight"):
+        derived_config(pvp, 256)
+    pvp["SC0"][3] += 1e6
+    with pytest.raises(ValueError, match="fixed sampling"):
+        derived_config(pvp, 256)

@@ -1,10 +1,12 @@
 """Read a CPHD file (NGA.STND.0068-1, 1.0.1 or 1.1.0) into rtsar's shots, with sarkit's reader.
 
-The subset rtsar's geometry covers: one FX-domain channel with fixed frequency sampling, a
-straight track at a constant step, and the processing configuration rtsar wrote into the file
-(ProductInfo parameter ``rtsar:config``, as ``rtsar export --cphd`` does).  The signal vectors go
-back to shots through the inverse of rtsar.sources.formats.phase_history; anything else (TOA
-domain, several channels, a file without the configuration) is refused in one line.
+The subset rtsar's geometry covers: one FX-domain channel with fixed frequency sampling and a
+straight track at a constant step.  A file rtsar wrote (``rtsar export --cphd``) carries its
+processing configuration (ProductInfo parameter ``rtsar:config``) and reads back into the very
+shots it was made of; for any other file a configuration is derived from the PVPs
+(rtsar.sources.formats.cphd_geometry).  The signal vectors go back to shots through the inverse
+of rtsar.sources.formats.phase_history; anything else (TOA domain, several channels, a curved
+track) is refused in one line.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ...params import C_M_PER_S, config_from_dict
+from .cphd_geometry import derived_config
 from .foreign import ForeignRecording, check_telemetry
 from .geometry import LocalFrame
 from .phase_history import fx_mapping, fx_to_shots
@@ -85,16 +88,16 @@ def open_cphd(path: str | Path) -> ForeignRecording:
             raise ValueError(f"{len(channels)} channels: rtsar reads one-channel CPHD")
         channel = channels[0].findtext("./{*}Identifier")
         params = _parameters(tree)
-        if "rtsar:config" not in params:
-            raise ValueError(
-                "no rtsar:config in ProductInfo: rtsar reads the CPHD it writes (`rtsar export "
-                "--cphd`); another collector's CPHD needs a processing configuration"
-            )
-        cfg = config_from_dict(json.loads(params["rtsar:config"]))
-        scene = json.loads(params.get("rtsar:scene", "{}") or "{}")
-        m = fx_mapping(cfg)
         pvp = reader.read_pvps(channel)
         vectors = len(pvp)
+        derived = None
+        if "rtsar:config" in params:  # written by rtsar: its own configuration
+            cfg = config_from_dict(json.loads(params["rtsar:config"]))
+        else:  # made elsewhere: a configuration from the collection's geometry
+            derived = derived_config(pvp, int(channels[0].findtext("./{*}NumSamples")))
+            cfg = derived[0]
+        scene = json.loads(params.get("rtsar:scene", "{}") or "{}")
+        m = fx_mapping(cfg)
         if int(channels[0].findtext("./{*}NumSamples")) != m.num_samples:
             raise ValueError(
                 f"{m.num_samples} samples per vector expected from the configuration, "
@@ -105,8 +108,11 @@ def open_cphd(path: str | Path) -> ForeignRecording:
             and np.allclose(pvp["SCSS"], m.scss_hz, rtol=1e-9)
         ):
             raise ValueError("SC0/SCSS differ from the configuration's frequency sampling")
-        lat, lon = (float(v) for v in params.get("rtsar:origin_lat_lon_deg", "0,0").split(","))
-        local = LocalFrame(lat, lon).from_ecf(pvp["TxPos"])
+        if derived is None:
+            lat, lon = (float(v) for v in params.get("rtsar:origin_lat_lon_deg", "0,0").split(","))
+            local = LocalFrame(lat, lon).from_ecf(pvp["TxPos"])
+        else:
+            local = derived[2]
         names = pvp.dtype.names
         index = (
             np.asarray(pvp["rtsar_pulse_index"], np.int64)
@@ -116,7 +122,9 @@ def open_cphd(path: str | Path) -> ForeignRecording:
         time_s = np.asarray(pvp["TxTime"], np.float64)
         along = local[:, 0]
         check_telemetry(path, cfg, index, along)
-        start = float(params.get("rtsar:start_along_track_m", along[0] if vectors else 0.0))
+        start = float(along[0])  # the derived frame: x = 0 abeam of the middle vector's SRP
+        if derived is None:
+            start = float(params.get("rtsar:start_along_track_m", start))
         position = local if cfg.geometry.platform_height_m > 0 else None
     except (ValueError, KeyError, TypeError) as exc:
         f.close()

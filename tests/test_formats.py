@@ -167,6 +167,16 @@ def test_sicd_of_an_image_opens_in_sarpy(pulsed, tmp_path):
     assert sicd.Grid.Col.SS == pytest.approx(az[1] - az[0], rel=1e-12)
     assert sicd.SCPCOA.SideOfTrack == "R"
     assert sicd.Grid.Row.ImpRespBW == pytest.approx(2 * 40e6 / C_M_PER_S)
+    with open(out, "rb") as f:  # NGA's SICD consistency checks (sarkit): no error
+        con = skver.SicdConsistency.from_file(f)
+        con.check()
+    errors = [
+        (name, d["details"])
+        for name, v in con.failures().items()
+        for d in v["details"]
+        if not d["passed"] and d["severity"] == "Error"
+    ]
+    assert con.passes() and not errors, errors
 
 
 def test_missing_packages_named_in_one_line(pulsed, tmp_path, monkeypatch, capsys):

@@ -34,6 +34,7 @@ except ImportError:  # the optional extra "formats"
     SICDType = None
 
 EPOCH = datetime.datetime(2000, 1, 1)  # rtsar's times are relative: an arbitrary epoch
+SINC_3DB_WIDTH = 0.8858929  # -3 dB width of |sinc|² in units of 1 / bandwidth
 WINDOW_BROADENING = {"rect": 1.0, "hann": 1.62, "hamming": 1.47, "taylor": 1.19}
 
 
@@ -176,7 +177,7 @@ def _direction(u, ss, bw, kctr, window) -> dict:
     return {
         "UVectECF": {"X": u[0], "Y": u[1], "Z": u[2]},
         "SS": ss,
-        "ImpRespWid": 0.886 * WINDOW_BROADENING.get(window, 1.0) / bw,
+        "ImpRespWid": SINC_3DB_WIDTH * WINDOW_BROADENING.get(window, 1.0) / bw,
         "Sgn": -1,
         "ImpRespBW": bw,
         "KCtr": kctr,

@@ -75,8 +75,9 @@ REASONS = (*ESTIMATED, *NOTHING_TO_CORRECT, *COULD_NOT_ESTIMATE)
 class PGASettings:
     """PGA knobs (Crouch ch. 4); ``None`` sizes follow the processor's aperture N.
 
-    block_pulses, hop_pulses  P (default N, ≥ max(8, N): the range walk inside a block grows as
-                        P²) and H (default P/2, ≤ P)
+    block_pulses, hop_pulses  P (default 2N, or 1.1 beam footprints in pulses where shorter,
+                        ≥ max(8, N): the range walk inside a block grows as P²) and H
+                        (default P/2, ≤ P)
     xi, initial_window_bins, min_window_bins  eq. 4.14: W_q = W/ξ^q (Crouch 1.1), W default P
                         (the whole block: the fastest errors); stop when W_q < min_window_bins
     max_iterations, stop_rad  at most so many iterations; converged when the step's peak to
@@ -147,9 +148,19 @@ class PGASettings:
             if not ok:
                 raise ValueError(f"PGASettings.{name} out of range: {getattr(self, name)!r}")
 
-    def resolved(self, aperture_pulses: int) -> tuple[int, int, int]:
-        """(P, H, min_pulses) for a processor aperture N; raises ValueError if inconsistent."""
+    def resolved(
+        self, aperture_pulses: int, footprint_pulses: float | None = None
+    ) -> tuple[int, int, int]:
+        """(P, H, min_pulses) for a processor aperture N; raises ValueError if inconsistent.
+
+        The default P is 2N, capped at 1.1 × the beam's footprint λR/(D d) in pulses where that
+        is shorter (never below N): a point must stay lit across the block to be one of its rows,
+        and at ±0.55 λR/D from the beam centre the two-way power sinc⁴ is down to 0.1, the
+        ``min_row_fill`` of a quarter block.
+        """
         p = self.block_pulses or 2 * aperture_pulses
+        if self.block_pulses is None and footprint_pulses is not None:
+            p = max(aperture_pulses, min(p, int(round(1.1 * footprint_pulses))))
         if p < max(8, aperture_pulses):
             raise ValueError(f"block_pulses {p} must be >= max(8, aperture_pulses)")
         h = self.hop_pulses or p // 2
@@ -185,6 +196,12 @@ class BlockReport:
 
 
 # ---- the estimator ---------------------------------------------------------------------------
+def footprint_pulses(config: Config) -> float:
+    """The real beam's footprint λR/D (Crouch eq. 4.9) in pulses of the along-track step."""
+    g = config.geometry
+    return g.illuminated_length_m / g.along_track_step_m
+
+
 def curvature_m(config: Config, range_m: np.ndarray, pulses: int) -> np.ndarray:
     """ΔR_p of eq. (1) of the module docstring: [pulses, bins] float64 metres.
 
@@ -344,7 +361,7 @@ def estimate_block(
     if range_m.shape != (x.shape[1],):
         raise ValueError(f"range_m must have {x.shape[1]} entries, got {range_m.shape}")
     pulses = x.shape[0]
-    min_pulses = settings.resolved(config.processor.aperture_pulses)[2]
+    min_pulses = settings.resolved(config.processor.aperture_pulses, footprint_pulses(config))[2]
     window_bins = min(settings.initial_window_bins or pulses, pulses)
     w = row_half_width(config, range_m, pulses, settings.migration_cells)
 

@@ -10,7 +10,7 @@ from ...phase import phasor
 from ...samples import zero_nonfinite_rows
 from .blocks import Stitcher
 from .doppler import antenna_coherence, centroid_lags
-from .estimator import BlockReport, PGASettings, estimate_block
+from .estimator import BlockReport, PGASettings, estimate_block, footprint_pulses
 
 
 def pga_batch(
@@ -32,7 +32,7 @@ def pga_batch(
     x = zero_nonfinite_rows(x.astype(np.complex128))[0]
     if range_m is None:
         range_m = range_axis_m(config)
-    block, hop, _ = settings.resolved(config.processor.aperture_pulses)
+    block, hop, _ = settings.resolved(config.processor.aperture_pulses, footprint_pulses(config))
     total = x.shape[0]
     st = Stitcher(block, hop, settings.doppler_gain, settings.min_doppler_coherence)
     anchor = settings.doppler_anchor and antenna_coherence(config) > 0

@@ -18,7 +18,7 @@ from ...samples import zero_nonfinite_rows
 from ..stage import CorrectionStage
 from .blocks import Stitcher
 from .doppler import antenna_coherence, centroid_lags
-from .estimator import REASONS, BlockReport, PGASettings, estimate_block
+from .estimator import REASONS, BlockReport, PGASettings, estimate_block, footprint_pulses
 
 
 @dataclass
@@ -54,7 +54,8 @@ class PGAStage(CorrectionStage):
         self.config = config
         self.settings = settings or PGASettings()
         self.range_m = range_axis_m(config) if range_m is None else np.asarray(range_m, np.float64)
-        self.block, self.hop, _ = self.settings.resolved(config.processor.aperture_pulses)
+        n = config.processor.aperture_pulses
+        self.block, self.hop, _ = self.settings.resolved(n, footprint_pulses(config))
         self.bins = self.range_m.size
         # The block being filled plus the hop before it: the last block at flush may start up
         # to H pulses before the next regular block.

@@ -248,7 +248,11 @@ def add_parsers(sub) -> None:
         description="Run a recording through the streaming engine as fast as "
         "possible; writes image[azimuth, range] with axes in metres.",
     )
-    s.add_argument("recording", help="recording from `rtsar simulate` (.h5)")
+    s.add_argument(
+        "recording",
+        help="recording from `rtsar simulate` (.h5), or a CPHD (.cphd) or SigMF (.sigmf-meta) "
+        'file (these need pip install "rtsar[formats]"; README "Standard formats")',
+    )
     s.add_argument("-o", "--output", required=True, help="image file to write (.h5)")
     add_lens_options(s)
     add_correlator_option(s)

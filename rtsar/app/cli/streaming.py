@@ -315,7 +315,11 @@ def add_parsers(sub) -> None:
         "the replay waits for the slowest subscriber. Use --wait-subscribers 1 when a "
         "`rtsar subscribe` must see the stream from its first strip.",
     )
-    s.add_argument("recording", help="recording (.h5)")
+    s.add_argument(
+        "recording",
+        help="recording from `rtsar simulate` (.h5), or a CPHD (.cphd) or SigMF (.sigmf-meta) "
+        'file (these need pip install "rtsar[formats]"; README "Standard formats")',
+    )
     s.add_argument(
         "--rate",
         default="real",

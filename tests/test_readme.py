@@ -31,6 +31,8 @@ RULES = [
     (r"^rtsar (view|subscribe)\b", "help", "needs a live publisher (tests/test_publish.py)"),
     (r"^rtsar (simulate|process|quicklook) ", "run", "quick on the README's scenes"),
     (r"^rtsar (bench|tradeoff|table1|demo|replay|batch)\b", "help", "a minute or more"),
+    (r"^rtsar (spot-simulate|spotlight|projective)\b", "help", "run by tests/test_spot*.py"),
+    (r"^rtsar (export|swath-worker)\b", "help", "run by their own tests"),
     (r"^python tools/make_figures\.py", "help", "about a minute (it runs the live demo)"),
     (r"^python tools/sim_cost\.py", "run", "quick with --pulses"),
     (r"^python tools/fake_instrument\.py", "help", "serves until stopped"),

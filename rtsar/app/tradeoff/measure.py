@@ -7,7 +7,6 @@ import time
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import signal
 
 from ...analysis import analyse_point_target, relative_rms, theoretical_irw_factor
 from ...analysis.acceptance import SINC_IRW
@@ -41,9 +40,11 @@ def reference_image(cfg: Config, shots: np.ndarray, migration_taps: int = 0) -> 
     lines = compress_reference(plan, shots)
     if migration_taps:
         return correlate_migration_reference(lines, design_migration_mask(ideal, plan.range_m))
+    from scipy.signal import fftconvolve  # here: scipy.signal costs ~1 s at every CLI start
+
     mask = design_mask(ideal, plan.range_m)
     n = mask.shape[0]
-    full = signal.fftconvolve(lines, mask[::-1], axes=0)
+    full = fftconvolve(lines, mask[::-1], axes=0)
     return full[n - 1 : lines.shape[0]]
 
 

@@ -13,10 +13,14 @@ y = x·e^{-iφ̂} over clutter rows,
 
     z = Σ_r Σ_p y*(p, r) y(p+1, r) = Σ_p e^{-i(φ̂(p+1) - φ̂(p))} Σ_r x*(p, r) x(p+1, r),     (1)
 
-has the angle 2π f_dc / PRF: the residual slope s = arg z.  Only clutter rows take part
-(energy at most ``CLUTTER_FACTOR`` × the median row's): a bright point's Doppler is its own
-position in the block, not the beam's centre.  The lag products Σ_r x* x are formed once per
-block (``centroid_lags``); (1) is then one weighted sum for any φ̂.
+has the angle 2π f_dc / PRF: the residual slope s = arg z.  Only clutter rows take part:
+energy at most ``CLUTTER_FACTOR`` × the median row's, and coherence with either neighbouring
+row at most ``MAX_ROW_COHERENCE`` (speckle decorrelates across range cells, a point's range
+sidelobes do not).  A bright point's Doppler, and that of its sidelobes in a scene without
+clutter, is its own position in the block, not the beam's centre (measured: a clutter-free
+zhao-insal point scene anchored on its sidelobes moved by up to 1.9 rad/pulse).  The lag
+products Σ_r x* x are formed once per block (``centroid_lags``); (1) is then one weighted sum
+for any φ̂.
 
 When the antenna sets nothing.  The two-way power pattern sinc⁴(D sinθ/λ) of an aperture D,
 with f = 2d sinθ/λ cycles per pulse, has the lag-one coherence ρ(1) = B₃(2d/D)/B₃(0)
@@ -38,8 +42,11 @@ import numpy as np
 from ...params import Config
 from ...phase import phasor
 
-#: Rows whose energy is at most this many times the median row's are clutter.
+#: Rows whose energy is at most this many times the median row's are clutter ...
 CLUTTER_FACTOR = 1.5
+#: ... unless their coherence with a neighbouring row exceeds this (measured: speckle 0.2,
+#: the range sidelobes of isolated points 0.98-0.999).
+MAX_ROW_COHERENCE = 0.8
 
 
 def antenna_coherence(config: Config) -> float:
@@ -90,7 +97,16 @@ def centroid_lags(config: Config, lines: np.ndarray) -> CentroidLags:
     x = np.where(np.isfinite(x).all(axis=1)[:, None], x, 0)
     power = x.real**2 + x.imag**2
     energy_rows = power.sum(axis=0)
-    clutter = energy_rows <= CLUTTER_FACTOR * float(np.median(energy_rows)) if x.size else []
+    med = float(np.median(energy_rows)) if x.size else 0.0
+    clutter = energy_rows <= CLUTTER_FACTOR * med
+    # Speckle decorrelates from one range cell to the next; a point's range sidelobes carry
+    # its one history in every row: rows coherent with a neighbour are not clutter.
+    if x.shape[1] > 1 and x.shape[0] > 0:
+        cross = np.abs(np.sum(x[:, :-1] * np.conj(x[:, 1:]), axis=0))
+        norm = np.sqrt(energy_rows[:-1] * energy_rows[1:])
+        coh = np.divide(cross, norm, out=np.zeros_like(cross), where=norm > 0)
+        near = np.maximum(np.pad(coh, (1, 0)), np.pad(coh, (0, 1)))
+        clutter &= near <= MAX_ROW_COHERENCE
     c = x[:, clutter]
     lag = np.sum(np.conj(c[:-1]) * c[1:], axis=1) if len(c) > 1 else np.zeros(0, np.complex128)
     # R(0) over the same pulse pairs: the coherence |z| / energy estimates ρ(1).

@@ -117,7 +117,7 @@ class PGASettings:
     min_sharpness_gain: float = 0.25
     min_pulses: int | None = None
     doppler_anchor: bool = True
-    doppler_gain: float = 0.25
+    doppler_gain: float = 0.1
     min_doppler_coherence: float = 0.05
 
     def __post_init__(self):

@@ -74,8 +74,9 @@ def add_parsers(sub) -> None:
         "--method",
         choices=("pfa", "backprojection"),
         default="pfa",
-        help="pfa (default) or backprojection (fast: 16x upsampled profiles, exact phase; "
-        "same spectral aperture and window)",
+        help="pfa (default) or backprojection (16x upsampled profiles, exact phase, the same "
+        "spectral aperture and window; its cost grows as pixels x shots, about 100x PFA's: "
+        "give a small --extent-mm)",
     )
     s.add_argument("--oversampling", type=float, default=2.0, help="pixels per cell (2)")
     s.add_argument(

@@ -162,3 +162,15 @@ def test_a_squinted_first_few_shots_wait_for_more(five_degrees):
         stream.image()
     stream.push(data[3:40])
     assert stream.ready() and np.isfinite(stream.image()).all()
+
+
+def test_tradeoff_spotlight_rows_measure_against_the_exact_sum():
+    from rtsar.app.tradeoff.spotlight import VARIANTS, run_spotlight, spotlight_markdown
+
+    chosen = [v for v in VARIANTS if v[0] in ("pfa czt", "backprojection x16")]
+    rows, scene = run_spotlight(repeats=1, size=(32, 3.2e-3, 1.0), variants=chosen)
+    assert [r["variant"].split(" (")[0] for r in rows] == [v[0] for v in chosen]
+    by = {r["variant"].split(" (")[0]: r for r in rows}
+    assert all(x["error_db"] < -50 for x in by["backprojection x16"]["rings"])
+    assert by["pfa czt"]["rings"][0]["error_db"] < -25
+    assert "err @ 0.00 mm" in spotlight_markdown(rows, scene)

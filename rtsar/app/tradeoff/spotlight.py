@@ -54,13 +54,17 @@ def _chip(plan, xy, half):
     return slice(max(i - half, 0), i + half + 1), slice(max(j - half, 0), j + half + 1)
 
 
-def run_spotlight(quick: bool = False, repeats: int = 2, log=None) -> tuple[list[dict], dict]:
-    """Measure every variant → (rows, scene description).
+def run_spotlight(
+    quick: bool = False, repeats: int = 2, log=None, size: tuple | None = None, variants=VARIANTS
+) -> tuple[list[dict], dict]:
+    """Measure every variant → (rows, scene description); ``size`` = (samples per shot,
+    alias-free extent m, sweep °) overrides the scene's scale; ``variants`` a subset of
+    VARIANTS.
 
     PFA forms its whole image (timed); backprojection is evaluated on a chip of
     (2·CHIP + 1)² pixels around each target and its time scaled to the PFA image's pixel count
     (its cost is proportional to pixels x shots; the rows say "extrapolated")."""
-    samples, extent, sweep = (64, 3.2e-3, 2.5) if quick else (512, 20e-3, 5.0)
+    samples, extent, sweep = size or ((64, 3.2e-3, 2.5) if quick else (512, 20e-3, 5.0))
     cfg, geo = reduced_spotlight(samples, extent, sweep)
     radius = 0.4 * min(extent, samples * cfg.waveform.range_resolution_m)
     targets = _targets(radius)
@@ -70,7 +74,7 @@ def run_spotlight(quick: bool = False, repeats: int = 2, log=None) -> tuple[list
     rho_y = 0.886 * cfg.waveform.range_resolution_m
     box = (2.2 * radius, 2.2 * radius)
     rows, refs = [], {}
-    for name, method, knobs in VARIANTS:
+    for name, method, knobs in variants:
         settings = PfaSettings(extent_m=box, **knobs)
         plan = PolarFormatPlan(cfg, geo, settings=settings)
         n = geo.pulses

@@ -174,3 +174,19 @@ def test_tradeoff_spotlight_rows_measure_against_the_exact_sum():
     assert all(x["error_db"] < -50 for x in by["backprojection x16"]["rings"])
     assert by["pfa czt"]["rings"][0]["error_db"] < -25
     assert "err @ 0.00 mm" in spotlight_markdown(rows, scene)
+
+
+def test_shots_holding_nan_are_zeroed_and_counted(five_degrees):
+    cfg, geo, data = five_degrees
+    plan = PolarFormatPlan(cfg, geo, settings=PfaSettings(extent_m=(1e-3, 1e-3)))
+    bad = data.copy()
+    bad[100, 5] = np.nan
+    zeroed = data.copy()
+    zeroed[100] = 0
+    stream = ProgressivePolarFormat(plan)
+    stream.push(bad)
+    assert stream.nonfinite_shots == 1
+    img = stream.image()
+    assert np.isfinite(img).all()
+    assert np.max(np.abs(img - polar_format(zeroed, plan))) < 1e-12
+    assert np.max(np.abs(polar_format(bad, plan) - img)) < 1e-12

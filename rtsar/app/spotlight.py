@@ -12,11 +12,13 @@ from __future__ import annotations
 import json
 import math
 import time
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
+from ..samples import nonfinite_rows, zero_nonfinite_rows
 from ..sinks.image_file import read_image, write_image
 from ..sinks.io import RecordingWriter, open_recording, replace_when_complete
 from ..spot.backprojection import backproject
@@ -136,11 +138,17 @@ def progressive(blocks, plan: PolarFormatPlan, every: int, publish=None) -> np.n
                 next_at = stream.count + every
     if stream.count != total:
         raise ValueError(f"{stream.count} shots arrived of the {total} planned")
+    if stream.nonfinite_shots:
+        warnings.warn(f"{stream.nonfinite_shots} shots held NaN/Inf and were zeroed", stacklevel=2)
     return image
 
 
 def batch_image(data: np.ndarray, plan: PolarFormatPlan, method: str, upsample: int = 16):
     """The image of all shots by ``method``: "pfa" or "backprojection" (fast, same aperture)."""
+    bad = int(nonfinite_rows(data).sum())
+    if bad:
+        warnings.warn(f"{bad} shots held NaN/Inf and were zeroed", stacklevel=2)
+        data = zero_nonfinite_rows(data)[0]
     if method == "pfa":
         return polar_format(data, plan)
     if method == "backprojection":

@@ -39,6 +39,7 @@ from scipy import fft as sfft
 
 from ..focus.resample import resample
 from ..params import Config
+from ..samples import zero_nonfinite_rows
 from ..windows import window_at
 from .czt import zoom_dtft
 from .geometry import SpotlightGeometry, echo_cycles, sample_times_s, wavenumbers
@@ -298,9 +299,11 @@ class PolarFormatPlan:
 
 
 def polar_format(data: np.ndarray, plan: PolarFormatPlan) -> np.ndarray:
-    """Batch PFA of every shot of the plan: image [x, y] complex128."""
+    """Batch PFA of every shot of the plan: image [x, y] complex128 (shots holding NaN/Inf are
+    zeroed, as the stream does; count them with rtsar.samples.nonfinite_rows)."""
     if len(data) != len(plan.psi):
         raise ValueError(f"{len(data)} shots for a plan of {len(plan.psi)}")
+    data = zero_nonfinite_rows(data)[0]
     return plan.form(plan.range_step(data, 0), 0)
 
 
@@ -312,12 +315,15 @@ class ProgressivePolarFormat:
         self.plan = plan
         self.rows = np.zeros((len(plan.psi), plan.rows), np.complex128)
         self.count = 0
+        self.nonfinite_shots = 0  # shots holding NaN/Inf, zeroed (their angle kept), counted
 
     def push(self, data: np.ndarray, start: int | None = None) -> None:
         data = np.atleast_2d(data)
         start = self.count if start is None else start
         if start != self.count or start + len(data) > len(self.rows):
             raise ValueError(f"shots {start}… arrive out of order (expected {self.count})")
+        data, bad = zero_nonfinite_rows(data)
+        self.nonfinite_shots += int(bad.sum())
         self.rows[start : start + len(data)] = self.plan.range_step(data, start)
         self.count += len(data)
 

@@ -123,3 +123,18 @@ def test_projective_recovers_points_and_reports_ambiguity(scene_file, tmp_path):
     assert main(["projective", "--simulate", str(tmp_path / "amb.toml"), "-o", str(out)]) == 0
     pts = np.loadtxt(out, delimiter=",", skiprows=1).reshape(-1, 4)
     assert len(pts) == 1 and math.isclose(pts[0, 1], -5e-4, abs_tol=10e-6)
+
+
+def test_bistatic_channel_from_a_recording(tmp_path):
+    scene = SCENE.replace("sweep_deg = 2.0", "sweep_deg = 2.0\nbistatic_angle_deg = 8.0")
+    (tmp_path / "bi.toml").write_text(scene)
+    rec, img = tmp_path / "bi.h5", tmp_path / "bi_img.h5"
+    assert main(["spot-simulate", str(tmp_path / "bi.toml"), "-o", str(rec)]) == 0
+    argv = ["spotlight", str(rec), "-o", str(img), "--channel", "bistatic", "--extent-mm", "2", "2"]
+    assert main(argv) == 0
+    image, _, _, spot = read_spot_image(img)
+    s = load_spot_scene(tmp_path / "bi.toml")
+    plan = PolarFormatPlan(s.config, s.geometry, "bistatic", PfaSettings(extent_m=(2e-3, 2e-3)))
+    ref = polar_format(SpotlightSimulator(s).block()[1]["bistatic"], plan)
+    assert spot["channel"] == "bistatic" and np.max(np.abs(image - ref)) < 1e-5
+    assert spot["frame_angle_rad"] == pytest.approx(math.radians(4.0), abs=1e-3)  # the bisector

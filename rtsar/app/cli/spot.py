@@ -67,8 +67,8 @@ def add_parsers(sub) -> None:
         "--look",
         choices=("exact", "monostatic"),
         default="exact",
-        help="polar grid of the channel's own geometry (default), or 'monostatic': a bistatic "
-        "channel processed as if monostatic (the uncorrected image, for comparison)",
+        help="exact: the polar grid of the channel's own geometry (default exact), or "
+        "monostatic: a bistatic channel processed as if monostatic (the uncorrected image)",
     )
     s.add_argument(
         "--method",
@@ -78,7 +78,9 @@ def add_parsers(sub) -> None:
         "spectral aperture and window; its cost grows as pixels x shots, about 100x PFA's: "
         "give a small --extent-mm)",
     )
-    s.add_argument("--oversampling", type=float, default=2.0, help="pixels per cell (2)")
+    s.add_argument(
+        "--oversampling", type=float, default=2.0, help="pixels per resolution cell (default 2)"
+    )
     s.add_argument(
         "--extent-mm",
         type=float,
@@ -111,7 +113,8 @@ def add_parsers(sub) -> None:
         type=int,
         default=0,
         metavar="N",
-        help="with --publish: wait (up to 10 s) for N subscribers before the first image",
+        help="with --publish: wait (up to 10 s) for N subscribers before the first image "
+        "(default 0: do not wait)",
     )
     s.add_argument("--png", help="also write a dB picture of the image (.png)")
     s.set_defaults(func=cmd_spotlight)

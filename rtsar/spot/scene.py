@@ -211,7 +211,7 @@ def reduced_spotlight(
 ) -> tuple[Config, SpotlightGeometry]:
     """crouch-spotlight scaled down for tests and measurements: the same chirp rate, carrier
     and arc, ``samples`` per shot (range window samples·c/2B) and a step angle λ/(2·extent_m)
-    (alias-free cross-range extent), so ``sweep_deg`` takes a few hundred shots, not 8029."""
+    (alias-free cross-range extent), so ``sweep_deg`` takes a few hundred shots, not 8030."""
     base = preset("crouch-spotlight")
     wf = replace(base.waveform, sample_rate_hz=samples / base.waveform.chirp_duration_s)
     lam, r0 = base.geometry.wavelength_m, base.geometry.slant_range_m

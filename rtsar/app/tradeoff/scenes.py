@@ -208,7 +208,45 @@ def correction_scenes(quick: bool = False) -> list[TradeoffScene]:
         ("reference_interferometer", {}),
         ("hcn_cell", {}),
     )
-    return [phase, chirp]
+    return [phase, chirp] + pga_scenes(quick)
+
+
+#: The piston error of the PGA scenes (Crouch size: a few hundred radians over the record).
+PGA_PISTON = {"random_walk_rad": 0.3, "drift_rad": 1e-3, "vibration_rad": 3.0,
+              "vibration_hz": 0.13, "white_rad": 0.1, "seed": 12}  # fmt: skip
+
+
+def pga_scenes(quick: bool = False) -> list[TradeoffScene]:
+    """PGA on the papers' presets (issue 14): no correction against ``pga``, the acceptance
+    targets (PGA needs no retro-reflector), Crouch's piston error; ≥ 3N shots so the stream has
+    whole blocks.
+
+    ``pga crouch-sal``: N = 2048 (quick 128), 512 bins (quick 64): points walk ~3 range cells
+    inside a 2N block.  ``pga zhao-insal``: N = 160, 64 bins.  ``pga psaltis-jpl``: N = 512,
+    320 bins (quick 64).  None of these point scenes has clutter, so the Doppler
+    anchor has nothing to measure and the error's own slope stays: the position error column.
+    """
+    specs = [
+        ("crouch-sal", 128 if quick else 2048, 64 if quick else 512),
+        ("zhao-insal", 160, 64),
+        ("psaltis-jpl", 512, 64 if quick else 320),
+    ]
+    out = []
+    for name, n, bins in specs:
+        cfg = preset(name).with_processor(aperture_pulses=n, range_bins=bins, micro_batch=64)
+        scene = make_scene(
+            f"pga {name}",
+            cfg,
+            [
+                Variant("corrections", "none", default=True),
+                Variant("corrections", "pga", corrections=("pga",)),
+            ],
+            f"{name}, N = {n}, {bins} bins: piston error (Crouch size), no retro-reflector; PGA",
+        )
+        scene.effects = (("piston", PGA_PISTON),)
+        scene.min_pulses = 3 * n
+        out.append(scene)
+    return out
 
 
 def default_scenes(quick: bool = False, corrections: bool = True) -> list[TradeoffScene]:

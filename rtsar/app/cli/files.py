@@ -59,15 +59,16 @@ def cmd_presets(args) -> int:
     if args.json:
         print(json.dumps(rows, indent=2))
         return 0
+    width = max(len("preset"), *(len(r["preset"]) for r in rows))
     print(
-        f"{'preset':12} {'kind':6} {'swath (slant range)':>23} {'rho_R':>10} {'rho_A':>10} "
+        f"{'preset':{width}} {'kind':6} {'swath (slant range)':>23} {'rho_R':>10} {'rho_A':>10} "
         f"{'N':>5} {'bins':>5} {'samples':>7} {'PRF Hz':>8} {'L illum.':>10} {'aperture':>10} "
         f"{'curvature':>10}"
     )
     for r in rows:
         swath = f"{r['swath_m'][0]:.6g}–{r['swath_m'][1]:.6g}"
         print(
-            f"{r['preset']:12} {r['waveform']:6} {swath:>23} {r['range_resolution_m']:10.4g} "
+            f"{r['preset']:{width}} {r['waveform']:6} {swath:>23} {r['range_resolution_m']:10.4g} "
             f"{r['azimuth_resolution_m']:10.4g} {r['aperture_pulses']:5d} {r['range_bins']:5d} "
             f"{r['samples_per_shot']:7d} {r['prf_hz']:8g} {r['illuminated_length_m']:10.4g} "
             f"{r['synthetic_aperture_m']:10.4g} {r['range_curvature_m']:10.3g}"

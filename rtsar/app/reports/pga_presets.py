@@ -9,12 +9,13 @@ works), a piston error of hundreds of radians (random walk 0.5 µm per shot, 20 
 vibration).  The correction found on the whole scene is applied to the points alone for IRW,
 PSLR, peak and position (the speckle under the sidelobes would move the PSLR).
 
-psaltis-jpl (Psaltis & Wagner Table 1; 320 bins, 3072 pulses, N = 512): a retro-reflector and
-points 20 and 26 dB weaker (600 and -550 pulses, ∓100 bins away; Taylor range window) in
+psaltis-jpl (Psaltis & Wagner Table 1; 320 bins, 5120 pulses, N = 512): a retro-reflector and
+points 20 and 26 dB weaker (300 and -250 pulses, ∓100 bins away; Taylor range window) in
 receiver noise (0 dB per sample against the retro), a piston error (random walk 0.1 λ per
 pulse, 2 λ drift, 0.1 λ vibration); its 15 km beam is flat over the record and holds no
 clutter: the anchor has nothing to measure and the error's own slope remains (the shift
-equals it, column "error's own slope").
+equals it, column "error's own slope"; the record is long enough that a shift of ~6 cells
+keeps the points inside the image).
 
 Per row: IRW, PSLR and peak against the error-free image, the shift in lines and in resolution
 cells, the blocks (reasons, anchored), stream = float64 batch, pulses/s of the stage.
@@ -70,14 +71,14 @@ def zhao_scene(seed: int | None, pulses: int = 640):
     return cfg, targets, 0.0, sc.point_lines, small.apply_phase(sc.point_lines, truth), err, truth
 
 
-def psaltis_scene(seed: int | None, pulses: int = 3072):
+def psaltis_scene(seed: int | None, pulses: int = 5120):
     cfg = preset("psaltis-jpl").with_processor(range_window="taylor")
     plan = make_plan(cfg)
     rm, d, lam = plan.range_m, cfg.geometry.along_track_step_m, cfg.geometry.wavelength_m
     dr, c = rm[1] - rm[0], len(rm) // 2
     start = -0.5 * pulses * d
-    targets = [(0.0, rm[c] + 0.3 * dr), (600 * d, rm[c - 100] + 0.4 * dr),
-               (-550 * d, rm[c + 100] + 0.2 * dr)]  # fmt: skip
+    targets = [(0.0, rm[c] + 0.3 * dr), (300 * d, rm[c - 100] + 0.4 * dr),
+               (-250 * d, rm[c + 100] + 0.2 * dr)]  # fmt: skip
     sc = point_scene(cfg, [t[0] for t in targets], [t[1] for t in targets], [1.0, 0.1, 0.05],
                      effects=[("noise", {"snr_db": 0.0})], seed=3, start_along_track_m=start,
                      pulses=pulses)  # fmt: skip

@@ -303,7 +303,8 @@ def test_residual_ignores_constant_slope_and_whole_turns():
         {"min_sharpness_gain": -0.5},
         {"migration_cells": math.nan},
         {"doppler_gain": 1.5},
-        {"doppler_anchor": 1},
+        {"doppler_anchor": 2},
+        {"doppler_anchor": "no"},
         {"min_doppler_coherence": -0.1},
         {"segments": 0},
         {"bright_threshold_db": math.inf},
@@ -317,3 +318,14 @@ def test_settings_are_validated(kwargs):
 def test_block_must_cover_the_aperture():
     with pytest.raises(ValueError, match="block_pulses"):
         PGAStage(report.sal_config(), PGASettings(block_pulses=16))
+
+
+def test_the_anchor_is_switched_from_the_command_line_spec():
+    """``--correct pga:doppler_anchor=0,doppler_gain=0.2`` (numbers arrive as floats)."""
+    from rtsar.focus.chain import make_stage, parse_spec
+
+    name, params = parse_spec("pga:doppler_anchor=0,doppler_gain=0.2")
+    stage = make_stage(name, report.sal_config(), params)
+    assert stage.settings.doppler_anchor is False and stage.settings.doppler_gain == 0.2
+    assert stage._anchor is False
+    assert PGASettings(doppler_anchor=1.0).doppler_anchor is True

@@ -95,7 +95,8 @@ class PGASettings:
     min_sharpness_gain  an estimate is used only if it sharpens the block image by this fraction
     min_pulses          a shorter block (end of a short stream) is not estimated (min(P, N))
     doppler_anchor      set the slope PGA cannot see from the clutter's Doppler centroid
-                        (rtsar.focus.pga.doppler); False: the error's own slope stays
+                        (rtsar.focus.pga.doppler); False (or 0, as in ``--correct
+                        pga:doppler_anchor=0``): the error's own slope stays
     doppler_gain        the first anchored block takes its whole residual centroid slope,
                         later ones this share (a tracking loop over ~1/gain blocks)
     min_doppler_coherence  the clutter's lag-one coherence below which its centroid is not
@@ -142,12 +143,13 @@ class PGASettings:
             "min_sharpness_gain": math.isfinite(self.min_sharpness_gain)
             and self.min_sharpness_gain >= 0,
             "doppler_gain": 0.0 <= self.doppler_gain <= 1.0,
-            "doppler_anchor": isinstance(self.doppler_anchor, bool),
+            "doppler_anchor": self.doppler_anchor in (True, False),  # 0/1 from pga:key=value
             "min_doppler_coherence": 0.0 <= self.min_doppler_coherence <= 1.0,
         }
         for name, ok in checks.items():
             if not ok:
                 raise ValueError(f"PGASettings.{name} out of range: {getattr(self, name)!r}")
+        object.__setattr__(self, "doppler_anchor", bool(self.doppler_anchor))
 
     def resolved(
         self, aperture_pulses: int, footprint_pulses: float | None = None

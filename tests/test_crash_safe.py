@@ -197,3 +197,19 @@ def test_a_stale_temporary_name_does_not_block_the_next_run(tmp_path, monkeypatc
     with replace_when_complete(out) as tmp:
         tmp.write_bytes(b"new")
     assert out.read_bytes() == b"new"
+
+
+def test_a_finished_file_has_the_mode_of_any_new_file(tmp_path):
+    """mkstemp's temporary is owner-only; the finished file must follow the umask, as files
+    that `run -o` writes do (a Dask worker of another user reads them)."""
+    from rtsar.sinks.io import replace_when_complete
+
+    old = os.umask(0o022)
+    try:
+        with replace_when_complete(tmp_path / "out.h5") as tmp:
+            tmp.write_bytes(b"x")
+        plain = tmp_path / "plain"
+        plain.write_bytes(b"x")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "out.h5").stat().st_mode & 0o777 == plain.stat().st_mode & 0o777 == 0o644

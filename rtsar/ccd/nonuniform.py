@@ -27,7 +27,9 @@ sizes or on the thread's timing (tested bit for bit).
 
 from __future__ import annotations
 
+import atexit
 import threading
+import weakref
 from collections import deque
 
 import numba
@@ -71,12 +73,15 @@ class _Tail(threading.Thread):
         self._threaded = threaded
         if threaded:
             self.start()
+            _LIVE.add(self)
 
     def submit(self, lines: np.ndarray | None) -> None:
         """Push ``lines`` into every tail segment (None: flush them)."""
         if not self._threaded:
             self._work(lines)
             return
+        if not self.is_alive() and self.error is None:
+            raise RuntimeError("the nonuniform correlator was closed: no more lines")
         with self._cond:
             self._jobs.append(lines)
             self._cond.notify_all()
@@ -136,14 +141,26 @@ class _Tail(threading.Thread):
         lines = parts[0] if len(parts) == 1 else np.concatenate(parts)
         return lines[skip:]
 
-    def stop(self) -> None:
+    def stop(self, join_s: float = 0.0) -> None:
+        """End the thread after the jobs before; wait up to ``join_s`` for it to exit."""
         if self._threaded and self.is_alive():
             with self._cond:
                 self._jobs.append(_STOP)
                 self._cond.notify_all()
+            if join_s:
+                self.join(join_s)
 
 
 _STOP = object()
+_LIVE: weakref.WeakSet = weakref.WeakSet()  # tail threads not yet stopped
+
+
+@atexit.register
+def _stop_all() -> None:
+    # A tail thread still alive when the interpreter finalises dies inside the OpenMP runtime
+    # its kernels used ("terminate called without an active exception", SIGABRT): end them here.
+    for tail in list(_LIVE):
+        tail.stop(join_s=5.0)
 
 
 class NonUniformCorrelator(Correlator):
@@ -223,8 +240,9 @@ class NonUniformCorrelator(Correlator):
         return self._combine(self._head.flush())
 
     def close(self) -> None:
-        """End the tail thread (also done when the correlator is garbage collected)."""
-        self._tail.stop()
+        """End the tail thread and wait for it (also done, without the wait, when the correlator
+        is garbage collected, and at interpreter exit)."""
+        self._tail.stop(join_s=5.0)
 
     def __del__(self):
         try:

@@ -193,6 +193,17 @@ def run_stream(
     interrupted = None
     try:
         print("rtsar: preparing the lens and the correlator …", file=stream, flush=True)
+        if settings.swath_workers:
+            print(
+                f"rtsar: starting {settings.swath_workers} swath workers (each loads rtsar and "
+                "builds its lens: seconds, more on a busy machine) …"
+                if settings.swath_spawn
+                else f"rtsar: waiting for {settings.swath_workers} swath workers: run `rtsar "
+                f"swath-worker --connect {settings.swath_bind} --index k` for k = 0 … "
+                f"{settings.swath_workers - 1}",
+                file=stream,
+                flush=True,
+            )
         if hasattr(source, "prepare"):  # a simulated source readies its kernels too
             source.prepare()
         pipe = Pipeline(
@@ -211,8 +222,13 @@ def run_stream(
         print(
             f"rtsar: {source.description}; CCD {n.aperture_pulses} x {n.range_bins}, "
             f"{'emulated CCD' if physical else n.correlator + ' correlator'}, "
-            f"{lens_label(pipe.engine.lens)}, {settings.stages} stages, "
-            f"strips of {settings.strip_lines} lines on {endpoint} ({delivery})"
+            f"{lens_label(pipe.engine.lens)}, "
+            + (
+                f"lens + CCD in {settings.swath_workers} swath worker processes, "
+                if settings.swath_workers
+                else f"{settings.stages} stages, "
+            )
+            + f"strips of {settings.strip_lines} lines on {endpoint} ({delivery})"
             + (f"; corrections: {', '.join(corrections.names)}" if corrections else "")
             + (f"; physical CCD, carrier in {physical.carrier}" if physical else "")
             + (f"; height strips of {height.strip_lines} lines" if height is not None else "")

@@ -251,7 +251,9 @@ def scene_from_dict(d: dict, name: str = "scene") -> Scene:
     """Build and validate a Scene from the parsed TOML mapping."""
     unknown = set(d) - _TOP_KEYS
     if unknown:
-        raise ValueError(f"scene: unknown keys {sorted(unknown)}; known: {sorted(_TOP_KEYS)}")
+        # [[pictures]] and [surface] are read by rtsar.scene.files before it comes here.
+        known = sorted(_TOP_KEYS | {"pictures", "surface"})
+        raise ValueError(f"scene: unknown keys {sorted(unknown)}; known: {known}")
     cfg, effects, seed = scene_settings(d)
     targets = _targets(_table_list(d, "targets"), cfg)
     start, pulses = scan_extent(cfg, targets, d.get("start_along_track_m"), d.get("pulses"))

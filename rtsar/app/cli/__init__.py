@@ -72,6 +72,9 @@ def main(argv=None) -> int:
     warnings.showwarning = _show_warning
     try:
         return args.func(args)
+    except BrokenPipeError:  # `rtsar presets | head`: the reader has all it wanted
+        sys.stdout = None  # nothing more to flush into the closed pipe at exit
+        return 0
     except (ValueError, OSError, RuntimeError) as exc:
         return die(str(exc))
     except KeyboardInterrupt as exc:

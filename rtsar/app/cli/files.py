@@ -238,7 +238,9 @@ def add_parsers(sub) -> None:
         description="Simulate a TOML scene (format: README 'Scene files') shot by "
         "shot with the exact range history; writes an HDF5 recording.",
     )
-    s.add_argument("scene", help="scene file (.toml), or a built-in scene: demo, insal-ridge")
+    s.add_argument(
+        "scene", help="scene file (.toml), or a built-in scene: demo, sal-demo, insal-ridge"
+    )
     s.add_argument("-o", "--output", required=True, help="recording to write (.h5)")
     s.add_argument("--pulses", type=int, help="override the scene's number of shots")
     s.set_defaults(func=cmd_simulate)

@@ -39,7 +39,11 @@ def add_lens_options(g) -> None:
         "NumPy, said on the banner), opencl (PoCL CPU unless RTSAR_OPENCL_DEVICE; an error if "
         "it cannot build), or numpy",
     )
-    g.add_argument("--device", help="OpenCL platform/device name substring")
+    g.add_argument(
+        "--device",
+        help="OpenCL platform/device name substring (default: $RTSAR_OPENCL_DEVICE, else "
+        "PoCL's CPU device)",
+    )
 
 
 def add_correlator_option(g) -> None:
@@ -79,7 +83,8 @@ def add_processing_knobs(g) -> None:
         "--range-migration-taps",
         type=int,
         metavar="T",
-        help="handle range migration with a T-tap interpolating 2-D mask (0: off; use with "
+        help="handle range migration with a T-tap interpolating 2-D mask (0: off, the "
+        "presets' default; use with "
         "range oversampling 2; ~2-5× the CCD cost)",
     )
     g.add_argument(
@@ -94,7 +99,8 @@ def add_processing_knobs(g) -> None:
         "--physical",
         choices=CARRIERS,
         help="physical mode: the paper's CCD (bias, full well, noise, 12-bit ADC, blooming) "
-        "with the coherent-detection carrier in range or in azimuth",
+        "with the coherent-detection carrier in range or in azimuth (default: off, the ideal "
+        "correlator)",
     )
     g.add_argument(
         "--full-scale",
@@ -199,7 +205,11 @@ def add_pipeline_options(s, delivery: str) -> None:
         f"lossless: the pipeline waits for the slowest subscriber (default {delivery})",
     )
     g.add_argument("--strip-lines", type=int, default=16, help="lines per strip (default 16)")
-    g.add_argument("--strip-ms", type=float, help="strip length in ms at the PRF instead")
+    g.add_argument(
+        "--strip-ms",
+        type=float,
+        help="strip length in ms at the PRF instead (default: none, --strip-lines rules)",
+    )
     g.add_argument(
         "--stall-timeout",
         type=float,

@@ -294,8 +294,9 @@ def add_parsers(sub) -> None:
     src.add_argument(
         "--duration",
         type=float,
-        help="stop after this many seconds (serial: of silence) (default: the whole scene, 10 s "
-        "for the demo; serial: never)",
+        help="stop after this many seconds of the stream, i.e. pulses at the PRF (a busy "
+        "machine takes longer; serial: seconds of silence) (default: the whole scene, 10 s for "
+        "the demo; serial: never)",
     )
     src.add_argument(
         "--reconnect",
@@ -356,7 +357,12 @@ def add_parsers(sub) -> None:
     )
     add_subscriber_options(s)
     s.add_argument("-o", "--output", required=True, help="image file to write (.h5)")
-    s.add_argument("--timeout", type=float, help="stop after this many seconds of silence")
+    s.add_argument(
+        "--timeout",
+        type=float,
+        help="stop after this many seconds of silence (default: none, until the stream's end "
+        "message or Ctrl-C)",
+    )
     s.add_argument(
         "--sicd",
         metavar="OUT.nitf",

@@ -216,6 +216,7 @@ def cmd_spotlight(args) -> int:
     print(
         f"spotlight image {image.shape} in {dt:.2f} s"
         + (f" → {args.output}" if args.output else "")
+        + (f"; wrote {args.png}" if args.png else "")
     )
     return 0
 

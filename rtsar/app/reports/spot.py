@@ -5,7 +5,7 @@
 Printed (Markdown):
 
 * Crouch's bench at full size (crouch-spotlight: 4.6 m arc, 50 µm steps, 1024 samples, the
-  5° sweep: 8029 shots): point targets at the centre and 3-6 mm out, PFA (chirp-z, unweighted):
+  5° sweep: 8030 shots): point targets at the centre and 3-6 mm out, PFA (chirp-z, unweighted):
   cross-range and range IRW against 0.886·λ/2Δθ (eq. 9.5) and 0.886·c/2B, PSLR, position error
   in cells, the time to simulate and to form the image; the exact backprojection at the centre
   target (its own IRW, and the PFA error on a 9 x 9 patch, dB);

@@ -329,3 +329,21 @@ def test_the_anchor_is_switched_from_the_command_line_spec():
     assert stage.settings.doppler_anchor is False and stage.settings.doppler_gain == 0.2
     assert stage._anchor is False
     assert PGASettings(doppler_anchor=1.0).doppler_anchor is True
+
+
+def test_anchor_gate_takes_only_clutter_like_coherence():
+    """The Stitcher anchors an estimated block only when its rows are as coherent as the beam
+    makes clutter: ρ(1)/2 ≤ |z|/E ≤ ρ(1) + 0.1.  A point's own history (coherence 0.95 where
+    ρ(1) = 0.25, as on a clutter-free psaltis-jpl scene) or noise (0.02) is left alone."""
+    from rtsar.focus.pga import BlockReport, CentroidLags
+    from rtsar.focus.pga.blocks import Stitcher
+
+    n, slope = 64, 0.3
+    rep = BlockReport(0, n, True, True, "converged", 3, 4, 0.0, 1.0, 1.0, 2.0)
+    for coherence, anchored in ((0.95, False), (0.02, False), (0.2, True), (0.3, True)):
+        lags = CentroidLags(np.full(n - 1, coherence * np.exp(1j * slope)), n - 1.0, 8, 0.25)
+        st = Stitcher(n, n // 2, doppler_gain=0.1)
+        phase = st.add(0, np.zeros(n), rep, n // 2, lags)
+        assert st.doppler_anchored is anchored
+        expected = slope * np.arange(n // 2) if anchored else np.zeros(n // 2)
+        np.testing.assert_allclose(phase, expected, atol=1e-12)  # the first block: whole slope

@@ -17,7 +17,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .doppler import CentroidLags
+from .doppler import MAX_EXCESS_COHERENCE, CentroidLags
 from .estimator import BlockReport
 
 
@@ -87,7 +87,8 @@ class Stitcher:
         Over the common pulses δ = previous - phase is fitted by a + c·i (``align_blocks``);
         c is taken only when the previous block had an estimate of its own.  Then the Doppler
         anchor (rtsar.focus.pga.doppler): on an estimated block whose clutter ``lags`` are
-        coherent (≥ ``min_doppler_coherence`` and half the antenna's ρ(1)), ``doppler_gain`` of
+        coherent as clutter is (≥ ``min_doppler_coherence`` and half the antenna's ρ(1), at most
+        ρ(1) + ``MAX_EXCESS_COHERENCE``), ``doppler_gain`` of
         the residual centroid slope s is added as s·(i - i₀), i₀ the first uncommitted pulse,
         so the committed phase stays continuous and the next block inherits the slope.
         """
@@ -112,8 +113,11 @@ class Stitcher:
         self.doppler_anchored = False
         if report.estimated and lags is not None:
             slope, coherence = lags.residual(aligned)
-            floor = max(self.min_doppler_coherence, 0.5 * lags.expected_coherence)
-            if lags.expected_coherence > 0 and coherence >= floor:
+            rho = lags.expected_coherence
+            floor = max(self.min_doppler_coherence, 0.5 * rho)
+            # Clutter and noise cannot be more coherent than the beam makes them: above ρ(1)
+            # the rows hold a point's history (measured 0.95 on psaltis-jpl, ρ(1) = 0.25).
+            if rho > 0 and floor <= coherence <= rho + MAX_EXCESS_COHERENCE:
                 pivot = max(self.committed - start, 0)
                 # The first anchored block (or the first after one without an estimate) takes
                 # the whole slope; later ones doppler_gain of it (a first-order tracking loop).

@@ -172,3 +172,17 @@ def test_replay_command_with_swath_workers(tmp_path):
     assert one.shape == two.shape and np.abs(one - two).max() <= 1e-6 * np.abs(one).max()
     with pytest.raises(SystemExit):
         main(["swath-worker", "--help"])
+
+
+def test_bind_problems_are_one_line_errors():
+    """From a cold review: a port range past 65535 and a port in use gave ZMQError tracebacks."""
+    cfg = preset("tiny")
+    with pytest.raises(ValueError, match="65535"):
+        SwathWorkers(cfg, 2, "numpy", spawn=False, bind="tcp://127.0.0.1:65534")
+    busy = zmq.Context.instance().socket(zmq.PULL)
+    port = busy.bind_to_random_port("tcp://127.0.0.1")
+    try:
+        with pytest.raises(ValueError, match="cannot listen"):
+            SwathWorkers(cfg, 1, "numpy", spawn=False, bind=f"tcp://127.0.0.1:{port}")
+    finally:
+        busy.close(0)

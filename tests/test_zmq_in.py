@@ -50,6 +50,11 @@ def test_pmt_and_header_parse_by_hand():
         parse_tag_header(struct.pack("<HBQQ", 0x5FF1, 1, 0, 0))
     with pytest.raises(PmtError):
         parse_tag_header(head[:-3])
+    # From a cold review: 5000 nested pairs exhausted Python's stack (RecursionError ended the
+    # run); nesting is bounded, so the message is a counted bad one.
+    deep = struct.pack("<HBQQ", 0x5FF0, 1, 0, 1) + struct.pack("<Q", 0) + b"\x07" * 5000
+    with pytest.raises(PmtError, match="nested"):
+        parse_tag_header(deep + b"\0" * 8)
 
 
 def test_flat_stream_sliced_by_packet_len_with_gap_and_wrong_length(rng):

@@ -182,7 +182,8 @@ class NonUniformCorrelator(Correlator):
         super().__init__(mask, precision)
         n = self.aperture
         self.block_lines = head_lines
-        self.segments = plan_segments(n, head_lines, min(max_block_lines, n))
+        largest = 1 << (n.bit_length() - 1)  # the largest power of two <= N
+        self.segments = plan_segments(n, head_lines, min(max_block_lines, largest))
         mask = np.asarray(mask)
         parts = [
             PartitionedCorrelator(mask[n - d - t : n - d], b, precision)

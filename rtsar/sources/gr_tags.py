@@ -35,10 +35,16 @@ class PmtError(ValueError):
     """A PMT or tag header that does not parse."""
 
 
-def read_pmt(buf: bytes, pos: int) -> tuple[object, int]:
+MAX_PMT_DEPTH = 32  # nesting of pairs, tuples and dicts; a tag needs two or three levels
+
+
+def read_pmt(buf: bytes, pos: int, depth: int = 0) -> tuple[object, int]:
     """One serialised PMT at ``pos``: (Python value, position after it).  Symbols → str,
     integers → int, doubles → float, complex → complex, tuples/vectors → tuple, pairs →
-    (car, cdr), dicts → dict, null → None, uniform vectors → ("uvector", count)."""
+    (car, cdr), dicts → dict, null → None, uniform vectors → ("uvector", count).  Nesting
+    deeper than MAX_PMT_DEPTH is a PmtError (a hostile message must not exhaust the stack)."""
+    if depth > MAX_PMT_DEPTH:
+        raise PmtError(f"PMT nested deeper than {MAX_PMT_DEPTH}")
     try:
         kind = buf[pos]
     except IndexError:
@@ -75,8 +81,8 @@ def read_pmt(buf: bytes, pos: int) -> tuple[object, int]:
         re, im = take(">dd")
         return complex(re, im), pos
     if kind == 0x07:
-        car, pos = read_pmt(buf, pos)
-        cdr, pos = read_pmt(buf, pos)
+        car, pos = read_pmt(buf, pos, depth + 1)
+        cdr, pos = read_pmt(buf, pos, depth + 1)
         return (car, cdr), pos
     if kind in (0x08, 0x0C):
         (n,) = take(">I")
@@ -84,7 +90,7 @@ def read_pmt(buf: bytes, pos: int) -> tuple[object, int]:
             raise PmtError("PMT tuple longer than its message")
         items = []
         for _ in range(n):
-            item, pos = read_pmt(buf, pos)
+            item, pos = read_pmt(buf, pos, depth + 1)
             items.append(item)
         return tuple(items), pos
     if kind == 0x09:
@@ -92,7 +98,7 @@ def read_pmt(buf: bytes, pos: int) -> tuple[object, int]:
         while True:  # a chain of pairs ((key . value) . rest), ending in null
             if pos < len(buf) and buf[pos] == 0x06:
                 return out, pos + 1
-            pair, pos = read_pmt(buf, pos)
+            pair, pos = read_pmt(buf, pos, depth + 1)
             if not (isinstance(pair, tuple) and len(pair) == 2):
                 raise PmtError("PMT dict entry is not a pair")
             out[pair[0]] = pair[1]

@@ -279,8 +279,7 @@ class Pipeline:
                 elif self.swath.finished:
                     break
         finally:
-            self.swath.close()
-            self.q_image.close()
+            self.q_image.close()  # the sockets close in join(), once no stage uses them
 
     def _put_image(self, block: LineBlock | None) -> None:
         if block is not None:
@@ -411,6 +410,8 @@ class Pipeline:
             except BaseException as exc:  # a stage failed: stop everything, report in run()
                 self._errors.append(exc)
                 self._stop.set()
+                if self.swath is not None:
+                    self.swath.abort()
                 self.source.close()
                 for q in (self.q_shots, self.q_lines, self.q_image):
                     q.close()
@@ -452,6 +453,8 @@ class Pipeline:
                         raise
             raise
         finally:
+            if self.swath is not None:  # workers that were told the end finish; others go
+                self.swath.close(wait_s=0.0 if self._errors else 5.0)
             if self._errors:
                 raise self._errors[0]
         return self.stats

@@ -42,6 +42,7 @@ from ..samples import precision_dtype
 from .engine import Lines
 
 HWM_MESSAGES = 8  # pulse blocks in flight per worker before the coordinator waits
+SEND_SLICE_S = 0.2  # a waiting send looks for an abort this often
 READY_TIMEOUT_S = 120.0  # a worker's first start compiles numba kernels and builds OpenCL
 
 
@@ -72,10 +73,14 @@ def worker_endpoints(connect: str, index: int) -> tuple[str, str]:
 
 
 def _bind(socket, host: str, port: int | None) -> str:
-    if port is None:
-        port = socket.bind_to_random_port(f"tcp://{host}")
-    else:
-        socket.bind(f"tcp://{host}:{port}")
+    try:
+        if port is None:
+            port = socket.bind_to_random_port(f"tcp://{host}")
+        else:
+            socket.bind(f"tcp://{host}:{port}")
+    except zmq.ZMQError as exc:
+        where = f"tcp://{host}:{port if port is not None else '*'}"
+        raise ValueError(f"swath workers: cannot listen on {where}: {exc}") from None
     return f"tcp://{host}:{port}"
 
 
@@ -219,24 +224,39 @@ class SwathWorkers:
         self.timeout_s = timeout_s
         self.dtype = np.dtype(precision_dtype(config.processor.precision))
         self._ctx = zmq.Context()
+        self._procs: list[subprocess.Popen] = []
+        self._pushes, self.shot_endpoints = [], []
+        self._results = None
+        self._closed = False
+        self._aborted = False
+        try:
+            self._start(bind, spawn, lens_backend, device, timeout_s)
+        except BaseException:
+            self.close(wait_s=0.0)  # no worker or socket outlives a failed start
+            raise
+
+    def _start(self, bind, spawn, lens_backend, device, timeout_s) -> None:
+        config = self.config
         host, base = parse_bind(bind)
+        if base is not None and base + len(self.columns) > 65535:
+            raise ValueError(f"--swath-bind port {base} + {len(self.columns)} workers > 65535")
         self._results = self._ctx.socket(zmq.PULL)
         self.results_endpoint = _bind(self._results, host, base)
-        self._pushes, self.shot_endpoints = [], []
         for k in range(len(self.columns)):
             s = self._ctx.socket(zmq.PUSH)
             s.setsockopt(zmq.SNDHWM, HWM_MESSAGES)
-            s.setsockopt(zmq.SNDTIMEO, int(1000 * timeout_s))
             s.setsockopt(zmq.LINGER, 0)
             self._pushes.append(s)
             self.shot_endpoints.append(_bind(s, host, base and base + 1 + k))
-        self._procs: list[subprocess.Popen] = []
         if spawn:
             for k, endpoint in enumerate(self.shot_endpoints):
                 cmd = [sys.executable, "-m", "rtsar", "swath-worker", "--shots", endpoint]
                 cmd += ["--results", self.results_endpoint, "--index", str(k)]
                 cmd += ["--parent-pid", str(os.getpid())]
-                self._procs.append(subprocess.Popen(cmd, stdin=subprocess.DEVNULL))
+                # A session of their own: a terminal's Ctrl-C goes to the coordinator alone,
+                # which ends the stream; the workers then flush their CCDs and finish.
+                proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, start_new_session=True)
+                self._procs.append(proc)
         self._pending = [deque() for _ in self.columns]  # per worker: Lines not merged yet
         self._done = [False] * len(self.columns)
         self._heard_at, self._ended_at = time.monotonic(), None
@@ -273,23 +293,30 @@ class SwathWorkers:
         if not zero:
             frames.append(samples.tobytes())
         for k, s in enumerate(self._pushes):
-            try:
-                s.send_multipart(frames, copy=False)
-            except zmq.Again:
-                raise RuntimeError(
-                    f"swath worker {k} took no pulses for {self.timeout_s:g} s (stalled or gone)"
-                ) from None
+            self._send(k, s, frames)
 
     def end(self) -> None:
         """No more pulses: the workers flush their CCDs and say they are done."""
         for k, s in enumerate(self._pushes):
-            try:
-                s.send_multipart([b"end"])
-            except zmq.Again:
+            self._send(k, s, [b"end"])
+        self._ended_at = time.monotonic()
+
+    def abort(self) -> None:
+        """Another stage failed: a send waiting on a worker gives up within SEND_SLICE_S."""
+        self._aborted = True
+
+    def _send(self, k: int, socket, frames: list) -> None:
+        """Send, waiting while worker k is HWM blocks behind: up to ``timeout_s``, in slices so
+        that :meth:`abort` ends the wait."""
+        deadline = time.monotonic() + self.timeout_s
+        while not socket.poll(int(1000 * SEND_SLICE_S), zmq.POLLOUT):
+            if self._aborted:
+                raise RuntimeError("swath run aborted")
+            if time.monotonic() > deadline:
                 raise RuntimeError(
                     f"swath worker {k} took no pulses for {self.timeout_s:g} s (stalled or gone)"
-                ) from None
-        self._ended_at = time.monotonic()
+                )
+        socket.send_multipart(frames, copy=False)
 
     @property
     def finished(self) -> bool:
@@ -368,12 +395,20 @@ class SwathWorkers:
             if p.poll() is not None and not self._done[k]:
                 raise RuntimeError(f"swath worker {k} exited with status {p.returncode}")
 
-    def close(self) -> None:
+    def close(self, wait_s: float = 5.0) -> None:
+        """Wait up to ``wait_s`` (in all) for the workers started here, kill the rest, close
+        the sockets.  Call it once no thread sends or receives any more."""
+        if self._closed:
+            return
+        self._closed = True
+        deadline = time.monotonic() + wait_s
         for p in self._procs:
             try:
-                p.wait(timeout=5)
+                p.wait(timeout=max(0.0, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
                 p.kill()
+                p.wait()
         for s in (*self._pushes, self._results):
-            s.close(0)
+            if s is not None:
+                s.close(0)
         self._ctx.term()

@@ -79,3 +79,20 @@ def test_inputs_are_checked_before_any_work(tmp_path):
     assert len(recs) == 2  # a/r.h5 named twice counts once
     with pytest.raises(ValueError, match="both write"):
         batch.output_paths(recs, tmp_path / "out")
+
+
+def test_no_input_is_overwritten_and_earlier_images_are_not_inputs(recordings, tmp_path):
+    """From a cold review: `batch bt --out-dir bt` with bt/x.h5 and bt/x-img.h5 replaced the
+    recording x-img.h5 by x.h5's image; a second run took the first run's images as inputs."""
+    folder = tmp_path / "bt"
+    folder.mkdir()
+    for name in ("x.h5", "x-img.h5"):
+        (folder / name).write_bytes((recordings / "r1.h5").read_bytes())
+    with pytest.raises(ValueError, match="would overwrite a recording"):
+        batch.output_paths(batch.find_recordings([str(folder)]), folder)
+    mix = tmp_path / "mix"
+    mix.mkdir()
+    (mix / "r1.h5").write_bytes((recordings / "r1.h5").read_bytes())
+    assert main(["batch", str(mix), "--out-dir", str(mix), "--workers", "1"]) == 0
+    assert (mix / "r1-img.h5").is_file()
+    assert batch.find_recordings([str(mix)]) == [(mix / "r1.h5").resolve()]

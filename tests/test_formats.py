@@ -151,6 +151,11 @@ def test_sigmf_round_trip_bit_identical_with_channels(tmp_path):
     assert main(["process", str(rec_path), "-o", str(a), "--lens", "numpy"]) == 0
     assert main(["process", str(base) + ".sigmf-meta", "-o", str(b), "--lens", "numpy"]) == 0
     np.testing.assert_array_equal(read_image(a)[0], read_image(b)[0])
+    # From a cold review: a SigMF recording exported onto itself was truncated to 0 bytes.
+    data = tmp_path / "out.sigmf-data"
+    size = data.stat().st_size
+    assert main(["export", str(base) + ".sigmf-meta", "--sigmf", str(base)]) == 2
+    assert data.stat().st_size == size
 
 
 def test_sicd_of_an_image_opens_in_sarpy(pulsed, tmp_path):
@@ -257,3 +262,18 @@ def test_replay_of_cphd_into_subscribe_sicd(pulsed, tmp_path):
     got = read_image(sub_h5)[0]
     assert np.abs(got - want).max() <= 1e-5 * np.abs(want).max()
     np.testing.assert_array_equal(open_complex(str(sub_sicd))[:, :], got.T)
+
+
+def test_subscribe_sicd_never_exports_a_stale_image(pulsed, tmp_path):
+    """From a cold review: with no strip received, an image file left by an earlier run was
+    exported as this stream's SICD."""
+    import socket
+
+    stale, sicd = tmp_path / "stale.h5", tmp_path / "stale.nitf"
+    assert main(["process", str(pulsed), "-o", str(stale), "--lens", "numpy"]) == 0
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        ep = f"tcp://127.0.0.1:{s.getsockname()[1]}"
+    args = ["subscribe", ep, "-o", str(stale), "--sicd", str(sicd), "--timeout", "0.5"]
+    assert main(args) == 1  # nothing received
+    assert not sicd.exists()

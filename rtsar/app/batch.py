@@ -23,6 +23,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import h5py
+
 from .cli import files
 from .progress import Progress
 
@@ -39,8 +41,18 @@ class FileResult:
     worker: str = ""
 
 
+def _is_image(path: Path) -> bool:
+    """An rtsar image file (``format = "rtsar-image"``), e.g. a previous batch's output."""
+    try:
+        with h5py.File(path, "r") as f:
+            return f.attrs.get("format") == "rtsar-image"
+    except OSError:
+        return False
+
+
 def find_recordings(inputs: list[str]) -> list[Path]:
-    """The recordings named: files as given, folders by their ``*.h5``/``*.hdf5`` files (sorted).
+    """The recordings named: files as given, folders by their ``*.h5``/``*.hdf5`` files (sorted,
+    rtsar image files left out: a folder may hold an earlier batch's images).
 
     Raises ValueError for a path that does not exist or a list with no recording.
     """
@@ -49,7 +61,11 @@ def find_recordings(inputs: list[str]) -> list[Path]:
         path = Path(item)
         if path.is_dir():
             found.extend(
-                sorted(p for p in path.iterdir() if p.suffix.lower() in RECORDING_SUFFIXES)
+                sorted(
+                    p
+                    for p in path.iterdir()
+                    if p.suffix.lower() in RECORDING_SUFFIXES and not _is_image(p)
+                )
             )
         elif path.is_file():
             found.append(path)
@@ -62,10 +78,14 @@ def find_recordings(inputs: list[str]) -> list[Path]:
 
 
 def output_paths(recordings: list[Path], out_dir: Path, suffix: str = "-img.h5") -> list[Path]:
-    """``OUT_DIR/STEM-img.h5`` for every recording; two recordings with one stem are refused."""
-    outputs = [out_dir / f"{r.stem}{suffix}" for r in recordings]
+    """``OUT_DIR/STEM-img.h5`` for every recording; two recordings with one stem, or an output
+    that is one of the recordings, are refused (before any work)."""
+    outputs = [out_dir.resolve() / f"{r.stem}{suffix}" for r in recordings]
+    inputs = {r.resolve() for r in recordings}
     seen: dict[Path, Path] = {}
     for rec, out in zip(recordings, outputs, strict=True):
+        if out in inputs:
+            raise ValueError(f"{rec}'s image {out} would overwrite a recording of this batch")
         if out in seen:
             raise ValueError(
                 f"{seen[out]} and {rec} would both write {out}: give them different names"

@@ -187,15 +187,25 @@ def cmd_demo(args) -> int:
     return cmd_replay(args)
 
 
+def _stamp(path) -> tuple | None:
+    """(inode, mtime) of a file, None when there is none: tells a file this run wrote."""
+    try:
+        st = Path(path).stat()
+    except OSError:
+        return None
+    return st.st_ino, st.st_mtime_ns
+
+
 def cmd_subscribe(args) -> int:
     if args.timeout is not None and args.timeout <= 0:
         return die(f"--timeout must be > 0 seconds, got {args.timeout}")
     if args.sicd:
         check_writable(args.sicd)
+    before = _stamp(args.output)
     status = subscribe(
         args.endpoint, args.output, args.curve_server_key, args.timeout, args.curve_client_key
     )
-    if args.sicd and Path(args.output).exists():
+    if args.sicd and _stamp(args.output) not in (None, before):  # only an image of this run
         # Here, not above: sarpy takes ~1 s to load and only --sicd needs it.
         from ...sinks.exports.sicd import write_sicd
 

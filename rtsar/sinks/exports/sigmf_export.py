@@ -78,6 +78,12 @@ def write_sigmf(rec, path: str | Path) -> dict:
     or a name ending in .sigmf-meta/.sigmf-data); returns the files written."""
     require_formats(SigMFFile, "SigMF export")
     base = sigmf_base(Path(path)) or Path(path)
+    source = Path(rec.path)
+    source_base = sigmf_base(source)
+    if source_base is not None and base.resolve() == source_base.resolve():
+        # The data file is written in place: exporting a SigMF recording onto itself would
+        # truncate the samples it is reading.
+        raise ValueError(f"{path}: the export would overwrite its own input {source}")
     cfg = rec.config
     s = cfg.waveform.samples_per_shot
     index = np.asarray(rec.pulse_index, np.int64)

@@ -36,6 +36,7 @@ __all__ = [
     "design_mask",
     "make_ccd",
     "make_correlator",
+    "processor_correlator",
 ]
 
 CORRELATORS = Processor.CORRELATORS
@@ -99,6 +100,11 @@ def make_ccd(config: Config, range_m: np.ndarray, physical=None) -> Correlator:
         mask = design_migration_mask(config, range_m)
     else:
         mask = design_mask(config, range_m)
+    return processor_correlator(p, mask)
+
+
+def processor_correlator(p: Processor, mask) -> Correlator:
+    """make_correlator with the settings of ``p`` (correlator kind, blocks, precision)."""
     return make_correlator(
         p.correlator,
         mask,

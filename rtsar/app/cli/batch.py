@@ -7,13 +7,7 @@ import sys
 from pathlib import Path
 
 from .. import batch
-from .options import (
-    add_correlator_option,
-    add_height_options,
-    add_lens_options,
-    add_processing_knobs,
-    die,
-)
+from .options import add_process_options, die
 
 # The options of ``batch`` itself; every other parsed option is a ``process`` option.
 BATCH_ONLY = {"command", "func", "inputs", "out_dir", "workers", "scheduler", "retries"}
@@ -75,11 +69,5 @@ def add_parsers(sub) -> None:
         default=2,
         help="retries of a task whose worker died (default 2)",
     )
-    add_lens_options(s)
-    add_correlator_option(s)
-    s.add_argument(
-        "--micro-batch", type=int, help="pulses per lens launch (default: the configuration's)"
-    )
-    add_processing_knobs(s)
-    add_height_options(s)
+    add_process_options(s)
     s.set_defaults(func=cmd_batch)

@@ -20,10 +20,7 @@ from ..progress import Progress
 from ..quicklook import save_height_quicklook, save_quicklook
 from .inputs import open_input
 from .options import (
-    add_correlator_option,
-    add_height_options,
-    add_lens_options,
-    add_processing_knobs,
+    add_process_options,
     check_channels,
     correction_chain,
     die,
@@ -257,13 +254,7 @@ def add_parsers(sub) -> None:
         'file (these need pip install "rtsar[formats]"; README "Standard formats")',
     )
     s.add_argument("-o", "--output", required=True, help="image file to write (.h5)")
-    add_lens_options(s)
-    add_correlator_option(s)
-    s.add_argument(
-        "--micro-batch", type=int, help="pulses per lens launch (default: the configuration's)"
-    )
-    add_processing_knobs(s)
-    add_height_options(s)
+    add_process_options(s)
     s.set_defaults(func=cmd_process)
 
     s = sub.add_parser(

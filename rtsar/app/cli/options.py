@@ -115,6 +115,17 @@ def add_processing_knobs(g) -> None:
 HEIGHT_METHODS = ("insal", "sam")
 
 
+def add_process_options(s) -> None:
+    """The processing options of ``process`` (and ``batch``, which runs process per file)."""
+    add_lens_options(s)
+    add_correlator_option(s)
+    s.add_argument(
+        "--micro-batch", type=int, help="pulses per lens launch (default: the configuration's)"
+    )
+    add_processing_knobs(s)
+    add_height_options(s)
+
+
 def add_height_options(g) -> None:
     """--height and its strip size (process, run, replay)."""
     g.add_argument(

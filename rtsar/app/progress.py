@@ -28,7 +28,7 @@ class Progress:
         eta = (self.total - done) / rate if rate > 0 else float("inf")
         msg = (
             f"{self.label}: {done}/{self.total} {self.unit} ({100 * done / self.total:5.1f} %), "
-            f"{rate:,.0f} {self.unit}/s, eta {eta:5.1f} s {extra}"
+            f"{rate:,.{1 if rate < 10 else 0}f} {self.unit}/s, eta {eta:5.1f} s {extra}"
         )
         self.stream.write(("\r" + msg + "   ") if self.tty else (msg + "\n"))
         self.stream.flush()

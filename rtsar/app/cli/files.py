@@ -114,7 +114,8 @@ def simulate_to(scene, output) -> None:
     channels = f" + channels {', '.join(rec.channel_names)}" if rec.channel_names else ""
     print(
         f"wrote {output}: {done} shots × {sim.samples_per_shot} samples{channels}, "
-        f"{len(scene.targets)} targets, effects: {effects}; {1e6 * dt / max(done, 1):.1f} µs/shot"
+        f"{len(scene.targets)} target{'' if len(scene.targets) == 1 else 's'}, effects: "
+        f"{effects}; {1e6 * dt / max(done, 1):.1f} µs/shot"
     )
 
 

@@ -86,7 +86,7 @@ class ReplaySource(Source):
             recording.config.geometry.prf_hz,
             rate,
             batch,
-            description=f"replay of {recording.path} ({rate})",
+            description=f"replay of {recording.path} ({_rate_words(rate)})",
             aux={name: recording.channels[name] for name in channels},
         )
 
@@ -117,3 +117,8 @@ class ReplaySource(Source):
             return float("nan")
         (n0, t0), (n1, t1) = self.first_release, self.last_release
         return (n1 - n0) / (t1 - t0)
+
+
+def _rate_words(rate) -> str:
+    """A replay rate in words: real, max, or a factor as '5× real rate' (not a bare 5)."""
+    return str(rate) if rate in ("real", "max") else f"{float(rate):g}× real rate"

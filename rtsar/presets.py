@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from .params import Config, FMCWChirp, Geometry, Processor, PulsedChirp
 
 
@@ -71,20 +73,10 @@ def _crouch_spotlight() -> Config:
     # the LO delayed to the centre.  The sweep is the spotlight scene's (rtsar.spot: 5° by
     # default, 8030 shots, ρ = λ/2Δθ = 8.9 µm).  The processor only matters to a strip-map run
     # of this instrument: a 1.28 cm aperture (ρA = 279 µm, curvature 0.03 cell).
+    sal = _crouch_sal()
     return Config(
-        FMCWChirp(
-            bandwidth_hz=3e12,
-            chirp_duration_s=0.3,
-            sample_rate_hz=1024 / 0.3,
-            reference_range_m=4.6,
-        ),
-        Geometry(
-            wavelength_m=1.55e-6,
-            slant_range_m=4.6,
-            along_track_step_m=50e-6,
-            prf_hz=2.0,
-            antenna_length_m=100e-6,
-        ),
+        replace(sal.waveform, reference_range_m=4.6),
+        replace(sal.geometry, slant_range_m=4.6, along_track_step_m=50e-6, antenna_length_m=100e-6),
         Processor(aperture_pulses=256, range_bins=1024),
     )
 

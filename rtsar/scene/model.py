@@ -260,6 +260,17 @@ def scene_from_dict(d: dict, name: str = "scene") -> Scene:
     return Scene(cfg, targets, pulses, start, seed, effects, d.get("name", name))
 
 
+def recorded_scene(d: dict | None, source) -> Scene | None:
+    """The scene a recording carries (None when it has none); ValueError naming ``source``
+    when it does not parse."""
+    if not d:
+        return None
+    try:
+        return scene_from_dict(d, name=d.get("name", "scene"))
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"{source}: the recorded scene does not parse ({exc})") from None
+
+
 def scene_settings(d: dict) -> tuple[Config, tuple, int]:
     """The configuration, effects and seed of a scene mapping, validated (everything a scene
     has besides its scatterers; rtsar.scene.files builds surface scenes from it)."""
@@ -304,6 +315,7 @@ def point_scene(
 
 
 __all__ = [
+    "recorded_scene",
     "Scene",
     "Targets",
     "scene_from_dict",

@@ -30,7 +30,7 @@ import numpy as np
 
 from .. import __version__
 from ..params import Config, config_from_dict
-from ..scene.model import Scene, scene_from_dict
+from ..scene.model import Scene, recorded_scene
 
 RECORDING_FORMAT = "rtsar-recording"
 IMAGE_FORMAT = "rtsar-image"
@@ -245,12 +245,7 @@ class Recording:
 
     def scene_object(self) -> Scene | None:
         """The recorded scene as an rtsar.scene.Scene (None when the recording has none)."""
-        if not self.scene:
-            return None
-        try:
-            return scene_from_dict(self.scene, name=self.scene.get("name", "scene"))
-        except (ValueError, TypeError) as exc:
-            raise ValueError(f"{self.path}: the recorded scene does not parse ({exc})") from None
+        return recorded_scene(self.scene, self.path)
 
     def close(self) -> None:
         self._file.close()

@@ -268,7 +268,6 @@ class SwathWorkers:
         self._done = [False] * len(self.columns)
         self._heard_at, self._ended_at = time.monotonic(), None
         self.lines_out = 0
-        self.lens_backend = ""
         setup = {"config": config.to_dict(), "lens_backend": lens_backend, "device": device}
         deadline = time.monotonic() + READY_TIMEOUT_S
         for (b0, b1), s in zip(self.columns, self._pushes, strict=True):
@@ -286,10 +285,6 @@ class SwathWorkers:
             frames = self._recv(deadline, "to start")
             if frames[0] == b"ready":
                 ready += 1
-                self.lens_backend = _json(frames[1])["lens"]
-
-    def endpoints(self) -> list[str]:
-        return self.shot_endpoints
 
     def send(self, first_pulse: int, samples: np.ndarray, zero: bool) -> None:
         """One block of pulses to every worker (waits while a worker is HWM blocks behind)."""

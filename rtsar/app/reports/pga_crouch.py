@@ -26,7 +26,7 @@ import numpy as np
 
 from ...analysis import analyse_point_target
 from ...ccd import make_correlator
-from ...ccd.base import design_mask
+from ...ccd.base import design_mask, line_azimuth_m
 from ...focus.pga import PGASettings, PGAStage, antenna_coherence, pga_batch
 from ...lens.base import compress_reference
 from ...lens.plan import make_plan
@@ -68,21 +68,20 @@ def focus(cfg, lines, start):
     plan, p = make_plan(cfg), cfg.processor
     ccd = make_correlator("fft", design_mask(cfg, plan.range_m), p.fft_length)
     img = np.concatenate([ccd.push(lines.astype(np.complex64)), ccd.flush()])
-    step = cfg.geometry.along_track_step_m
-    az = start + (np.arange(len(img)) + 0.5 * (p.aperture_pulses - 1)) * step
-    return img, az, plan.range_m
+    return img, line_azimuth_m(cfg, start, 0, len(img)), plan.range_m
 
 
-def metrics(cfg, lines, start, targets) -> np.ndarray:
-    """[point, (azimuth IRW m, PSLR dB, |peak|, azimuth m)]; search ±40 ρA (shifts are found)."""
+def metrics(cfg, lines, start, targets, chip=48, radius_m=None) -> np.ndarray:
+    """[point, (azimuth IRW m, PSLR dB, |peak|, azimuth m)] of targets (x, r, ...); search
+    ``radius_m`` (azimuth, range) around each, by default ±40 ρA (shifts are found)."""
     img, az, rg = focus(cfg, lines, start)
     out = []
-    for x, r, _ in targets:
-        radius = (40 * cfg.azimuth_resolution_m(r), 3 * cfg.waveform.range_resolution_m)
-        rep = analyse_point_target(img, az, rg, near_azimuth_m=x, near_range_m=r, chip=48,
+    for x, r, *_ in targets:
+        radius = radius_m or (40 * cfg.azimuth_resolution_m(r), 3 * cfg.waveform.range_resolution_m)
+        rep = analyse_point_target(img, az, rg, near_azimuth_m=x, near_range_m=r, chip=chip,
                                    search_radius_m=radius)  # fmt: skip
         out.append((rep.azimuth.irw_m, rep.azimuth.pslr_db, abs(rep.peak_value), rep.azimuth_m))
-    return np.array(out)
+    return np.array(out).reshape(-1, 4)
 
 
 def stream(cfg, lines, batch=64, settings=None):

@@ -26,32 +26,24 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 
 import numpy as np
 
-from ...analysis import analyse_point_target
-from ...focus.pga import PGAStage, pga_batch
+from ...focus.pga import pga_batch
 from ...lens.base import compress_reference
 from ...lens.plan import make_plan
 from ...phase import phasor
 from ...presets import preset
 from ...scene import Simulator, point_scene
 from . import pga as small
-from .pga_crouch import error_slope_shift_lines, focus
+from .pga_crouch import error_slope_shift_lines, metrics, stream
 
 
 def _measure(cfg, lines, start, targets, radius_cells):
-    img, az, rg = focus(cfg, lines, start)
     rho = cfg.azimuth_resolution_m()
     chip = max(48, int(8 * rho / cfg.geometry.along_track_step_m))
-    out = []
-    radius = (radius_cells * rho, 2 * (rg[1] - rg[0]))
-    for x, r in targets:
-        rep = analyse_point_target(img, az, rg, near_azimuth_m=x, near_range_m=r, chip=chip,
-                                   search_radius_m=radius)  # fmt: skip
-        out.append((rep.azimuth.irw_m, rep.azimuth.pslr_db, abs(rep.peak_value), rep.azimuth_m))
-    return np.array(out).reshape(-1, 4)
+    bin_m = np.diff(make_plan(cfg).range_m[:2])[0]
+    return metrics(cfg, lines, start, targets, chip, (radius_cells * rho, 2 * bin_m))
 
 
 def zhao_scene(seed: int | None, pulses: int = 640):
@@ -97,12 +89,7 @@ def case(name: str, seed: int | None) -> dict:
     cfg, targets, start, clean_pts, err_pts, err, truth = build(seed)
     d = cfg.geometry.along_track_step_m
     x = err.astype(np.complex64)
-    stage = PGAStage(cfg)
-    b = 64
-    t0 = time.perf_counter()
-    outs = [stage.process(x[i : i + b]) for i in range(0, len(x), b)] + [stage.flush()]
-    seconds = time.perf_counter() - t0
-    out = np.concatenate(outs)
+    out, stage, seconds = stream(cfg, x)
     ref_lines, phase, _ = pga_batch(cfg, x)
     ref = _measure(cfg, clean_pts, start, targets, radius)
     got = _measure(cfg, err_pts * phasor(-phase)[:, None], start, targets, radius)

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ...params import Config
-from ...scene.model import Scene, scene_from_dict
+from ...scene.model import Scene, recorded_scene
 
 
 @dataclass
@@ -41,12 +41,7 @@ class ForeignRecording:
             yield np.asarray(self.shots[i : i + size], np.complex64), aux
 
     def scene_object(self) -> Scene | None:
-        if not self.scene:
-            return None
-        try:
-            return scene_from_dict(self.scene, name=self.scene.get("name", "scene"))
-        except (ValueError, TypeError) as exc:
-            raise ValueError(f"{self.path}: the recorded scene does not parse ({exc})") from None
+        return recorded_scene(self.scene, self.path)
 
     def close(self) -> None:
         if self.closer is not None:

@@ -122,6 +122,11 @@ class Correlator(ABC):
         """Emit every line whose pulses have all arrived (nothing is ever held back after this)."""
         return self._no_lines()
 
+    def close(self) -> None:
+        """The stream is over: release what the correlator runs beside it (the nonuniform
+        correlator's thread); nothing for the others."""
+        return None
+
 
 def line_azimuth_m(
     cfg: Config, start_along_track_m: float, first_line: int, count: int

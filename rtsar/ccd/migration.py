@@ -224,6 +224,10 @@ class MigrationCorrelator(Correlator):
     def flush(self) -> np.ndarray:
         return self._sum([c.flush() for c in self.inner])
 
+    def close(self) -> None:
+        for c in self.inner:
+            c.close()
+
 
 class FFTMigrationCorrelator(FFTCorrelator):
     """(M2) by overlap-save, filtering each block's spectrum with every range tap (M3).

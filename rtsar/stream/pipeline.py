@@ -301,7 +301,7 @@ class Pipeline:
         finally:
             self.stats.busy_s["ccd"] = busy
             self.q_image.close()
-            getattr(self.engine.correlator, "close", lambda: None)()  # a thread of its own
+            self.engine.correlator.close()
 
     def _ccd_step(self, blocks: list[PulseBlock]) -> LineBlock | None:
         block = concat_blocks(blocks)

@@ -12,7 +12,7 @@ import pytest
 
 from rtsar.analysis import analyse_point_target
 from rtsar.app.reports.pga_crouch import PISTON, focus
-from rtsar.focus.pga import PGASettings, PGAStage, pga_batch, row_half_width
+from rtsar.focus.pga import PGASettings, PGAStage, pga_batch, remove_linear, row_half_width
 from rtsar.lens.base import compress_reference
 from rtsar.lens.plan import make_plan
 from rtsar.presets import preset
@@ -110,3 +110,34 @@ def test_stream_equals_batch(geometry):
     np.testing.assert_allclose(np.concatenate(phases), ref_phase, rtol=0, atol=1e-9)
     got = np.concatenate(outs)
     np.testing.assert_allclose(got, ref_lines, rtol=0, atol=2e-6 * np.abs(ref_lines).max())
+
+
+def test_rows_that_follow_the_walk_halve_the_noise_in_the_estimate():
+    """With receiver noise (-10 dB per sample) the 2w+1-bin rows carry 13 bins of noise: their
+    estimate misses the injected piston by 0.30 rad rms (slope removed).  Narrow rows that follow
+    each point's walk carry 3: measured 0.16 rad.  Bound: ≤ 0.2 rad and ≤ 0.7 × the wide rows'."""
+    cfg = preset("crouch-sal").with_processor(aperture_pulses=512, range_bins=64,
+                                              range_window="taylor")  # fmt: skip
+    cfg = replace(cfg, geometry=replace(cfg.geometry, along_track_step_m=40e-6))
+    plan = make_plan(cfg)
+    rm, d = plan.range_m, cfg.geometry.along_track_step_m
+    dr = rm[1] - rm[0]
+    effects = [("piston", {**PISTON, "random_walk_rad": 1.0, "seed": 5}),
+               ("noise", {"snr_db": -10.0})]  # fmt: skip
+    sc = point_scene(cfg, [0.0, 2e-3], [rm[32] + 0.3 * dr, rm[20] + 0.4 * dr], [1.0, 0.1],
+                     effects=effects, seed=3, start_along_track_m=-0.5 * PULSES * d,
+                     pulses=PULSES)  # fmt: skip
+    sim = Simulator(sc)
+    err = compress_reference(plan, sim.block(PULSES))
+    truth = sim.effects[0].truth(np.arange(PULSES))
+
+    def residual_rms(settings):
+        _, phase, reports = pga_batch(cfg, err, settings=settings)
+        r = np.unwrap(np.angle(np.exp(1j * (truth - phase))))
+        return float(np.std(remove_linear(r))), reports
+
+    narrow, reports = residual_rms(PGASettings())
+    wide, wide_reports = residual_rms(PGASettings(follow_walk=False))
+    assert all(r.estimated and r.walk_rows >= 1 for r in reports)
+    assert all(r.walk_rows == 0 for r in wide_reports)
+    assert narrow <= 0.2 and narrow <= 0.7 * wide, (narrow, wide)

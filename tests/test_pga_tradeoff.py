@@ -18,8 +18,9 @@ def scenes():
 
 def test_the_pga_rows_are_defined(scenes):
     assert set(scenes) == {"pga crouch-sal", "pga zhao-insal", "pga psaltis-jpl"}
-    for s in scenes.values():
-        assert [v.value for v in s.variants] == ["none", "pga"]
+    for key, s in scenes.items():
+        walk = ["pga:follow_walk=0"] if key == "pga crouch-sal" else []
+        assert [v.value for v in s.variants] == ["none", "pga", *walk]
         assert s.variants[1].corrections == ("pga",)
         assert s.effects[0][0] == "piston"
         assert s.min_pulses >= 3 * s.config.processor.aperture_pulses

@@ -225,6 +225,7 @@ def pga_scenes(quick: bool = False) -> list[TradeoffScene]:
     inside a 2N block.  ``pga zhao-insal``: N = 160, 64 bins.  ``pga psaltis-jpl``: N = 512,
     320 bins (quick 64).  None of these point scenes has clutter, so the Doppler
     anchor has nothing to measure and the error's own slope stays: the position error column.
+    crouch-sal also has ``pga:follow_walk=0`` (PGA without its walk-following second pass).
     """
     specs = [
         ("crouch-sal", 128 if quick else 2048, 64 if quick else 512),
@@ -234,12 +235,16 @@ def pga_scenes(quick: bool = False) -> list[TradeoffScene]:
     out = []
     for name, n, bins in specs:
         cfg = preset(name).with_processor(aperture_pulses=n, range_bins=bins, micro_batch=64)
+        # What PGA's walk-following second pass costs where points migrate (crouch-sal).
+        walk = ("pga:follow_walk=0",) if name == "crouch-sal" else ()
+        walk_variant = [Variant("corrections", w, corrections=(w,)) for w in walk]
         scene = make_scene(
             f"pga {name}",
             cfg,
             [
                 Variant("corrections", "none", default=True),
                 Variant("corrections", "pga", corrections=("pga",)),
+                *walk_variant,
             ],
             f"{name}, N = {n}, {bins} bins: piston error (Crouch size), no retro-reflector; PGA",
         )

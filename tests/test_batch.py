@@ -1,5 +1,7 @@
 """``rtsar batch``: the images of ``process``, bit for bit, from Dask workers; failures per file."""
 
+import os
+
 import h5py
 import numpy as np
 import pytest
@@ -96,3 +98,31 @@ def test_no_input_is_overwritten_and_earlier_images_are_not_inputs(recordings, t
     assert main(["batch", str(mix), "--out-dir", str(mix), "--workers", "1"]) == 0
     assert (mix / "r1-img.h5").is_file()
     assert batch.find_recordings([str(mix)]) == [(mix / "r1.h5").resolve()]
+
+
+def _die_and_count(counter: str):
+    """A task whose worker dies: it notes the attempt in ``counter``, then ends the process."""
+    import os
+
+    with open(counter, "a") as f:
+        f.write("x")
+    os._exit(3)
+
+
+def test_a_task_whose_worker_dies_is_tried_retries_plus_one_times(tmp_path):
+    """--retries counts the retries of a task whose worker died (Dask's KilledWorker), not
+    Dask's own default of 3 (``distributed.scheduler.allowed-failures``)."""
+    import cloudpickle
+
+    cloudpickle.register_pickle_by_value(__import__(__name__))
+    counter = tmp_path / "attempts"
+    rec, out = tmp_path / "r.h5", tmp_path / "r-img.h5"
+
+    def task(options, recording, output):
+        return _die_and_count(str(counter))
+
+    with open(os.devnull, "w") as quiet:
+        results = batch.run_batch([rec], [out], {}, workers=1, retries=1, stream=quiet, task=task)
+    assert [r.status for r in results] == ["failed"]
+    assert "KilledWorker" in results[0].message and "1 retries" in results[0].message
+    assert counter.read_text() == "xx"

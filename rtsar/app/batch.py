@@ -7,8 +7,9 @@ process's shared one (``rtsar.lens.cl_loader.default_queue``), created there and
 
 Failures are per file.  A file that ``process`` refuses (a malformed recording, a missing
 channel, an unwritable output) is reported with its one-line reason and not retried: the same
-input fails the same way.  A task whose worker died (killed, out of memory) is retried by Dask up
-to ``--retries`` times, then reported as failed.
+input fails the same way.  A task whose worker died (killed, out of memory) is retried up to
+``--retries`` times (on a LocalCluster; a ``--scheduler`` keeps its own allowed-failures), then
+reported as failed.
 """
 
 from __future__ import annotations
@@ -119,10 +120,16 @@ def process_one(options: dict, recording: str, output: str) -> FileResult:
     return FileResult(recording, output, "ok", seconds, summary[-1] if summary else "", worker)
 
 
-def start_client(workers: int, scheduler: str | None):
+def start_client(workers: int, scheduler: str | None, retries: int = 2):
     """A Dask client: on ``scheduler`` (``tcp://HOST:PORT``) or a LocalCluster of ``workers``
-    single-threaded processes (the lens and the correlator use their own threads)."""
+    single-threaded processes (the lens and the correlator use their own threads).
+
+    A task whose worker dies is retried by the scheduler's ``allowed-failures``, not by the
+    task's own retries: the LocalCluster's scheduler is given ``retries``; a cluster of one's own
+    keeps its setting (``distributed.scheduler.allowed-failures``, Dask's default 3).
+    """
     try:
+        import dask
         from distributed import Client, LocalCluster
     except ImportError as exc:
         raise RuntimeError(
@@ -130,13 +137,14 @@ def start_client(workers: int, scheduler: str | None):
         ) from exc
     if scheduler:
         return Client(scheduler, timeout="10s"), None
-    cluster = LocalCluster(
-        n_workers=workers,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=None,
-        silence_logs=40,  # logging.ERROR: Dask's own chatter would bury the progress line
-    )
+    with dask.config.set({"distributed.scheduler.allowed-failures": retries}):
+        cluster = LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=40,  # logging.ERROR: Dask's own chatter would bury the progress line
+        )
     return Client(cluster), cluster
 
 
@@ -148,16 +156,20 @@ def run_batch(
     scheduler: str | None = None,
     retries: int = 2,
     stream=None,
+    task=None,
 ) -> list[FileResult]:
-    """Process every recording on Dask; one FileResult per recording, in the input order."""
+    """Process every recording on Dask; one FileResult per recording, in the input order.
+
+    ``task(options, recording, output) -> FileResult`` runs each file (default ``process_one``;
+    the tests give one whose worker dies)."""
     from distributed import as_completed  # after start_client's clear error when missing
 
     stream = stream or sys.stderr
-    client, cluster = start_client(workers, scheduler)
+    client, cluster = start_client(workers, scheduler, retries)
     try:
         futures = {
             client.submit(
-                process_one,
+                task or process_one,
                 options,
                 str(rec),
                 str(out),

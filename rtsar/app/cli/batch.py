@@ -67,7 +67,9 @@ def add_parsers(sub) -> None:
         "--retries",
         type=int,
         default=2,
-        help="retries of a task whose worker died (default 2)",
+        help="retries of a file whose worker died (killed, out of memory) before it is "
+        "reported as failed (default 2; with --scheduler, that scheduler's own "
+        "distributed.scheduler.allowed-failures applies)",
     )
     add_process_options(s)
     s.set_defaults(func=cmd_batch)

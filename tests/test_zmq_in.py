@@ -80,6 +80,29 @@ def test_flat_stream_sliced_by_packet_len_with_gap_and_wrong_length(rng):
     assert src.counters["wrong_length"] == 1
 
 
+def test_guard_samples_between_packets_are_no_gap(rng):
+    """Packets of S samples every S + 4 items (a burst flowgraph's guard): 30 shots numbered
+    0…29 without a hole (item offset // S made a false gap every 4 shots, zero-filled as lost),
+    and a lost message still leaves its gap."""
+    period = S + 4
+    shots = _shots(rng, 30)
+    flat = np.zeros(30 * period, np.complex64)
+    for p in range(30):
+        flat[p * period : p * period + S] = shots[p]
+    tags = [(p * period, pmt_symbol("packet_len"), pmt_long(S)) for p in range(30)]
+    src = ZmqSource("tcp://127.0.0.1:1", S, item_rate_hz=1000.0, shot_rate_hz=50.0)
+    out = []
+    for a in range(0, 30 * period, 50):
+        if 200 <= a < 300:  # lost: packets 10…14 (11, 12, 13 whole)
+            continue
+        mine = [t for t in tags if a <= t[0] < a + 50]
+        out += src.decode(tag_header(a, mine) + flat[a : a + 50].tobytes())
+    seqs = [s for s, _, _ in out]
+    assert seqs == [*range(10), *range(15, 30)]
+    for seq, _, samples in out:
+        np.testing.assert_array_equal(samples, shots[seq])
+
+
 def test_vector_items_over_a_socket(rng):
     shots = _shots(rng, 5)
     ctx = zmq.Context()

@@ -8,9 +8,12 @@ Two layouts, told apart by the message length:
   S: counted in ``wrong_length``, dropped).
 
 With pass tags, each message begins with GNU Radio's tag header (rtsar.sources.gr_tags): its
-item offset numbers the shots (seq = the first sample's offset // S, or the vector item's
-offset), so a message lost on the way becomes a gap that ingest zero-fills, as for serial
-frames; ``rx_time`` tags give the instrument clock (later shots: rx_time + items / rate).
+item offset numbers the shots (vector items: the item's offset; a flat stream: the packets'
+starts, one shot per packet period, the smallest spacing of starts seen, so guard samples
+between packets are no gap: seq = the previous packet's + round(Δoffset / period), the first
+packet's offset // S), so a message lost on the way becomes a gap
+that ingest zero-fills, as for serial frames; ``rx_time`` tags give the instrument clock
+(later shots: rx_time + items / rate).
 Without tags the shots are numbered as they come and timed by arrival.  A message that does not
 parse is counted (``bad_messages``), never raised.  The socket connects to ``endpoint`` (GNU
 Radio's sink binds); a multipart message (a sink with a topic key) uses its last part.
@@ -63,6 +66,9 @@ class ZmqSource(Source):
         self._pending = np.zeros(0, np.complex64)  # flat stream: samples of an unfinished shot
         self._pending_offset = 0
         self._pending_len: int | None = None
+        self._pending_seq = 0
+        self._last_start: tuple[int, int] | None = None  # (item offset, seq) of the last packet
+        self._period: int | None = None  # items from one packet start to the next
         self._flat = False  # a packet_len tag was seen: a flat stream sliced by tags
         self._clock: tuple[int, float, bool] | None = None  # (item offset, rx_time, flat?)
         self.stop_reason = ""
@@ -109,6 +115,19 @@ class ZmqSource(Source):
         self._next_seq = first + len(shots)
         return [(first + i, self._time(first + i, False), s) for i, s in enumerate(shots)]
 
+    def _packet_seq(self, offset: int) -> int:
+        """The shot number of a packet starting at item ``offset`` (module docstring)."""
+        if self._last_start is None:
+            seq = offset // self.samples
+        else:
+            last, last_seq = self._last_start
+            step = offset - last
+            if step > 0 and (self._period is None or step < self._period):
+                self._period = step
+            seq = last_seq + max(1, round(step / self._period)) if step > 0 else last_seq + 1
+        self._last_start = (offset, seq)
+        return seq
+
     def _slice(self, offset: int, items: np.ndarray, packet) -> list:
         """Flat stream: cut the items at the packet_len tags into shots (module docstring)."""
         out = []
@@ -117,12 +136,13 @@ class ZmqSource(Source):
             self.counters["partial_samples"] += len(self._pending)
             self._pending, self._pending_len = np.zeros(0, np.complex64), None
         starts = {t.offset: t.value for t in packet if offset <= t.offset < offset + len(items)}
-        bounds = [offset, *sorted(starts), offset + len(items)]
+        bounds = sorted({offset, *starts, offset + len(items)})
         for a, b in zip(bounds[:-1], bounds[1:], strict=True):
             seg = items[a - offset : b - offset]
             if a in starts:  # a packet begins: one still unfinished is cut short
                 self.counters["partial_samples"] += len(self._pending)
                 self._pending, self._pending_offset, self._pending_len = seg, a, starts[a]
+                self._pending_seq = self._packet_seq(a)
             elif self._pending_len is None:  # samples outside any packet
                 self.counters["partial_samples"] += len(seg)
                 continue
@@ -131,9 +151,8 @@ class ZmqSource(Source):
             if self._pending_len is not None and len(self._pending) >= self._pending_len:
                 n = self._pending_len
                 if n == self.samples:
-                    seq = self._pending_offset // self.samples
                     t = self._time(self._pending_offset, True)
-                    out.append((seq, t, self._pending[:n]))
+                    out.append((self._pending_seq, t, self._pending[:n]))
                 else:
                     self.counters["wrong_length"] += 1
                 self.counters["partial_samples"] += len(self._pending) - n

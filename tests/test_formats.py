@@ -151,11 +151,46 @@ def test_sigmf_round_trip_bit_identical_with_channels(tmp_path):
     assert main(["process", str(rec_path), "-o", str(a), "--lens", "numpy"]) == 0
     assert main(["process", str(base) + ".sigmf-meta", "-o", str(b), "--lens", "numpy"]) == 0
     np.testing.assert_array_equal(read_image(a)[0], read_image(b)[0])
-    # From a cold review: a SigMF recording exported onto itself was truncated to 0 bytes.
-    data = tmp_path / "out.sigmf-data"
-    size = data.stat().st_size
-    assert main(["export", str(base) + ".sigmf-meta", "--sigmf", str(base)]) == 2
-    assert data.stat().st_size == size
+    # From a cold review: a SigMF recording exported onto itself was truncated to 0 bytes (its
+    # channel files too). Files are now renamed into place when complete: the same bytes.
+    before = {f.name: f.read_bytes() for f in sorted(tmp_path.glob("out*.sigmf-data"))}
+    assert len(before) == 2  # the shots and the reference interferometer's channel
+    assert main(["export", str(base) + ".sigmf-meta", "--sigmf", str(base)]) == 0
+    assert {f.name: f.read_bytes() for f in sorted(tmp_path.glob("out*.sigmf-data"))} == before
+    assert not list(tmp_path.glob(".*partial*"))
+
+
+@pytest.mark.parametrize("kind", ["cphd", "sigmf", "sicd"])
+def test_an_export_that_dies_leaves_the_old_file_and_no_partial_one(
+    pulsed, tmp_path, kind, monkeypatch, capsys
+):
+    """A run that dies in the middle of writing (here: the writer raises) leaves whatever was at
+    the destination as it was, and nothing half-written under any name."""
+    from rtsar.sinks.exports import cphd, sicd, sigmf_export
+
+    if kind == "sicd":
+        src = tmp_path / "img.h5"
+        assert main(["process", str(pulsed), "-o", str(src), "--lens", "numpy"]) == 0
+        dest, args = tmp_path / "old.nitf", ["--sicd"]
+        monkeypatch.setattr(sicd.SICDWriter, "write_chip", _boom)
+    else:
+        src = pulsed
+        dest = tmp_path / ("old.cphd" if kind == "cphd" else "old.sigmf-data")
+        args = [f"--{kind}"]
+        if kind == "cphd":
+            monkeypatch.setattr(cphd.skcphd.Writer, "write_pvp", _boom)
+        else:
+            monkeypatch.setattr(sigmf_export.SigMFFile, "dump", _boom)
+    dest.write_bytes(b"the user's earlier file")
+    out = dest if kind != "sigmf" else tmp_path / "old"
+    assert main(["export", str(src), *args, str(out)]) != 0
+    assert "the writer died" in capsys.readouterr().err
+    assert dest.read_bytes() == b"the user's earlier file"
+    assert not list(tmp_path.glob(".*partial*"))
+
+
+def _boom(*args, **kwargs):
+    raise RuntimeError("the writer died")
 
 
 def test_sicd_of_an_image_opens_in_sarpy(pulsed, tmp_path):

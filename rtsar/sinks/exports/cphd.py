@@ -29,6 +29,7 @@ from ...sources.formats.cphd_reader import srp_delay_s
 from ...sources.formats.geometry import LocalFrame, platform_height_m, platform_positions_m
 from ...sources.formats.phase_history import fx_mapping, shots_to_fx
 from ...sources.formats.requirements import require_formats
+from ..io import replace_when_complete
 
 try:
     import lxml.etree as etree
@@ -296,7 +297,8 @@ def write_cphd(rec, path: str | Path, frame: LocalFrame | None = None) -> dict:
     for i in range(0, rec.pulses, 1024):
         signal[i : i + 1024] = shots_to_fx(m, rec.shots[i : i + 1024], dtau[i : i + 1024])
     meta = skcphd.Metadata(xmltree=tree)
-    with open(path, "wb") as f, skcphd.Writer(f, meta) as w:
+    # Written beside ``path`` and renamed when complete: a run that dies leaves no partial CPHD.
+    with replace_when_complete(path) as tmp, open(tmp, "wb") as f, skcphd.Writer(f, meta) as w:
         w.write_signal(CHANNEL, signal)
         w.write_pvp(CHANNEL, pvps)
     return {"vectors": rec.pulses, "samples": m.num_samples, "domain": "FX"}

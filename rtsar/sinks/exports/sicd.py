@@ -26,6 +26,7 @@ from ...sources.formats.geometry import LocalFrame, platform_height_m
 from ...sources.formats.requirements import require_formats
 from ...windows import window as taper
 from ..image_file import read_image
+from ..io import replace_when_complete
 
 try:
     from sarpy.io.complex.sicd import SICDWriter
@@ -199,6 +200,11 @@ def write_sicd(image_path: str | Path, path: str | Path, frame: LocalFrame | Non
     sicd = sicd_structure(
         image.shape, azimuth_m, range_m, cfg, frame or LocalFrame(), Path(path).stem
     )
-    with SICDWriter(str(path), sicd, check_existence=False) as w:
+    # Written beside ``path`` and renamed when complete: a run that dies leaves no partial file.
+    with (
+        replace_when_complete(path) as tmp,
+        open(tmp, "wb") as f,
+        SICDWriter(f, sicd, check_existence=False) as w,
+    ):
         w.write_chip(np.ascontiguousarray(image.T.astype(np.complex64)), start_indices=(0, 0))
     return {"version": sicd.version_required(), "rows": image.shape[1], "cols": image.shape[0]}

@@ -15,6 +15,7 @@ there by name and file.  rtsar.sources.formats.sigmf_reader reads all of it back
 
 from __future__ import annotations
 
+import contextlib
 import json
 from pathlib import Path
 
@@ -23,6 +24,7 @@ import numpy as np
 from ... import __version__
 from ...sources.formats.requirements import require_formats
 from ...sources.formats.sigmf_reader import RTSAR_EXTENSION, sigmf_base
+from ..io import replace_when_complete
 
 try:
     from sigmf import SigMFFile
@@ -44,13 +46,19 @@ def _chirp(cfg) -> dict:
     }
 
 
-def _write_channel(base: Path, shots, sample_rate_hz, global_extra, annotations, rec) -> None:
-    data = base.with_name(base.name + ".sigmf-data")
+def _files(base: Path) -> tuple[Path, Path]:
+    """(data, metadata) file names of a SigMF recording named ``base``."""
+    return base.with_name(base.name + ".sigmf-data"), base.with_name(base.name + ".sigmf-meta")
+
+
+def _write_channel(files, shots, sample_rate_hz, global_extra, annotations, rec) -> None:
+    """Write one SigMF pair to ``files`` = (data, metadata) paths (the temporary ones)."""
+    data, meta_path = files
     with open(data, "wb") as f:
         for i in range(0, rec.pulses, BLOCK):
             np.asarray(shots[i : i + BLOCK], "<c8").tofile(f)
     meta = SigMFFile(
-        data_file=str(data),
+        data_file=None,  # written by us beside its final name: none to check or name
         global_info={
             "core:datatype": "cf32_le",
             "core:sample_rate": float(sample_rate_hz),
@@ -70,7 +78,10 @@ def _write_channel(base: Path, shots, sample_rate_hz, global_extra, annotations,
     meta.add_capture(0, metadata=capture)
     for start, length, md in annotations:
         meta.add_annotation(start, length, md)
-    meta.tofile(str(base.with_name(base.name + ".sigmf-meta")), overwrite=True)
+    meta.validate()
+    with open(meta_path, "w") as fp:
+        meta.dump(fp, pretty=True)
+        fp.write("\n")
 
 
 def write_sigmf(rec, path: str | Path) -> dict:
@@ -78,12 +89,20 @@ def write_sigmf(rec, path: str | Path) -> dict:
     or a name ending in .sigmf-meta/.sigmf-data); returns the files written."""
     require_formats(SigMFFile, "SigMF export")
     base = sigmf_base(Path(path)) or Path(path)
-    source = Path(rec.path)
-    source_base = sigmf_base(source)
-    if source_base is not None and base.resolve() == source_base.resolve():
-        # The data file is written in place: exporting a SigMF recording onto itself would
-        # truncate the samples it is reading.
-        raise ValueError(f"{path}: the export would overwrite its own input {source}")
+    with contextlib.ExitStack() as stack:
+        # Every file is written beside its name and all are renamed into place when the last is
+        # complete (the data files first, then the metadata that describes them): a run that
+        # dies leaves the files that were there and no partial one, and an export of a SigMF
+        # recording onto itself reads its samples whole (an in-place write truncated them).
+        names = [_files(base.with_name(f"{base.name}.{n}")) for n in rec.channels] + [_files(base)]
+        order = [m for _, m in names] + [d for d, _ in names]  # renamed in reverse: data first
+        tmp = {p: stack.enter_context(replace_when_complete(p)) for p in order}
+        files = [(tmp[d], tmp[m]) for d, m in names]
+        return _write_all(rec, base, files)
+
+
+def _write_all(rec, base: Path, files: list) -> dict:
+    """The channels' pairs, then the shots' (``files``: their temporary paths, in that order)."""
     cfg = rec.config
     s = cfg.waveform.samples_per_shot
     index = np.asarray(rec.pulse_index, np.int64)
@@ -91,12 +110,12 @@ def write_sigmf(rec, path: str | Path) -> dict:
     along = rec.start_along_track_m + cfg.geometry.along_track_step_m * np.arange(rec.pulses)
     position = rec.position_m
     channels = []
-    for name, ds in rec.channels.items():
+    for (name, ds), pair in zip(rec.channels.items(), files, strict=False):
         width = ds.shape[1]
         cbase = base.with_name(f"{base.name}.{name}")
         rate = cfg.waveform.sample_rate_hz * width / s
         _write_channel(
-            cbase,
+            pair,
             ds,
             rate,
             {"rtsar:channel": name, "rtsar:samples_per_shot": int(width)},
@@ -115,7 +134,7 @@ def write_sigmf(rec, path: str | Path) -> dict:
             md["rtsar:position_m"] = [float(v) for v in position[p]]
         annotations.append((p * s, s, md))
     _write_channel(
-        base,
+        files[-1],
         rec.shots,
         cfg.waveform.sample_rate_hz,
         {

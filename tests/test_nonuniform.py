@@ -126,7 +126,7 @@ def test_a_failing_tail_is_reported_not_hung(rng):
     def broken(lines):
         raise MemoryError("no room")
 
-    corr._tail.correlators[0].push = broken
+    corr._tail._run = broken
     with pytest.raises(RuntimeError, match="tail thread failed: no room"):
         corr.push(crandn(rng, 100, 3, dtype=np.complex64))
 

@@ -28,6 +28,7 @@ sizes or on the thread's timing (tested bit for bit).
 from __future__ import annotations
 
 import atexit
+import math
 import threading
 import weakref
 from collections import deque
@@ -35,17 +36,74 @@ from collections import deque
 import numba
 import numpy as np
 
+from . import tiled
 from .base import Correlator
-from .partitioned import PartitionedCorrelator
 
 
-def plan_segments(n: int, head_lines: int, max_block_lines: int) -> list[tuple[int, int, int]]:
-    """(first tap D, taps T, block B) of each segment, head first; Σ T = n and D_s ≥ B_s - 1."""
+def transform_cost(block: int) -> float:
+    """A block size's pair of transforms (with the window load and the output) per line, in
+    units of one partition's multiply-adds per line: 2 + 0.6·log2(2B), fitted to the kernels of
+    rtsar.ccd.tiled on the 2-core development machine (B = 16 … 256 at 1200 range cells: one
+    partition 2.5 µs a line, the transforms 11.6 / 11.7 / 12.7 / 15.3 / 18.1 µs)."""
+    return 2.0 + 0.6 * math.log2(2 * block)
+
+
+def _check_plan(n: int, head_lines: int, max_block_lines: int) -> None:
     for name, value in (("head_lines", head_lines), ("max_block_lines", max_block_lines)):
         if not (isinstance(value, int) and value >= 1 and not value & (value - 1)):
             raise ValueError(f"{name} must be a power of two, got {value!r}")
     if head_lines > n:
         raise ValueError(f"head_lines {head_lines} exceeds the aperture N = {n}")
+
+
+def _segments_for(n: int, blocks: list[int]) -> list[tuple[int, int, int]] | None:
+    """The segments with these block sizes, each but the last holding the fewest partitions
+    that let the next block start late enough (D ≥ B); None where the taps run out first."""
+    segments, first = [], 0
+    for s, block in enumerate(blocks):
+        if s + 1 == len(blocks):
+            return [*segments, (first, n - first, block)]
+        parts = max(1, -(-(blocks[s + 1] - first) // block))
+        if first + parts * block >= n:
+            return None
+        segments.append((first, parts * block, block))
+        first += parts * block
+    return None
+
+
+def plan_segments(
+    n: int, head_lines: int, max_block_lines: int, rule: str = "optimal"
+) -> list[tuple[int, int, int]]:
+    """(first tap D, taps T, block B) of each segment, head first; Σ T = n and D_s ≥ B_s.
+
+    ``rule="optimal"`` (Garcia 2002): of every increasing sequence of block sizes L < B_1 < …
+    ≤ ``max_block_lines`` (powers of two), each segment holding the fewest partitions that
+    let the next one start, the one with the least cost per line, Σ_s transform_cost(B_s) +
+    partitions_s (fewer segments on a tie).  ``rule="doubling"`` (Gardner 1995): 2 partitions
+    of L, then 2 of each size 2L, 4L, … up to ``max_block_lines``, the last taking the rest.
+    """
+    _check_plan(n, head_lines, max_block_lines)
+    if rule == "doubling":
+        return _doubling(n, head_lines, max_block_lines)
+    if rule != "optimal":
+        raise ValueError(f"rule must be 'optimal' or 'doubling', got {rule!r}")
+    sizes = []
+    while head_lines << (len(sizes) + 1) <= min(max_block_lines, n):
+        sizes.append(head_lines << (len(sizes) + 1))
+    best, best_key = [(0, n, head_lines)], None
+    for chosen in range(1 << len(sizes)):
+        blocks = [head_lines] + [b for i, b in enumerate(sizes) if chosen >> i & 1]
+        segments = _segments_for(n, blocks)
+        if segments is None:
+            continue
+        cost = sum(transform_cost(b) + -(-t // b) for _, t, b in segments)
+        key = (round(cost, 9), len(segments))
+        if best_key is None or key < best_key:
+            best, best_key = segments, key
+    return best
+
+
+def _doubling(n: int, head_lines: int, max_block_lines: int) -> list[tuple[int, int, int]]:
     segments, first, block = [], 0, head_lines
     while first < n:
         remaining = n - first
@@ -59,14 +117,74 @@ def plan_segments(n: int, head_lines: int, max_block_lines: int) -> list[tuple[i
     return segments
 
 
-class _Tail(threading.Thread):
-    """The tail segments, fed pushes in order on their own thread; outputs kept per segment."""
+class _Group:
+    """Segments computed together (the head, or the tail): their spectra, delay lines, scratch."""
 
-    def __init__(self, correlators: list[PartitionedCorrelator], threaded: bool):
+    def __init__(self, h: np.ndarray, segments, tiles: int, tile: int, real, tw):
+        spectra, segs, offset = [], [], 0
+        for d, t, b in segments:
+            hr, hi = tiled.tile_spectra(h[d : d + t], b, tile, real)
+            spectra.append((hr.ravel(), hi.ravel()))
+            segs.append((offset, 2 * b, hr.shape[2], d))
+            offset += hr.size
+        self.blocks = [b for _, _, b in segments]
+        h_re, h_im = (np.concatenate([sp[i] for sp in spectra]) for i in (0, 1))
+        width = 2 * max(self.blocks)
+        self.arrays = (
+            np.array(segs, np.int64),
+            h_re,
+            h_im,
+            np.zeros_like(h_re),  # the delay lines, same layout
+            np.zeros_like(h_im),
+            *tw,
+            *(np.zeros((tiles, width, tile), real) for _ in range(4)),
+        )
+        self.done = [0] * len(segments)  # blocks computed per segment
+
+    def run(self, kernel, events, valid_end: int, ring, out, assign: bool) -> None:
+        """``kernel`` (tiled.run_blocks or its serial twin) on these segments' blocks."""
+        segs, h_re, h_im, d_re, d_im, tw_re, tw_im, x_re, x_im, y_re, y_im = self.arrays
+        kernel(
+            events,
+            valid_end,
+            segs,
+            *ring,
+            h_re,
+            h_im,
+            d_re,
+            d_im,
+            tw_re,
+            tw_im,
+            x_re,
+            x_im,
+            y_re,
+            y_im,
+            *out,
+            assign,
+        )
+
+    def events(self, end: int, limit: int | None = None) -> np.ndarray:
+        """(segment, block) of the blocks complete at ``end`` pulses (and, with ``limit``,
+        completing at most at pulse ``limit``), ordered by the pulse that completes them, then
+        segment: every stream computes the same blocks in the same order (bit-exact sums)."""
+        found = []
+        for s, b in enumerate(self.blocks):
+            last = min(end, end if limit is None else limit) // b
+            found += [((k + 1) * b, s, k) for k in range(self.done[s], last)]
+            self.done[s] = max(self.done[s], last)
+        found.sort()
+        return np.array([(s, k) for _, s, k in found], np.int64).reshape(-1, 2)
+
+
+class _Tail(threading.Thread):
+    """The tail segments, computed chunk by chunk in order on their own thread: ``progress``
+    is the pulse count up to which every tail block is in the accumulation ring."""
+
+    def __init__(self, run, threaded: bool):
         super().__init__(name="rtsar-ccd-tail", daemon=True)
-        self.correlators = correlators
-        self.outputs = [deque() for _ in correlators]  # per segment: arrays of lines, in order
-        self.lines_ready = [0] * len(correlators)  # lines each segment has produced
+        self._run = run  # run(events): the blocks into the accumulation ring
+        self.group: _Group | None = None
+        self.progress = 0
         self.error: BaseException | None = None
         self._jobs: deque = deque()
         self._cond = threading.Condition()
@@ -75,25 +193,26 @@ class _Tail(threading.Thread):
             self.start()
             _LIVE.add(self)
 
-    def submit(self, lines: np.ndarray | None) -> None:
-        """Push ``lines`` into every tail segment (None: flush them)."""
+    def submit(self, end: int, urgent: int) -> None:
+        """Compute the blocks complete at ``end`` pulses, those completing by ``urgent`` first."""
         if not self._threaded:
-            self._work(lines)
+            self._work((end, urgent))
             return
         if not self.is_alive() and self.error is None:
             raise RuntimeError("the nonuniform correlator was closed: no more lines")
         with self._cond:
-            self._jobs.append(lines)
+            self._jobs.append((end, urgent))
             self._cond.notify_all()
 
-    def _work(self, lines) -> None:
-        for s, corr in enumerate(self.correlators):
-            out = corr.flush() if lines is None else corr.push(lines)
-            if len(out):
-                with self._cond:
-                    self.outputs[s].append(out)
-                    self.lines_ready[s] += len(out)
-                    self._cond.notify_all()
+    def _work(self, job) -> None:
+        end, urgent = job
+        for limit in (urgent, end):
+            events = self.group.events(end, limit)
+            if len(events):
+                self._run(events)
+            with self._cond:
+                self.progress = max(self.progress, limit)
+                self._cond.notify_all()
 
     def run(self) -> None:  # pragma: no cover - runs on the worker thread (covered via push)
         while True:
@@ -114,32 +233,15 @@ class _Tail(threading.Thread):
                 self._jobs.popleft()
                 self._cond.notify_all()
 
-    def wait_for(self, needed: list[int]) -> None:
-        """Block until segment s has produced ``needed[s]`` lines (or the thread failed)."""
+    def wait_for(self, pulses: int) -> None:
+        """Block until every tail block completing by pulse count ``pulses`` is in the ring."""
+        if self.progress >= pulses and self.error is None:
+            return
         with self._cond:
-            while self.error is None and any(
-                r < w for r, w in zip(self.lines_ready, needed, strict=True)
-            ):
+            while self.error is None and self.progress < pulses:
                 self._cond.wait()
             if self.error is not None:
                 raise RuntimeError(f"the CCD's tail thread failed: {self.error}") from self.error
-
-    def take(self, s: int, skip: int, count: int) -> np.ndarray:
-        """Drop ``skip`` lines of segment s, then remove and return the next ``count``."""
-        with self._cond:
-            queue = self.outputs[s]
-            parts, need = [], skip + count
-            while need:
-                head = queue[0]
-                if len(head) <= need:
-                    parts.append(queue.popleft())
-                    need -= len(head)
-                else:
-                    parts.append(head[:need])
-                    queue[0] = head[need:]
-                    need = 0
-        lines = parts[0] if len(parts) == 1 else np.concatenate(parts)
-        return lines[skip:]
 
     def stop(self, join_s: float = 0.0) -> None:
         """End the thread after the jobs before; wait up to ``join_s`` for it to exit."""
@@ -171,6 +273,8 @@ class NonUniformCorrelator(Correlator):
     kernels, i.e. not "workqueue") runs the tail segments on their own thread.
     """
 
+    CHUNK = 128  # pushes are computed up to this many lines at a time
+
     def __init__(
         self,
         mask: np.ndarray,
@@ -178,67 +282,115 @@ class NonUniformCorrelator(Correlator):
         max_block_lines: int = 128,
         precision: str = "complex64",
         threaded: bool | None = None,
+        rule: str = "doubling",
     ):
         super().__init__(mask, precision)
-        n = self.aperture
+        n, bins = self.aperture, self.range_bins
         self.block_lines = head_lines
         largest = 1 << (n.bit_length() - 1)  # the largest power of two <= N
-        self.segments = plan_segments(n, head_lines, min(max_block_lines, largest))
-        mask = np.asarray(mask)
-        parts = [
-            PartitionedCorrelator(mask[n - d - t : n - d], b, precision)
-            for d, t, b in self.segments
-        ]
-        self.partitions = sum(c.partitions for c in parts)
-        self._head = parts[0]
-        # Full line j takes segment s's line j + skip_s, skip_s = N - D_s - T_s: each segment's
-        # first skip_s lines are dropped.
-        self._skip = [n - d - t for d, t, _ in self.segments]
+        self.segments = plan_segments(n, head_lines, min(max_block_lines, largest), rule)
+        self.partitions = sum(-(-t // b) for _, t, b in self.segments)
+        real = np.float64 if self.dtype == np.complex128 else np.float32
+        tile = tiled.TILE_COLUMNS
+        tiles = -(-bins // tile)
+        widest = max(b for _, _, b in self.segments)
+        tw = tiled.twiddles(2 * widest, real)
+        h = np.asarray(mask, dtype=np.complex128)[::-1]  # h[q] = mask[N-1-q], float64 formed
+        self._head = _Group(h, self.segments[:1], tiles, tile, real, tw)
+        tail = _Group(h, self.segments[1:], tiles, tile, real, tw) if self.segments[1:] else None
+        # Rings indexed by pulse: the input lines (2 × the widest block plus a chunk behind
+        # the newest pulse) and the full output's sums (N + a chunk + a head block ahead).
+        rows = 1 << (n + 2 * widest + 2 * self.CHUNK + 2 * head_lines).bit_length()
+        self._hist = (np.zeros((tiles, rows, tile), real), np.zeros((tiles, rows, tile), real))
+        self._acc = (np.zeros((tiles, rows, tile), real), np.zeros((tiles, rows, tile), real))
+        self._head_out = (np.zeros((tiles, rows, tile), real), np.zeros((tiles, rows, tile), real))
         if threaded is None:
-            try:  # known once a parallel kernel ran (the segments' constructors ran theirs)
+            try:  # known once a parallel kernel ran
+                empty = np.zeros((0, 2 * bins), real)
+                tiled.emit_lines(*self._acc, *self._head_out, 0, 0, 0, empty)
                 threaded = numba.threading_layer() != "workqueue"
             except ValueError:  # pragma: no cover - no parallel kernel has run
                 threaded = False
-        self.threaded = bool(threaded) and len(parts) > 1
-        self._tail = _Tail(parts[1:], self.threaded)
-        self._tail_skipped = [0] * (len(parts) - 1)
-        self._head_skipped = 0
+        self.threaded = bool(threaded) and tail is not None
+        self._tail = _Tail(self._run_tail, self.threaded)
+        self._tail.group = tail
+        self._flushed = 0  # lines of the pending head block that flush() has emitted
+        # Compile (or load from numba's cache) the kernels and touch every buffer now.
+        self._warm()
 
-    def _combine(self, head: np.ndarray) -> np.ndarray:
-        """The full lines for the head segment's new lines ``head`` (segment-0 line numbers)."""
-        if len(head) == 0:
-            return self._no_lines()
-        # Full lines first..first+len-1, first = head lines given so far less the skipped ones.
-        skip0 = self._skip[0] - self._head_skipped
-        if skip0 >= len(head):
-            self._head_skipped += len(head)
-            return self._no_lines()
-        if skip0 > 0:
-            self._head_skipped += skip0
-            head = head[skip0:]
-        first = self.lines_out
-        count = len(head)
-        needed = [first + count + k for k in self._skip[1:]]
-        self._tail.wait_for(needed)
-        out = np.array(head, dtype=self.dtype, copy=True)
-        for s in range(len(self._skip) - 1):  # a fixed order: the same sums whatever the timing
-            skip = self._skip[s + 1] - self._tail_skipped[s]  # nonzero on the first lines only
-            out += self._tail.take(s, skip, count)
-            self._tail_skipped[s] += skip
-        self.lines_out += count
+    def _warm(self) -> None:
+        none = np.zeros((0, 2), np.int64)
+        run = tiled.run_blocks_serial if self.threaded else tiled.run_blocks
+        for group, out, assign, kernel in (
+            (self._head, self._head_out, True, tiled.run_blocks),
+            (self._tail.group, self._acc, False, run),
+        ):
+            if group is not None:
+                group.run(kernel, none, 0, self._hist, out, assign)
+        tiled.store_lines(self._no_lines(), *self._hist, 0)
+
+    def _run_tail(self, events: np.ndarray) -> None:
+        run = tiled.run_blocks_serial if self.threaded else tiled.run_blocks
+        self._tail.group.run(run, events, 1 << 62, self._hist, self._acc, False)
+
+    def _needed(self, last_pulse: int) -> int:
+        """Pulse count by which every tail block that serves lines ≤ ``last_pulse`` is done."""
+        need = 0
+        for d, _, b in self.segments[1:]:
+            if last_pulse >= d:
+                need = max(need, ((last_pulse - d) // b + 1) * b)
+        return need
+
+    def _lines_out(self, first: int, count: int, skip: int) -> np.ndarray:
+        """Full lines for pulses first+skip .. first+count-1 (acc + head); their rows freed."""
+        # Lines completing before the N-th pulse saw a partial aperture: not emitted.
+        skip = min(count, max(skip, self.aperture - 1 - first))
+        self._tail.wait_for(self._needed(first + count - 1))
+        out = np.empty((count - skip, self.range_bins), self.dtype)
+        tiled.emit_lines(*self._acc, *self._head_out, first, count, skip, out.view(out.real.dtype))
+        self.lines_out += len(out)
         return out
 
     def push(self, lines: np.ndarray) -> np.ndarray:
         lines = self._check(lines)
-        self.pulses_in += len(lines)
-        # The tail works while the head is computed; on its thread it reads a copy (the caller
-        # may reuse its buffer once push returns).
-        self._tail.submit(lines.copy() if self.threaded else lines)
-        return self._combine(self._head.push(lines))
+        lb, rows = self.block_lines, self._hist[0].shape[1]
+        widest = 2 * max(b for _, _, b in self.segments)
+        outs = []
+        for i in range(0, len(lines), self.CHUNK):
+            chunk = lines[i : i + self.CHUNK]
+            start, end = self.pulses_in, self.pulses_in + len(chunk)
+            if self._tail.group is not None:
+                # The tail may still read the rows this chunk overwrites: wait (rarely).
+                self._tail.wait_for(end - rows + widest)
+            tiled.store_lines(chunk, *self._hist, start % rows)
+            self.pulses_in = end
+            done, blocks = start // lb, end // lb
+            if self._tail.group is not None:
+                self._tail.submit(end, self._needed(blocks * lb - 1))
+            if blocks > done:
+                events = self._head.events(end)
+                self._head.run(tiled.run_blocks, events, end, self._hist, self._head_out, True)
+                outs.append(self._lines_out(done * lb, (blocks - done) * lb, self._flushed))
+                self._flushed = 0
+        if len(outs) == 1:
+            return outs[0]
+        return np.concatenate(outs) if outs else self._no_lines()
 
     def flush(self) -> np.ndarray:
-        self._tail.submit(None)
-        return self._combine(self._head.flush())
+        # The filter is causal (line p needs pulses ≤ p), so the head's partial block,
+        # zero-padded, gives its lines exactly; the tail's parts of them are complete already
+        # (each tail block ends before the lines it serves).  Nothing is committed: the head's
+        # spectrum lands in the delay-line slot that the complete block will overwrite.
+        lb = self.block_lines
+        first = self.pulses_in // lb * lb
+        pending = self.pulses_in - first
+        if pending == self._flushed:
+            return self._no_lines()
+        events = np.array([[0, first // lb]], np.int64)
+        self._head.run(tiled.run_blocks, events, self.pulses_in, self._hist, self._head_out, True)
+        out = self._lines_out(first, pending, self._flushed)
+        self._flushed = pending
+        return out
 
     def close(self) -> None:
         """End the tail thread and wait for it (also done, without the wait, when the correlator

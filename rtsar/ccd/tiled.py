@@ -1,0 +1,363 @@
+"""Overlap-save blocks along azimuth on tiles of range columns, in split real/imaginary layout.
+
+The kernels of rtsar.ccd.nonuniform: every array is [tile, row, column-in-tile] with the
+real and imaginary parts in separate arrays, so every operation runs over C contiguous columns
+(one SIMD loop) and no transform needs a transpose.  A block of an overlap-save segment with
+block B and P partitions (Gardner 1995; the notation of rtsar.ccd.partitioned):
+
+1. the window of 2B lines [block k-1, block k] is loaded into the delay-line slot k mod P and
+   transformed there by a decimation-in-frequency radix-2 FFT (natural order in, bit-reversed
+   order out: no reordering pass);
+2. Y_k = Σ_p H_p · X_{k-p} over the delay line, with H_p stored in the same bit-reversed order
+   (the multiply is elementwise, so the order does not matter) and 1/2B folded in;
+3. a decimation-in-time inverse FFT (bit-reversed in, natural out) whose last stage computes
+   only the second half, the B outputs of block k, which are added (tail segments) into an
+   accumulation ring or stored (the head segment) at the rows of the full output they serve.
+
+Twiddles come from one float64-formed table of the largest size, cast to the precision.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+TILE_COLUMNS = 32  # range columns per tile: 2 × 4 AVX2 registers of float32 per row
+
+
+def twiddles(size: int, dtype) -> tuple[np.ndarray, np.ndarray]:
+    """exp(-2πi j/size), j < size/2, formed in float64: (real, imaginary) in ``dtype``."""
+    w = np.exp(-2j * np.pi * np.arange(max(1, size // 2)) / size)
+    return w.real.astype(dtype), w.imag.astype(dtype)
+
+
+def bit_reversed(n: int) -> np.ndarray:
+    """The bit-reversal permutation of range(n), n a power of two."""
+    bits = n.bit_length() - 1
+    idx = np.arange(n)
+    rev = np.zeros(n, np.int64)
+    for b in range(bits):
+        rev |= ((idx >> b) & 1) << (bits - 1 - b)
+    return rev
+
+
+def tile_spectra(taps: np.ndarray, block: int, tile: int, dtype) -> tuple[np.ndarray, np.ndarray]:
+    """H[t, f, p, c] = DFT_2B([h_p, 0_B])[bitrev f] / 2B of range column t·C + c (split parts):
+    for each frequency, the P partitions' values side by side (what the multiply-adds stream).
+
+    ``taps`` [T, range]: the taps h[q] of the segment (float64 formed), P = ceil(T/B).
+    """
+    count, bins = taps.shape
+    parts, width = -(-count // block), 2 * block
+    tiles = -(-bins // tile)
+    h = np.zeros((parts * block, tiles * tile), np.complex128)
+    h[:count, :bins] = taps
+    padded = np.zeros((parts, width, tiles * tile), np.complex128)
+    padded[:, :block] = h.reshape(parts, block, tiles * tile)
+    spec = np.fft.fft(padded, axis=1)[:, bit_reversed(width)] / width
+    spec = spec.reshape(parts, width, tiles, tile).transpose(2, 1, 0, 3)
+    return (
+        np.ascontiguousarray(spec.real, dtype=dtype),
+        np.ascontiguousarray(spec.imag, dtype=dtype),
+    )
+
+
+@numba.njit(nogil=True, cache=True)
+def store_lines(lines, hist_re, hist_im, first_row):  # pragma: no cover - compiled
+    # hist[t, (first_row + i) mod rows, c] = lines[i, t·C + c] (zero beyond the last column).
+    tiles, rows, tile = hist_re.shape
+    bins = lines.shape[1]
+    for t in range(tiles):
+        for i in range(lines.shape[0]):
+            r = (first_row + i) % rows
+            line = lines[i]
+            for c in range(tile):
+                col = t * tile + c
+                if col < bins:
+                    v = line[col]
+                    hist_re[t, r, c] = v.real
+                    hist_im[t, r, c] = v.imag
+
+
+@numba.njit(nogil=True, fastmath=True, cache=True)
+def _dif(re, im, twr, twi, stride):  # pragma: no cover - compiled
+    # In place: natural order in, bit-reversed out; twiddle j of size n at tw[j·stride].  The
+    # 2-point stage and j = 0 (twiddle 1) skip the multiply.
+    n, width = re.shape
+    m = n
+    while m > 2:
+        half = m // 2
+        for k in range(0, n, m):
+            for j in range(half):
+                wr, wi = twr[j * stride], twi[j * stride]
+                ar, ai, br, bi = re[k + j], im[k + j], re[k + j + half], im[k + j + half]
+                if j == 0:
+                    for c in range(width):
+                        dr = ar[c] - br[c]
+                        di = ai[c] - bi[c]
+                        ar[c] += br[c]
+                        ai[c] += bi[c]
+                        br[c] = dr
+                        bi[c] = di
+                else:
+                    for c in range(width):
+                        dr = ar[c] - br[c]
+                        di = ai[c] - bi[c]
+                        ar[c] += br[c]
+                        ai[c] += bi[c]
+                        br[c] = dr * wr - di * wi
+                        bi[c] = dr * wi + di * wr
+        m = half
+        stride *= 2
+    if m == 2:
+        for k in range(0, n, 2):
+            ar, ai, br, bi = re[k], im[k], re[k + 1], im[k + 1]
+            for c in range(width):
+                dr = ar[c] - br[c]
+                di = ai[c] - bi[c]
+                ar[c] += br[c]
+                ai[c] += bi[c]
+                br[c] = dr
+                bi[c] = di
+
+
+@numba.njit(nogil=True, fastmath=True, cache=True)
+def _dit_second_half(re, im, twr, twi, stride, out_re, out_im):  # pragma: no cover - compiled
+    # Inverse DFT (conjugate twiddles), bit-reversed in, natural out, in place but for the last
+    # stage, which writes only outputs n/2 .. n-1 into out[0 .. n/2).
+    n, width = re.shape
+    if n == 2:
+        for c in range(width):
+            out_re[0, c] = re[0, c] - re[1, c]
+            out_im[0, c] = im[0, c] - im[1, c]
+        return
+    for k in range(0, n, 2):  # the 2-point stage: twiddle 1
+        ar, ai, br, bi = re[k], im[k], re[k + 1], im[k + 1]
+        for c in range(width):
+            dr = ar[c] - br[c]
+            di = ai[c] - bi[c]
+            ar[c] += br[c]
+            ai[c] += bi[c]
+            br[c] = dr
+            bi[c] = di
+    step = stride * (n // 4)  # twiddle stride of the 4-point stage
+    m = 4
+    while m < n:
+        half = m // 2
+        for k in range(0, n, m):
+            for j in range(half):
+                wr, wi = twr[j * step], -twi[j * step]
+                ar, ai, br, bi = re[k + j], im[k + j], re[k + j + half], im[k + j + half]
+                for c in range(width):
+                    tr = br[c] * wr - bi[c] * wi
+                    ti = br[c] * wi + bi[c] * wr
+                    br[c] = ar[c] - tr
+                    bi[c] = ai[c] - ti
+                    ar[c] += tr
+                    ai[c] += ti
+        m *= 2
+        step //= 2
+    half = n // 2
+    for j in range(half):
+        wr, wi = twr[j * step], -twi[j * step]
+        ar, ai, br, bi = re[j], im[j], re[j + half], im[j + half]
+        yr, yi = out_re[j], out_im[j]
+        for c in range(width):
+            yr[c] = ar[c] - (br[c] * wr - bi[c] * wi)
+            yi[c] = ai[c] - (br[c] * wi + bi[c] * wr)
+
+
+@numba.njit(nogil=True, fastmath=True, cache=True)
+def _enter_and_mac(x_re, x_im, h_re, h_im, d_re, d_im, k, y_re, y_im):  # pragma: no cover
+    # X_k = x enters the delay line at slot k mod P, then y = Σ_p H_p · X_{k-p}; h[f, p] = H_p
+    # and d[f, s] = X_s at frequency f: one contiguous run of P·C values each.
+    n, parts, width = h_re.shape
+    slot = k % parts
+    for f in range(n):
+        d_re[f, slot] = x_re[f]
+        d_im[f, slot] = x_im[f]
+        yr, yi = y_re[f], y_im[f]
+        yr[:] = 0
+        yi[:] = 0
+        for p in range(parts):
+            s = (k - p) % parts
+            hr, hi, xr, xi = h_re[f, p], h_im[f, p], d_re[f, s], d_im[f, s]
+            for c in range(width):
+                yr[c] += hr[c] * xr[c] - hi[c] * xi[c]
+                yi[c] += hr[c] * xi[c] + hi[c] * xr[c]
+
+
+@numba.njit(nogil=True, cache=True)
+def _block(
+    t,
+    k,
+    valid_end,
+    seg,
+    ring_re,
+    ring_im,
+    h_re,
+    h_im,
+    d_re,
+    d_im,
+    tw_re,
+    tw_im,
+    x_re,
+    x_im,
+    y_re,
+    y_im,
+    out_re,
+    out_im,
+    assign,
+):  # pragma: no cover - compiled
+    # Block k of the segment seg = (offset, 2B, P, delay) for tile t; pulses ≥ valid_end read
+    # as zeros.  Its outputs (pulses kB .. kB+B-1 of the segment) go to the full output's
+    # pulse + delay.  h/d: the flat arrays of all segments' spectra and delay lines.
+    offset, n, parts, delay = seg[0], seg[1], seg[2], seg[3]
+    tiles, rows, width = ring_re.shape
+    size = tiles * n * parts * width
+    shape = (tiles, n, parts, width)
+    hr = h_re[offset : offset + size].reshape(shape)[t]
+    hi = h_im[offset : offset + size].reshape(shape)[t]
+    dr = d_re[offset : offset + size].reshape(shape)[t]
+    di = d_im[offset : offset + size].reshape(shape)[t]
+    block = n // 2
+    xr, xi, yr, yi = x_re[t, :n], x_im[t, :n], y_re[t, :n], y_im[t, :n]
+    for i in range(n):
+        pulse = (k - 1) * block + i
+        if pulse < 0 or pulse >= valid_end:
+            xr[i, :] = 0
+            xi[i, :] = 0
+        else:
+            r = pulse % rows
+            xr[i, :] = ring_re[t, r]
+            xi[i, :] = ring_im[t, r]
+    stride = (tw_re.shape[0] * 2) // n
+    _dif(xr, xi, tw_re, tw_im, stride)
+    _enter_and_mac(xr, xi, hr, hi, dr, di, k, yr, yi)
+    ob_r, ob_i = xr[:block], xi[:block]  # the window is no longer needed
+    _dit_second_half(yr, yi, tw_re, tw_im, stride, ob_r, ob_i)
+    ring_rows = out_re.shape[1]
+    for i in range(block):
+        r = (k * block + i + delay) % ring_rows
+        if assign:
+            out_re[t, r] = ob_r[i]
+            out_im[t, r] = ob_i[i]
+        else:
+            out_re[t, r] += ob_r[i]
+            out_im[t, r] += ob_i[i]
+
+
+@numba.njit(parallel=True, nogil=True, cache=True)
+def run_blocks(
+    events,
+    valid_end,
+    segs,
+    ring_re,
+    ring_im,
+    h_re,
+    h_im,
+    d_re,
+    d_im,
+    tw_re,
+    tw_im,
+    x_re,
+    x_im,
+    y_re,
+    y_im,
+    out_re,
+    out_im,
+    assign,
+):  # pragma: no cover - compiled
+    """The blocks ``events`` [(segment, block k), ...] in this order on every tile (threads
+    over tiles).  segs[s] = (offset in h and d, 2B, P, delay); ring: the input lines; h, d:
+    all segments' spectra (tile_spectra) and delay lines, flat; tw: twiddles; x, y: per-tile
+    work rows; out: the rows the outputs are added to (``assign``: stored) at pulse + delay."""
+    for t in numba.prange(ring_re.shape[0]):
+        for e in range(events.shape[0]):
+            _block(
+                t,
+                events[e, 1],
+                valid_end,
+                segs[events[e, 0]],
+                ring_re,
+                ring_im,
+                h_re,
+                h_im,
+                d_re,
+                d_im,
+                tw_re,
+                tw_im,
+                x_re,
+                x_im,
+                y_re,
+                y_im,
+                out_re,
+                out_im,
+                assign,
+            )
+
+
+@numba.njit(nogil=True, cache=True)
+def run_blocks_serial(
+    events,
+    valid_end,
+    segs,
+    ring_re,
+    ring_im,
+    h_re,
+    h_im,
+    d_re,
+    d_im,
+    tw_re,
+    tw_im,
+    x_re,
+    x_im,
+    y_re,
+    y_im,
+    out_re,
+    out_im,
+    assign,
+):  # pragma: no cover - compiled
+    """run_blocks on the calling thread alone."""
+    for t in range(ring_re.shape[0]):
+        for e in range(events.shape[0]):
+            _block(
+                t,
+                events[e, 1],
+                valid_end,
+                segs[events[e, 0]],
+                ring_re,
+                ring_im,
+                h_re,
+                h_im,
+                d_re,
+                d_im,
+                tw_re,
+                tw_im,
+                x_re,
+                x_im,
+                y_re,
+                y_im,
+                out_re,
+                out_im,
+                assign,
+            )
+
+
+@numba.njit(parallel=True, nogil=True, cache=True)
+def emit_lines(acc_re, acc_im, head_re, head_im, first, count, skip, out):  # pragma: no cover
+    """out[j - skip] = acc + head at pulse first + j for skip ≤ j < count (``out``: the output
+    lines viewed as floats, real and imaginary interleaved); those rows of acc are zeroed."""
+    tiles, ring, tile = acc_re.shape
+    bins = out.shape[1] // 2
+    for t in numba.prange(tiles):
+        width = min(tile, bins - t * tile)
+        for j in range(count):
+            r = (first + j) % ring
+            if j >= skip:
+                line = out[j - skip]
+                for c in range(width):
+                    line[2 * (t * tile + c)] = acc_re[t, r, c] + head_re[t, r, c]
+                    line[2 * (t * tile + c) + 1] = acc_im[t, r, c] + head_im[t, r, c]
+            acc_re[t, r, :] = 0
+            acc_im[t, r, :] = 0

@@ -30,8 +30,9 @@ def _stream(corr, lines, sizes, flush_every=None):
     "n, head, tail",
     [(512, 16, 128), (512, 8, 64), (64, 4, 16), (100, 8, 32), (37, 4, 8), (16, 16, 16), (2, 1, 1)],
 )
-def test_plan_covers_the_mask_and_every_tail_block_is_early_enough(n, head, tail):
-    segs = plan_segments(n, head, min(tail, n))
+@pytest.mark.parametrize("rule", ["optimal", "doubling"])
+def test_plan_covers_the_mask_and_every_tail_block_is_early_enough(n, head, tail, rule):
+    segs = plan_segments(n, head, min(tail, n), rule)
     assert segs[0][0] == 0 and segs[0][2] == head
     first = 0
     for s, (d, t, b) in enumerate(segs):
@@ -44,15 +45,23 @@ def test_plan_covers_the_mask_and_every_tail_block_is_early_enough(n, head, tail
 
 @pytest.mark.parametrize("threaded", [False, True])
 @pytest.mark.parametrize(
-    # (96, 8, 128): N below the tail block and no power of two (refused before a cold review)
-    "n, head, tail, bins",
-    [(64, 4, 16, 9), (100, 8, 32, 5), (37, 2, 8, 3), (96, 8, 128, 4)],
+    # (96, 8, 128): N below the tail block and no power of two (refused before a cold review);
+    # 40 range bins: more than one tile of columns, the last one partly used
+    "n, head, tail, bins, rule",
+    [
+        (64, 4, 16, 9, "optimal"),
+        (64, 4, 16, 40, "doubling"),
+        (100, 8, 32, 5, "doubling"),
+        (37, 2, 8, 3, "doubling"),
+        (96, 8, 128, 4, "doubling"),
+        (512, 16, 128, 3, "optimal"),
+    ],
 )
-def test_matches_the_float64_reference(n, head, tail, bins, threaded, rng):
+def test_matches_the_float64_reference(n, head, tail, bins, rule, threaded, rng):
     mask = crandn(rng, n, bins) / n
     lines = crandn(rng, 7 * n + 5, bins, dtype=np.complex64)
     ref = correlate_reference(lines, mask)
-    corr = NonUniformCorrelator(mask, head, tail, threaded=threaded)
+    corr = NonUniformCorrelator(mask, head, tail, threaded=threaded, rule=rule)
     got = _stream(corr, lines, [len(lines)])
     assert got.shape == ref.shape and got.dtype == np.complex64
     assert relative_rms(got, ref) < TOL
@@ -60,15 +69,17 @@ def test_matches_the_float64_reference(n, head, tail, bins, threaded, rng):
     corr.close()
 
 
-def test_output_is_bit_identical_whatever_the_pushes_and_the_thread(rng):
+@pytest.mark.parametrize("rule", ["optimal", "doubling"])
+def test_output_is_bit_identical_whatever_the_pushes_and_the_thread(rule, rng):
     n, nr, p = 64, 7, 901
     mask, lines = crandn(rng, n, nr) / n, crandn(rng, p, nr, dtype=np.complex64)
-    one = _stream(NonUniformCorrelator(mask, 4, 32, threaded=False), lines, [p])
+    one = _stream(NonUniformCorrelator(mask, 4, 32, threaded=False, rule=rule), lines, [p])
     sizes = [1] * 40 + [5, 3, 200, 1, 7, 131] + [1] * 10
     sizes.append(p - sum(sizes))
     for threaded in (False, True):
-        by_line = _stream(NonUniformCorrelator(mask, 4, 32, threaded=threaded), lines, [1] * p)
-        odd = _stream(NonUniformCorrelator(mask, 4, 32, threaded=threaded), lines, sizes)
+        corrs = [NonUniformCorrelator(mask, 4, 32, threaded=threaded, rule=rule) for _ in "ab"]
+        by_line = _stream(corrs[0], lines, [1] * p)
+        odd = _stream(corrs[1], lines, sizes)
         assert np.array_equal(by_line, one) and np.array_equal(odd, one)
 
 
@@ -99,9 +110,31 @@ def test_lines_leave_in_head_blocks(rng):
 
 
 def test_fewer_multiply_adds_than_the_uniform_partition(rng):
-    corr = NonUniformCorrelator(crandn(rng, 512, 2) / 512, 16, 128)
-    assert corr.partitions == 9  # 2 × (16, 32, 64) + 128 × 3 (the rest): 2·9 = 18 MACs per line
+    mask = crandn(rng, 512, 2) / 512
+    doubling = NonUniformCorrelator(mask, 16, 128, rule="doubling")
+    assert doubling.partitions == 9  # 2 × (16, 32, 64) + 128 × 3 (the rest): 18 MACs per line
+    optimal = NonUniformCorrelator(mask, 16, 128)
+    assert optimal.segments == [(0, 64, 16), (64, 448, 64)]  # 4 × 16 + 7 × 64: 22 MACs
     assert PartitionedCorrelator(crandn(rng, 512, 2), 16).partitions == 32  # 2·32 = 64
+
+
+@pytest.mark.parametrize("n, head, tail", [(512, 16, 128), (2048, 16, 512), (300, 4, 64)])
+def test_the_optimal_plan_costs_no_more_than_any_other(n, head, tail):
+    """Garcia 2002's search against plans built by hand: the doubling, the uniform partition
+    and every two-segment plan."""
+    from rtsar.ccd.nonuniform import transform_cost
+
+    def cost(segs):
+        return sum(transform_cost(b) + -(-t // b) for _, t, b in segs)
+
+    best = cost(plan_segments(n, head, tail))
+    others = [plan_segments(n, head, tail, "doubling"), [(0, n, head)]]
+    for b in (2**i for i in range(20) if head < 2**i <= tail):
+        for d in range(max(b, head), n, head):
+            others.append([(0, d, head), (d, n - d, b)])
+    assert all(best <= cost(o) + 1e-9 for o in others)
+    with pytest.raises(ValueError, match="rule"):
+        plan_segments(n, head, tail, "greedy")
 
 
 def test_chosen_by_the_configuration(rng):
@@ -126,7 +159,7 @@ def test_a_failing_tail_is_reported_not_hung(rng):
     def broken(lines):
         raise MemoryError("no room")
 
-    corr._tail._run = broken
+    corr._tail._run = broken  # the kernel call of the tail's blocks
     with pytest.raises(RuntimeError, match="tail thread failed: no room"):
         corr.push(crandn(rng, 100, 3, dtype=np.complex64))
 
@@ -193,3 +226,36 @@ def test_pushing_after_close_is_an_error_not_a_hang(rng):
     corr.close()
     with pytest.raises(RuntimeError, match="closed"):
         corr.push(crandn(rng, 40, 3, dtype=np.complex64))
+
+
+def test_tiled_transforms_and_spectra_against_numpy(rng):
+    """The split-format kernels: the DIF transform gives the DFT in bit-reversed order, the
+    inverse gives the second half of the inverse DFT, tile_spectra the bit-reversed /2B DFT."""
+    from rtsar.ccd import tiled
+
+    for n in (2, 8, 64):
+        x = crandn(rng, n, 5)
+        re, im = x.real.copy(), x.imag.copy()
+        twr, twi = tiled.twiddles(2 * n, np.float64)  # stride 2: the table of a larger size
+        tiled._dif(re, im, twr, twi, 2)
+        want = np.fft.fft(x, axis=0)[tiled.bit_reversed(n)]
+        assert np.allclose(re + 1j * im, want, atol=1e-12)
+        y_re, y_im = np.zeros((n // 2, 5)), np.zeros((n // 2, 5))
+        tiled._dit_second_half(re.copy(), im.copy(), twr, twi, 2, y_re, y_im)
+        assert np.allclose(y_re + 1j * y_im, n * x[n // 2 :], atol=1e-12)
+    taps = crandn(rng, 6, 3)
+    hr, hi = tiled.tile_spectra(taps, 4, 2, np.float64)  # P = 2 partitions, tiles of 2 columns
+    padded = np.zeros((2, 8, 4), complex)
+    padded[0, :4, :3], padded[1, :2, :3] = taps[:4], taps[4:]
+    want = (np.fft.fft(padded, axis=1) / 8)[:, tiled.bit_reversed(8)]
+    got = (hr + 1j * hi).transpose(2, 1, 0, 3).reshape(2, 8, 4)  # [p, f, tile·C + c]
+    assert np.allclose(got, want, atol=1e-12) and hr.shape == (2, 8, 2, 2)
+
+
+def test_complex128_reaches_the_float64_reference(rng):
+    mask = crandn(rng, 64, 5) / 64
+    lines = crandn(rng, 300, 5)
+    ref = correlate_reference(lines, mask)
+    corr = NonUniformCorrelator(mask, 4, 16, precision="complex128", threaded=False)
+    got = _stream(corr, lines, [7] * 42 + [6])
+    assert got.dtype == np.complex128 and relative_rms(got, ref) < 1e-12

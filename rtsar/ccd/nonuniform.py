@@ -3,26 +3,31 @@
 Gardner 1995 ("Efficient convolution without input-output delay") and Garcia 2002 ("Optimal
 filter partition for efficient convolution with short input/output delay"): the N taps
 h[q] = mask[N-1-q] of eq. (1) (rtsar.ccd.base) are cut into segments; segment s holds the taps
-[D_s, D_s + T_s) and runs as a uniformly partitioned overlap-save correlator
-(rtsar.ccd.partitioned) with its own block B_s.  Since
+[D_s, D_s + T_s) and is a uniformly partitioned overlap-save correlation (the scheme of
+rtsar.ccd.partitioned) with its own block B_s, whose outputs serve the full line D_s pulses
+later:
 
-    g[j] = Σ_s g_s[j + N - D_s - T_s],   g_s = correlation of the lines with mask rows
-                                          [N - D_s - T_s, N - D_s),
+    g[p] = Σ_s g_s[p - D_s],   g_s[p'] = Σ_{q<T_s} h[D_s + q] · line[p' - q]   (pulse index p).
 
-and segment s's line j + N - D_s - T_s is complete B_s - 1 pulses after pulse j + N - 1 - D_s,
-a segment with D_s ≥ B_s has its part of line j ready before the line's last pulse arrives.
-Only the head segment (D_0 = 0, block L) sits on the latency path: lines leave in blocks of L,
-as with the uniform correlator of block L, while the long tail blocks cut the multiply-adds per
-pixel and line from 2N/L to 2·(number of partitions), at the cost of one more pair of transforms
-per segment.  The tail segments run on a worker thread (their numba and SciPy kernels release
-the GIL), fed each push before the head is computed, so their work overlaps the head's and the
-next pulses' arrival instead of delaying the lines of the push that completed a long block.
+Segment s's output for pulse p - D_s is complete once its block ends, at most B_s - 1 pulses
+later, so a segment with D_s ≥ B_s has its part of line p ready before the line's last pulse
+arrives.  Only the head segment (D_0 = 0, block L) sits on the latency path: lines leave in
+blocks of L, as with the uniform correlator of block L, while the long tail blocks cut the
+multiply-adds per pixel and line from 2N/L to 2·(number of partitions), at the cost of one more
+pair of transforms per segment.  The tail segments run on a worker thread (the kernels release
+the GIL), fed each chunk of a push before the head is computed, the blocks the head's lines of
+that chunk need first, so the rest overlaps the head's work and the next pulses' arrival.
 
-Plan (Gardner's doubling; ``plan_segments``): the head holds 2 partitions of L, then each block
-size 2L, 4L, … up to ``max_block_lines`` holds 2 partitions, and the last segment takes what is
-left (also when fewer taps are left than the next size's block).
-Sums are formed segment by segment in a fixed order, so the output does not depend on the push
-sizes or on the thread's timing (tested bit for bit).
+All segments run on the kernels of rtsar.ccd.tiled (split real/imaginary arrays over tiles of
+range columns, FFTs along azimuth without transposes, one parallel kernel call for all the
+blocks of a chunk).  The tail segments add their outputs into one ring of full-output rows in
+the order of the pulse that completes each block (then segment); the head's are added last when
+the line leaves.  Every stream computes the same blocks in the same order, so the output does
+not depend on the push sizes or on the thread's timing (tested bit for bit).
+
+Plan (``plan_segments``): by default the partition of least modelled cost (Garcia 2002;
+``transform_cost``), at psaltis-max (N = 512, L = 16) 4 partitions of 16 then 7 of 64;
+``rule="doubling"`` gives Gardner's doubling (2 partitions of L, 2L, 4L, …).
 """
 
 from __future__ import annotations
@@ -42,10 +47,11 @@ from .base import Correlator
 
 def transform_cost(block: int) -> float:
     """A block size's pair of transforms (with the window load and the output) per line, in
-    units of one partition's multiply-adds per line: 2 + 0.6·log2(2B), fitted to the kernels of
-    rtsar.ccd.tiled on the 2-core development machine (B = 16 … 256 at 1200 range cells: one
-    partition 2.5 µs a line, the transforms 11.6 / 11.7 / 12.7 / 15.3 / 18.1 µs)."""
-    return 2.0 + 0.6 * math.log2(2 * block)
+    units of one partition's multiply-adds per line: 2.4 + log2(2B), fitted to the kernels of
+    rtsar.ccd.tiled on the 2-core development machine (one thread, 1200 range cells: a
+    partition ≈ 1.5 µs a line, the transforms of B = 16 / 32 / 64 / 128 / 256 11.3 / 12.0 /
+    13.7 / 14.0 / 18.2 µs a line)."""
+    return 2.4 + math.log2(2 * block)
 
 
 def _check_plan(n: int, head_lines: int, max_block_lines: int) -> None:
@@ -141,10 +147,10 @@ class _Group:
         )
         self.done = [0] * len(segments)  # blocks computed per segment
 
-    def run(self, kernel, events, valid_end: int, ring, out, assign: bool) -> None:
-        """``kernel`` (tiled.run_blocks or its serial twin) on these segments' blocks."""
+    def run(self, events, valid_end: int, ring, out, assign: bool) -> None:
+        """tiled.run_blocks on these segments' blocks ``events``."""
         segs, h_re, h_im, d_re, d_im, tw_re, tw_im, x_re, x_im, y_re, y_im = self.arrays
-        kernel(
+        tiled.run_blocks(
             events,
             valid_end,
             segs,
@@ -282,7 +288,7 @@ class NonUniformCorrelator(Correlator):
         max_block_lines: int = 128,
         precision: str = "complex64",
         threaded: bool | None = None,
-        rule: str = "doubling",
+        rule: str = "optimal",
     ):
         super().__init__(mask, precision)
         n, bins = self.aperture, self.range_bins
@@ -315,23 +321,17 @@ class NonUniformCorrelator(Correlator):
         self._tail = _Tail(self._run_tail, self.threaded)
         self._tail.group = tail
         self._flushed = 0  # lines of the pending head block that flush() has emitted
+        self._closed = False
         # Compile (or load from numba's cache) the kernels and touch every buffer now.
         self._warm()
 
     def _warm(self) -> None:
         none = np.zeros((0, 2), np.int64)
-        run = tiled.run_blocks_serial if self.threaded else tiled.run_blocks
-        for group, out, assign, kernel in (
-            (self._head, self._head_out, True, tiled.run_blocks),
-            (self._tail.group, self._acc, False, run),
-        ):
-            if group is not None:
-                group.run(kernel, none, 0, self._hist, out, assign)
+        self._head.run(none, 0, self._hist, self._head_out, True)
         tiled.store_lines(self._no_lines(), *self._hist, 0)
 
     def _run_tail(self, events: np.ndarray) -> None:
-        run = tiled.run_blocks_serial if self.threaded else tiled.run_blocks
-        self._tail.group.run(run, events, 1 << 62, self._hist, self._acc, False)
+        self._tail.group.run(events, 1 << 62, self._hist, self._acc, False)
 
     def _needed(self, last_pulse: int) -> int:
         """Pulse count by which every tail block that serves lines ≤ ``last_pulse`` is done."""
@@ -352,6 +352,8 @@ class NonUniformCorrelator(Correlator):
         return out
 
     def push(self, lines: np.ndarray) -> np.ndarray:
+        if self._closed:
+            raise RuntimeError("the nonuniform correlator was closed: no more lines")
         lines = self._check(lines)
         lb, rows = self.block_lines, self._hist[0].shape[1]
         widest = 2 * max(b for _, _, b in self.segments)
@@ -369,7 +371,7 @@ class NonUniformCorrelator(Correlator):
                 self._tail.submit(end, self._needed(blocks * lb - 1))
             if blocks > done:
                 events = self._head.events(end)
-                self._head.run(tiled.run_blocks, events, end, self._hist, self._head_out, True)
+                self._head.run(events, end, self._hist, self._head_out, True)
                 outs.append(self._lines_out(done * lb, (blocks - done) * lb, self._flushed))
                 self._flushed = 0
         if len(outs) == 1:
@@ -387,7 +389,7 @@ class NonUniformCorrelator(Correlator):
         if pending == self._flushed:
             return self._no_lines()
         events = np.array([[0, first // lb]], np.int64)
-        self._head.run(tiled.run_blocks, events, self.pulses_in, self._hist, self._head_out, True)
+        self._head.run(events, self.pulses_in, self._hist, self._head_out, True)
         out = self._lines_out(first, pending, self._flushed)
         self._flushed = pending
         return out
@@ -395,6 +397,7 @@ class NonUniformCorrelator(Correlator):
     def close(self) -> None:
         """End the tail thread and wait for it (also done, without the wait, when the correlator
         is garbage collected, and at interpreter exit)."""
+        self._closed = True
         self._tail.stop(join_s=5.0)
 
     def __del__(self):

@@ -196,8 +196,8 @@ class Processor:
                       M - N + 1 lines: fastest, latency ~N pulses) or "partitioned"
                       (partitioned overlap-save: lines leave in blocks of partition_lines)
                       or "nonuniform" (non-uniformly partitioned: a head block of
-                      partition_lines, tail blocks doubling up to tail_block_lines; the
-                      partitioned latency at fewer multiply-adds)
+                      partition_lines, tail blocks up to tail_block_lines in the partition of
+                      least modelled cost; the partitioned latency at fewer multiply-adds)
     fft_length        FFT correlator block transform length M (power of two >= N; None: 2N);
                       lines leave in blocks of M - N + 1: the latency/throughput knob of "fft"
     partition_lines   L, the block of the "partitioned" correlator: a power of two, at most N
@@ -207,10 +207,11 @@ class Processor:
                       transforms, so halving L halves the wait and doubles the multiply-adds.
                       16 at 10 kHz PRF: ≤ 1.5 ms wait, 64 multiply-adds per pixel (N = 512)
     tail_block_lines  the largest block of the "nonuniform" correlator's tail (a power of two;
-                      blocks 2L, 4L, … up to it, two partitions each, the last size takes the
-                      rest): 2·(partitions) multiply-adds per pixel and line instead of 2N/L
-                      (N = 512, L = 16, 128: 18 instead of 64) for one more pair of transforms
-                      per block size
+                      the block sizes up to it and their partitions are chosen by a cost model,
+                      rtsar.ccd.nonuniform.plan_segments): 2·(partitions) multiply-adds per
+                      pixel and line instead of 2N/L (N = 512, L = 16, 128: 4 partitions of 16
+                      and 7 of 64, 22 instead of 64) for one more pair of transforms per block
+                      size
     micro_batch       pulses per AO-lens launch
     precision         one of PRECISIONS: the sample type of the AO lens and the CCD.
                       "complex64" (default): float32 arithmetic, the real-time setting, within

@@ -234,13 +234,13 @@ def test_tiled_transforms_and_spectra_against_numpy(rng):
     from rtsar.ccd import tiled
 
     for n in (2, 8, 64):
-        x = crandn(rng, n, 5)
+        x = crandn(rng, n, tiled.TILE_COLUMNS)  # the kernels' fixed row width
         re, im = x.real.copy(), x.imag.copy()
         twr, twi = tiled.twiddles(2 * n, np.float64)  # stride 2: the table of a larger size
         tiled._dif(re, im, twr, twi, 2)
         want = np.fft.fft(x, axis=0)[tiled.bit_reversed(n)]
         assert np.allclose(re + 1j * im, want, atol=1e-12)
-        y_re, y_im = np.zeros((n // 2, 5)), np.zeros((n // 2, 5))
+        y_re, y_im = np.zeros((n // 2, len(x[0]))), np.zeros((n // 2, len(x[0])))
         tiled._dit_second_half(re.copy(), im.copy(), twr, twi, 2, y_re, y_im)
         assert np.allclose(y_re + 1j * y_im, n * x[n // 2 :], atol=1e-12)
     taps = crandn(rng, 6, 3)

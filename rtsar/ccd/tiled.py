@@ -22,7 +22,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-TILE_COLUMNS = 32  # range columns per tile: 2 × 4 AVX2 registers of float32 per row
+TILE_COLUMNS = 32  # range columns per tile (a compile-time constant of the kernels' inner loops)
 
 
 def twiddles(size: int, dtype) -> tuple[np.ndarray, np.ndarray]:
@@ -83,7 +83,7 @@ def store_lines(lines, hist_re, hist_im, first_row):  # pragma: no cover - compi
 def _dif(re, im, twr, twi, stride):  # pragma: no cover - compiled
     # In place: natural order in, bit-reversed out; twiddle j of size n at tw[j·stride].  The
     # 2-point stage and j = 0 (twiddle 1) skip the multiply.
-    n, width = re.shape
+    n = re.shape[0]
     m = n
     while m > 2:
         half = m // 2
@@ -92,7 +92,7 @@ def _dif(re, im, twr, twi, stride):  # pragma: no cover - compiled
                 wr, wi = twr[j * stride], twi[j * stride]
                 ar, ai, br, bi = re[k + j], im[k + j], re[k + j + half], im[k + j + half]
                 if j == 0:
-                    for c in range(width):
+                    for c in range(TILE_COLUMNS):
                         dr = ar[c] - br[c]
                         di = ai[c] - bi[c]
                         ar[c] += br[c]
@@ -100,7 +100,7 @@ def _dif(re, im, twr, twi, stride):  # pragma: no cover - compiled
                         br[c] = dr
                         bi[c] = di
                 else:
-                    for c in range(width):
+                    for c in range(TILE_COLUMNS):
                         dr = ar[c] - br[c]
                         di = ai[c] - bi[c]
                         ar[c] += br[c]
@@ -112,7 +112,7 @@ def _dif(re, im, twr, twi, stride):  # pragma: no cover - compiled
     if m == 2:
         for k in range(0, n, 2):
             ar, ai, br, bi = re[k], im[k], re[k + 1], im[k + 1]
-            for c in range(width):
+            for c in range(TILE_COLUMNS):
                 dr = ar[c] - br[c]
                 di = ai[c] - bi[c]
                 ar[c] += br[c]
@@ -125,15 +125,15 @@ def _dif(re, im, twr, twi, stride):  # pragma: no cover - compiled
 def _dit_second_half(re, im, twr, twi, stride, out_re, out_im):  # pragma: no cover - compiled
     # Inverse DFT (conjugate twiddles), bit-reversed in, natural out, in place but for the last
     # stage, which writes only outputs n/2 .. n-1 into out[0 .. n/2).
-    n, width = re.shape
+    n = re.shape[0]
     if n == 2:
-        for c in range(width):
+        for c in range(TILE_COLUMNS):
             out_re[0, c] = re[0, c] - re[1, c]
             out_im[0, c] = im[0, c] - im[1, c]
         return
     for k in range(0, n, 2):  # the 2-point stage: twiddle 1
         ar, ai, br, bi = re[k], im[k], re[k + 1], im[k + 1]
-        for c in range(width):
+        for c in range(TILE_COLUMNS):
             dr = ar[c] - br[c]
             di = ai[c] - bi[c]
             ar[c] += br[c]
@@ -148,7 +148,7 @@ def _dit_second_half(re, im, twr, twi, stride, out_re, out_im):  # pragma: no co
             for j in range(half):
                 wr, wi = twr[j * step], -twi[j * step]
                 ar, ai, br, bi = re[k + j], im[k + j], re[k + j + half], im[k + j + half]
-                for c in range(width):
+                for c in range(TILE_COLUMNS):
                     tr = br[c] * wr - bi[c] * wi
                     ti = br[c] * wi + bi[c] * wr
                     br[c] = ar[c] - tr
@@ -162,7 +162,7 @@ def _dit_second_half(re, im, twr, twi, stride, out_re, out_im):  # pragma: no co
         wr, wi = twr[j * step], -twi[j * step]
         ar, ai, br, bi = re[j], im[j], re[j + half], im[j + half]
         yr, yi = out_re[j], out_im[j]
-        for c in range(width):
+        for c in range(TILE_COLUMNS):
             yr[c] = ar[c] - (br[c] * wr - bi[c] * wi)
             yi[c] = ai[c] - (br[c] * wi + bi[c] * wr)
 
@@ -172,21 +172,22 @@ def _enter_and_mac(x_re, x_im, h_re, h_im, d_re, d_im, k, y_re, y_im):  # pragma
     # X_k = x enters the delay line at slot k mod P, then y = Σ_p H_p · X_{k-p}; h[f, p] = H_p
     # and d[f, s] = X_s at frequency f: one contiguous run of P·C values each.  (Indexed, not
     # sliced: a row view per partition cost 1.7× the time.)
-    n, parts, width = h_re.shape
+    n, parts = h_re.shape[0], h_re.shape[1]
     slot = k % parts
     for f in range(n):
-        for c in range(width):
-            d_re[f, slot, c] = x_re[f, c]
-            d_im[f, slot, c] = x_im[f, c]
-            y_re[f, c] = 0
-            y_im[f, c] = 0
+        for c in range(TILE_COLUMNS):  # p = 0: X_k itself, entering the delay line
+            hr, hi, xr, xi = h_re[f, 0, c], h_im[f, 0, c], x_re[f, c], x_im[f, c]
+            d_re[f, slot, c] = xr
+            d_im[f, slot, c] = xi
+            y_re[f, c] = hr * xr - hi * xi
+            y_im[f, c] = hr * xi + hi * xr
         s = slot
-        for p in range(parts):
-            for c in range(width):
+        for p in range(1, parts):
+            s = s - 1 if s > 0 else parts - 1
+            for c in range(TILE_COLUMNS):
                 hr, hi, xr, xi = h_re[f, p, c], h_im[f, p, c], d_re[f, s, c], d_im[f, s, c]
                 y_re[f, c] += hr * xr - hi * xi
                 y_im[f, c] += hr * xi + hi * xr
-            s = s - 1 if s > 0 else parts - 1
 
 
 @numba.njit(nogil=True, cache=True)
@@ -227,12 +228,12 @@ def _block(
     for i in range(n):
         pulse = (k - 1) * block + i
         if pulse < 0 or pulse >= valid_end:
-            for c in range(width):
+            for c in range(TILE_COLUMNS):
                 xr[i, c] = 0
                 xi[i, c] = 0
         else:
             r = pulse % rows
-            for c in range(width):
+            for c in range(TILE_COLUMNS):
                 xr[i, c] = ring_re[t, r, c]
                 xi[i, c] = ring_im[t, r, c]
     stride = (tw_re.shape[0] * 2) // n
@@ -244,11 +245,11 @@ def _block(
     for i in range(block):
         r = (k * block + i + delay) % ring_rows
         if assign:
-            for c in range(width):
+            for c in range(TILE_COLUMNS):
                 out_re[t, r, c] = ob_r[i, c]
                 out_im[t, r, c] = ob_i[i, c]
         else:
-            for c in range(width):
+            for c in range(TILE_COLUMNS):
                 out_re[t, r, c] += ob_r[i, c]
                 out_im[t, r, c] += ob_i[i, c]
 

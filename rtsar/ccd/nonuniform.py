@@ -304,12 +304,13 @@ class NonUniformCorrelator(Correlator):
         h = np.asarray(mask, dtype=np.complex128)[::-1]  # h[q] = mask[N-1-q], float64 formed
         self._head = _Group(h, self.segments[:1], tiles, tile, real, tw)
         tail = _Group(h, self.segments[1:], tiles, tile, real, tw) if self.segments[1:] else None
-        # Rings indexed by pulse: the input lines (2 × the widest block plus a chunk behind
-        # the newest pulse) and the full output's sums (N + a chunk + a head block ahead).
-        rows = 1 << (n + 2 * widest + 2 * self.CHUNK + 2 * head_lines).bit_length()
-        self._hist = (np.zeros((tiles, rows, tile), real), np.zeros((tiles, rows, tile), real))
-        self._acc = (np.zeros((tiles, rows, tile), real), np.zeros((tiles, rows, tile), real))
-        self._head_out = (np.zeros((tiles, rows, tile), real), np.zeros((tiles, rows, tile), real))
+        # Rings indexed by pulse (powers of two): the input lines (2 × the widest block and a
+        # chunk behind the newest pulse), the tail's sums of the full output (rows up to N
+        # ahead of it, a chunk behind) and the head's outputs (the chunk's blocks).
+        chunk = self.CHUNK + 2 * head_lines
+        self._hist = self._ring(tiles, 2 * max(widest, head_lines) + chunk, real)
+        self._acc = self._ring(tiles, n + chunk, real)
+        self._head_out = self._ring(tiles, chunk, real)
         if threaded is None:
             try:  # known once a parallel kernel ran
                 empty = np.zeros((0, 2 * bins), real)
@@ -324,6 +325,12 @@ class NonUniformCorrelator(Correlator):
         self._closed = False
         # Compile (or load from numba's cache) the kernels and touch every buffer now.
         self._warm()
+
+    @staticmethod
+    def _ring(tiles: int, rows: int, real) -> tuple[np.ndarray, np.ndarray]:
+        """Real and imaginary parts of a ring of at least ``rows`` rows on every tile."""
+        shape = (tiles, 1 << (rows - 1).bit_length(), tiled.TILE_COLUMNS)
+        return np.zeros(shape, real), np.zeros(shape, real)
 
     def _warm(self) -> None:
         none = np.zeros((0, 2), np.int64)

@@ -309,15 +309,16 @@ def emit_lines(acc_re, acc_im, head_re, head_im, first, count, skip, out):  # pr
     """out[j - skip] = acc + head at pulse first + j for skip ≤ j < count (``out``: the output
     lines viewed as floats, real and imaginary interleaved); those rows of acc are zeroed."""
     tiles, ring, tile = acc_re.shape
+    head_ring = head_re.shape[1]
     bins = out.shape[1] // 2
     for t in numba.prange(tiles):
         width = min(tile, bins - t * tile)
         for j in range(count):
-            r = (first + j) % ring
+            r, h = (first + j) % ring, (first + j) % head_ring
             if j >= skip:
                 line = out[j - skip]
                 for c in range(width):
-                    line[2 * (t * tile + c)] = acc_re[t, r, c] + head_re[t, r, c]
-                    line[2 * (t * tile + c) + 1] = acc_im[t, r, c] + head_im[t, r, c]
+                    line[2 * (t * tile + c)] = acc_re[t, r, c] + head_re[t, h, c]
+                    line[2 * (t * tile + c) + 1] = acc_im[t, r, c] + head_im[t, h, c]
             acc_re[t, r, :] = 0
             acc_im[t, r, :] = 0

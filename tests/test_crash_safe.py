@@ -70,7 +70,8 @@ def test_a_writer_killed_at_random_moments_leaves_a_readable_file(tmp_path):
         )
         written = []  # (time, lines handed to the writer)
         reader = threading.Thread(target=_note_lines, args=(proc.stdout, written), daemon=True)
-        assert proc.stdout.readline().strip() == "0"  # the file exists under its name
+        assert proc.stdout.readline().strip() == "0"
+        assert proc.stdout.readline().strip() == "16"  # the first lines: under its name now
         reader.start()
         time.sleep(rng.uniform(0.0, 1.5))
         killed_at = time.monotonic()
@@ -84,6 +85,20 @@ def test_a_writer_killed_at_random_moments_leaves_a_readable_file(tmp_path):
         # No temporary file is left beside it.
         assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
     assert max(kept) > 0  # the kills landed while lines were being written
+
+
+def test_a_writer_killed_before_its_first_line_leaves_the_earlier_file(tmp_path):
+    """From a kill test: a live writer SIGKILLed before its first line replaced the user's file
+    with an empty image.  The file takes its name with its first flushed lines."""
+    path = tmp_path / "img.h5"
+    path.write_bytes(b"the user's earlier image")
+    idle = WRITER.replace("while True:", "time.sleep(60)\nwhile True:")
+    proc = subprocess.Popen([sys.executable, "-c", idle, str(path)], stdout=subprocess.PIPE,
+                            text=True)  # fmt: skip
+    assert proc.stdout.readline().strip() == "0"  # the writer is open, no line yet
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(10)
+    assert path.read_bytes() == b"the user's earlier image"
 
 
 def _wait_for(path: Path, timeout_s: float = 60.0) -> None:

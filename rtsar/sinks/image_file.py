@@ -75,8 +75,10 @@ class ImageWriter:
     single-writer/multiple-reader mode, flushed at least every ``flush_every_s``: a writer killed
     at any moment (SIGKILL, an OOM kill, a power cut after the disk has the data) leaves a file
     that opens, holding every line flushed before the kill, with ``complete`` False.  The file
-    is set up under a temporary name and takes its own name once it is in that state, so no
-    half-made file ever carries the name.  Readers can open it while it is written.
+    is set up under a temporary name and takes its own name once its first lines are flushed,
+    so neither a half-made nor an empty file ever carries the name (a writer killed before its
+    first line leaves the earlier file there as it was).  Readers can open it while it is
+    written.
     """
 
     def __init__(
@@ -129,9 +131,9 @@ class ImageWriter:
         a["complete"] = False
         for k, v in attrs.items():
             a[k] = v
+        self._target = target
         if crash_safe:
             self._f.swmr_mode = True  # from here on the file on disk is always readable
-            os.replace(target, self.path)
         self._flushed_s = time.monotonic()
         self._dirty = False
         self.lines = 0
@@ -144,6 +146,12 @@ class ImageWriter:
         self._azimuth[self.lines : end] = azimuth_m
         self.lines = end
         self._dirty = True
+        if self.crash_safe and self._target != self.path and end:
+            self._f.flush()  # the first lines are on disk: the file takes its name
+            os.replace(self._target, self.path)
+            self._target = self.path
+            self._flushed_s = time.monotonic()
+            self._dirty = False
         self.flush_if_due()
 
     def flush_if_due(self) -> None:
@@ -186,6 +194,9 @@ class ImageWriter:
             # Attributes cannot be added in SWMR mode: close (the data is safe from here on),
             # reopen in normal mode for the final attributes.
             self._f.close()
+            if self._target != self.path:  # closed before its first line
+                os.replace(self._target, self.path)
+                self._target = self.path
             self._f = h5py.File(self.path, "r+")
         for k, v in attrs.items():
             self._f.attrs[k] = v

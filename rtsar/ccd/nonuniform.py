@@ -276,7 +276,10 @@ class NonUniformCorrelator(Correlator):
     ``head_lines`` L, the tail of the mask in blocks up to ``max_block_lines``.
 
     ``threaded`` (default: True where numba's threading layer allows concurrent parallel
-    kernels, i.e. not "workqueue") runs the tail segments on their own thread.
+    kernels, i.e. not "workqueue") runs the tail segments on their own thread; ``rule``:
+    plan_segments' "optimal" (default) or "doubling".  Relative RMS error against
+    correlate_reference 1.8e-7 in complex64, 1.6e-15 in complex128 (N = 2048, 64 bins; tested
+    to 1e-5 and 1e-12).
     """
 
     CHUNK = 128  # pushes are computed up to this many lines at a time

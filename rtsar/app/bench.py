@@ -23,7 +23,7 @@ from ..lens.base import make_lens, opencl_unavailable
 from ..lens.numpy_lens import NumpyLens
 from ..lens.plan import make_plan
 from ..presets import preset
-from ..sinks.io import check_writable
+from ..sinks.io import check_writable, replace_when_complete
 from .bench_pipeline import bench_pipeline
 
 
@@ -243,7 +243,7 @@ def run_bench(args) -> int:
             )
         )
     if args.json:
-        with open(args.json, "w") as f:
+        with replace_when_complete(args.json) as tmp, open(tmp, "w") as f:
             json.dump(
                 {
                     "preset": name,

@@ -5,7 +5,11 @@ Axes in metres (or the unit that suits the span).
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
+
+from ..sinks.io import replace_when_complete
 
 
 def file_pyplot():
@@ -16,6 +20,16 @@ def file_pyplot():
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def save_figure(fig, path, **kwargs) -> None:
+    """``fig.savefig`` to a file name through replace_when_complete (a kill leaves the earlier
+    file, never an empty or torn one); a file object is written directly."""
+    if isinstance(path, (str, os.PathLike)):
+        with replace_when_complete(path) as tmp:
+            fig.savefig(tmp, **kwargs)
+    else:
+        fig.savefig(path, **kwargs)
 
 
 def to_db(image: np.ndarray, dynamic_range_db: float) -> np.ndarray:
@@ -88,7 +102,7 @@ def save_quicklook(
     ax.set_title(title)
     fig.colorbar(im, ax=ax, label="dB re peak")
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path)
     plt.close(fig)
 
 
@@ -157,5 +171,5 @@ def save_height_quicklook(
     ax.set_title(title)
     fig.colorbar(im, ax=ax, label="height [mm]")
     fig.tight_layout()
-    fig.savefig(path)
+    save_figure(fig, path)
     plt.close(fig)

@@ -28,7 +28,6 @@ import json
 import math
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -44,7 +43,7 @@ from ..physical.carrier import pulses_integrated, range_cells
 from ..physical.settings import PhysicalSettings, paper_ccd
 from ..presets import preset
 from ..scene import Simulator, point_scene
-from ..sinks.io import check_writable
+from ..sinks.io import check_writable, write_text_when_complete
 
 # Psaltis & Wagner 1981, Table 1, as printed.
 PAPER = {
@@ -412,11 +411,11 @@ def run(args) -> int:
     data = table1_data(speed=getattr(args, "speed", False))
     text = table1_markdown(data)
     if getattr(args, "out", None):
-        Path(args.out).write_text(text, encoding="utf-8")
+        write_text_when_complete(args.out, text)
         print(f"wrote {args.out}", file=sys.stderr)
     else:
         sys.stdout.write(text)
     if getattr(args, "json", None):
-        Path(args.json).write_text(json.dumps(data, indent=2, default=float), encoding="utf-8")
+        write_text_when_complete(args.json, json.dumps(data, indent=2, default=float))
         print(f"wrote {args.json}", file=sys.stderr)
     return 0

@@ -62,7 +62,10 @@ def replace_when_complete(path: str | Path) -> Iterator[Path]:
     """
     path = Path(path)
     try:
-        fd, name = tempfile.mkstemp(prefix=f".{path.name}.partial-", dir=path.parent)
+        # The suffix kept: writers that go by it (matplotlib's savefig) see the right kind.
+        fd, name = tempfile.mkstemp(
+            prefix=f".{path.name}.partial-", suffix=path.suffix, dir=path.parent
+        )
     except OSError as exc:
         raise ValueError(f"cannot write {path}: {exc.strerror or exc}") from None
     os.close(fd)
@@ -75,6 +78,12 @@ def replace_when_complete(path: str | Path) -> Iterator[Path]:
     # mkstemp makes the file owner-only; the finished file gets the mode any new file would.
     os.chmod(tmp, 0o666 & ~_umask())
     os.replace(tmp, path)
+
+
+def write_text_when_complete(path: str | Path, text: str) -> None:
+    """``path.write_text(text)`` through :func:`replace_when_complete` (UTF-8)."""
+    with replace_when_complete(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
 
 
 def _umask() -> int:

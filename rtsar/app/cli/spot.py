@@ -10,13 +10,14 @@ from dataclasses import replace
 
 import numpy as np
 
+from ...sinks.io import replace_when_complete
 from ...sinks.publish import DEFAULT_ENDPOINT, ZmqPublisher
 from ...spot.pfa import PolarFormatPlan
 from ...spot.projective import reconstruct_line, reconstruct_points
 from ...spot.scene import load_spot_scene
 from ...spot.simulate import BISTATIC_CHANNEL
 from .. import spotlight as run
-from ..quicklook import file_pyplot, save_quicklook
+from ..quicklook import file_pyplot, save_figure, save_quicklook
 from .options import die
 
 
@@ -277,7 +278,8 @@ def cmd_projective(args) -> int:
         th = -10.0 if args.threshold_db is None else args.threshold_db
         rec = reconstruct_points(a, b, x, y, phi_a, phi_b, th)
     rows = np.column_stack([rec.points_m, rec.power_db]) if len(rec.points_m) else np.zeros((0, 4))
-    np.savetxt(args.output, rows, delimiter=",", header="x_m,y_m,z_m,power_db", comments="")
+    with replace_when_complete(args.output) as tmp:
+        np.savetxt(tmp, rows, delimiter=",", header="x_m,y_m,z_m,power_db", comments="")
     print(f"wrote {args.output}: {rec.summary()}")
     for y_amb, na, nb in rec.ambiguous[:10]:
         print(
@@ -293,6 +295,6 @@ def cmd_projective(args) -> int:
         ax.set_ylabel("range y (mm)")
         ax.set_zlabel("out of plane z (mm)")
         ax.set_title(f"projective SAL: {rec.summary()}", fontsize=9)
-        fig.savefig(args.png, dpi=110)
+        save_figure(fig, args.png, dpi=110)
         plt.close(fig)
     return 0

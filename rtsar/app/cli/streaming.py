@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import tempfile
 from dataclasses import replace
 from pathlib import Path
 
@@ -236,10 +237,13 @@ def cmd_keygen(args) -> int:
     if there and not args.force:
         return die(f"{', '.join(there)} exist(s): keep them, or replace them with --force")
     folder.mkdir(parents=True, exist_ok=True)
-    for p in (public, secret):
-        p.unlink(missing_ok=True)
-    public, secret = zmq.auth.create_certificates(str(folder), args.name)
-    os.chmod(secret, 0o600)  # the secret key is readable by its owner only
+    # Made in an owner-only folder beside them and renamed into place: the secret key is never
+    # readable by others, and a run that dies leaves the earlier pair as it was.
+    with tempfile.TemporaryDirectory(prefix=f".{args.name}.keygen-", dir=folder) as tmp:
+        new_public, new_secret = zmq.auth.create_certificates(tmp, args.name)
+        os.chmod(new_secret, 0o600)  # the secret key is readable by its owner only
+        os.replace(new_secret, secret)
+        os.replace(new_public, public)
     print(
         f"wrote {public} (give to subscribers: --curve-server-key; or, for a subscriber's own "
         f"pair, put it in the publisher's --curve-clients folder)\n"

@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from ...lens.base import opencl_unavailable
+from ...sinks.io import write_text_when_complete
 from .measure import measure_cost, measure_quality, reference_image, trace_latency_s
 from .report import markdown, pareto_front, plot
 from .scenes import TradeoffScene, Variant, default_scenes, make_scene, simulate
@@ -195,9 +196,10 @@ def run(args) -> int:
         "rows": rows,
         "spotlight": {**spot_scene, "rows": spot_rows},
     }
-    (out / "tradeoff.json").write_text(json.dumps(doc, indent=1, default=float))
-    (out / "tradeoff.md").write_text(
-        markdown(rows, scenes) + "\n" + spotlight_markdown(spot_rows, spot_scene)
+    write_text_when_complete(out / "tradeoff.json", json.dumps(doc, indent=1, default=float))
+    write_text_when_complete(
+        out / "tradeoff.md",
+        markdown(rows, scenes) + "\n" + spotlight_markdown(spot_rows, spot_scene),
     )
     plot(rows, scenes, out / "tradeoff.png")
     print(markdown(rows, scenes))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..quicklook import file_pyplot
+from ..quicklook import file_pyplot, save_figure
 from .scenes import TradeoffScene
 
 # ---- the sweep ---------------------------------------------------------------------------------
@@ -97,5 +97,5 @@ def plot(rows: list[dict], scenes: list[TradeoffScene], path: Path) -> None:
         ]
         row_axes[1].legend(handles=handles, fontsize=7, loc="best")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)

@@ -228,3 +228,40 @@ def test_a_finished_file_has_the_mode_of_any_new_file(tmp_path):
     finally:
         os.umask(old)
     assert (tmp_path / "out.h5").stat().st_mode & 0o777 == plain.stat().st_mode & 0o777 == 0o644
+
+
+def test_a_png_or_key_pair_that_fails_midway_leaves_the_earlier_files(tmp_path, monkeypatch):
+    """From a kill test: quicklook (and view, spotlight, projective, tradeoff) saved straight to
+    the name, so a kill left an empty PNG; keygen --force deleted the old pair before making the
+    new one.  A write that dies now leaves the earlier files and no partial one."""
+    import matplotlib.figure
+    import zmq.auth
+
+    from rtsar.app.quicklook import save_quicklook
+
+    png = tmp_path / "q.png"
+    png.write_bytes(b"the earlier picture")
+
+    def dies_midway(self, fname, **kwargs):
+        Path(fname).write_bytes(b"\x89PNG half")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", dies_midway)
+    image = np.ones((8, 8), np.complex64)
+    with pytest.raises(OSError, match="disk full"):
+        save_quicklook(png, image, np.arange(8.0), np.arange(8.0), title="t")
+    assert png.read_bytes() == b"the earlier picture"
+
+    keys = tmp_path / "keys"
+    assert main(["keygen", str(keys), "--name", "pub"]) == 0
+    before = {p.name: p.read_bytes() for p in keys.iterdir()}
+    assert (keys / "pub.key_secret").stat().st_mode & 0o777 == 0o600
+
+    def fails(folder, name):
+        (Path(folder) / f"{name}.key").write_text("half")
+        raise OSError("no entropy")
+
+    monkeypatch.setattr(zmq.auth, "create_certificates", fails)
+    assert main(["keygen", str(keys), "--name", "pub", "--force"]) != 0
+    assert {p.name: p.read_bytes() for p in keys.iterdir()} == before
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []

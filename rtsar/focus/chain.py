@@ -25,7 +25,8 @@ pipeline's.  What a stage needs to know of the scene comes in a :class:`Correcti
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import inspect
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -85,6 +86,23 @@ def parse_spec(text: str) -> tuple[str, dict]:
     return name, params
 
 
+def stage_keys(name: str) -> list[str]:
+    """The ``name:key=value`` keys a correction takes (its constructor's or PGASettings')."""
+    if name == "pga":
+        return [f.name for f in fields(PGASettings)]
+    target, skip = {
+        "hcn": (HCNAligner, {"config"}),
+        "linearize": (ChirpLinearizer, {"config", "aligner"}),
+        "reference_region": (ReferenceRegionCorrector, {"config", "geometry"}),
+        "pra": (
+            PhaseToRetro,
+            {"config", "retro_along_track_m", "retro_range_m", "start_along_track_m", "range_m"},
+        ),
+    }[name]
+    keys = [k for k in inspect.signature(target).parameters if k not in skip]
+    return ["along_track_m", "range_m", *keys] if name == "pra" else keys
+
+
 def make_stage(
     name: str,
     config: Config,
@@ -92,8 +110,16 @@ def make_stage(
     context: CorrectionContext | None = None,
     with_hcn: bool = False,
 ) -> CorrectionStage:
-    """One correction stage (see the table above); ``context`` supplies geometry where needed."""
+    """One correction stage (see the table above); ``context`` supplies geometry where needed.
+
+    A key the stage does not take is a ValueError naming the keys it takes."""
     params = dict(params)
+    unknown = sorted(set(params) - set(stage_keys(name)))
+    if unknown:
+        raise ValueError(
+            f"correction {name}: unknown key(s) {', '.join(unknown)}; "
+            f"it takes {', '.join(stage_keys(name))}"
+        )
     context = context or CorrectionContext()
     if name == "hcn":
         return HCNAligner(config, **params)

@@ -93,7 +93,10 @@ def add_processing_knobs(g) -> None:
         metavar="NAME[:KEY=VALUE,...]",
         help=f"phase/chirp correction in the stream, repeatable: {', '.join(CORRECTIONS)} "
         "(pra: pra:along_track_m=X,range_m=R; default the scene's brightest point, or a "
-        "recording's found in a first pass; README 'Phase errors and focusing')",
+        "recording's found in a first pass; pga: e.g. pga:follow_walk=0 skips the "
+        "walk-following second pass, pga:doppler_anchor=0 the Doppler anchor; an unknown key's "
+        "error lists the keys a correction takes; default: none; README 'Phase errors and "
+        "focusing')",
     )
     g.add_argument(
         "--physical",

@@ -1,7 +1,8 @@
 """Phase gradient autofocus (Crouch 2012, eqs. 4.14-4.17) for the strip-map stream.
 
-``estimator`` (one block), ``blocks`` (the stream's block layout and stitching), ``stream`` (the
-correction stage), ``reference`` (the float64 batch version on a recording).
+``estimator`` (one block), ``migration`` (points that walk in range inside a block), ``blocks``
+(the stream's block layout and stitching), ``stream`` (the correction stage), ``reference`` (the
+float64 batch version on a recording).
 """
 
 from .doppler import CentroidLags, antenna_coherence, centroid_lags, centroid_std_rad
@@ -12,13 +13,11 @@ from .estimator import (
     REASONS,
     BlockReport,
     PGASettings,
-    curvature_m,
     deramp_cycles,
     estimate_block,
-    migration_corrected,
     remove_linear,
-    row_half_width,
 )
+from .migration import curvature_m, migration_corrected, row_half_width
 from .reference import pga_batch
 from .stream import PGACounters, PGAStage
 

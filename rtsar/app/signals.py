@@ -3,12 +3,23 @@
 The handlers raise :class:`Terminated` (a KeyboardInterrupt) in the main thread, so every
 command's Ctrl-C path serves the other signals too; the exit status is 128 + the signal number
 (130 for Ctrl-C, 143 for SIGTERM, 129 for SIGHUP).
+
+Inside :func:`deferred` (the block loops of simulate and process) a signal only sets a flag that
+:func:`check` raises at the loop's next step: an exception raised at an arbitrary point could
+land in a finalizer, where Python drops it ("Exception ignored …": a kill test saw simulate
+finish and replace the old file after Ctrl-C or SIGTERM, 7 times in 40), or inside a numba
+call (a SystemError traceback).  A second signal before that step is raised at once.
 """
 
 from __future__ import annotations
 
 import signal
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+_deferring = 0  # depth of deferred() blocks
+_pending: int | None = None  # a signal received inside one, not yet raised
 
 
 class Terminated(KeyboardInterrupt):
@@ -19,17 +30,48 @@ class Terminated(KeyboardInterrupt):
         self.signum = signum
 
 
+def _exception(signum: int) -> KeyboardInterrupt:
+    return KeyboardInterrupt() if signum == signal.SIGINT else Terminated(signum)
+
+
 def _raise(signum, frame):
-    raise Terminated(signum)
+    global _pending
+    if _deferring and _pending is None:
+        _pending = signum
+        return
+    _pending = None
+    raise _exception(signum)
 
 
 def install() -> None:
-    """Route SIGTERM and SIGHUP to :class:`Terminated` (main thread only; elsewhere a no-op)."""
+    """Route SIGINT, SIGTERM and SIGHUP through :func:`_raise` (main thread only; elsewhere a
+    no-op): KeyboardInterrupt for Ctrl-C, :class:`Terminated` for the others."""
     if threading.current_thread() is not threading.main_thread():
         return
-    for name in ("SIGTERM", "SIGHUP"):
+    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
         if hasattr(signal, name):
             signal.signal(getattr(signal, name), _raise)
+
+
+@contextmanager
+def deferred() -> Iterator[None]:
+    """Signals inside the block wait for :func:`check` (module docstring); one still waiting at
+    the block's end is raised there."""
+    global _deferring
+    _deferring += 1
+    try:
+        yield
+    finally:
+        _deferring -= 1
+    check()
+
+
+def check() -> None:
+    """Raise the signal that arrived inside :func:`deferred`, if any."""
+    global _pending
+    if _pending is not None:
+        signum, _pending = _pending, None
+        raise _exception(signum)
 
 
 def describe(exc: BaseException) -> str:

@@ -16,6 +16,7 @@ from ...scene import Simulator, load_scene
 from ...sinks.image_file import ImageWriter, read_heights, read_image
 from ...sinks.io import RecordingWriter, replace_when_complete
 from ...stream.engine import StreamProcessor
+from .. import signals
 from ..progress import Progress
 from ..quicklook import save_height_quicklook, save_quicklook
 from .inputs import open_input
@@ -93,11 +94,13 @@ def simulate_to(scene, output) -> None:
     batch = scene.config.processor.micro_batch
     t0 = time.perf_counter()
     with (
+        signals.deferred(),
         replace_when_complete(output) as tmp,
         RecordingWriter(tmp, scene.config, scene.to_dict(), chunk_pulses=batch) as rec,
     ):
         done = 0
         while done < scene.pulses:
+            signals.check()
             shots = list(sim.shots(batch))
             rec.write(
                 [s.samples for s in shots],
@@ -152,12 +155,14 @@ def cmd_process(args) -> int:
         # The image goes to disk as it is focused (bounded memory), under a temporary name
         # until it is complete.
         with (
+            signals.deferred(),
             replace_when_complete(args.output) as tmp,
             ImageWriter(
                 tmp, cfg, eng.range_m, heights=bool(receivers), source=str(args.recording)
             ) as img,
         ):
             for shots, aux in rec.batches_with_aux(cfg.processor.micro_batch, channels):
+                signals.check()
                 out = eng.push(shots, aux)
                 img.write(out.lines, eng.azimuth_m(out.first_line, len(out.lines)))
                 if receivers:

@@ -50,3 +50,24 @@ def test_a_second_signal_is_raised_at_once_and_the_first_at_the_end(handlers):
         with signals.deferred():
             os.kill(os.getpid(), signal.SIGHUP)
     assert signals.exit_status(info.value) == 128 + signal.SIGHUP
+
+
+def test_a_ctrl_c_during_the_commands_imports_is_one_line(monkeypatch, capsys):
+    """From a kill test: Ctrl-C in the second the rtsar command spends importing printed a
+    KeyboardInterrupt traceback.  The console script imports the command inside its main."""
+    import subprocess
+    import types
+
+    from rtsar.app import entry
+
+    code = "import sys, rtsar.app.entry; print('rtsar.app.cli' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"  # nothing heavy before main runs
+
+    class Importing(types.ModuleType):
+        def __getattr__(self, name):
+            raise KeyboardInterrupt
+
+    monkeypatch.setitem(sys.modules, "rtsar.app.cli", Importing("rtsar.app.cli"))
+    assert entry.main(["presets"]) == 130
+    assert capsys.readouterr().err.strip() == "rtsar: interrupted"

@@ -126,3 +126,24 @@ def test_a_task_whose_worker_dies_is_tried_retries_plus_one_times(tmp_path):
     assert [r.status for r in results] == ["failed"]
     assert "KilledWorker" in results[0].message and "1 retries" in results[0].message
     assert counter.read_text() == "xx"
+
+
+def test_an_interrupted_batch_lists_every_file_and_prints_no_traceback(tmp_path, monkeypatch):
+    """From a kill test: Ctrl-C during a batch printed Dask tracebacks and no summary.  The
+    interrupt (here raised where the batch waits for its files) ends the batch with every file's
+    result, those not done "interrupted"."""
+    recs = [tmp_path / f"r{i}.h5" for i in range(3)]
+    outs = [tmp_path / f"r{i}-img.h5" for i in range(3)]
+
+    def interrupted(*args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(batch, "_collect", interrupted)
+    with open(os.devnull, "w") as quiet, pytest.raises(batch.BatchInterrupted) as info:
+        batch.run_batch(recs, outs, {}, workers=1, retries=0, stream=quiet)
+    assert [r.status for r in info.value.results] == ["interrupted"] * 3
+    assert [r.recording for r in info.value.results] == [str(r) for r in recs]
+    # An image that a worker finished as the batch stopped is whole (it took its name complete).
+    outs[1].write_bytes(b"image")
+    assert batch._unfinished(recs[1], outs[1], 0.0).status == "ok"
+    assert batch._unfinished(recs[2], outs[2], 0.0).status == "interrupted"

@@ -18,8 +18,10 @@ import argparse
 import contextlib
 import io
 import os
+import signal
 import socket
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -137,15 +139,34 @@ def start_client(workers: int, scheduler: str | None, retries: int = 2):
         ) from exc
     if scheduler:
         return Client(scheduler, timeout="10s"), None
-    with dask.config.set({"distributed.scheduler.allowed-failures": retries}):
-        cluster = LocalCluster(
-            n_workers=workers,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            silence_logs=40,  # logging.ERROR: Dask's own chatter would bury the progress line
-        )
+    # The workers are started with Ctrl-C ignored (they inherit it): a terminal's Ctrl-C reaches
+    # every process of the group, and Dask's workers answered it with tracebacks; this process
+    # ends them when it is interrupted.
+    main = threading.current_thread() is threading.main_thread()
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    try:
+        with dask.config.set({"distributed.scheduler.allowed-failures": retries}):
+            cluster = LocalCluster(
+                n_workers=workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=40,  # logging.ERROR: Dask's chatter would bury the progress line
+            )
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, before)
     return Client(cluster), cluster
+
+
+class BatchInterrupted(KeyboardInterrupt):
+    """Ctrl-C (or SIGTERM/SIGHUP) during a batch: ``results`` has every file, those not finished
+    marked "interrupted"; ``cause`` is the interrupt itself."""
+
+    def __init__(self, results: list, cause: KeyboardInterrupt):
+        super().__init__(str(cause))
+        self.results, self.cause = results, cause
+        self.signum = getattr(cause, "signum", signal.SIGINT)
 
 
 def run_batch(
@@ -160,12 +181,14 @@ def run_batch(
 ) -> list[FileResult]:
     """Process every recording on Dask; one FileResult per recording, in the input order.
 
+    Interrupted (Ctrl-C, SIGTERM, SIGHUP): :class:`BatchInterrupted` with every file's result.
+
     ``task(options, recording, output) -> FileResult`` runs each file (default ``process_one``;
     the tests give one whose worker dies)."""
-    from distributed import as_completed  # after start_client's clear error when missing
-
     stream = stream or sys.stderr
+    started = time.time()
     client, cluster = start_client(workers, scheduler, retries)
+    closed = False
     try:
         futures = {
             client.submit(
@@ -181,28 +204,64 @@ def run_batch(
         }
         results: list[FileResult | None] = [None] * len(recordings)
         prog = Progress(len(recordings), "batch", unit="files", stream=stream, every_s=5.0)
-        done = failed = 0
-        for fut in as_completed(futures):
-            i = futures[fut]
-            try:
-                result = fut.result()
-            except Exception as exc:  # the worker died on every try (KilledWorker, ...)
-                result = FileResult(
-                    str(recordings[i]),
-                    str(outputs[i]),
-                    "failed",
-                    message=f"{type(exc).__name__}: {exc} (after {retries} retries)",
-                )
-            results[i] = result
-            done += 1
-            failed += result.status != "ok"
-            prog.update(done, f"{failed} failed" if failed else "")
-        prog.done(done, f"{failed} failed" if failed else "")
+        try:
+            _collect(futures, recordings, outputs, retries, results, prog)
+        except KeyboardInterrupt as exc:
+            for fut in futures:
+                fut.cancel()
+            _close(client, cluster)  # a file a worker was on may be finished by now
+            closed = True
+            left = [
+                r or _unfinished(recordings[i], outputs[i], started) for i, r in enumerate(results)
+            ]
+            raise BatchInterrupted(left, exc) from None
         return [r for r in results if r is not None]
     finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        if not closed:
+            _close(client, cluster)
+
+
+def _close(client, cluster) -> None:
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
+def _unfinished(recording: Path, output: Path, started: float) -> FileResult:
+    """A file without a result when the batch was interrupted: its image is whole if it is there
+    and new (images take their name only when complete), else it was not done."""
+    try:
+        new = output.stat().st_mtime >= started
+    except OSError:
+        new = False
+    if new:
+        return FileResult(
+            str(recording), str(output), "ok", message="finished as the batch stopped"
+        )
+    return FileResult(str(recording), str(output), "interrupted")
+
+
+def _collect(futures, recordings, outputs, retries, results, prog) -> None:
+    """Fill ``results`` as the files finish (run_batch's loop)."""
+    from distributed import as_completed
+
+    done = failed = 0
+    for fut in as_completed(futures):
+        i = futures[fut]
+        try:
+            result = fut.result()
+        except Exception as exc:  # the worker died on every try (KilledWorker, ...)
+            result = FileResult(
+                str(recordings[i]),
+                str(outputs[i]),
+                "failed",
+                message=f"{type(exc).__name__}: {exc} (after {retries} retries)",
+            )
+        results[i] = result
+        done += 1
+        failed += result.status != "ok"
+        prog.update(done, f"{failed} failed" if failed else "")
+    prog.done(done, f"{failed} failed" if failed else "")
 
 
 def summary_table(results: list[FileResult]) -> str:

@@ -6,7 +6,7 @@ import os
 import sys
 from pathlib import Path
 
-from .. import batch
+from .. import batch, signals
 from .options import add_process_options, die
 
 # The options of ``batch`` itself; every other parsed option is a ``process`` option.
@@ -25,9 +25,15 @@ def cmd_batch(args) -> int:
     options = {k: v for k, v in vars(args).items() if k not in BATCH_ONLY}
     where = args.scheduler or f"a local cluster of {args.workers} worker processes"
     print(f"rtsar batch: {len(recordings)} recordings on {where} → {out_dir}", file=sys.stderr)
-    results = batch.run_batch(
-        recordings, outputs, options, args.workers, args.scheduler, args.retries
-    )
+    try:
+        results = batch.run_batch(
+            recordings, outputs, options, args.workers, args.scheduler, args.retries
+        )
+    except batch.BatchInterrupted as exc:  # what finished is listed; their images are whole
+        print(batch.summary_table(exc.results))
+        ok = sum(r.status == "ok" for r in exc.results)
+        print(f"{signals.describe(exc.cause)}: {ok} of {len(exc.results)} recordings focused")
+        return signals.exit_status(exc.cause)
     print(batch.summary_table(results))
     failed = [r for r in results if r.status != "ok"]
     total_s = sum(r.seconds for r in results)

@@ -76,8 +76,14 @@ def _write_channel(files, shots, sample_rate_hz, global_extra, annotations, rec)
     if carrier <= SIGMF_MAX_FREQUENCY_HZ:
         capture["core:frequency"] = carrier
     meta.add_capture(0, metadata=capture)
-    for start, length, md in annotations:
-        meta.add_annotation(start, length, md)
+    # The annotations (one per shot, in sample order) set at once: the sigmf package's
+    # add_annotation re-sorts the whole list on every call (154 s for 60 000 shots).
+    full = dict(meta.ordered_metadata())
+    full[SigMFFile.ANNOTATION_KEY] = [
+        {**md, "core:sample_start": int(start), "core:sample_count": int(length)}
+        for start, length, md in sorted(annotations, key=lambda a: a[0])
+    ]
+    meta.set_metadata(full)
     meta.validate()
     with open(meta_path, "w") as fp:
         meta.dump(fp, pretty=True)

@@ -169,6 +169,13 @@ def test_pra_default_finds_the_recorded_scenes_brightest_point(tmp_path, capsys)
     assert main(["process", str(rec), "-o", str(img), "--correct", "pra", "--lens", "numpy"]) == 0
     got, _, _, _ = read_image(img)
     np.testing.assert_array_equal(got, live_image(load_scene(scene_file), ["pra"]))
+    # What the correction did is said (a cold review: process said nothing of PGA's outcome) and
+    # kept with the image.
+    assert main(["process", str(rec), "-o", str(img), "--correct", "pga", "--lens", "numpy"]) == 0
+    said = capsys.readouterr().err
+    assert "corrections: pga.pulses_in" in said and "pga.reasons." in said
+    counted = json.loads(read_image(img)[3]["correction_counters"])
+    assert counted["pga.pulses_in"] == counted["pga.pulses_out"] > 0
 
 
 def test_correlator_with_physical_mode_is_refused(recorded, capsys):

@@ -177,6 +177,9 @@ def cmd_process(args) -> int:
                 more = [e.flush().lines for e in receivers.values()]
                 _write_heights(img, heights.process(out.lines, *more) + heights.flush())
                 extra = {"height_method": args.height, "height_strips": heights.strips_out}
+            counted = eng.corrections.counters() if eng.corrections else {}
+            if counted:  # what each correction did (PGA: blocks estimated and why not, …)
+                extra["correction_counters"] = json.dumps(counted)
             img.close(
                 lens=eng.lens.backend,
                 correlator=cfg.processor.correlator,
@@ -190,6 +193,9 @@ def cmd_process(args) -> int:
             f"warning: {eng.nonfinite_pulses} of {done} shots held NaN/Inf and were zeroed",
             file=sys.stderr,
         )
+    if counted:
+        said = [f"{k} {v}" for k, v in counted.items() if v]
+        print(f"corrections: {', '.join(said) or 'nothing counted'}", file=sys.stderr)
     print(
         f"wrote {args.output}: image {img.lines} azimuth × {len(eng.range_m)} range, "
         f"{done / dt:,.0f} pulses/s ({eng.lens.backend} lens, "

@@ -22,8 +22,8 @@ from rtsar.scene import Simulator, point_scene
 PULSES = 2048
 
 
-@pytest.fixture(scope="module")
-def geometry():
+def shortened_crouch(effects):
+    """(config, targets, start, range-compressed lines, simulator) of the module's scene."""
     cfg = preset("crouch-sal").with_processor(aperture_pulses=512, range_bins=64,
                                               range_window="taylor")  # fmt: skip
     cfg = replace(cfg, geometry=replace(cfg.geometry, along_track_step_m=40e-6))
@@ -33,14 +33,17 @@ def geometry():
     targets = [(0.0, rm[32] + 0.3 * dr, 1.0), (2e-3, rm[20] + 0.4 * dr, 0.1)]
     start = -0.5 * PULSES * d
     xs, rs, amps = (list(v) for v in zip(*targets, strict=True))
+    sc = point_scene(cfg, xs, rs, amps, effects=effects, seed=3, start_along_track_m=start,
+                     pulses=PULSES)  # fmt: skip
+    sim = Simulator(sc)
+    return cfg, targets, start, compress_reference(plan, sim.block(PULSES)), sim
 
-    def lines(effects):
-        sc = point_scene(cfg, xs, rs, amps, effects=effects, seed=3, start_along_track_m=start,
-                         pulses=PULSES)  # fmt: skip
-        return compress_reference(plan, Simulator(sc).block(PULSES))
 
-    err = lines([("piston", {**PISTON, "random_walk_rad": 1.0, "seed": 5})])
-    return cfg, targets, start, lines([]), err
+@pytest.fixture(scope="module")
+def geometry():
+    cfg, targets, start, clean, _ = shortened_crouch([])
+    err = shortened_crouch([("piston", {**PISTON, "random_walk_rad": 1.0, "seed": 5})])[3]
+    return cfg, targets, start, clean, err
 
 
 def metrics(cfg, lines, start, targets):
@@ -117,19 +120,9 @@ def test_rows_that_follow_the_walk_halve_the_noise_in_the_estimate():
     """With receiver noise (-10 dB per sample) the 2w+1-bin rows carry 13 bins of noise: their
     estimate misses the injected piston by 0.30 rad rms (slope removed).  Narrow rows that follow
     each point's walk carry 3: measured 0.16 rad.  Bound: ≤ 0.2 rad and ≤ 0.7 × the wide rows'."""
-    cfg = preset("crouch-sal").with_processor(aperture_pulses=512, range_bins=64,
-                                              range_window="taylor")  # fmt: skip
-    cfg = replace(cfg, geometry=replace(cfg.geometry, along_track_step_m=40e-6))
-    plan = make_plan(cfg)
-    rm, d = plan.range_m, cfg.geometry.along_track_step_m
-    dr = rm[1] - rm[0]
     effects = [("piston", {**PISTON, "random_walk_rad": 1.0, "seed": 5}),
                ("noise", {"snr_db": -10.0})]  # fmt: skip
-    sc = point_scene(cfg, [0.0, 2e-3], [rm[32] + 0.3 * dr, rm[20] + 0.4 * dr], [1.0, 0.1],
-                     effects=effects, seed=3, start_along_track_m=-0.5 * PULSES * d,
-                     pulses=PULSES)  # fmt: skip
-    sim = Simulator(sc)
-    err = compress_reference(plan, sim.block(PULSES))
+    cfg, _, _, err, sim = shortened_crouch(effects)
     truth = sim.effects[0].truth(np.arange(PULSES))
 
     def residual_rms(settings):

@@ -251,7 +251,7 @@ def add_parsers(sub) -> None:
         "scene", help="scene file (.toml), or a built-in scene: demo, sal-demo, insal-ridge"
     )
     s.add_argument("-o", "--output", required=True, help="recording to write (.h5)")
-    s.add_argument("--pulses", type=int, help="override the scene's number of shots")
+    s.add_argument("--pulses", type=int, help="number of shots (default: the scene's `pulses`)")
     s.set_defaults(func=cmd_simulate)
 
     s = sub.add_parser(

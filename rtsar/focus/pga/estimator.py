@@ -170,7 +170,9 @@ class PGASettings:
         }
         for name, ok in checks.items():
             if not ok:
-                raise ValueError(f"PGASettings.{name} out of range: {getattr(self, name)!r}")
+                switch = name in ("doppler_anchor", "follow_walk")
+                what = "must be 0 or 1" if switch else "out of range"
+                raise ValueError(f"PGASettings.{name} {what}: {getattr(self, name)!r}")
         object.__setattr__(self, "doppler_anchor", bool(self.doppler_anchor))
         object.__setattr__(self, "follow_walk", bool(self.follow_walk))
 

@@ -172,3 +172,21 @@ def test_an_unknown_correction_key_is_one_line_naming_the_keys():
     for name in ("pga", "pra", "hcn", "linearize", "reference_region"):
         with pytest.raises(ValueError, match=r"unknown key\(s\) follow_wlak; it takes"):
             make_stage(name, cfg, {"follow_wlak": 0.0})
+
+
+def test_a_return_fixed_to_the_platform_does_not_steer_pga(geometry):
+    """From a cold review: a steady return (leakage, an internal reflection) three times the
+    brightest point's amplitude made PGA fit its deramp chirp (68-184 rad rms off), and one on
+    its own gave a 157 rad estimate.  Each bin's mean over the block is removed before estimating
+    where a point's history sweeps many cycles (180 here): the estimate is the one without it."""
+    cfg, _, _, _, err = geometry
+    _, alone, _ = pga_batch(cfg, err)
+    leaky = err.copy()
+    leaky[:, 40] += 3.0 * np.abs(err).max()
+    _, with_leak, reports = pga_batch(cfg, leaky)
+    assert all(r.estimated for r in reports)
+    np.testing.assert_allclose(with_leak, alone, rtol=0, atol=1e-6)
+    only = np.zeros_like(err)
+    only[:, 40] = 1.0
+    _, phase, reports = pga_batch(cfg, only)
+    assert not np.any(phase) and {r.reason for r in reports} == {"no_bright_points"}

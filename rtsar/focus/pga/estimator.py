@@ -249,6 +249,12 @@ def remove_linear(phase_rad: np.ndarray) -> np.ndarray:
     return phi - phi.mean() - slope * t
 
 
+#: Where a point's history sweeps more cycles than this over a block (its mean over the block is
+#: then ≲ 1/√(2·cycles) of it), each range bin's mean is removed before estimating: a return
+#: fixed to the platform (leakage, an internal reflection) is steady, so it is all mean.
+FIXED_MIN_CYCLES = 20.0
+
+
 def _sharpness(image: np.ndarray) -> float:
     p = image.real**2 + image.imag**2
     total = float(p.sum())
@@ -350,10 +356,14 @@ def estimate_block(
     zero = np.zeros(pulses)
     if pulses < max(2, min_pulses):
         return zero, report("short_block")
+    centre_m = range_m[range_m.size // 2 : range_m.size // 2 + 1]
+    if 2.0 * float(curvature_m(config, centre_m, pulses)[0, 0]) / config.geometry.wavelength_m > (
+        FIXED_MIN_CYCLES
+    ):  # a scene point's history sweeps that many cycles: its mean over the block is tiny
+        x = x - x.mean(axis=0, keepdims=True)  # a return fixed to the platform is all mean
     if w:  # one ΔR per pulse (the swath centre's): the curvature varies little with R
-        centre = range_m[range_m.size // 2 : range_m.size // 2 + 1]
         cell_m = range_m[1] - range_m[0]  # signed: an axis may decrease
-        xc = migration_corrected(x, curvature_m(config, centre, pulses)[:, 0] / cell_m)
+        xc = migration_corrected(x, curvature_m(config, centre_m, pulses)[:, 0] / cell_m)
         x = rows(xc, w)
     power = x.real**2 + x.imag**2
     bins = _bright_bins(power, settings)

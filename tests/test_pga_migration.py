@@ -190,3 +190,20 @@ def test_a_return_fixed_to_the_platform_does_not_steer_pga(geometry):
     only[:, 40] = 1.0
     _, phase, reports = pga_batch(cfg, only)
     assert not np.any(phase) and {r.reason for r in reports} == {"no_bright_points"}
+
+
+def test_the_built_in_crouch_pga_scene_is_the_reports_scene():
+    """`rtsar simulate crouch-pga` (README) holds tools/pga_crouch_report.py's targets, piston
+    and noise on the same crouch-sal processor, so a user's recording is the report's scene."""
+    from rtsar.app.reports.pga_crouch import scene_lines
+    from rtsar.scene import load_scene
+
+    sc = load_scene("crouch-pga")
+    cfg, targets, start, *_ = scene_lines(64, 512, None)
+    assert sc.config.processor.range_window == "taylor" and sc.pulses == 6144
+    assert sc.start_along_track_m == pytest.approx(-0.5 * 6144 * cfg.geometry.along_track_step_m)
+    t = sc.targets
+    got = np.column_stack([t.along_track_m, t.slant_range_m, np.abs(t.amplitude)])
+    np.testing.assert_allclose(got, targets, rtol=0, atol=1e-10)
+    effects = dict(sc.effects)
+    assert effects["piston"] == {**PISTON, "seed": 11} and effects["noise"] == {"snr_db": -10.0}

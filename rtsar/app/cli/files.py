@@ -248,7 +248,8 @@ def add_parsers(sub) -> None:
         "shot with the exact range history; writes an HDF5 recording.",
     )
     s.add_argument(
-        "scene", help="scene file (.toml), or a built-in scene: demo, sal-demo, insal-ridge"
+        "scene",
+        help="scene file (.toml), or a built-in scene: demo, sal-demo, insal-ridge, crouch-pga",
     )
     s.add_argument("-o", "--output", required=True, help="recording to write (.h5)")
     s.add_argument("--pulses", type=int, help="number of shots (default: the scene's `pulses`)")

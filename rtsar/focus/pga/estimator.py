@@ -49,6 +49,12 @@ injected error.  It runs only where the wide rows' noise matters (``walk_noise_r
 SNR the wide rows' estimate is the better one (a cold review measured 0.090 against 0.110 rad
 at +20 dB).  The migration handling itself is rtsar.focus.pga.migration.
 
+Returns fixed to the platform (leakage, an internal reflection) are steady; deramped they look
+like a defocused point and PGA would fit their deramp chirp (a cold review: 68-184 rad rms off
+with one 3× the brightest point).  Where a point's history sweeps over ``FIXED_MIN_CYCLES``
+cycles in a block (180 at crouch-sal), each bin's mean over the block, which is then all of a
+steady return and ≲ 1/√(2·cycles) of a point's history, is removed before estimating.
+
 Safety (PGA must never harm a focused image; Crouch: it cannot focus scenes without prominent
 points).  The block's estimate is not used, and its phase is zero, when: its first step is
 already below ``focused_rad`` = π/10 ("nothing_to_correct": the bright points are focused); no

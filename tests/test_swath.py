@@ -3,6 +3,7 @@
 import json
 import socket
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -186,3 +187,73 @@ def test_bind_problems_are_one_line_errors():
             SwathWorkers(cfg, 1, "numpy", spawn=False, bind=f"tcp://127.0.0.1:{port}")
     finally:
         busy.close(0)
+
+
+def _echo_worker(results_ep, shots_ep, columns, stop):
+    """A worker that answers every block with zero lines, blocking when its results back up."""
+    ctx = zmq.Context.instance()
+    pull, push = ctx.socket(zmq.PULL), ctx.socket(zmq.PUSH)
+    for s, opt in ((pull, zmq.RCVHWM), (push, zmq.SNDHWM)):
+        s.setsockopt(opt, 1)
+    pull.connect(shots_ep)
+    push.connect(results_ep)
+    pull.recv_multipart()  # the setup
+    push.send_multipart([b"ready", json.dumps({"index": 0, "lens": "numpy"}).encode()])
+    first = 0
+    while not stop.is_set():
+        if not pull.poll(50):
+            continue
+        frames = pull.recv_multipart()
+        if frames[0] != b"block":
+            break
+        count = json.loads(frames[1])["count"]
+        head = {"index": 0, "first_line": first, "count": count}
+        push.send_multipart([b"lines", json.dumps(head).encode(),
+                             np.zeros((count, columns), np.complex64).tobytes()])  # fmt: skip
+        first += count
+    pull.close(0)
+    push.close(0)
+
+
+def test_a_consumer_waiting_downstream_is_not_a_stalled_worker(rng):
+    """Not found before: while the stage that takes the workers' lines waits on the stages after
+    it (a slow sink), the workers wait on their results and take no pulses; after timeout_s
+    that read as "swath worker 0 took no pulses" and ended the run.  It is waited out now, and
+    the run goes on when the consumer does."""
+    cfg = preset("tiny")
+    bind = f"tcp://127.0.0.1:{_free_port()}"
+    shots_ep, results_ep = worker_endpoints(bind, 0)
+    stop = threading.Event()
+    columns = cfg.processor.range_bins
+    t = threading.Thread(target=_echo_worker, args=(results_ep, shots_ep, columns, stop),
+                         daemon=True)  # fmt: skip
+    t.start()
+    workers = SwathWorkers(cfg, 1, "numpy", spawn=False, bind=bind, timeout_s=0.3)
+    block = crandn(rng, 16, cfg.waveform.samples_per_shot, dtype=np.complex64)
+    sent, errors = [0], []
+
+    def sender():
+        try:
+            for i in range(4000):
+                workers.send(16 * i, block, False)
+                sent[0] = i + 1
+        except RuntimeError as exc:
+            errors.append(exc)
+
+    workers.downstream_since = time.monotonic()  # the consumer waits on a slow sink
+    s = threading.Thread(target=sender, daemon=True)
+    s.start()
+    time.sleep(1.5)  # five timeouts, the pipe full
+    assert errors == [] and 0 < sent[0] < 4000
+    workers.downstream_since = None  # it reads again
+    lines = 0
+    while s.is_alive() or lines < 16 * sent[0]:
+        out = workers.receive(0.05)
+        lines += 0 if out is None else len(out.lines)
+        if not s.is_alive() and out is None and lines < 16 * sent[0]:
+            break
+    s.join(10)
+    assert errors == [] and sent[0] == 4000
+    stop.set()
+    t.join(5)
+    workers.close(wait_s=0.0)

@@ -275,7 +275,11 @@ class Pipeline:
                     self.timing.record(meta)
                     self.own["pulses_processed"] += len(meta)
                 if out is not None:
-                    self._put_image(self._line_block(out))
+                    self.swath.downstream_since = time.monotonic()
+                    try:  # the workers wait on us meanwhile: not a stall of theirs
+                        self._put_image(self._line_block(out))
+                    finally:
+                        self.swath.downstream_since = None
                 elif self.swath.finished:
                     break
         finally:

@@ -233,6 +233,9 @@ class SwathWorkers:
         self._results = None
         self._closed = False
         self._aborted = False
+        #: Set (to when) while the consumer of ``receive`` waits on the stages after it: the
+        #: workers then wait on their results and take no pulses, which is not their stall.
+        self.downstream_since: float | None = None
         try:
             self._start(bind, spawn, lens_backend, device, timeout_s)
         except BaseException:
@@ -308,13 +311,17 @@ class SwathWorkers:
         self._aborted = True
 
     def _send(self, k: int, socket, frames: list) -> None:
-        """Send, waiting while worker k is HWM blocks behind: up to ``timeout_s``, in slices so
+        """Send, waiting while worker k is HWM blocks behind: up to ``timeout_s`` (not counting
+        time the consumer spends waiting on later stages, ``downstream_since``), in slices so
         that :meth:`abort` ends the wait."""
         deadline = time.monotonic() + self.timeout_s
         while not socket.poll(int(1000 * SEND_SLICE_S), zmq.POLLOUT):
             if self._aborted:
                 raise RuntimeError("swath run aborted")
-            if time.monotonic() > deadline:
+            now = time.monotonic()
+            if self.downstream_since is not None:
+                deadline = max(deadline, now + self.timeout_s)
+            elif now > deadline:
                 raise RuntimeError(
                     f"swath worker {k} took no pulses for {self.timeout_s:g} s (stalled or gone)"
                 )

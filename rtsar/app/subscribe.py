@@ -53,7 +53,7 @@ def subscribe(
             if now - last > 2.0:
                 last = now
                 print(
-                    f"subscribe: {sub.counters['strips']} strips, {rec.lines_written} lines, "
+                    f"subscribe: strips {sub.counters['strips']}, lines {rec.lines_written}, "
                     f"missed strips {sub.counters['missed_strips']}",
                     file=stream,
                 )

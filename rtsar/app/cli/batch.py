@@ -13,6 +13,10 @@ from .options import add_process_options, die
 BATCH_ONLY = {"command", "func", "inputs", "out_dir", "workers", "scheduler", "retries"}
 
 
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
 def cmd_batch(args) -> int:
     recordings = batch.find_recordings(args.inputs)
     out_dir = Path(args.out_dir)
@@ -23,8 +27,10 @@ def cmd_batch(args) -> int:
     if args.workers < 1:
         return die("--workers must be at least 1")
     options = {k: v for k, v in vars(args).items() if k not in BATCH_ONLY}
-    where = args.scheduler or f"a local cluster of {args.workers} worker processes"
-    print(f"rtsar batch: {len(recordings)} recordings on {where} → {out_dir}", file=sys.stderr)
+    procs = f"{args.workers} worker process{'' if args.workers == 1 else 'es'}"
+    where = args.scheduler or f"a local cluster of {procs}"
+    n = len(recordings)
+    print(f"rtsar batch: {_count(n, 'recording')} on {where} → {out_dir}", file=sys.stderr)
     try:
         results = batch.run_batch(
             recordings, outputs, options, args.workers, args.scheduler, args.retries
@@ -32,13 +38,13 @@ def cmd_batch(args) -> int:
     except batch.BatchInterrupted as exc:  # what finished is listed; their images are whole
         print(batch.summary_table(exc.results))
         ok = sum(r.status == "ok" for r in exc.results)
-        print(f"{signals.describe(exc.cause)}: {ok} of {len(exc.results)} recordings focused")
+        print(f"{signals.describe(exc.cause)}: {ok} of {_count(n, 'recording')} focused")
         return signals.exit_status(exc.cause)
     print(batch.summary_table(results))
     failed = [r for r in results if r.status != "ok"]
     total_s = sum(r.seconds for r in results)
     print(
-        f"{len(results) - len(failed)} of {len(results)} recordings focused "
+        f"{len(results) - len(failed)} of {_count(len(results), 'recording')} focused "
         f"({total_s:.1f} s of processing in all)" + (f"; {len(failed)} failed" if failed else "")
     )
     return 1 if failed else 0

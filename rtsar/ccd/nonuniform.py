@@ -303,6 +303,7 @@ class NonUniformCorrelator(Correlator):
         tile = tiled.TILE_COLUMNS
         tiles = -(-bins // tile)
         widest = max(b for _, _, b in self.segments)
+        self._window_rows = 2 * widest  # rows the widest segment's transform reads
         tw = tiled.twiddles(2 * widest, real)
         h = np.asarray(mask, dtype=np.complex128)[::-1]  # h[q] = mask[N-1-q], float64 formed
         self._head = _Group(h, self.segments[:1], tiles, tile, real, tw)
@@ -366,14 +367,13 @@ class NonUniformCorrelator(Correlator):
             raise RuntimeError("the nonuniform correlator was closed: no more lines")
         lines = self._check(lines)
         lb, rows = self.block_lines, self._hist[0].shape[1]
-        widest = 2 * max(b for _, _, b in self.segments)
         outs = []
         for i in range(0, len(lines), self.CHUNK):
             chunk = lines[i : i + self.CHUNK]
             start, end = self.pulses_in, self.pulses_in + len(chunk)
             if self._tail.group is not None:
                 # The tail may still read the rows this chunk overwrites: wait (rarely).
-                self._tail.wait_for(end - rows + widest)
+                self._tail.wait_for(end - rows + self._window_rows)
             tiled.store_lines(chunk, *self._hist, start % rows)
             self.pulses_in = end
             done, blocks = start // lb, end // lb

@@ -36,6 +36,7 @@ from ...lens.plan import make_plan
 from ...phase import phasor
 from ...presets import preset
 from ...scene import Simulator, point_scene
+from ...sinks.io import write_text_when_complete
 
 PISTON = dict(random_walk_rad=0.3, drift_rad=1e-3, vibration_rad=3.0, vibration_hz=0.13,
               white_rad=0.1)  # fmt: skip
@@ -182,7 +183,6 @@ def markdown(rows: list[dict], pulses: int, bins: int) -> str:
         "|" + "---|" * 13,
     ]
     for r in rows:
-        reasons = ", ".join(f"{k} {v}" for k, v in r["reasons"].items())
         out.append(
             f"| {r['seed'] if r['seed'] is not None else 'none (error-free)'} | "
             f"{r['piston_ptp_rad']:.0f} | {min(r['irw_ratio']):.3f} … {max(r['irw_ratio']):.3f} | "
@@ -193,12 +193,25 @@ def markdown(rows: list[dict], pulses: int, bins: int) -> str:
             f"≥ {min(r['vs_ideal_peak_ratio']):.3f} | {r['shift_lines'][0]:.1f} "
             f"({r['shift_spread_lines']:.2f}; {r['shift_cells'][0]:.1f}) | "
             f"{r['error_slope_shift_lines']:.1f} | {r['one_block_shift_cells'][0]:.1f}, "
-            f"≥ {min(r['one_block_peak_ratio']):.3f} | {reasons}"
-            f"{' (input returned)' if r['unchanged'] else ''}; anchored "
-            f"{r['doppler_anchored_blocks']} | {r['stream_vs_batch_max']:.1e} | "
-            f"{r['pulses_per_s']:.0f} |"
+            f"≥ {min(r['one_block_peak_ratio']):.3f} | {stage_cells(r)}"
         )
     return "\n".join(out)
+
+
+def stage_cells(row: dict) -> str:
+    """The last cells of a report row: the blocks' reasons (and whether the input came back
+    unchanged), anchored blocks, stream against batch, pulses/s."""
+    reasons = ", ".join(f"{k} {v}" for k, v in row["reasons"].items())
+    returned = " (input returned)" if row["unchanged"] else ""
+    return (
+        f"{reasons}{returned}; anchored {row['doppler_anchored_blocks']} | "
+        f"{row['stream_vs_batch_max']:.1e} | {row['pulses_per_s']:.0f} |"
+    )
+
+
+def write_json(path: str, rows: list[dict]) -> None:
+    """The rows as JSON at ``path``, renamed into place when complete."""
+    write_text_when_complete(path, json.dumps(rows, indent=2))
 
 
 def main(argv=None) -> int:
@@ -220,8 +233,7 @@ def main(argv=None) -> int:
     rows = [case(args.pulses, args.bins, s, settings, args.snr_db) for s in [None, *seeds]]
     print(markdown(rows, args.pulses, args.bins))
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(rows, f, indent=2)
+        write_json(args.json, rows)
     return 0
 
 

@@ -261,6 +261,16 @@ def remove_linear(phase_rad: np.ndarray) -> np.ndarray:
 FIXED_MIN_CYCLES = 20.0
 
 
+def _wide_rows_noisy(power: np.ndarray, bins: np.ndarray, limit_rad: float) -> bool:
+    """Whether the rows' noise puts more than ``limit_rad`` rms into the estimate: √(N/2S) of
+    the brightest row ``bins[0]``, N the median row's energy (noise and clutter), S its own
+    above that (``power[pulse, row]``)."""
+    energy = power.sum(axis=0)
+    noise = float(np.median(energy))
+    signal = float(energy[bins[0]]) - noise
+    return signal > 0 and math.sqrt(noise / (2.0 * signal)) > limit_rad
+
+
 def _sharpness(image: np.ndarray) -> float:
     p = image.real**2 + image.imag**2
     total = float(p.sum())
@@ -362,14 +372,15 @@ def estimate_block(
     zero = np.zeros(pulses)
     if pulses < max(2, min_pulses):
         return zero, report("short_block")
-    centre_m = range_m[range_m.size // 2 : range_m.size // 2 + 1]
-    if 2.0 * float(curvature_m(config, centre_m, pulses)[0, 0]) / config.geometry.wavelength_m > (
-        FIXED_MIN_CYCLES
-    ):  # a scene point's history sweeps that many cycles: its mean over the block is tiny
-        x = x - x.mean(axis=0, keepdims=True)  # a return fixed to the platform is all mean
-    if w:  # one ΔR per pulse (the swath centre's): the curvature varies little with R
+    # ΔR_p of the swath centre: one per pulse, the curvature varies little with R.
+    centre_dr_m = curvature_m(config, range_m[range_m.size // 2 : range_m.size // 2 + 1], pulses)
+    if 2.0 * float(centre_dr_m[0, 0]) / config.geometry.wavelength_m > FIXED_MIN_CYCLES:
+        # A scene point's history sweeps that many cycles: its mean over the block is tiny,
+        # while a return fixed to the platform is all mean.
+        x = x - x.mean(axis=0, keepdims=True)
+    if w:
         cell_m = range_m[1] - range_m[0]  # signed: an axis may decrease
-        xc = migration_corrected(x, curvature_m(config, centre_m, pulses)[:, 0] / cell_m)
+        xc = migration_corrected(x, centre_dr_m[:, 0] / cell_m)
         x = rows(xc, w)
     power = x.real**2 + x.imag**2
     bins = _bright_bins(power, settings)
@@ -381,14 +392,11 @@ def estimate_block(
         return zero, report(reason, iterations, bins.size, step)
     phi = remove_linear(phi)
     walk = 0
-    energy = power.sum(axis=0)  # per row; the median row holds noise (and clutter) only
-    noise = float(np.median(energy))
-    signal = float(energy[bins[0]]) - noise
-    noisy = signal > 0 and math.sqrt(noise / (2.0 * signal)) > settings.walk_noise_rad
-    if w and settings.follow_walk and noisy:  # again on narrow rows following each point's walk
+    if w and settings.follow_walk and _wide_rows_noisy(power, bins, settings.walk_noise_rad):
+        # Again on narrow rows that follow each point's walk.
         image = np.fft.fft(g0 * phasor(-phi)[:, None], axis=0)
         peaks = np.argmax(image.real**2 + image.imag**2, axis=0)
-        energy = energy[bins]
+        energy = power[:, bins].sum(axis=0)
         gw, where = walking_rows(config, xc, range_m, bins, peaks, energy, w)
         if where.size:  # from pass one's φ, with the whole window again: its noise is replaced
             gw *= np.exp(2j * math.pi * deramp_cycles(config, range_m[where], pulses))

@@ -188,7 +188,8 @@ def run_batch(
     stream = stream or sys.stderr
     started = time.time()
     client, cluster = start_client(workers, scheduler, retries)
-    closed = False
+    results: list[FileResult | None] = [None] * len(recordings)
+    interrupted = None
     try:
         futures = {
             client.submit(
@@ -202,29 +203,21 @@ def run_batch(
             ): i
             for i, (rec, out) in enumerate(zip(recordings, outputs, strict=True))
         }
-        results: list[FileResult | None] = [None] * len(recordings)
         prog = Progress(len(recordings), "batch", unit="files", stream=stream, every_s=5.0)
         try:
             _collect(futures, recordings, outputs, retries, results, prog)
         except KeyboardInterrupt as exc:
             for fut in futures:
                 fut.cancel()
-            _close(client, cluster)  # a file a worker was on may be finished by now
-            closed = True
-            left = [
-                r or _unfinished(recordings[i], outputs[i], started) for i, r in enumerate(results)
-            ]
-            raise BatchInterrupted(left, exc) from None
-        return [r for r in results if r is not None]
+            interrupted = exc
     finally:
-        if not closed:
-            _close(client, cluster)
-
-
-def _close(client, cluster) -> None:
-    client.close()
-    if cluster is not None:
-        cluster.close()
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    if interrupted is not None:  # closed now: a file a worker was on may be finished
+        left = [r or _unfinished(recordings[i], outputs[i], started) for i, r in enumerate(results)]
+        raise BatchInterrupted(left, interrupted) from None
+    return [r for r in results if r is not None]
 
 
 def _unfinished(recording: Path, output: Path, started: float) -> FileResult:

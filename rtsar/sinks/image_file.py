@@ -147,11 +147,9 @@ class ImageWriter:
         self.lines = end
         self._dirty = True
         if self.crash_safe and self._target != self.path and end:
-            self._f.flush()  # the first lines are on disk: the file takes its name
+            self._flush()  # the first lines are on disk: the file takes its name
             os.replace(self._target, self.path)
             self._target = self.path
-            self._flushed_s = time.monotonic()
-            self._dirty = False
         self.flush_if_due()
 
     def flush_if_due(self) -> None:
@@ -159,9 +157,12 @@ class ImageWriter:
         (called after every write, and by the writers' owners when a stream is idle)."""
         if self.crash_safe and self._dirty and self._f.id.valid:
             if time.monotonic() - self._flushed_s >= self.flush_every_s:
-                self._f.flush()
-                self._flushed_s = time.monotonic()
-                self._dirty = False
+                self._flush()
+
+    def _flush(self) -> None:
+        self._f.flush()
+        self._flushed_s = time.monotonic()
+        self._dirty = False
 
     @property
     def has_heights(self) -> bool:

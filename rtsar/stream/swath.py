@@ -16,10 +16,18 @@ Transport (ZeroMQ, one context per process):
 * workers → coordinator: one PULL socket the coordinator binds; each worker PUSHes its lines.
 
 Messages are multipart: ``[b"setup", JSON]`` (configuration, columns, lens choice), ``[b"block",
-JSON {first_pulse, count, zero}, samples]``, ``[b"end"]``; back: ``[b"ready", JSON]``,
-``[b"lines", JSON {index, first_line, count}, lines]``, ``[b"done", JSON]``, ``[b"error", JSON]``.
-The same worker loop (:func:`serve`) runs in a local process (``rtsar run --swath-workers K``
-spawns them) or on another host (``rtsar swath-worker --connect``).
+JSON {first_pulse, count, zero}, samples]``, ``[b"beat"]``, ``[b"end"]``; back: ``[b"ready",
+JSON]``, ``[b"lines", JSON {index, first_line, count}, lines]``, ``[b"done", JSON]``, ``[b"error",
+JSON]``.  The same worker loop (:func:`serve`) runs in a local process (``rtsar run
+--swath-workers K`` spawns them) or on another host (``rtsar swath-worker --connect``).
+
+Liveness: ZeroMQ reconnects silently, so a worker cannot see its coordinator die (SIGKILL, host
+lost, network cut).  After the setup the coordinator sends worker k a ``beat`` whenever it has sent
+it nothing for ``BEAT_S`` (before the first block, while the source is idle or slow); a beat is
+sent without waiting and skipped when the worker's queue is full (it is being fed then), and it
+carries no pulses.  A worker that hears nothing (no block, no beat) for its coordinator timeout
+ends with status 1 (:func:`serve`).  The converse, a worker that takes no pulses for ``timeout_s``,
+is the coordinator's stall error (:class:`SwathWorkers`).
 """
 
 from __future__ import annotations
@@ -28,6 +36,7 @@ import json
 import os
 import subprocess
 import sys
+import threading
 import time
 from collections import deque
 
@@ -44,6 +53,9 @@ from .engine import Lines
 HWM_MESSAGES = 8  # pulse blocks in flight per worker before the coordinator waits
 SEND_SLICE_S = 0.2  # a waiting send looks for an abort this often
 READY_TIMEOUT_S = 120.0  # a worker's first start compiles numba kernels and builds OpenCL
+BEAT_S = 1.0  # the coordinator beats to a worker it has sent nothing for this long
+COORDINATOR_TIMEOUT_S = 30.0  # a worker that hears nothing for this long after its setup ends
+MIN_COORDINATOR_TIMEOUT_S = 3 * BEAT_S  # below it a loaded coordinator's beats may come too late
 
 
 def split_columns(range_bins: int, workers: int) -> list[tuple[int, int]]:
@@ -141,10 +153,18 @@ def _json(frame: bytes) -> dict:
 
 
 def serve(
-    shots_endpoint: str, results_endpoint: str, index: int, log=None, parent_pid: int | None = None
+    shots_endpoint: str,
+    results_endpoint: str,
+    index: int,
+    log=None,
+    parent_pid: int | None = None,
+    coordinator_timeout_s: float = COORDINATOR_TIMEOUT_S,
 ) -> int:
     """A worker: connect, take the setup, process blocks until "end"; 0 on a clean end.
 
+    Before the setup it waits for its coordinator without limit (it may start first).  After
+    it, a coordinator silent (no block, no beat) for ``coordinator_timeout_s`` (0: no limit) is
+    gone: the worker says so through ``log`` and returns 1, dropping what it still holds.
     ``parent_pid``: a worker started by a coordinator ends when that process is gone.
     """
     ctx = zmq.Context()
@@ -154,12 +174,27 @@ def serve(
     pull.connect(shots_endpoint)
     push.connect(results_endpoint)
     engine = None
+    limit = coordinator_timeout_s > 0
+    heard_at = None  # when the last message was handled (None: no setup yet)
     try:
         while True:
-            if not pull.poll(1000):
-                if parent_pid is not None and os.getppid() != parent_pid:
-                    return 1  # the coordinator died without its "end"
-                continue
+            wait_s = 1.0
+            if heard_at is not None and limit:
+                wait_s = min(wait_s, heard_at + coordinator_timeout_s - time.monotonic())
+            if not pull.poll(max(1, int(1000 * wait_s))):
+                orphan = parent_pid is not None and os.getppid() != parent_pid
+                silent = limit and heard_at is not None
+                silent = silent and time.monotonic() - heard_at >= coordinator_timeout_s
+                if not (orphan or silent):
+                    continue
+                push.setsockopt(zmq.LINGER, 0)  # the coordinator is gone: nobody to deliver to
+                if silent and log:
+                    log(
+                        f"swath worker {index}: no word from the coordinator {results_endpoint} "
+                        f"for {coordinator_timeout_s:g} s (it is gone or cut off); ending "
+                        "(--coordinator-timeout)"
+                    )
+                return 1
             frames = pull.recv_multipart(copy=True)
             kind = frames[0]
             if kind == b"setup":
@@ -172,6 +207,8 @@ def serve(
                 push.send_multipart(
                     [b"ready", json.dumps({"index": index, "lens": engine.lens.backend}).encode()]
                 )
+            elif kind == b"beat":
+                pass  # the coordinator is alive: heard_at is all a beat carries
             elif kind == b"block":
                 head = _json(frames[1])
                 count = int(head["count"])
@@ -184,6 +221,7 @@ def serve(
                 _send_lines(push, index, engine.flush())
                 push.send_multipart([b"done", json.dumps({"index": index}).encode()])
                 return 0
+            heard_at = time.monotonic()  # after the work: a long setup or block is no silence
     except Exception as exc:  # told to the coordinator, which stops the run with it
         push.send_multipart([b"error", json.dumps({"index": index, "message": f"{exc}"}).encode()])
         if log:
@@ -209,7 +247,8 @@ class SwathWorkers:
     (``rtsar swath-worker --connect tcp://HOST:PORT --index k``).  ``spawn``: start the K
     workers here (``python -m rtsar swath-worker``), over loopback.  ``timeout_s``: the longest
     wait for a worker to take pulses, or to finish after the end, before the run stops with an
-    error.
+    error.  ``beat_s``: a worker sent nothing for this long gets a beat (module docstring), from
+    a thread of this object's own; a lock per worker socket keeps it off a send in progress.
     """
 
     def __init__(
@@ -221,11 +260,17 @@ class SwathWorkers:
         spawn: bool = True,
         bind: str = "127.0.0.1",
         timeout_s: float = 10.0,
+        beat_s: float = BEAT_S,
     ):
         check_splittable(config)
         self.config = config
         self.columns = split_columns(config.processor.range_bins, workers)
         self.timeout_s = timeout_s
+        self.beat_s = beat_s
+        self._locks = [threading.Lock() for _ in self.columns]  # per worker socket
+        self._sent_at = [0.0] * len(self.columns)  # when worker k was last sent anything
+        self._beats_off = threading.Event()  # set: beat no more (end sent, or closing)
+        self._beater: threading.Thread | None = None
         self.dtype = np.dtype(precision_dtype(config.processor.precision))
         self._ctx = zmq.Context()
         self._procs: list[subprocess.Popen] = []
@@ -283,11 +328,14 @@ class SwathWorkers:
                         f"(pulses on {', '.join(self.shot_endpoints)})"
                     )
             s.send_multipart([b"setup", json.dumps({**setup, "columns": [b0, b1]}).encode()])
+        self._sent_at = [time.monotonic()] * len(self.columns)
         ready = 0
         while ready < len(self.columns):
             frames = self._recv(deadline, "to start")
             if frames[0] == b"ready":
                 ready += 1
+        self._beater = threading.Thread(target=self._beat_loop, name="swath-beat", daemon=True)
+        self._beater.start()
 
     def send(self, first_pulse: int, samples: np.ndarray, zero: bool) -> None:
         """One block of pulses to every worker (waits while a worker is HWM blocks behind)."""
@@ -302,6 +350,7 @@ class SwathWorkers:
 
     def end(self) -> None:
         """No more pulses: the workers flush their CCDs and say they are done."""
+        self._beats_off.set()  # a worker reads nothing after its "end"
         for k, s in enumerate(self._pushes):
             self._send(k, s, [b"end"])
         self._ended_at = time.monotonic()
@@ -314,18 +363,38 @@ class SwathWorkers:
         """Send, waiting while worker k is HWM blocks behind: up to ``timeout_s`` (not counting
         time the consumer spends waiting on later stages, ``downstream_since``), in slices so
         that :meth:`abort` ends the wait."""
-        deadline = time.monotonic() + self.timeout_s
-        while not socket.poll(int(1000 * SEND_SLICE_S), zmq.POLLOUT):
-            if self._aborted:
-                raise RuntimeError("swath run aborted")
-            now = time.monotonic()
-            if self.downstream_since is not None:
-                deadline = max(deadline, now + self.timeout_s)
-            elif now > deadline:
-                raise RuntimeError(
-                    f"swath worker {k} took no pulses for {self.timeout_s:g} s (stalled or gone)"
-                )
-        socket.send_multipart(frames, copy=False)
+        with self._locks[k]:
+            deadline = time.monotonic() + self.timeout_s
+            while not socket.poll(int(1000 * SEND_SLICE_S), zmq.POLLOUT):
+                if self._aborted:
+                    raise RuntimeError("swath run aborted")
+                now = time.monotonic()
+                if self.downstream_since is not None:
+                    deadline = max(deadline, now + self.timeout_s)
+                elif now > deadline:
+                    raise RuntimeError(
+                        f"swath worker {k} took no pulses for {self.timeout_s:g} s "
+                        "(stalled or gone)"
+                    )
+            socket.send_multipart(frames, copy=False)
+            self._sent_at[k] = time.monotonic()
+
+    def _beat_loop(self) -> None:
+        """Every worker sent nothing for ``beat_s`` gets a beat, never waiting: a send in
+        progress (its lock held) or a full queue means that worker is being fed already."""
+        while not self._beats_off.wait(self.beat_s / 4):
+            for k, s in enumerate(self._pushes):
+                if not self._locks[k].acquire(blocking=False):
+                    continue
+                try:
+                    if time.monotonic() - self._sent_at[k] >= self.beat_s:
+                        try:
+                            s.send_multipart([b"beat"], zmq.NOBLOCK)
+                        except zmq.Again:
+                            pass  # its queue is full: fed, not idle
+                        self._sent_at[k] = time.monotonic()
+                finally:
+                    self._locks[k].release()
 
     @property
     def finished(self) -> bool:
@@ -410,6 +479,9 @@ class SwathWorkers:
         if self._closed:
             return
         self._closed = True
+        self._beats_off.set()
+        if self._beater is not None:
+            self._beater.join()  # within beat_s / 4: it never waits on a socket
         deadline = time.monotonic() + wait_s
         for p in self._procs:
             try:

@@ -55,11 +55,14 @@ def tiny():
     return cfg, Simulator(scene).block(scene.pulses)
 
 
-def _run(cfg, shots, **settings):
+def _run(cfg, shots, seen=None, **settings):
     seq = np.arange(len(shots))
     src = ReplaySource(shots, seq, seq / cfg.geometry.prf_hz, cfg.geometry.prf_hz, "max", 16)
     sink = Collect()
-    Pipeline(cfg, src, [sink], PipelineSettings(lens_backend="numpy", **settings)).run()
+    pipe = Pipeline(cfg, src, [sink], PipelineSettings(lens_backend="numpy", **settings))
+    if seen is not None:
+        seen.append(pipe)
+    pipe.run()
     return sink.image()
 
 
@@ -108,10 +111,12 @@ def test_workers_elsewhere_connect_to_the_bound_port(tiny):
     cfg, shots = tiny
     bind = f"tcp://127.0.0.1:{_free_port()}"
     threads = _threads(bind, 3)
-    got = _run(cfg, shots, swath_workers=3, swath_spawn=False, swath_bind=bind)
+    seen = []
+    got = _run(cfg, shots, seen, swath_workers=3, swath_spawn=False, swath_bind=bind)
     for t in threads:
         t.join(5)
         assert not t.is_alive()
+    assert seen[0].engine.correlator is None  # the workers correlate: none built here
     one = _run(cfg, shots)
     assert np.abs(got - one).max() <= 1e-6 * np.abs(one).max()
 

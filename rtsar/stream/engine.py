@@ -45,6 +45,8 @@ class StreamProcessor:
     ``corrections`` (an rtsar.focus.chain.CorrectionChain) runs its raw stages on the shots and
     its line stages between lens and CCD; ``physical`` (rtsar.physical.PhysicalSettings) puts the
     AO cell before the lens and the physical CCD in place of the ideal correlator.
+    ``azimuth`` False builds no correlator (the range half alone: a swath coordinator, whose
+    workers correlate).
     """
 
     def __init__(
@@ -55,6 +57,7 @@ class StreamProcessor:
         start_along_track_m: float = 0.0,
         corrections=None,
         physical=None,
+        azimuth: bool = True,
     ):
         self.config = config
         check_memory(config)
@@ -65,7 +68,7 @@ class StreamProcessor:
         self.ao_cell = None
         if physical is not None:
             self.ao_cell = AOCell(config, physical)
-        self.correlator = make_ccd(config, self.plan.range_m, physical)
+        self.correlator = make_ccd(config, self.plan.range_m, physical) if azimuth else None
         self.start_along_track_m = float(start_along_track_m)
         self.lines_out = 0
         self.pulses_in = 0

@@ -136,8 +136,9 @@ class Pipeline:
         n = config.processor.aperture_pulses
         capacity = s.queue_pulses or 8 * n
         check_memory(config, capacity, 0 if height is None else len(height.channels))
+        azimuth = not s.swath_workers  # with swath workers, they correlate: no CCD here
         self.engine = StreamProcessor(
-            config, s.lens_backend, s.device, start_along_track_m, corrections, physical
+            config, s.lens_backend, s.device, start_along_track_m, corrections, physical, azimuth
         )
         self.height = (
             None

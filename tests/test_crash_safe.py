@@ -214,6 +214,41 @@ def test_a_stale_temporary_name_does_not_block_the_next_run(tmp_path, monkeypatc
     assert out.read_bytes() == b"new"
 
 
+def test_temporaries_left_by_killed_runs_are_removed_and_live_ones_kept(tmp_path):
+    """From the kill test: a SIGKILL leaves `.NAME.partial-…` beside the output, and every later
+    kill added one more.  The next write of NAME removes those of writers on this host that are
+    gone, and keeps a running writer's and another host's (a shared folder)."""
+    import socket
+
+    from rtsar.presets import preset as named_preset
+    from rtsar.sinks.image_file import ImageWriter
+    from rtsar.sinks.io import partial_prefix, replace_when_complete
+
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait(30)  # its pid names no running process now
+    host = socket.gethostname()
+    for name in ("out.h5", "live.h5"):
+        prefix = partial_prefix(tmp_path / name)
+        assert prefix.startswith(f".{name}.partial-{host}-{os.getpid()}-")
+        (tmp_path / f".{name}.partial-{host}-{gone.pid}-abc.h5").write_bytes(b"killed run")
+        (tmp_path / f".{name}.partial-{host}-{gone.pid}-live").write_bytes(b"killed live run")
+        (tmp_path / f".{name}.partial-{host}-{os.getppid()}-xyz.h5").write_bytes(b"running")
+        (tmp_path / f".{name}.partial-otherhost-{gone.pid}-q.h5").write_bytes(b"other host")
+    with replace_when_complete(tmp_path / "out.h5") as tmp:
+        tmp.write_bytes(b"new")
+    writer = ImageWriter(
+        tmp_path / "live.h5", named_preset("tiny"), np.arange(4.0), crash_safe=True
+    )
+    writer.close()
+    left = sorted(p.name for p in tmp_path.glob(".*partial*"))
+    assert left == sorted(
+        f".{name}.partial-{h}-{pid}-{tail}"
+        for name in ("out.h5", "live.h5")
+        for h, pid, tail in ((host, os.getppid(), "xyz.h5"), ("otherhost", gone.pid, "q.h5"))
+    )
+    assert (tmp_path / "out.h5").read_bytes() == b"new"
+
+
 def test_a_finished_file_has_the_mode_of_any_new_file(tmp_path):
     """mkstemp's temporary is owner-only; the finished file must follow the umask, as files
     that `run -o` writes do (a Dask worker of another user reads them)."""

@@ -22,7 +22,13 @@ import numpy as np
 
 from .. import __version__
 from ..params import Config
-from .io import FORMAT_VERSION, IMAGE_FORMAT, open_checked
+from .io import (
+    FORMAT_VERSION,
+    IMAGE_FORMAT,
+    open_checked,
+    partial_prefix,
+    remove_stale_partials,
+)
 
 
 def write_image(
@@ -95,10 +101,10 @@ class ImageWriter:
         self.path = Path(path)
         self.crash_safe = crash_safe
         self.flush_every_s = float(flush_every_s)
+        if crash_safe:
+            remove_stale_partials(self.path)
         target = (
-            self.path.with_name(f".{self.path.name}.partial-{os.getpid()}")
-            if crash_safe
-            else self.path
+            self.path.with_name(partial_prefix(self.path) + "live") if crash_safe else self.path
         )
         libver = ("v110", "v110") if crash_safe else None
         self._f = h5py.File(target, "w", libver=libver)

@@ -17,8 +17,10 @@ Complex values are HDF5 compounds of two floats named r and i (h5py's convention
 
 from __future__ import annotations
 
+import glob
 import json
 import os
+import socket
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -51,6 +53,47 @@ def check_writable(path: str | Path) -> None:
         raise ValueError(f"cannot write {path}: permission denied")
 
 
+def partial_prefix(path: Path) -> str:
+    """Start of the hidden temporary name of an output of ``path`` written by this process:
+    ``.NAME.partial-HOST-PID-`` (the host and the process tell :func:`remove_stale_partials`
+    whose it is)."""
+    return f".{path.name}.partial-{_host()}-{os.getpid()}-"
+
+
+def remove_stale_partials(path: str | Path) -> list[Path]:
+    """Delete the temporary files of ``path`` left by writers on this host that are no longer
+    running (a SIGKILL, a power cut); returns them.  Another host's (a shared folder) and a
+    running process's are kept: they may still become the file."""
+    path = Path(path)
+    start = f".{path.name}.partial-{_host()}-"
+    removed = []
+    for stale in path.parent.glob(glob.escape(start) + "*"):
+        pid = stale.name[len(start) :].split("-", 1)[0]
+        if pid.isdigit() and not _running(int(pid)):
+            try:
+                stale.unlink()
+            except FileNotFoundError:  # another run removed it first
+                continue
+            except OSError:  # not ours to delete: left as it was
+                continue
+            removed.append(stale)
+    return removed
+
+
+def _host() -> str:
+    return socket.gethostname().replace("/", "_") or "host"
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
 @contextmanager
 def replace_when_complete(path: str | Path) -> Iterator[Path]:
     """Write to a temporary file beside ``path``, renamed to ``path`` only when the block ends
@@ -58,13 +101,15 @@ def replace_when_complete(path: str | Path) -> Iterator[Path]:
     partial file is left under its name (a partial recording or batch image has no value).
 
     The temporary file is created at once: an unwritable destination is reported before any
-    work is done.
+    work is done.  Temporaries of ``path`` that killed runs left are removed first
+    (:func:`remove_stale_partials`).
     """
     path = Path(path)
+    remove_stale_partials(path)
     try:
         # The suffix kept: writers that go by it (matplotlib's savefig) see the right kind.
         fd, name = tempfile.mkstemp(
-            prefix=f".{path.name}.partial-", suffix=path.suffix, dir=path.parent
+            prefix=partial_prefix(path), suffix=path.suffix, dir=path.parent
         )
     except OSError as exc:
         raise ValueError(f"cannot write {path}: {exc.strerror or exc}") from None

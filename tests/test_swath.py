@@ -275,10 +275,12 @@ def _coordinator_sockets():
     return push, pull, shots_ep, results_ep
 
 
-def _serving(shots_ep, results_ep, timeout_s):
+def _serving(shots_ep, results_ep, timeout_s, index=0):
     box, said = {}, []
     t = threading.Thread(
-        target=lambda: box.update(rc=serve(shots_ep, results_ep, 0, said.append, None, timeout_s)),
+        target=lambda: box.update(
+            rc=serve(shots_ep, results_ep, index, said.append, None, timeout_s)
+        ),
         daemon=True,
     )
     t.start()
@@ -344,16 +346,22 @@ def test_beats_keep_an_idle_worker_and_are_no_pulses(tiny):
 
 
 def test_swath_workers_beat_while_idle_and_never_wait_to(tiny, rng):
-    """The coordinator beats a worker it sends nothing (here 1.5 s, three of the worker's
+    """The coordinator beats a worker it sends nothing: worker 0 while worker 1 has not yet
+    connected (1 s), then both while the source is idle (1 s; each two of the workers'
     timeouts); the run then goes on.  A beat never waits: with a worker that reads nothing
     the pipe fills, the send fails as a stall, and close() still returns at once."""
     cfg, shots = tiny
     bind = f"tcp://127.0.0.1:{_free_port()}"
-    shots_ep, results_ep = worker_endpoints(bind, 0)
-    t, box, said = _serving(shots_ep, results_ep, 0.5)
-    workers = SwathWorkers(cfg, 1, "numpy", spawn=False, bind=bind, beat_s=0.1)
-    time.sleep(1.5)  # the source is idle
-    assert t.is_alive() and said == []
+    serving = [_serving(*worker_endpoints(bind, 0), 0.5)]
+    made, opts = {}, {"spawn": False, "bind": bind, "beat_s": 0.1}
+    maker = threading.Thread(target=lambda: made.update(w=SwathWorkers(cfg, 2, "numpy", **opts)))
+    maker.start()
+    time.sleep(1.0)  # worker 1 starts late (on another host, by hand)
+    serving.append(_serving(*worker_endpoints(bind, 1), 0.5, 1))
+    maker.join(60)
+    workers = made["w"]
+    time.sleep(1.0)  # the source is idle
+    assert all(t.is_alive() and said == [] for t, _, said in serving)
     workers.send(0, shots, False)
     workers.end()
     lines = 0
@@ -361,8 +369,10 @@ def test_swath_workers_beat_while_idle_and_never_wait_to(tiny, rng):
         out = workers.receive(1.0)
         lines += 0 if out is None else len(out.lines)
     workers.close()
-    t.join(5)
-    assert box["rc"] == 0 and lines == len(shots) - cfg.processor.aperture_pulses + 1
+    for t, box, _ in serving:
+        t.join(5)
+        assert box["rc"] == 0
+    assert lines == len(shots) - cfg.processor.aperture_pulses + 1
 
     bind = f"tcp://127.0.0.1:{_free_port()}"
     shots_ep, results_ep = worker_endpoints(bind, 0)

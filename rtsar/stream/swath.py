@@ -21,13 +21,10 @@ JSON]``, ``[b"lines", JSON {index, first_line, count}, lines]``, ``[b"done", JSO
 JSON]``.  The same worker loop (:func:`serve`) runs in a local process (``rtsar run
 --swath-workers K`` spawns them) or on another host (``rtsar swath-worker --connect``).
 
-Liveness: ZeroMQ reconnects silently, so a worker cannot see its coordinator die (SIGKILL, host
-lost, network cut).  After the setup the coordinator sends worker k a ``beat`` whenever it has sent
-it nothing for ``BEAT_S`` (before the first block, while the source is idle or slow); a beat is
-sent without waiting and skipped when the worker's queue is full (it is being fed then), and it
-carries no pulses.  A worker that hears nothing (no block, no beat) for its coordinator timeout
-ends with status 1 (:func:`serve`).  The converse, a worker that takes no pulses for ``timeout_s``,
-is the coordinator's stall error (:class:`SwathWorkers`).
+Liveness (ZeroMQ reconnects silently: a worker cannot see its coordinator die): from its setup
+on, a worker sent nothing for ``BEAT_S`` gets a ``beat`` (no pulses; sent without waiting, skipped
+when the worker's queue is full); a worker that hears nothing for its coordinator timeout ends
+(:func:`serve`).  The converse, a worker taking no pulses, is the coordinator's stall error.
 """
 
 from __future__ import annotations
@@ -247,8 +244,8 @@ class SwathWorkers:
     (``rtsar swath-worker --connect tcp://HOST:PORT --index k``).  ``spawn``: start the K
     workers here (``python -m rtsar swath-worker``), over loopback.  ``timeout_s``: the longest
     wait for a worker to take pulses, or to finish after the end, before the run stops with an
-    error.  ``beat_s``: a worker sent nothing for this long gets a beat (module docstring), from
-    a thread of this object's own; a lock per worker socket keeps it off a send in progress.
+    error.  ``beat_s``: the beat period (module docstring), kept by a thread of this object's
+    own; a lock per worker socket keeps it off a send in progress.
     """
 
     def __init__(
@@ -268,7 +265,8 @@ class SwathWorkers:
         self.timeout_s = timeout_s
         self.beat_s = beat_s
         self._locks = [threading.Lock() for _ in self.columns]  # per worker socket
-        self._sent_at = [0.0] * len(self.columns)  # when worker k was last sent anything
+        #: When worker k was last sent anything (None: no setup yet, no beat).
+        self._sent_at: list[float | None] = [None] * len(self.columns)
         self._beats_off = threading.Event()  # set: beat no more (end sent, or closing)
         self._beater: threading.Thread | None = None
         self.dtype = np.dtype(precision_dtype(config.processor.precision))
@@ -318,7 +316,11 @@ class SwathWorkers:
         self.lines_out = 0
         setup = {"config": config.to_dict(), "lens_backend": lens_backend, "device": device}
         deadline = time.monotonic() + READY_TIMEOUT_S
-        for (b0, b1), s in zip(self.columns, self._pushes, strict=True):
+        # From its setup on, a worker hears at least every beat_s: worker 0 waits meanwhile for
+        # the others to connect (started by hand on other hosts) and to build their engines.
+        self._beater = threading.Thread(target=self._beat_loop, name="swath-beat", daemon=True)
+        self._beater.start()
+        for k, ((b0, b1), s) in enumerate(zip(self.columns, self._pushes, strict=True)):
             # A worker connects once its process has started (seconds on a loaded machine).
             while not s.poll(500, zmq.POLLOUT):
                 self._check_alive()
@@ -327,15 +329,14 @@ class SwathWorkers:
                         f"swath workers did not connect within {READY_TIMEOUT_S:g} s "
                         f"(pulses on {', '.join(self.shot_endpoints)})"
                     )
-            s.send_multipart([b"setup", json.dumps({**setup, "columns": [b0, b1]}).encode()])
-        self._sent_at = [time.monotonic()] * len(self.columns)
+            with self._locks[k]:
+                s.send_multipart([b"setup", json.dumps({**setup, "columns": [b0, b1]}).encode()])
+                self._sent_at[k] = time.monotonic()
         ready = 0
         while ready < len(self.columns):
             frames = self._recv(deadline, "to start")
             if frames[0] == b"ready":
                 ready += 1
-        self._beater = threading.Thread(target=self._beat_loop, name="swath-beat", daemon=True)
-        self._beater.start()
 
     def send(self, first_pulse: int, samples: np.ndarray, zero: bool) -> None:
         """One block of pulses to every worker (waits while a worker is HWM blocks behind)."""
@@ -380,14 +381,15 @@ class SwathWorkers:
             self._sent_at[k] = time.monotonic()
 
     def _beat_loop(self) -> None:
-        """Every worker sent nothing for ``beat_s`` gets a beat, never waiting: a send in
-        progress (its lock held) or a full queue means that worker is being fed already."""
+        """Every worker set up and sent nothing for ``beat_s`` gets a beat, never waiting: a
+        send in progress (its lock held) or a full queue means that worker is being fed."""
         while not self._beats_off.wait(self.beat_s / 4):
             for k, s in enumerate(self._pushes):
                 if not self._locks[k].acquire(blocking=False):
                     continue
                 try:
-                    if time.monotonic() - self._sent_at[k] >= self.beat_s:
+                    sent_at = self._sent_at[k]
+                    if sent_at is not None and time.monotonic() - sent_at >= self.beat_s:
                         try:
                             s.send_multipart([b"beat"], zmq.NOBLOCK)
                         except zmq.Again:

@@ -155,6 +155,34 @@ def test_outputs_are_checked_before_the_work(tmp_path, capsys):
         assert "does not exist" in capsys.readouterr().err
 
 
+def test_an_output_never_replaces_the_commands_input(tmp_path, capsys, monkeypatch):
+    """From a cold review: `process rec.h5 -o rec.h5` (and `replay … -o`, `simulate s.toml -o
+    s.toml`, `quicklook img.h5 -o img.h5`) replaced the input by the output, exit 0; an
+    instrument's raw recording may be irreplaceable.  Refused before any work (exit 2), whatever
+    the spelling of the name (./x, a symlink); the input is untouched."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "s.toml").write_text(SCENE.format(correlator="fft"))
+    assert main(["simulate", "s.toml", "-o", "rec.h5", "--pulses", "300"]) == 0
+    (tmp_path / "link.h5").symlink_to(tmp_path / "rec.h5")
+    assert main(["process", "rec.h5", "-o", "img.h5", "--lens", "numpy"]) == 0
+    before = {p: (tmp_path / p).read_bytes() for p in ("rec.h5", "s.toml", "img.h5")}
+    capsys.readouterr()
+    for args in (
+        ["process", "rec.h5", "-o", "rec.h5"],
+        ["process", "rec.h5", "-o", "./rec.h5"],
+        ["process", "link.h5", "-o", "rec.h5"],
+        ["replay", "rec.h5", "--rate", "max", "-o", "rec.h5", "--endpoint", "inproc://x"],
+        ["simulate", "s.toml", "-o", "s.toml"],
+        ["quicklook", "img.h5", "-o", "img.h5"],
+        ["export", "rec.h5", "--cphd", "rec.h5"],
+        ["spotlight", "rec.h5", "-o", "out.h5", "--png", "out.h5"],
+    ):
+        assert main(args) == 2, args
+        err = capsys.readouterr().err
+        assert "choose another output name" in err or "two outputs" in err, (args, err)
+    assert {p: (tmp_path / p).read_bytes() for p in before} == before
+
+
 def test_version():
     with pytest.raises(SystemExit) as info:
         main(["--version"])

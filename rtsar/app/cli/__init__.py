@@ -15,7 +15,7 @@ from ... import __version__
 from ...sinks.publish import DEFAULT_ENDPOINT
 from .. import signals
 from . import batch, files, formats, measure, spot, streaming, swath
-from .options import die
+from .options import check_outputs_spare_inputs, die
 
 EPILOG = f"""examples:
   rtsar run                                  live demo: the built-in scene streamed at its PRF,
@@ -71,6 +71,7 @@ def main(argv=None) -> int:
     signals.install()
     warnings.showwarning = _show_warning
     try:
+        check_outputs_spare_inputs(args)
         return args.func(args)
     except BrokenPipeError:  # `rtsar presets | head`: the reader has all it wanted
         sys.stdout = None  # nothing more to flush into the closed pipe at exit

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import sys
 from dataclasses import replace
+from pathlib import Path
 
 from ...focus.chain import ORDER as CORRECTIONS
 from ...focus.chain import CorrectionChain
@@ -26,6 +27,67 @@ def die(msg: str) -> int:
     """Report a usage or input error in one line; exit status 2."""
     print(f"rtsar: error: {msg}", file=sys.stderr)
     return 2
+
+
+# ---- outputs that would replace an input ---------------------------------------------------------
+# Options naming files a command reads, and files it writes (``--sigmf BASE`` writes
+# BASE.sigmf-meta and BASE.sigmf-data).
+INPUT_OPTIONS = ("scene", "recording", "image", "input", "images", "inputs")
+OUTPUT_OPTIONS = ("output", "png", "json", "out", "cphd", "sicd", "sigmf")
+
+
+def check_outputs_spare_inputs(args) -> None:
+    """ValueError before any work when an output of the command names one of its inputs (or
+    another of its outputs): ``process rec.h5 -o rec.h5`` replaced the recording by its image.
+    A SigMF recording exported onto itself (``export rec.sigmf-meta --sigmf rec``) is the
+    exception: that export reads the recording whole first."""
+    inputs = {}
+    for name in INPUT_OPTIONS:
+        for value in _values(getattr(args, name, None)):
+            for path in _files_of(value, name):
+                inputs[_identity(path)] = path
+    outputs = {}
+    for name in OUTPUT_OPTIONS:
+        for value in _values(getattr(args, name, None)):
+            for path in _files_of(value, name):
+                key = _identity(path)
+                if key in outputs:
+                    raise ValueError(f"{path} is named as two outputs of this command")
+                outputs[key] = path
+                sigmf_in_place = name == "sigmf" and str(inputs.get(key, "")).endswith(
+                    (".sigmf-meta", ".sigmf-data")
+                )
+                if key in inputs and not sigmf_in_place:
+                    raise ValueError(
+                        f"the output {path} is this command's input {inputs[key]}: writing it "
+                        "would replace what it reads; choose another output name"
+                    )
+
+
+def _values(value) -> list[str]:
+    if value is None or isinstance(value, bool):
+        return []
+    return [str(v) for v in value] if isinstance(value, list | tuple) else [str(value)]
+
+
+def _files_of(value: str, option: str) -> list[Path]:
+    """The files an option's value names (SigMF: both files of a recording)."""
+    path = Path(value)
+    if option == "sigmf":
+        return [Path(value + ".sigmf-meta"), Path(value + ".sigmf-data")]
+    if path.suffix.lower() in (".sigmf-meta", ".sigmf-data"):
+        return [path.with_suffix(".sigmf-meta"), path.with_suffix(".sigmf-data")]
+    return [path]
+
+
+def _identity(path: Path):
+    """What tells two names of one file apart from two files: (device, inode) of an existing
+    file (hard links, symlinks, ./x and x), else its absolute path."""
+    try:
+        st = path.stat()
+    except OSError:
+        return str(path.resolve())
+    return st.st_dev, st.st_ino
 
 
 # ---- option groups ---------------------------------------------------------------------------

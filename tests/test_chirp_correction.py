@@ -208,6 +208,28 @@ def test_linearizer_with_hcn_anchor_stream_equals_batch_reference(rng):
     assert np.max(np.abs(got - want)) < 1e-5 * np.max(np.abs(want))
 
 
+def test_hcn_with_linearize_is_named_keeps_its_keys_and_counts_its_shots():
+    """From a cold review: `--correct hcn --correct linearize` showed as 'linearize' with
+    `linearize.hcn_shots_in 0` though the cell anchored every shot, and `hcn:KEY=…` keys were
+    dropped.  The combined stage is 'hcn+linearize', takes the hcn keys (and refuses wrong
+    ones) and counts the shots the cell measured."""
+    from rtsar.focus.chain import CorrectionChain
+
+    chain = CorrectionChain.from_specs(["linearize", "hcn:linewidth_hz=2e8,min_depth=0.2"], CFG)
+    assert chain.names == ["hcn+linearize"]
+    aligner = chain.named[0][1].aligner
+    assert aligner.options["linewidth_hz"] == 2e8 and aligner.options["min_depth"] == 0.2
+    _, main, aux = simulate([JITTER, RI, HCN], pulses=3)
+    chain.raw(main, aux)
+    counted = chain.counters()
+    assert counted["hcn+linearize.shots_in"] == counted["hcn+linearize.hcn_shots_in"] == 3
+    with pytest.raises(ValueError, match="unknown key"):
+        CorrectionChain.from_specs(["linearize", "hcn:linewidth=1"], CFG)
+    alone = CorrectionChain.from_specs(["hcn"], CFG)
+    alone.raw(main, aux)
+    assert alone.counters()["hcn.shots_in"] == 3  # counted once, not in process and offsets
+
+
 def test_stages_count_bad_input_and_reject_wrong_shapes():
     _, main, aux = simulate([JITTER, RI, HCN], pulses=2)
     stage = ChirpLinearizer(CFG, aligner=HCNAligner(CFG))

@@ -8,7 +8,8 @@ name                    where   what (module)
 ======================  ======  ===========================================================
 ``hcn``                 raw     start-frequency alignment on the HCN cell (focus.hcn_align)
 ``linearize``           raw     chirp linearization on the reference interferometer
-                                (focus.linearize; with ``hcn`` both in one resampling)
+                                (focus.linearize; with ``hcn`` both in one resampling: the
+                                stage ``hcn+linearize``, its counters ``hcn_…`` the cell's)
 ``reference_region``    raw     α/β from the reference region (patent eqs. 5-11,
                                 focus.reference_region)
 ``pra``                 lines   phase-to-retro (Crouch; focus.pra)
@@ -108,9 +109,11 @@ def make_stage(
     config: Config,
     params: dict,
     context: CorrectionContext | None = None,
-    with_hcn: bool = False,
+    hcn_params: dict | None = None,
 ) -> CorrectionStage:
     """One correction stage (see the table above); ``context`` supplies geometry where needed.
+    ``hcn_params`` (linearize only): anchor the chirp on the HCN cell too, an HCNAligner with
+    these ``hcn:`` keys, in the same resampling (the chain names that stage ``hcn+linearize``).
 
     A key the stage does not take is a ValueError naming the keys it takes."""
     params = dict(params)
@@ -126,7 +129,7 @@ def make_stage(
     if name == "linearize":
         if context.ri_delay_s is not None:
             params.setdefault("delay_s", context.ri_delay_s)
-        aligner = HCNAligner(config) if with_hcn else None
+        aligner = None if hcn_params is None else make_stage("hcn", config, hcn_params)
         return ChirpLinearizer(config, aligner=aligner, **params)
     if name == "reference_region":
         if context.reference_geometry is None:
@@ -176,8 +179,12 @@ class CorrectionChain:
         if dup:
             raise ValueError(f"correction named twice: {sorted(dup)}")
         both = "hcn" in names and "linearize" in names  # one resampling does both
+        hcn_params = dict(parsed)["hcn"] if both else None
         stages = [
-            (n, make_stage(n, config, p, context, with_hcn=both))
+            (
+                "hcn+linearize" if both and n == "linearize" else n,
+                make_stage(n, config, p, context, hcn_params=hcn_params),
+            )
             for n, p in sorted(parsed, key=lambda np_: ORDER.index(np_[0]))
             if not (both and n == "hcn")
         ]

@@ -343,6 +343,7 @@ class HCNAligner(CorrectionStage):
                 self._last_good = float(c[i])
             else:
                 c[i] = self._last_good
+        self.shots_in += n_shots
         self.shots_not_aligned += int(np.count_nonzero(~ok))
         self.last_offsets_hz = c
         return c
@@ -364,8 +365,7 @@ class HCNAligner(CorrectionStage):
         c = self.offsets_hz(hcn)
         u = np.arange(s)[None, :] - (c / k * fs)[:, None]
         out, outside = resample(x, u, self.taps, self.kaiser_beta)
-        self.shots_in += len(x)
-        self.samples_zeroed += int(np.count_nonzero(outside))
+        self.samples_zeroed += int(np.count_nonzero(outside))  # shots_in: in offsets_hz
         return out.astype(np.complex64)
 
 

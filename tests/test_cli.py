@@ -183,6 +183,54 @@ def test_an_output_never_replaces_the_commands_input(tmp_path, capsys, monkeypat
     assert {p: (tmp_path / p).read_bytes() for p in before} == before
 
 
+def test_an_image_says_how_it_was_focused(tmp_path, capsys):
+    """From a cold review: `process --physical range` wrote the same attributes as the ideal
+    image (correlator 'fft', no physical key) though the images differ by 0.8 of the peak, and
+    said '(… fft correlator)'.  Images now record the corrections and the physical mode, from
+    `process` and, through the strip header, from a subscriber."""
+    import json
+
+    from rtsar.presets import preset as named
+    from rtsar.sinks.record import StripRecorder
+
+    (tmp_path / "s.toml").write_text(SCENE.format(correlator="fft"))
+    rec, ideal, phys = (str(tmp_path / n) for n in ("rec.h5", "ideal.h5", "phys.h5"))
+    assert main(["simulate", str(tmp_path / "s.toml"), "-o", rec, "--pulses", "300"]) == 0
+    assert main(["process", rec, "-o", ideal, "--lens", "numpy"]) == 0
+    assert main(["process", rec, "-o", phys, "--lens", "numpy", "--physical", "range"]) == 0
+    assert "physical CCD, carrier in range" in capsys.readouterr().out
+    a, b = read_image(ideal)[3], read_image(phys)[3]
+    assert (a["physical"], a["corrections"]) == ("", "")
+    assert json.loads(b["physical"])["carrier"] == "range"
+    # A subscriber's image: what the publisher's strip header says (never trusted further).
+    bins = 4
+    head = {
+        "stream_id": "s",
+        "range_bins": bins,
+        "range_first_m": 100.0,
+        "range_step_m": 1.0,
+        "azimuth_step_m": 1.0,
+        "azimuth_first_m": 0.0,
+        "first_line": 0,
+        "config": named("tiny").to_dict(),
+    }
+    lines = np.ones((2, bins), np.complex64)
+    for n, processing, want in (
+        (
+            "sub.h5",
+            {"lens": "opencl", "correlator": "fft", "corrections": ["pra", "pga"], "physical": {}},
+            ("opencl", "fft", "pra,pga", ""),
+        ),
+        ("odd.h5", {"lens": 3, "correlator": "fft", "corrections": [], "physical": None}, None),
+    ):
+        sub = StripRecorder(tmp_path / n, "test")
+        sub.add_strip({**head, "processing": processing}, lines)
+        sub.finish()
+        attrs = read_image(tmp_path / n)[3]
+        got = tuple(attrs.get(k) for k in ("lens", "correlator", "corrections", "physical"))
+        assert got == (want or (None,) * 4), n
+
+
 def test_version():
     with pytest.raises(SystemExit) as info:
         main(["--version"])

@@ -29,6 +29,38 @@ from .wire import height_header, strip_header
 MAX_FILL_BYTES = 64 << 20  # the most zeros written for one gap of missing lines
 
 
+def processing_attrs(correlator: str, corrections=(), physical: dict | None = None) -> dict:
+    """The image attributes that say how it was focused: ``correlator``; ``corrections`` (the
+    stages, comma-separated, "" for none); ``physical`` (JSON of the physical mode's settings
+    where the emulated CCD ran in place of the correlator, else "")."""
+    return {
+        "correlator": correlator,
+        "corrections": ",".join(corrections),
+        "physical": json.dumps(physical) if physical else "",
+    }
+
+
+def processing_from_header(header: dict) -> dict:
+    """lens + processing_attrs from a strip header's ``processing`` (rtsar.sinks.wire), what a
+    subscriber's image records of how the strips were made; {} where it is absent or not of
+    the types the publisher writes (never trusted further)."""
+    p = header.get("processing")
+    if not isinstance(p, dict):
+        return {}
+    lens, correlator, names, physical = (
+        p.get(k) for k in ("lens", "correlator", "corrections", "physical")
+    )
+    if not (
+        isinstance(lens, str)
+        and isinstance(correlator, str)
+        and isinstance(names, list)
+        and all(isinstance(n, str) for n in names)
+        and (physical is None or isinstance(physical, dict))
+    ):
+        return {}
+    return {"lens": lens, **processing_attrs(correlator, names, physical)}
+
+
 class StripRecorder:
     """Append strips (wire header + lines) to an image file, filling and counting gaps."""
 
@@ -55,6 +87,7 @@ class StripRecorder:
         self.inconsistent_heights = 0
         self._early_heights: list = []  # height strips that came before the first image strip
         self.counters: dict = {}
+        self.processing: dict = {}  # how the publisher focused the strips (first strip's header)
 
     def _axes(self, header: dict) -> tuple:
         return (
@@ -85,6 +118,7 @@ class StripRecorder:
                 first_line=first,
             )
             self.stream_id = header.get("stream_id")
+            self.processing = processing_from_header(header)
             kind = header.get("height_kind")
             self.height_kind = kind if isinstance(kind, str) and kind.isidentifier() else "unknown"
             self.first_line = self.next_line = first
@@ -207,7 +241,7 @@ class StripRecorder:
                 if self.writer.has_heights
                 else {}
             ),
-            **attrs,
+            **{**self.processing, **attrs},
         )
         return self.writer.lines
 
@@ -234,5 +268,5 @@ class ImageFileSink(StripSink):
         self.lines = self.recorder.finish(
             stats["counters"],
             lens=info.lens_backend,
-            correlator=info.config.processor.correlator,
+            **processing_attrs(info.config.processor.correlator, info.corrections, info.physical),
         )

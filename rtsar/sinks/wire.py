@@ -55,6 +55,12 @@ def strip_header(strip: Strip, info: StreamInfo) -> dict:
         "config": info.config_dict,
         "height_strips": info.heights,
         "height_kind": info.height_kind,
+        "processing": {
+            "lens": info.lens_backend,
+            "correlator": info.config.processor.correlator,
+            "corrections": list(info.corrections),
+            "physical": info.physical,
+        },
     }
 
 

@@ -174,6 +174,8 @@ class Pipeline:
             clock_offset_s=time.time() - time.perf_counter(),
             heights=self.height is not None,
             height_kind="" if height is None else height.kind,
+            corrections=tuple(corrections.names) if corrections else (),
+            physical=None if physical is None else physical.to_dict(),
         )
         self.strips = StripAssembler(self.info)
         self.swath = None  # lens + CCD in worker processes (rtsar.stream.swath)

@@ -66,6 +66,8 @@ class StreamInfo:
     heights: bool = False  # height strips (3D) are published beside the image strips
     height_kind: str = ""  # their method: "insal" or "sam"
     config_dict: dict = field(default_factory=dict)  # config.to_dict(), formed once
+    corrections: tuple = ()  # names of the correction stages, in the order they run
+    physical: dict | None = None  # the physical mode's settings (PhysicalSettings.to_dict)
 
     def __post_init__(self):
         if not self.config_dict:

@@ -15,6 +15,7 @@ from ...presets import PRESETS, preset
 from ...scene import Simulator, load_scene
 from ...sinks.image_file import ImageWriter, read_heights, read_image
 from ...sinks.io import RecordingWriter, replace_when_complete
+from ...sinks.record import processing_attrs
 from ...stream.engine import StreamProcessor
 from .. import signals
 from ..progress import Progress
@@ -122,6 +123,13 @@ def simulate_to(scene, output) -> None:
     )
 
 
+def _ccd_words(cfg, physical) -> str:
+    """The azimuth stage in words: the correlator, or the physical CCD that emulates it."""
+    if physical is None:
+        return f"{cfg.processor.correlator} correlator"
+    return f"physical CCD, carrier in {physical.carrier}"
+
+
 def cmd_process(args) -> int:
     with open_input(args.recording) as rec:
         cfg = processor_changes(args, rec.config)
@@ -180,10 +188,15 @@ def cmd_process(args) -> int:
             counted = eng.corrections.counters() if eng.corrections else {}
             if counted:  # what each correction did (PGA: blocks estimated and why not, …)
                 extra["correction_counters"] = json.dumps(counted)
+            physical = physical_ccd(args)
             img.close(
                 lens=eng.lens.backend,
-                correlator=cfg.processor.correlator,
                 nonfinite_pulses=eng.nonfinite_pulses,
+                **processing_attrs(
+                    cfg.processor.correlator,
+                    chain.names if chain else (),
+                    None if physical is None else physical.to_dict(),
+                ),
                 **extra,
             )
         dt = time.perf_counter() - t0
@@ -198,8 +211,7 @@ def cmd_process(args) -> int:
         print(f"corrections: {', '.join(said) or 'nothing counted'}", file=sys.stderr)
     print(
         f"wrote {args.output}: image {img.lines} azimuth × {len(eng.range_m)} range, "
-        f"{done / dt:,.0f} pulses/s ({eng.lens.backend} lens, "
-        f"{cfg.processor.correlator} correlator)"
+        f"{done / dt:,.0f} pulses/s ({eng.lens.backend} lens, {_ccd_words(cfg, physical)})"
     )
     return 0
 

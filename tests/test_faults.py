@@ -61,6 +61,11 @@ BAD_RECORDINGS = {
         "must increase",
     ),
     "short time_s": (lambda f: _replace(f, "time_s", np.arange(10.0)), "10 entries"),
+    # From a cold review: process read this as gapless, replay zero-filled 5 shots.
+    "pulse_index skips, the platform does not": (
+        lambda f: _replace(f, "pulse_index", np.arange(160) + 5 * (np.arange(160) >= 100)),
+        "pulse_index jumps by 6 after shot 99",
+    ),
 }
 
 

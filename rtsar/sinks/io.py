@@ -33,6 +33,7 @@ import numpy as np
 from .. import __version__
 from ..params import Config, config_from_dict
 from ..scene.model import Scene, recorded_scene
+from ..sources.formats.foreign import telemetry_problem
 
 RECORDING_FORMAT = "rtsar-recording"
 IMAGE_FORMAT = "rtsar-image"
@@ -389,14 +390,9 @@ def open_recording(path: str | Path) -> Recording:
             pos = _dataset(f, "position_m", 2, "float")
             if pos.shape != (pulses, 3):
                 raise ValueError(f"position_m must be [{pulses}, 3], got {pos.shape}")
-        if pulses > 1 and not np.all(np.diff(meta["pulse_index"]) > 0):
-            raise ValueError("pulse_index must increase from shot to shot")
-        if pulses > 1:
-            # Shot 0's position and the step define the image's azimuth axis; a recording whose
-            # positions do not follow the configured step is refused rather than mis-labelled.
-            steps = np.diff(meta["along_track_m"])
-            if not np.allclose(steps, cfg.geometry.along_track_step_m, rtol=1e-6, atol=0):
-                raise ValueError("along_track_m does not advance by the configured step")
+        problem = telemetry_problem(cfg, meta["pulse_index"], meta["along_track_m"])
+        if problem:
+            raise ValueError(problem)
     except (ValueError, KeyError, TypeError, OSError) as exc:
         f.close()
         raise ValueError(f"{path}: {exc}") from None

@@ -56,11 +56,32 @@ class ForeignRecording:
 
 
 def check_telemetry(path, cfg: Config, pulse_index, along_track_m) -> None:
-    """The checks rtsar.sinks.io.open_recording makes: pulse numbers increase, positions follow
-    the configured step (the image's azimuth axis depends on it)."""
-    if len(pulse_index) > 1 and not np.all(np.diff(pulse_index) > 0):
-        raise ValueError(f"{path}: pulse numbers must increase from shot to shot")
-    if len(along_track_m) > 1:
-        steps = np.diff(along_track_m)
-        if not np.allclose(steps, cfg.geometry.along_track_step_m, rtol=1e-6, atol=1e-9):
-            raise ValueError(f"{path}: the platform does not advance by the configured step")
+    """ValueError ``PATH: …`` where :func:`telemetry_problem` finds one."""
+    problem = telemetry_problem(cfg, pulse_index, along_track_m)
+    if problem:
+        raise ValueError(f"{path}: {problem}")
+
+
+def telemetry_problem(cfg: Config, pulse_index, along_track_m) -> str | None:
+    """What is wrong with a recording's pulse numbers and positions, None if nothing: the
+    numbers increase, the positions follow the configured step (the image's azimuth axis
+    depends on it), so no shot is missing, and the numbers then advance by one (a skip with a
+    regular platform contradicts itself: process would read the file as gapless and replay
+    would zero-fill the skip, two images of one file).  Every recording reader checks this."""
+    pulse_index, along_track_m = np.asarray(pulse_index), np.asarray(along_track_m)
+    if len(pulse_index) < 2:
+        return None
+    if not np.all(np.diff(pulse_index) > 0):
+        return "pulse_index must increase from shot to shot"
+    steps = np.diff(along_track_m)
+    if not np.allclose(steps, cfg.geometry.along_track_step_m, rtol=1e-6, atol=1e-9):
+        return "along_track_m does not advance by the configured step"
+    skips = np.flatnonzero(np.diff(pulse_index) != 1)
+    if len(skips):
+        k = int(skips[0])
+        jump = int(pulse_index[k + 1] - pulse_index[k])
+        return (
+            f"pulse_index jumps by {jump} after shot {k} while along_track_m advances by one "
+            "step: the file contradicts itself (a dropped shot moves both)"
+        )
+    return None

@@ -208,3 +208,24 @@ def test_mask_is_conjugate_exact_history_and_per_bin():
     np.testing.assert_allclose(single[:, 0], single[:, -1])
     # The chirp rate depends on range: at the swath edge one mask is off by radians.
     assert np.max(np.abs(np.angle(single[:, 0] / mask[:, 0]))) > 1.0
+
+
+@pytest.mark.parametrize("kind", ["fft", "partitioned", "nonuniform", "direct"])
+@pytest.mark.parametrize("aperture", [64, 80])
+def test_first_line_pulses_is_when_the_correlator_emits_its_first_line(kind, aperture):
+    """The live hint "the first image line comes after … s" (rtsar run) counted one aperture;
+    the FFT mode's first block of M - N + 1 lines came much later (a cold review waited 46 s,
+    told 32 s).  first_line_pulses is checked against the correlator itself, pulse by pulse."""
+    from rtsar.ccd import first_line_pulses, make_ccd
+    from rtsar.lens import make_plan
+    from rtsar.presets import preset
+
+    cfg = preset("tiny").with_processor(correlator=kind, aperture_pulses=aperture)
+    plan = make_plan(cfg)
+    ccd = make_ccd(cfg, plan.range_m)
+    line = np.zeros((1, plan.bin_count), np.complex64)
+    pulses = 0
+    while not len(ccd.push(line)):
+        pulses += 1
+    ccd.close()
+    assert pulses + 1 == first_line_pulses(cfg.processor)

@@ -235,3 +235,21 @@ def test_version():
     with pytest.raises(SystemExit) as info:
         main(["--version"])
     assert info.value.code == 0
+
+
+def test_the_status_line_before_the_first_strip_says_so():
+    """From a cold review: until the first strip a live run's status read 'latency median nan
+    ms p99 nan ms' (at a few Hz, for a minute)."""
+    from rtsar.app.live import format_status
+
+    d = {
+        "counters": {"pulses_processed": 10},
+        "elapsed_s": 2.0,
+        "pulse_rate_hz": 5.0,
+        "latency_recent_median_ms": float("nan"),
+        "latency_recent_p99_ms": float("nan"),
+    }
+    line = format_status(d)
+    assert "nan" not in line and "no strip yet" in line
+    d.update(latency_recent_median_ms=3.5, latency_recent_p99_ms=9.0)
+    assert "latency median   3.50 ms p99   9.00 ms" in format_status(d)

@@ -6,6 +6,7 @@ the source; what already arrived is still focused, published and (with ``-o``) w
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 
@@ -118,11 +119,16 @@ def format_status(d: dict, total: int | None = None) -> str:
     done = c.get("pulses_processed", 0)
     progress = f"/{total}" if total else ""
     bad = problems(c)
+    median, p99 = d["latency_recent_median_ms"], d["latency_recent_p99_ms"]
+    latency = (
+        f"latency median {median:6.2f} ms p99 {p99:6.2f} ms"
+        if math.isfinite(median)
+        else "latency: no strip yet"
+    )
     return (
         f"t={d['elapsed_s']:6.1f} s  pulses {done}{progress}  {d['pulse_rate_hz']:8.0f} Hz  "
-        f"lines {c.get('lines_out', 0)}  strips {c.get('strips_published', 0)}  "
-        f"latency median {d['latency_recent_median_ms']:6.2f} ms p99 "
-        f"{d['latency_recent_p99_ms']:6.2f} ms  " + ("  ".join(bad) if bad else "no drops/gaps")
+        f"lines {c.get('lines_out', 0)}  strips {c.get('strips_published', 0)}  {latency}  "
+        + ("  ".join(bad) if bad else "no drops/gaps")
     )
 
 
@@ -261,11 +267,15 @@ def run_stream(
         stream.write("\n")
     d = stats.as_dict()
     c = d["counters"]
+    latency = (
+        f"latency median {d['latency_median_ms']:.2f} ms, p99 {d['latency_p99_ms']:.2f} ms"
+        if math.isfinite(d["latency_median_ms"])
+        else "no strip, so no latency"
+    )
     print(
         f"done: {c['pulses_processed']} pulses in {d['elapsed_s']:.1f} s "
         f"({d['pulse_rate_hz']:,.0f} Hz), {c['lines_out']} lines in {c['strips_published']} "
-        f"strips; latency median {d['latency_median_ms']:.2f} ms, p99 {d['latency_p99_ms']:.2f} "
-        f"ms; dropped {c['dropped_pulses']}, gap-filled {c.get('gap_pulses', 0)}, "
+        f"strips; {latency}; dropped {c['dropped_pulses']}, gap-filled {c.get('gap_pulses', 0)}, "
         f"flagged lines {c['flagged_lines']}",
         file=stream,
     )

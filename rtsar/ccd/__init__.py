@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..lens.plan import next_pow2
 from ..params import Config, Processor
 from .base import Correlator, aperture_offsets_m, correlate_reference, design_mask
 from .direct import DirectCorrelator
@@ -34,6 +35,7 @@ __all__ = [
     "aperture_offsets_m",
     "correlate_reference",
     "design_mask",
+    "first_line_pulses",
     "make_ccd",
     "make_correlator",
     "processor_correlator",
@@ -101,6 +103,20 @@ def make_ccd(config: Config, range_m: np.ndarray, physical=None) -> Correlator:
     else:
         mask = design_mask(config, range_m)
     return processor_correlator(p, mask)
+
+
+def first_line_pulses(p: Processor) -> int:
+    """Pulses in before the first image line leaves the correlator ``p`` asks for: line 0 needs
+    the N pulses of its aperture, and lines leave in blocks (fft: M - N + 1 lines, M the FFT
+    length; partitioned and nonuniform: partition_lines; direct: one)."""
+    n = p.aperture_pulses
+    if p.correlator == "fft":
+        block = (p.fft_length or next_pow2(2 * n)) - n + 1
+    elif p.correlator in ("partitioned", "nonuniform"):
+        block = min(p.partition_lines, n)
+    else:
+        block = 1
+    return -(-n // block) * block
 
 
 def processor_correlator(p: Processor, mask) -> Correlator:

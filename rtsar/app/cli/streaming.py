@@ -12,6 +12,7 @@ from pathlib import Path
 import zmq.auth
 
 from ... import __version__
+from ...ccd import first_line_pulses
 from ...presets import preset
 from ...scene import DEMO_SCENE, load_scene
 from ...scene.files import BUILT_IN, built_in_scenes
@@ -53,16 +54,25 @@ SLOW_FIRST_LINE_S = 30.0  # a live run whose first line takes longer than this g
 
 
 def warn_slow_first_line(scene, name) -> None:
-    """A live simulation waits N pulses at the real PRF for its first line: say so when that is
-    long (a lidar bench at a few Hz), and how to look at the scene sooner."""
-    g = scene.config.geometry
-    wait_s = scene.config.processor.aperture_pulses / g.prf_hz
+    """A live simulation waits at the real PRF for its first line (an aperture of N pulses,
+    and the correlator's block): say so when that is long (a lidar bench at a few Hz), and how
+    to look at the scene sooner."""
+    g, p = scene.config.geometry, scene.config.processor
+    pulses = first_line_pulses(p)
+    wait_s = pulses / g.prf_hz
     if wait_s > SLOW_FIRST_LINE_S:
+        block = (
+            f"; the {p.correlator} correlator's lines then leave in blocks, so the first "
+            f"after {pulses} pulses (--correlator nonuniform: lines every "
+            f"{p.partition_lines} pulses)"
+            if pulses > p.aperture_pulses
+            else ""
+        )
         print(
             f"note: at the scene's real PRF ({g.prf_hz:g} Hz) the first image line comes after "
-            f"{wait_s:,.0f} s (one aperture of {scene.config.processor.aperture_pulses} "
-            f"pulses). For a quicker look: rtsar simulate {name} -o REC.h5, then rtsar replay "
-            "REC.h5 --rate F (F times the PRF, or max)",
+            f"{wait_s:,.0f} s (an aperture of {p.aperture_pulses} pulses{block}). For a "
+            f"quicker look: rtsar simulate {name} -o REC.h5, then rtsar replay REC.h5 --rate F "
+            "(F times the PRF, or max)",
             file=sys.stderr,
             flush=True,
         )
@@ -185,6 +195,10 @@ def cmd_demo(args) -> int:
         simulate_to(scene, cached)
     args.recording = str(cached)
     args.height = args.height or "insal"
+    if not args.correlator and not getattr(args, "physical", None):
+        # Lines as they come (blocks of 16 pulses), not the FFT mode's whole-aperture blocks:
+        # at this PRF the fft correlator published the whole image at the end.
+        args.correlator = "nonuniform"
     return cmd_replay(args)
 
 
@@ -350,8 +364,10 @@ def add_parsers(sub) -> None:
         description="Simulate the built-in scene insal-ridge once (a few seconds; the recording "
         f"is cached in {DEMO_CACHE}), then replay it at --rate times its PRF through the "
         "pipeline with height strips (--height insal), publishing image and height strips "
-        "like `rtsar replay`. Watch with `rtsar subscribe -o demo.h5` and draw with `rtsar "
-        "quicklook demo.h5 -o demo.png --height demo-height.png`, or give -o here.",
+        "like `rtsar replay`, with the nonuniform correlator unless --correlator says "
+        "otherwise (lines leave every 16 pulses). Watch with `rtsar subscribe -o demo.h5` "
+        "and draw with `rtsar quicklook demo.h5 -o demo.png --height demo-height.png`, or give "
+        "-o here.",
     )
     s.add_argument("which", choices=("insal",), help="the demo to run (insal)")
     s.add_argument(

@@ -253,3 +253,29 @@ def test_the_status_line_before_the_first_strip_says_so():
     assert "nan" not in line and "no strip yet" in line
     d.update(latency_recent_median_ms=3.5, latency_recent_p99_ms=9.0)
     assert "latency median   3.50 ms p99   9.00 ms" in format_status(d)
+
+
+def test_option_values_are_named_in_their_errors(tmp_path, capsys, monkeypatch):
+    """From a cold review: `replay --rate foo` and `--correct pra:along_track_m=abc` answered
+    "could not convert string to float: 'foo'" (no option, no key named); `quicklook -o snap`
+    failed on the temporary file's name ("Format 'partial-…' is not supported")."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "s.toml").write_text(SCENE.format(correlator="fft"))
+    assert main(["simulate", "s.toml", "-o", "rec.h5", "--pulses", "300"]) == 0
+    capsys.readouterr()
+    for args, said in (
+        (["replay", "rec.h5", "--rate", "foo"], "rate must be 'real', 'max' or a factor > 0"),
+        (
+            ["process", "rec.h5", "-o", "x.h5", "--correct", "pra:along_track_m=abc,range_m=2e3"],
+            "correction pra: along_track_m must be a number, got 'abc'",
+        ),
+        (
+            ["process", "rec.h5", "-o", "x.h5", "--correct", "pga:block_pulses=many"],
+            "correction pga: block_pulses must be a number",
+        ),
+    ):
+        assert main(args) == 2, args
+        assert said in capsys.readouterr().err, args
+    assert main(["process", "rec.h5", "-o", "img.h5", "--lens", "numpy"]) == 0
+    assert main(["quicklook", "img.h5", "-o", "snap"]) == 0
+    assert (tmp_path / "snap").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # no suffix: a PNG

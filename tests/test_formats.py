@@ -2,6 +2,7 @@
 of an image, and the one-line error without the optional packages."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -193,10 +194,14 @@ def _boom(*args, **kwargs):
     raise RuntimeError("the writer died")
 
 
-def test_sicd_of_an_image_opens_in_sarpy(pulsed, tmp_path):
+def test_sicd_of_an_image_opens_in_sarpy(pulsed, tmp_path, capsys):
     img, out = tmp_path / "img.h5", tmp_path / "img.nitf"
     assert main(["process", str(pulsed), "-o", str(img), "--lens", "numpy"]) == 0
+    capsys.readouterr()
     assert main(["export", str(img), "--sicd", str(out)]) == 0
+    # The version said is the one the file declares (it said "(1, 1, 0)", the file 1.3.0).
+    declared = re.search(rb"urn:SICD:([0-9.]+)", out.read_bytes()).group(1).decode()
+    assert f"SICD {declared}," in capsys.readouterr().out
     from sarpy.io.complex.converter import open_complex
 
     reader = open_complex(str(out))

@@ -6,6 +6,7 @@ Axes in metres (or the unit that suits the span).
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import numpy as np
 
@@ -26,6 +27,9 @@ def save_figure(fig, path, **kwargs) -> None:
     """``fig.savefig`` to a file name through replace_when_complete (a kill leaves the earlier
     file, never an empty or torn one); a file object is written directly."""
     if isinstance(path, (str, os.PathLike)):
+        # The kind from the name the user gave (a name without a suffix: PNG, matplotlib's
+        # default), not from the temporary name's.
+        kwargs.setdefault("format", Path(path).suffix[1:].lower() or "png")
         with replace_when_complete(path) as tmp:
             fig.savefig(tmp, **kwargs)
     else:

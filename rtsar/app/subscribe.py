@@ -27,7 +27,7 @@ def subscribe(
     rec = StripRecorder(output, endpoint)
     final = None
     interrupted = None
-    print(f"subscribe: listening on {endpoint}; writing {output} (Ctrl-C to stop)", file=stream)
+    print(f"subscribe: connected to {endpoint}; writing {output} (Ctrl-C to stop)", file=stream)
     last = time.perf_counter()
     try:
         quiet_since = time.perf_counter()

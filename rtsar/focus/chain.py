@@ -104,6 +104,23 @@ def stage_keys(name: str) -> list[str]:
     return ["along_track_m", "range_m", *keys] if name == "pra" else keys
 
 
+def _numeric_keys(name: str) -> set[str]:
+    """The keys of correction ``name`` whose values are numbers (by their annotations)."""
+    if name == "pga":
+        typed = {f.name: str(f.type) for f in fields(PGASettings)}
+    else:
+        target = {
+            "hcn": HCNAligner,
+            "linearize": ChirpLinearizer,
+            "reference_region": ReferenceRegionCorrector,
+            "pra": PhaseToRetro,
+        }[name]
+        params = inspect.signature(target).parameters
+        typed = {k: str(p.annotation) for k, p in params.items()}
+    numeric = {k for k, t in typed.items() if ("float" in t or "int" in t) and "str" not in t}
+    return numeric | ({"along_track_m", "range_m"} if name == "pra" else set())
+
+
 def make_stage(
     name: str,
     config: Config,
@@ -115,7 +132,8 @@ def make_stage(
     ``hcn_params`` (linearize only): anchor the chirp on the HCN cell too, an HCNAligner with
     these ``hcn:`` keys, in the same resampling (the chain names that stage ``hcn+linearize``).
 
-    A key the stage does not take is a ValueError naming the keys it takes."""
+    A key the stage does not take, or a word where it takes a number, is a ValueError naming
+    the key."""
     params = dict(params)
     unknown = sorted(set(params) - set(stage_keys(name)))
     if unknown:
@@ -123,6 +141,10 @@ def make_stage(
             f"correction {name}: unknown key(s) {', '.join(unknown)}; "
             f"it takes {', '.join(stage_keys(name))}"
         )
+    numeric = _numeric_keys(name)
+    for key, value in params.items():
+        if key in numeric and isinstance(value, str):
+            raise ValueError(f"correction {name}: {key} must be a number, got {value!r}")
     context = context or CorrectionContext()
     if name == "hcn":
         return HCNAligner(config, **params)

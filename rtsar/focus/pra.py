@@ -62,7 +62,8 @@ def _window(range_m: np.ndarray, retro_range_m: float, radius_m: float) -> slice
     if inside.size < 5:
         raise ValueError(
             f"the retro search window ({retro_range_m:g} ± {radius_m:g} m) holds {inside.size} "
-            "range bins; it needs at least 5 (widen search_radius_m or check retro_range_m)"
+            "range bins; it needs at least 5 (widen pra:search_radius_m, or check the retro's "
+            "range, pra:range_m, against the swath)"
         )
     return slice(int(inside[0]), int(inside[-1]) + 1)
 

@@ -121,4 +121,7 @@ class ReplaySource(Source):
 
 def _rate_words(rate) -> str:
     """A replay rate in words: real, max, or a factor as '5× real rate' (not a bare 5)."""
-    return str(rate) if rate in ("real", "max") else f"{float(rate):g}× real rate"
+    factor = parse_rate(rate)  # a ValueError naming the choices for anything else
+    if factor is None or rate == "real":
+        return "max" if factor is None else "real"
+    return f"{factor:g}× real rate"

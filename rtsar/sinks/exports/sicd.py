@@ -30,7 +30,7 @@ from ..io import replace_when_complete
 
 try:
     from sarpy.io.complex.sicd import SICDWriter
-    from sarpy.io.complex.sicd_elements.SICD import SICDType
+    from sarpy.io.complex.sicd_elements.SICD import SICDType, get_default_version_string
 except ImportError:  # the optional extra "formats"
     SICDType = None
 
@@ -207,4 +207,7 @@ def write_sicd(image_path: str | Path, path: str | Path, frame: LocalFrame | Non
         SICDWriter(f, sicd, check_existence=False) as w,
     ):
         w.write_chip(np.ascontiguousarray(image.T.astype(np.complex64)), start_indices=(0, 0))
-    return {"version": sicd.version_required(), "rows": image.shape[1], "cols": image.shape[0]}
+    # The version the file declares (sarpy's writer writes its default, urn:SICD:1.3.0 with
+    # sarpy 1.3); version_required() is only the oldest that could hold this content.
+    version = get_default_version_string()
+    return {"version": version, "rows": image.shape[1], "cols": image.shape[0]}

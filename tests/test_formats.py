@@ -317,3 +317,19 @@ def test_subscribe_sicd_never_exports_a_stale_image(pulsed, tmp_path):
     args = ["subscribe", ep, "-o", str(stale), "--sicd", str(sicd), "--timeout", "0.5"]
     assert main(args) == 1  # nothing received
     assert not sicd.exists()
+
+
+def test_a_cut_short_cphd_is_refused_at_once_by_name(pulsed, tmp_path, capsys):
+    """From a cold review: a truncated CPHD failed after processing had started with "Expected
+    nbytes_requested=32768; only read 9376", naming no file.  Its size is checked against the
+    blocks its header places, before any work, wherever the cut falls."""
+    whole = tmp_path / "whole.cphd"
+    assert main(["export", str(pulsed), "--cphd", str(whole)]) == 0
+    data = whole.read_bytes()
+    for keep in (5000, len(data) // 2, len(data) - 1):
+        cut = tmp_path / f"cut{keep}.cphd"
+        cut.write_bytes(data[:keep])
+        capsys.readouterr()
+        assert main(["process", str(cut), "-o", str(tmp_path / "x.h5"), "--lens", "numpy"]) == 2
+        err = capsys.readouterr().err
+        assert str(cut) in err and "cut short" in err and f"holds {keep} bytes" in err

@@ -67,6 +67,22 @@ def _parameters(tree) -> dict:
     }
 
 
+def _described_bytes(path: Path) -> int:
+    """The end of the last block the CPHD file header (``KEY := VALUE`` lines up to the form
+    feed; NGA.STND.0068-1 §3) places: what a complete file holds at least."""
+    with open(path, "rb") as f:
+        head = f.read(8192).split(b"\f", 1)[0].decode("ascii", "replace")
+    fields = dict(
+        (k.strip(), v.strip()) for k, _, v in (line.partition(":=") for line in head.splitlines())
+    )
+    ends = [0]
+    for block in ("XML", "PVP", "SIGNAL", "SUPPORT"):
+        offset, size = fields.get(f"{block}_BLOCK_BYTE_OFFSET"), fields.get(f"{block}_BLOCK_SIZE")
+        if offset and size and offset.isdigit() and size.isdigit():
+            ends.append(int(offset) + int(size))
+    return max(ends)
+
+
 def open_cphd(path: str | Path) -> ForeignRecording:
     """Open a CPHD file as a recording; ValueError naming the file and what rtsar cannot read."""
     require_formats(skcphd, "reading CPHD")
@@ -75,6 +91,12 @@ def open_cphd(path: str | Path) -> ForeignRecording:
         raise ValueError(f"{path}: no such file")
     f = open(path, "rb")
     try:
+        # A truncated file (an interrupted copy) is refused here, by its size, not mid-run.
+        need, have = _described_bytes(path), path.stat().st_size
+        if have < need:
+            raise ValueError(
+                f"the file holds {have} bytes; its header describes {need} (cut short?)"
+            )
         try:
             reader = skcphd.Reader(f)
         except Exception as exc:  # sarkit raises several kinds on a file that is not CPHD

@@ -279,3 +279,11 @@ def test_option_values_are_named_in_their_errors(tmp_path, capsys, monkeypatch):
     assert main(["process", "rec.h5", "-o", "img.h5", "--lens", "numpy"]) == 0
     assert main(["quicklook", "img.h5", "-o", "snap"]) == 0
     assert (tmp_path / "snap").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"  # no suffix: a PNG
+
+
+def test_view_refuses_what_subscribe_and_quicklook_refuse(capsys):
+    """From a cold review: `view --timeout 0` and `--dynamic-range-db -1` were taken without a
+    word (subscribe and quicklook refuse them)."""
+    for args in (["view", "--timeout", "0"], ["view", "--dynamic-range-db", "-1", "--png", "x"]):
+        assert main(args) == 2
+        assert "must be > 0" in capsys.readouterr().err

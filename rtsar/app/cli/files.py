@@ -297,7 +297,9 @@ def add_parsers(sub) -> None:
         help="dB below the peak shown as black (default 50)",
     )
     s.add_argument(
-        "--height", metavar="PNG", help="also draw the image's height map (--height insal)"
+        "--height",
+        metavar="PNG",
+        help="also draw the image's height map (an image made with --height insal or sam)",
     )
     s.add_argument(
         "--true-aspect",

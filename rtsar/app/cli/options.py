@@ -196,7 +196,8 @@ def add_height_options(g) -> None:
     g.add_argument(
         "--height",
         choices=HEIGHT_METHODS,
-        help="3D: height strips, published on the 'height' topic and written beside the image: "
+        help="3D: height strips, written beside the image (live runs also publish them on the "
+        "'height' topic): "
         "insal (a second receiver, Zhao 2014; the scene's interferometric_receivers effect) or "
         "sam (cosine/sine-masked channels S1, S2, the INO 3D patent; the scene's "
         "amplitude_modulation_3d effect) (default: none, no height strips; insal in `rtsar "
@@ -207,7 +208,7 @@ def add_height_options(g) -> None:
         type=int,
         default=32,
         metavar="L",
-        help="lines per height strip (default 32; unwrapped with 8 lines of overlap)",
+        help="lines per height strip (default 32, at least 8; unwrapped with 8 lines of overlap)",
     )
 
 

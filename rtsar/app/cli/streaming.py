@@ -232,6 +232,10 @@ def cmd_subscribe(args) -> int:
 def cmd_view(args) -> int:
     if args.lines < 1:
         return die(f"--lines must be >= 1, got {args.lines}")
+    if args.timeout is not None and args.timeout <= 0:
+        return die(f"--timeout must be > 0 seconds, got {args.timeout}")
+    if not args.dynamic_range_db > 0:
+        return die(f"--dynamic-range-db must be > 0, got {args.dynamic_range_db}")
     return view(
         args.endpoint,
         args.png,
@@ -307,7 +311,11 @@ def add_parsers(sub) -> None:
         "complex64 vector items of one shot each, or a flat stream cut by packet_len tags "
         "(pass tags on); processed with --preset or --scene like --serial (README 'GNU Radio')",
     )
-    src.add_argument("--preset", help="with --serial: processing configuration preset")
+    src.add_argument(
+        "--preset",
+        help="with --serial or --zmq-in: the processing configuration preset (default: the "
+        "--scene's configuration)",
+    )
     src.add_argument(
         "--baudrate", type=int, default=3_000_000, help="serial line rate (default 3000000)"
     )

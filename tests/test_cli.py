@@ -287,3 +287,16 @@ def test_view_refuses_what_subscribe_and_quicklook_refuse(capsys):
     for args in (["view", "--timeout", "0"], ["view", "--dynamic-range-db", "-1", "--png", "x"]):
         assert main(args) == 2
         assert "must be > 0" in capsys.readouterr().err
+
+
+def test_swath_workers_with_corrections_are_refused_before_any_worker_starts(tmp_path, capsys):
+    """From a cold review: refused only after "starting 2 swath workers …" (1.5 s in)."""
+    (tmp_path / "s.toml").write_text(SCENE.format(correlator="fft"))
+    rec = str(tmp_path / "rec.h5")
+    assert main(["simulate", str(tmp_path / "s.toml"), "-o", rec, "--pulses", "300"]) == 0
+    capsys.readouterr()
+    args = ["replay", rec, "--rate", "max", "--swath-workers", "2", "--correct", "pga"]
+    assert main(args) == 2
+    captured = capsys.readouterr()
+    assert "--swath-workers runs without --correct" in captured.err
+    assert "starting" not in captured.out + captured.err

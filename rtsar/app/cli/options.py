@@ -409,6 +409,12 @@ def pipeline_settings(args, deadline: bool = False) -> PipelineSettings:
             raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got {value}")
     if not args.stall_timeout > 0:
         raise ValueError(f"--stall-timeout must be > 0 seconds, got {args.stall_timeout}")
+    if args.swath_workers > 0:  # before any worker starts (the pipeline refuses it too)
+        given = [
+            f"--{name}" for name in ("correct", "physical", "height") if getattr(args, name, None)
+        ]
+        if given:
+            raise ValueError(f"--swath-workers runs without {', '.join(given)}")
     return PipelineSettings(
         lens_backend=args.lens,
         device=args.device,

@@ -300,3 +300,16 @@ def test_swath_workers_with_corrections_are_refused_before_any_worker_starts(tmp
     captured = capsys.readouterr()
     assert "--swath-workers runs without --correct" in captured.err
     assert "starting" not in captured.out + captured.err
+
+
+def test_knobs_that_would_do_nothing_or_less_than_asked_are_said(tmp_path, capsys):
+    """From a cold review: `--full-scale 0` without --physical was taken (and ignored), and
+    `--range-migration-taps 4` on a critically sampled range axis without a word."""
+    (tmp_path / "s.toml").write_text(SCENE.format(correlator="fft"))
+    rec, out = str(tmp_path / "rec.h5"), str(tmp_path / "img.h5")
+    assert main(["simulate", str(tmp_path / "s.toml"), "-o", rec, "--pulses", "300"]) == 0
+    capsys.readouterr()
+    assert main(["process", rec, "-o", out, "--full-scale", "0"]) == 2
+    assert "give --physical" in capsys.readouterr().err
+    assert main(["process", rec, "-o", out, "--lens", "numpy", "--range-migration-taps", "4"]) == 0
+    assert "critically sampled range axis" in capsys.readouterr().err

@@ -7,6 +7,7 @@ Also the small translations from options to library objects that several command
 from __future__ import annotations
 
 import sys
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -170,7 +171,6 @@ def add_processing_knobs(g) -> None:
     g.add_argument(
         "--full-scale",
         type=float,
-        default=1.0,
         metavar="A",
         help="physical mode: focused-image amplitude whose charge swing fills the well above "
         "the bias (the drive level; set it ~1.4× the brightest target's peak, default 1)",
@@ -351,7 +351,16 @@ def processor_changes(args, cfg):
         changes["precision"] = args.precision
     if getattr(args, "range_migration_taps", None) is not None:
         changes["range_migration_taps"] = args.range_migration_taps
-    return cfg.with_processor(**changes) if changes else cfg
+    cfg = cfg.with_processor(**changes) if changes else cfg
+    p = cfg.processor
+    if p.range_migration_taps and p.range_oversampling < 2:
+        warnings.warn(
+            f"--range-migration-taps {p.range_migration_taps} on a critically sampled range "
+            "axis (range_oversampling 1) interpolates less accurately; set range_oversampling "
+            "= 2 in the scene's [processor] table (README 'What accuracy costs in time')",
+            stacklevel=2,
+        )
+    return cfg
 
 
 def correction_chain(args, cfg, scene=None, start_along_track_m=0.0, recording=None):
@@ -397,9 +406,14 @@ def check_channels(recording, chain=None, heights=None) -> list[str]:
 
 def physical_ccd(args):
     """--physical CARRIER: the paper's CCD (rtsar.physical.paper_ccd) with that carrier."""
+    full_scale = getattr(args, "full_scale", None)
     if not getattr(args, "physical", None):
+        if full_scale is not None:
+            raise ValueError("--full-scale sets the physical mode's drive level: give --physical")
         return None
-    return replace(paper_ccd(args.physical), full_scale_amplitude=args.full_scale)
+    return replace(
+        paper_ccd(args.physical), full_scale_amplitude=1.0 if full_scale is None else full_scale
+    )
 
 
 def pipeline_settings(args, deadline: bool = False) -> PipelineSettings:

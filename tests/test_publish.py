@@ -321,3 +321,12 @@ def test_a_publisher_with_client_keys_admits_only_those_clients(tmp_path):
     assert pub.subscribers == 1
     for s in (ok, no, anon, pub):
         s.close()
+
+
+def test_an_invalid_endpoint_is_one_error_without_a_warning_first():
+    """From a cold review: `--endpoint garbage` warned "publishing … without encryption" and
+    then said the address was invalid; the warning now comes once the socket is bound."""
+    warned = []
+    with pytest.raises(ValueError, match="cannot bind garbage"):
+        ZmqPublisher("garbage", warn=warned.append)
+    assert warned == []

@@ -127,11 +127,6 @@ class ZmqPublisher(StripSink):
             if curve_clients is not None:
                 self._auth = authenticator(ctx, curve_clients)
             s.curve_secretkey, s.curve_publickey, s.curve_server = secret, public, True
-        elif not is_local_endpoint(endpoint):
-            (warn or _warn)(
-                f"warning: publishing on {endpoint} beyond loopback without encryption "
-                "(give a CURVE key made by `rtsar keygen` to encrypt)"
-            )
         try:
             s.bind(endpoint)
         except zmq.ZMQError as exc:
@@ -139,6 +134,11 @@ class ZmqPublisher(StripSink):
             if self._auth is not None:
                 self._auth.stop()
             raise ValueError(f"cannot bind {endpoint}: {exc}") from None
+        if curve_secret_key is None and not is_local_endpoint(endpoint):  # once it is bound
+            (warn or _warn)(
+                f"warning: publishing on {endpoint} beyond loopback without encryption "
+                "(give a CURVE key made by `rtsar keygen` to encrypt)"
+            )
         self.endpoint = s.getsockopt_string(zmq.LAST_ENDPOINT)  # resolves a port given as *
         self._closed = False
 

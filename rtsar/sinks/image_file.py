@@ -15,13 +15,14 @@ from __future__ import annotations
 import json
 import os
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
-import h5py
 import numpy as np
 
 from .. import __version__
 from ..params import Config
+from .h5_output import H5Output, WriteFailed, is_write_error, make_room, reason
 from .io import (
     FORMAT_VERSION,
     IMAGE_FORMAT,
@@ -39,7 +40,9 @@ def write_image(
     config: Config,
     **attrs,
 ) -> None:
-    with h5py.File(path, "w") as f:
+    """The whole image in one file (a full disk: WriteFailed, see rtsar.sinks.h5_output)."""
+    out = H5Output(path)
+    with out.writing() as f:
         f.create_dataset("image", data=np.asarray(image, np.complex64))
         f.create_dataset("azimuth_m", data=np.asarray(azimuth_m, np.float64))
         f.create_dataset("range_m", data=np.asarray(range_m, np.float64))
@@ -49,6 +52,7 @@ def write_image(
         f.attrs["rtsar_version"] = __version__
         for k, v in attrs.items():
             f.attrs[k] = v
+    out.close()
 
 
 def read_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
@@ -106,8 +110,24 @@ class ImageWriter:
         target = (
             self.path.with_name(partial_prefix(self.path) + "live") if crash_safe else self.path
         )
+        self._target = target
+        self.lines = 0
+        self.saved_lines = 0  # lines sure to be on disk (crash-safe: flushed)
+        self.height_lines = 0  # rows of height_m written (the highest row + 1)
+        self._image = self._azimuth = self._height = self._valid = self._coherence = None
+        self._final = False  # crash-safe: the lines are closed, the final attributes follow
         libver = ("v110", "v110") if crash_safe else None
-        self._f = h5py.File(target, "w", libver=libver)
+        try:
+            self._out = H5Output(target, libver=libver, shown=self.path)
+        except WriteFailed as exc:
+            raise self._failed(exc) from None
+        self._f = self._out.file
+        with self._writing():
+            self._create(config, range_m, chunk_lines, heights, attrs)
+        self._flushed_s = time.monotonic()
+        self._dirty = False
+
+    def _create(self, config: Config, range_m, chunk_lines: int, heights: bool, attrs) -> None:
         nr = len(range_m)
         self._image = self._f.create_dataset(
             "image", (0, nr), np.complex64, maxshape=(None, nr), chunks=(chunk_lines, nr)
@@ -128,7 +148,6 @@ class ImageWriter:
                     ("coherence", np.float32),
                 )
             )
-        self.height_lines = 0  # rows of height_m written (the highest row + 1)
         a = self._f.attrs
         a["format"] = IMAGE_FORMAT
         a["format_version"] = FORMAT_VERSION
@@ -137,38 +156,85 @@ class ImageWriter:
         a["complete"] = False
         for k, v in attrs.items():
             a[k] = v
-        self._target = target
-        if crash_safe:
+        if self.crash_safe:
             self._f.swmr_mode = True  # from here on the file on disk is always readable
-        self._flushed_s = time.monotonic()
-        self._dirty = False
-        self.lines = 0
+
+    @contextmanager
+    def _writing(self):
+        """HDF5 work on the file: a failure (a full disk) ends the file, WriteFailed."""
+        try:
+            with self._out.writing(tidy=self._trim) as f:
+                yield f
+        except WriteFailed as exc:
+            raise self._failed(exc) from None
+
+    def _trim(self) -> None:
+        """After a failed write: the datasets back to the lines written whole (a write that
+        failed after its resize would leave zero lines at the end)."""
+        if self._final:  # the final attributes' file: its datasets were closed whole
+            return
+        for ds, n in (
+            (self._image, self.lines),
+            (self._azimuth, self.lines),
+            (self._height, self.height_lines),
+            (self._valid, self.height_lines),
+            (self._coherence, self.height_lines),
+        ):
+            if ds is not None and ds.shape[0] > n:  # (None: not created when it failed)
+                ds.resize(n, axis=0)
+
+    def _failed(self, exc: WriteFailed) -> WriteFailed:
+        """A crash-safe file that failed: still under its temporary name (no line flushed), it
+        is removed and an earlier file of the name stays; else what was written stays, readable,
+        marked incomplete, and the error says how many lines."""
+        if not self.crash_safe:
+            return exc  # a temporary name, removed by its owner (replace_when_complete)
+        if self._target != self.path:
+            self._target.unlink(missing_ok=True)
+            return exc.naming(self.path, kept="")
+        if self._final and not self._out.closed_cleanly:
+            # Its lines are all on disk, but the reopening for the final attributes marked the
+            # file open for writing (HDF5's superblock flag), and no close could clear it.
+            return exc.naming(
+                self.path,
+                kept=f"its {self.lines} lines are saved, but HDF5 readers refuse the file until "
+                f"`h5clear -s {self.path}` clears its open-for-writing flag",
+            )
+        if self._out.closed_cleanly:  # every line written went to disk, and the metadata too
+            saved = f"its {self.lines} lines are saved"
+        else:  # the last flush's lines are readable (SWMR); later ones may be lost
+            saved = f"at least its first {self.saved_lines} lines are saved"
+        return exc.naming(self.path, kept=f"{saved}, marked incomplete (complete = False)")
 
     def write(self, lines: np.ndarray, azimuth_m: np.ndarray) -> None:
         end = self.lines + len(lines)
-        self._image.resize(end, axis=0)
-        self._image[self.lines : end] = lines
-        self._azimuth.resize(end, axis=0)
-        self._azimuth[self.lines : end] = azimuth_m
+        with self._writing():
+            self._image.resize(end, axis=0)
+            self._image[self.lines : end] = lines
+            self._azimuth.resize(end, axis=0)
+            self._azimuth[self.lines : end] = azimuth_m
         self.lines = end
         self._dirty = True
         if self.crash_safe and self._target != self.path and end:
             self._flush()  # the first lines are on disk: the file takes its name
-            os.replace(self._target, self.path)
+            with self._writing():
+                os.replace(self._target, self.path)
             self._target = self.path
         self.flush_if_due()
 
     def flush_if_due(self) -> None:
         """Crash-safe files: flush what was written if the last flush is ``flush_every_s`` old
         (called after every write, and by the writers' owners when a stream is idle)."""
-        if self.crash_safe and self._dirty and self._f.id.valid:
+        if self.crash_safe and self._dirty and self._out.open:
             if time.monotonic() - self._flushed_s >= self.flush_every_s:
                 self._flush()
 
     def _flush(self) -> None:
-        self._f.flush()
+        with self._writing() as f:
+            f.flush()
         self._flushed_s = time.monotonic()
         self._dirty = False
+        self.saved_lines = self.lines
 
     @property
     def has_heights(self) -> bool:
@@ -182,35 +248,76 @@ class ImageWriter:
         if self._height is None:
             raise ValueError("this image file was opened without heights")
         end = row + len(height_m)
-        if end > self._height.shape[0]:
-            for ds in (self._height, self._valid, self._coherence):
-                ds.resize(end, axis=0)
-        self._height[row:end] = np.where(valid, height_m, 0.0)
-        self._valid[row:end] = valid
-        self._coherence[row:end] = 0.0 if coherence is None else coherence
+        with self._writing():
+            if end > self._height.shape[0]:
+                for ds in (self._height, self._valid, self._coherence):
+                    ds.resize(end, axis=0)
+            self._height[row:end] = np.where(valid, height_m, 0.0)
+            self._valid[row:end] = valid
+            self._coherence[row:end] = 0.0 if coherence is None else coherence
         self.height_lines = max(self.height_lines, end)
         self._dirty = True
         self.flush_if_due()
 
     def close(self, **attrs) -> None:
-        """Close with the final attributes; ``complete`` True unless ``complete=False`` given."""
-        if not self._f.id.valid:
+        """Close with the final attributes; ``complete`` True unless ``complete=False`` given.
+        WriteFailed when the disk refuses the last bytes; nothing after an earlier failure."""
+        if not self._out.open:
             return
-        attrs.setdefault("complete", True)
+        complete = attrs.pop("complete", True)
+        attrs["complete"] = complete  # written last: a failure before it leaves False
         if self.crash_safe:
             # Attributes cannot be added in SWMR mode: close (the data is safe from here on),
             # reopen in normal mode for the final attributes.
-            self._f.close()
+            try:
+                self._out.close()
+            except WriteFailed as exc:
+                raise self._failed(exc) from None
+            self.saved_lines = self.lines
+            self._final = True
             if self._target != self.path:  # closed before its first line
-                os.replace(self._target, self.path)
+                try:
+                    os.replace(self._target, self.path)
+                except OSError as exc:
+                    raise self._failed(WriteFailed(self.path, reason(exc))) from None
                 self._target = self.path
-            self._f = h5py.File(self.path, "r+")
-        for k, v in attrs.items():
-            self._f.attrs[k] = v
-        self._f.close()
+            # Reopened normally, the file carries HDF5's open-for-writing flag until it is
+            # closed, and a close that fails (a full disk) would lock every reader out: the
+            # room the final attributes take is asked of the disk first, and without it the
+            # file stays as it is now (every line, complete False).
+            try:
+                make_room(self.path, _room_for(attrs))
+            except OSError as exc:
+                if not is_write_error(exc):
+                    raise
+                raise WriteFailed(
+                    self.path,
+                    reason(exc),
+                    f"its {self.lines} lines are saved, marked incomplete (complete = False); "
+                    "no room for the final attributes (counters, gaps)",
+                ) from None
+            try:
+                self._out = H5Output(self.path, "r+")
+            except WriteFailed as exc:
+                raise self._failed(exc) from None
+            self._f = self._out.file
+        with self._writing() as f:
+            for k, v in attrs.items():
+                f.attrs[k] = v
+        try:
+            self._out.close()
+        except WriteFailed as exc:
+            raise self._failed(exc) from None
 
     def __enter__(self):
         return self
 
     def __exit__(self, *exc):
         self.close(complete=exc[0] is None)
+
+
+def _room_for(attrs: dict) -> int:
+    """Bytes of disk to hold before adding ``attrs`` to a file: twice their text, plus HDF5's
+    structures (object header, the heap and B-tree of many attributes)."""
+    text = sum(len(str(k)) + len(str(v)) + 64 for k, v in attrs.items())
+    return 2 * text + (64 << 10)

@@ -34,6 +34,7 @@ from .. import __version__
 from ..params import Config, config_from_dict
 from ..scene.model import Scene, recorded_scene
 from ..sources.formats.foreign import telemetry_problem
+from .h5_output import H5Output, WriteFailed, is_write_error, reason
 
 RECORDING_FORMAT = "rtsar-recording"
 IMAGE_FORMAT = "rtsar-image"
@@ -100,6 +101,8 @@ def replace_when_complete(path: str | Path) -> Iterator[Path]:
     """Write to a temporary file beside ``path``, renamed to ``path`` only when the block ends
     without an exception; otherwise removed, so an existing ``path`` stays as it was and no
     partial file is left under its name (a partial recording or batch image has no value).
+    A write the disk refused (:class:`~rtsar.sinks.h5_output.WriteFailed`, or an OSError
+    ENOSPC, EDQUOT, EFBIG, EROFS) becomes ``WriteFailed``: ``cannot write PATH: REASON``.
 
     The temporary file is created at once: an unwritable destination is reported before any
     work is done.  Temporaries of ``path`` that killed runs left are removed first
@@ -118,12 +121,20 @@ def replace_when_complete(path: str | Path) -> Iterator[Path]:
     tmp = Path(name)
     try:
         yield tmp
+        # mkstemp makes the file owner-only; the finished file gets the mode any new file would.
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, path)
+    except WriteFailed as exc:  # told of the output, not of its temporary name
+        tmp.unlink(missing_ok=True)
+        raise (exc.naming(path) if exc.path == tmp else exc) from None
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        if is_write_error(exc):  # a full disk under any writer: one line naming the output
+            raise WriteFailed(path, reason(exc)) from None
+        raise
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
-    # mkstemp makes the file owner-only; the finished file gets the mode any new file would.
-    os.chmod(tmp, 0o666 & ~_umask())
-    os.replace(tmp, path)
 
 
 def write_text_when_complete(path: str | Path, text: str) -> None:
@@ -149,7 +160,12 @@ class RecordingWriter:
         self, path: str | Path, config: Config, scene: dict | None = None, chunk_pulses: int = 64
     ):
         self.path = Path(path)
-        self._f = h5py.File(self.path, "w")
+        self._out = H5Output(self.path)  # a failed write: WriteFailed, never a crash
+        with self._out.writing():
+            self._create(config, scene, chunk_pulses)
+
+    def _create(self, config: Config, scene: dict | None, chunk_pulses: int) -> None:
+        self._f = self._out.file
         s = config.waveform.samples_per_shot
         chunk = max(1, min(chunk_pulses, 1024))
         self._shots = self._f.create_dataset(
@@ -214,7 +230,8 @@ class RecordingWriter:
         n = len(samples)
         aux = aux or {}
         if self._channels is None:
-            self._make_channels(aux)
+            with self._out.writing():
+                self._make_channels(aux)
         if set(aux) != set(self._channels):
             raise ValueError(
                 f"auxiliary channels {sorted(aux)} differ from the recording's "
@@ -228,6 +245,12 @@ class RecordingWriter:
             width = self._channels[name].shape[1]
             if values.shape != (n, width):
                 raise ValueError(f"channel {name!r}: {values.shape} for {n} shots of {width}")
+        with self._out.writing():
+            self._append(samples, pulse_index, time_s, along_track_m, channels, end)
+        self.pulses = end
+
+    def _append(self, samples, pulse_index, time_s, along_track_m, channels, end) -> None:
+        n = end - self.pulses
         for name, ds in self._channels.items():
             ds.resize(end, axis=0)
             ds[self.pulses : end] = channels[name]
@@ -247,11 +270,11 @@ class RecordingWriter:
             xyz[:, 2] = self._config.geometry.platform_height_m
             self._position.resize(end, axis=0)
             self._position[self.pulses : end] = xyz
-        self.pulses = end
 
     def close(self) -> None:
-        if self._f.id.valid:
-            self._f.close()
+        """Close the file; WriteFailed when its last bytes cannot be written (then, and after
+        any failed write, the file is closed once and left as it is)."""
+        self._out.close()
 
     def __enter__(self):
         return self

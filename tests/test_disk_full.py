@@ -8,6 +8,7 @@ and in the last metadata written at the close.  Before rtsar.sinks.h5_output, HD
 dataset whose close failed and crashed on closing it again: the child died with SIGSEGV.
 """
 
+import errno
 import json
 import os
 import re
@@ -17,7 +18,9 @@ import sys
 import numpy as np
 import pytest
 
+from rtsar.sinks.h5_output import WriteFailed
 from rtsar.sinks.image_file import read_image
+from rtsar.sinks.io import replace_when_complete
 
 pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="RLIMIT_FSIZE as on Linux")
 
@@ -168,3 +171,21 @@ def _check_saved(out: str, said: str, full) -> None:
     expect = np.arange(1, len(image) + 1, dtype=np.float32)
     np.testing.assert_array_equal(image.real, np.broadcast_to(expect[:, None], image.shape))
     np.testing.assert_array_equal(az, np.arange(len(image)) * 0.5)
+
+
+def test_a_full_disk_under_any_writer_names_the_output(tmp_path):
+    """The exports (CPHD, SICD, SigMF: plain files written by other libraries) and every other
+    output written through replace_when_complete: ENOSPC in the writer becomes one line naming
+    the output, not the temporary; the temporary goes, the earlier file stays."""
+    out = tmp_path / "out.nitf"
+    out.write_bytes(b"the earlier file")
+    with pytest.raises(WriteFailed) as failed:
+        with replace_when_complete(out) as tmp:
+            tmp.write_bytes(b"half")
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    assert str(failed.value) == f"cannot write {out}: No space left on device"
+    assert out.read_bytes() == b"the earlier file" and os.listdir(tmp_path) == ["out.nitf"]
+    with pytest.raises(FileNotFoundError):  # other errors pass as they were
+        with replace_when_complete(out) as tmp:
+            raise FileNotFoundError(errno.ENOENT, "no input")
+    assert os.listdir(tmp_path) == ["out.nitf"]

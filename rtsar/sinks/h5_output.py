@@ -12,9 +12,12 @@ a close succeeds, so trying again is harmless.
 So :func:`create` opens files without a raw-data chunk cache and without a sieve buffer (the
 contiguous datasets' cache): every data write goes to the disk at once, fails there (where it
 can be reported) and leaves nothing for a dataset's close to write; only the file's metadata is
-written at its close.  :class:`H5Output` closes a file that failed exactly once, its own error
-ignored, and turns the error into :class:`WriteFailed`: ``cannot write PATH: No space left on
-device``.
+written at its close.  :class:`H5Output` closes a file that failed exactly once (h5py's
+``File.close``: its datasets first, which have nothing left to write, then the file), that
+close's own error ignored, and turns the error into :class:`WriteFailed`: ``cannot write PATH:
+No space left on device``.  Closing it any other way (letting the garbage collector close the
+datasets after the file) can still fail inside a dataset's close: the last object of a file
+closes the file.
 """
 
 from __future__ import annotations

@@ -89,6 +89,10 @@ class ImageWriter:
     so neither a half-made nor an empty file ever carries the name (a writer killed before its
     first line leaves the earlier file there as it was).  Readers can open it while it is
     written.
+
+    A write the disk refuses (full, quota) ends the file (rtsar.sinks.h5_output): WriteFailed,
+    ``cannot write PATH: No space left on device``, a crash-safe file keeping its lines (the
+    message says how many), readable, ``complete`` False.
     """
 
     def __init__(

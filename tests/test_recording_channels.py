@@ -252,9 +252,11 @@ def test_a_slow_live_scene_says_how_to_look_sooner(capsys):
     from rtsar.app.cli.streaming import warn_slow_first_line
     from rtsar.scene import load_scene
 
-    warn_slow_first_line(load_scene("insal-ridge"), "insal-ridge")  # 160 pulses at 5 Hz: 32 s
+    # 160 pulses at 5 Hz, and the fft correlator's first block of 353 lines: 71 s
+    warn_slow_first_line(load_scene("insal-ridge"), "insal-ridge")
     err = capsys.readouterr().err
-    assert "first image line comes after 32 s" in err and "rtsar replay REC.h5 --rate F" in err
+    assert "first image line comes after 71 s" in err and "rtsar replay REC.h5 --rate F" in err
+    assert "--correlator nonuniform" in err
     warn_slow_first_line(load_scene("demo"), "demo")  # 512 pulses at 1600 Hz: no note
     assert capsys.readouterr().err == ""
 

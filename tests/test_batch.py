@@ -1,12 +1,16 @@
 """``rtsar batch``: the images of ``process``, bit for bit, from Dask workers; failures per file."""
 
 import os
+import signal
+import threading
+import time
 
 import h5py
 import numpy as np
 import pytest
 
 from rtsar.app import batch
+from rtsar.app.cli import batch as batch_cli
 from rtsar.app.cli import main
 from rtsar.sinks.image_file import read_image
 
@@ -71,16 +75,16 @@ def test_a_bad_file_is_reported_and_the_rest_done(recordings, tmp_path, capsys):
 
 def test_inputs_are_checked_before_any_work(tmp_path):
     with pytest.raises(ValueError, match="no such file"):
-        batch.find_recordings([str(tmp_path / "missing")])
+        batch_cli.find_recordings([str(tmp_path / "missing")])
     with pytest.raises(ValueError, match="no recording"):
-        batch.find_recordings([str(tmp_path)])
+        batch_cli.find_recordings([str(tmp_path)])
     a, b = tmp_path / "a", tmp_path / "b"
     a.mkdir(), b.mkdir()
     (a / "r.h5").touch(), (b / "r.h5").touch()
-    recs = batch.find_recordings([str(a), str(b), str(a / "r.h5")])
+    recs, _ = batch_cli.find_recordings([str(a), str(b), str(a / "r.h5")])
     assert len(recs) == 2  # a/r.h5 named twice counts once
     with pytest.raises(ValueError, match="both write"):
-        batch.output_paths(recs, tmp_path / "out")
+        batch_cli.output_paths(recs, tmp_path / "out")
 
 
 def test_no_input_is_overwritten_and_earlier_images_are_not_inputs(recordings, tmp_path):
@@ -91,13 +95,13 @@ def test_no_input_is_overwritten_and_earlier_images_are_not_inputs(recordings, t
     for name in ("x.h5", "x-img.h5"):
         (folder / name).write_bytes((recordings / "r1.h5").read_bytes())
     with pytest.raises(ValueError, match="would overwrite a recording"):
-        batch.output_paths(batch.find_recordings([str(folder)]), folder)
+        batch_cli.output_paths(batch_cli.find_recordings([str(folder)])[0], folder)
     mix = tmp_path / "mix"
     mix.mkdir()
     (mix / "r1.h5").write_bytes((recordings / "r1.h5").read_bytes())
     assert main(["batch", str(mix), "--out-dir", str(mix), "--workers", "1"]) == 0
     assert (mix / "r1-img.h5").is_file()
-    assert batch.find_recordings([str(mix)]) == [(mix / "r1.h5").resolve()]
+    assert batch_cli.find_recordings([str(mix)])[0] == [(mix / "r1.h5").resolve()]
 
 
 def _die_and_count(counter: str):
@@ -109,41 +113,170 @@ def _die_and_count(counter: str):
     os._exit(3)
 
 
-def test_a_task_whose_worker_dies_is_tried_retries_plus_one_times(tmp_path):
-    """--retries counts the retries of a task whose worker died (Dask's KilledWorker), not
-    Dask's own default of 3 (``distributed.scheduler.allowed-failures``)."""
+def test_a_dead_workers_row_says_how_it_ended_and_a_raised_error_is_carried(tmp_path):
+    """--retries counts the retries of a task whose worker died (Dask's KilledWorker, not
+    Dask's default of 3).  From a cold review: the row read only "KilledWorker: Attempted to run
+    task ... on 3 different workers, but all those workers died"; it now says how the worker
+    ended (the nanny's exit status), and an error the task raised is in its row as raised."""
     import cloudpickle
 
     cloudpickle.register_pickle_by_value(__import__(__name__))
     counter = tmp_path / "attempts"
-    rec, out = tmp_path / "r.h5", tmp_path / "r-img.h5"
+    recs = [tmp_path / "dies.h5", tmp_path / "full.h5"]
+    outs = [tmp_path / "dies-img.h5", tmp_path / "full-img.h5"]
 
     def task(options, recording, output):
-        return _die_and_count(str(counter))
+        if recording.endswith("dies.h5"):
+            return _die_and_count(str(counter))
+        raise MemoryError("disk or memory full: 28")
 
     with open(os.devnull, "w") as quiet:
-        results = batch.run_batch([rec], [out], {}, workers=1, retries=1, stream=quiet, task=task)
-    assert [r.status for r in results] == ["failed"]
-    assert "KilledWorker" in results[0].message and "1 retries" in results[0].message
+        results = batch.run_batch(recs, outs, {}, workers=1, retries=1, stream=quiet, task=task)
+    assert [r.status for r in results] == ["failed", "failed"]
+    assert "died on each of 2 tries" in results[0].message
+    assert "exited with status 3" in results[0].message
+    assert results[1].message.startswith("MemoryError: disk or memory full: 28")
     assert counter.read_text() == "xx"
 
 
-def test_an_interrupted_batch_lists_every_file_and_prints_no_traceback(tmp_path, monkeypatch):
-    """From a kill test: Ctrl-C during a batch printed Dask tracebacks and no summary.  The
-    interrupt (here raised where the batch waits for its files) ends the batch with every file's
-    result, those not done "interrupted"."""
-    recs = [tmp_path / f"r{i}.h5" for i in range(3)]
-    outs = [tmp_path / f"r{i}-img.h5" for i in range(3)]
+def _signal_soon(marker=None, delay_s=0.0):
+    """SIGINT to this process once ``marker`` exists (or at once), from a thread."""
 
-    def interrupted(*args):
-        raise KeyboardInterrupt
+    def send():
+        while marker is not None and not marker.exists():
+            time.sleep(0.05)
+        time.sleep(delay_s)
+        os.kill(os.getpid(), signal.SIGINT)
 
-    monkeypatch.setattr(batch, "_collect", interrupted)
-    with open(os.devnull, "w") as quiet, pytest.raises(batch.BatchInterrupted) as info:
-        batch.run_batch(recs, outs, {}, workers=1, retries=0, stream=quiet)
-    assert [r.status for r in info.value.results] == ["interrupted"] * 3
-    assert [r.recording for r in info.value.results] == [str(r) for r in recs]
+    threading.Thread(target=send, daemon=True).start()
+
+
+def _start_then_wait(options, recording, output):
+    """r2.h5 says it started (a file beside the output) and waits; the others are processed."""
+    import time as time_
+
+    from rtsar.app import batch as batch_
+
+    if recording.endswith("r2.h5"):
+        open(output + ".started", "w").close()
+        time_.sleep(60)
+    return batch_.process_one(options, recording, output)
+
+
+def test_an_interrupted_batch_lists_every_file_and_prints_no_noise(recordings, tmp_path, capfd):
+    """From a cold review: Ctrl-C with 2 workers printed Dask/tornado tracebacks, and when it
+    came during the cluster's close, no table (only `rtsar: interrupted`).  Now: r1 done, r2
+    interrupted (its worker was on it), r3 not started; exit status 130; nothing from Dask."""
+    import cloudpickle
+
+    cloudpickle.register_pickle_by_value(__import__(__name__))
+    out = tmp_path / "imgs"
+    _signal_soon(marker=out / "r2-img.h5.started", delay_s=0.5)
+    knobs = ["--lens", "numpy", "--correlator", "direct", "--workers", "1"]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(batch, "process_one", _start_then_wait)
+        assert main(["batch", str(recordings), "--out-dir", str(out), *knobs]) == 130
+    text, err = capfd.readouterr()
+    rows = {line.split()[0]: line for line in text.splitlines()[1:4]}
+    assert rows["r1.h5"].split()[1] == "ok" and "wrote" in rows["r1.h5"]
+    assert rows["r2.h5"].split()[1] == "interrupted"
+    assert rows["r3.h5"].split()[1:3] == ["not", "started"]
+    assert "interrupted: 1 of 3 recordings focused" in text
+    for noise in ("Traceback", "distributed", "tornado", "Error"):
+        assert noise not in err + text
+
+
+def test_a_signal_while_the_cluster_starts_or_closes_still_gives_every_row(tmp_path, capfd):
+    """The signal lands inside Dask's start (no file runs: every one "not started") or inside
+    its close (every file done); neither raises nor prints anything from Dask."""
+    recs = [tmp_path / f"r{i}.h5" for i in range(2)]
+    outs = [tmp_path / f"r{i}-img.h5" for i in range(2)]
+    real_start, real_close = batch.start_client, batch._close
+
+    def start_signalled(*args):
+        os.kill(os.getpid(), signal.SIGINT)  # noted by the StopSignal, raised nowhere
+        return real_start(*args)
+
+    def close_signalled(*args):
+        os.kill(os.getpid(), signal.SIGINT)
+        return real_close(*args)
+
+    def quick(options, recording, output):
+        return batch.FileResult(recording, output, "ok", message="done")
+
+    with pytest.MonkeyPatch.context() as mp, open(os.devnull, "w") as quiet:
+        mp.setattr(batch, "start_client", start_signalled)
+        with batch.StopSignal() as stop:
+            results = batch.run_batch(recs, outs, {}, 1, stream=quiet, task=quick, stop=stop)
+        assert stop.signum == signal.SIGINT
+        assert [r.status for r in results] == ["not started"] * 2
+        mp.setattr(batch, "start_client", real_start)
+        mp.setattr(batch, "_close", close_signalled)
+        with batch.StopSignal() as stop:
+            results = batch.run_batch(recs, outs, {}, 1, stream=quiet, task=quick, stop=stop)
+        assert stop.signum == signal.SIGINT
+        assert [(r.status, r.message) for r in results] == [("ok", "done")] * 2
+    text, err = capfd.readouterr()
+    for noise in ("Traceback", "distributed", "tornado", "Error"):
+        assert noise not in err + text
     # An image that a worker finished as the batch stopped is whole (it took its name complete).
     outs[1].write_bytes(b"image")
-    assert batch._unfinished(recs[1], outs[1], 0.0).status == "ok"
-    assert batch._unfinished(recs[2], outs[2], 0.0).status == "interrupted"
+    assert batch._unfinished(recs[1], outs[1], 0.0, True).status == "ok"
+    assert batch._unfinished(recs[0], outs[0], 0.0, True).status == "interrupted"
+    assert batch._unfinished(recs[0], outs[0], 0.0, False).status == "not started"
+
+
+def _no_cluster(*args):
+    raise AssertionError("the cluster was started")
+
+
+@pytest.mark.parametrize("bad", [["--correct", "foo"], ["--correct", "hcn"]])
+def test_options_process_refuses_stop_before_the_cluster(recordings, tmp_path, capsys, bad):
+    """From a cold review: `batch --correct foo` started Dask, then every file failed (exit 1
+    after ~7 s).  Now process's own line and exit status 2, no cluster; also for a correction
+    the recordings' waveform cannot take (hcn on these pulsed recordings)."""
+    rec = recordings / "r1.h5"
+    assert main(["process", str(rec), "-o", str(tmp_path / "p.h5"), *bad]) == 2
+    said = capsys.readouterr().err.strip().splitlines()[-1]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(batch, "start_client", _no_cluster)
+        status = main(["batch", str(recordings), "--out-dir", str(tmp_path / "o"), *bad])
+    assert status == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1] == said
+
+
+def test_files_process_would_refuse_are_rows_and_a_folder_says_what_it_skipped(
+    recordings, tmp_path, capsys
+):
+    """From a cold review: an rtsar image in a folder, and .cphd / .sigmf-meta files, were left
+    out without a word; files process would refuse were found only in the workers."""
+    folder = tmp_path / "in"
+    folder.mkdir()
+    (folder / "good.h5").write_bytes((recordings / "r1.h5").read_bytes())
+    with h5py.File(folder / "broken.h5", "w") as f:
+        f["x"] = 1  # an HDF5 file that is no recording
+    with h5py.File(folder / "animage.h5", "w") as f:
+        f.attrs["format"] = "rtsar-image"
+    (folder / "x.cphd").write_bytes(b"not CPHD")
+    (folder / "s.sigmf-meta").write_text("{}")
+    (folder / "s.sigmf-data").write_bytes(b"")
+    (folder / "lone.sigmf-data").write_bytes(b"")
+    (folder / "notes.txt").write_text("hello")
+    (folder / "sub").mkdir()
+    (folder / ".good-img.h5.partial-host-1").write_bytes(b"")
+    recs, skipped = batch_cli.find_recordings([str(folder)])
+    assert [p.name for p in recs] == ["broken.h5", "good.h5", "s.sigmf-meta", "x.cphd"]
+    line = batch_cli.skipped_line(skipped)
+    assert line.startswith("skipped 4 files: animage.h5 (an rtsar image, not a recording); ")
+    assert "lone.sigmf-data (SigMF data without its .sigmf-meta)" in line
+    assert "notes.txt (not a format process reads)" in line and "sub (a folder" in line
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(batch, "start_client", _no_cluster)
+        (folder / "good.h5").unlink()  # all refused: no cluster, each reason in its row
+        assert main(["batch", str(folder), "--out-dir", str(tmp_path / "o")]) == 2
+    out, err = capsys.readouterr()
+    assert "skipped 4 files: animage.h5" in err
+    rows = {line.split()[0]: line for line in out.splitlines()[1:4]}
+    assert set(rows) == {"broken.h5", "s.sigmf-meta", "x.cphd"}
+    assert all(r.split()[1] == "failed" for r in rows.values())
+    assert "x.cphd" in rows["x.cphd"].split("failed", 1)[1]

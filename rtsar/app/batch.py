@@ -9,7 +9,13 @@ Failures are per file.  A file that ``process`` refuses (a malformed recording, 
 channel, an unwritable output) is reported with its one-line reason and not retried: the same
 input fails the same way.  A task whose worker died (killed, out of memory) is retried up to
 ``--retries`` times (on a LocalCluster; a ``--scheduler`` keeps its own allowed-failures), then
-reported as failed.
+reported as failed with how the worker ended, where the cluster's nannies said so.
+
+A signal (Ctrl-C, SIGTERM, SIGHUP) at any moment of a batch is only noted (:class:`StopSignal`):
+the batch stops submitting, closes its cluster within :data:`CLOSE_TIMEOUT_S` and returns every
+file's result, so the table is printed whatever Dask does while it shuts down.  Dask's and
+tornado's log records are kept off stderr meanwhile (:func:`quiet_dask_logs`), and the workers
+of a LocalCluster write nowhere.
 """
 
 from __future__ import annotations
@@ -17,7 +23,9 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import logging
 import os
+import re
 import signal
 import socket
 import sys
@@ -26,77 +34,27 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import h5py
-
+from . import signals
 from .cli import files
 from .progress import Progress
 
-RECORDING_SUFFIXES = (".h5", ".hdf5")
+START_TOPIC = "rtsar-batch-start"  # each task's index, logged by its worker as it starts
+CLOSE_TIMEOUT_S = 10.0  # the longest wait for the cluster's close once the files are done
+_QUIET_ROOTS = ("distributed", "tornado", "bokeh", "asyncio")
+_worker_quiet = False  # this worker process's log records are dropped
 
 
 @dataclass
 class FileResult:
     recording: str
     output: str
-    status: str  # "ok" or "failed"
+    status: str  # "ok", "failed", "interrupted" (was running) or "not started"
     seconds: float = 0.0
     message: str = ""  # process's summary line, or the reason it failed
     worker: str = ""
 
 
-def _is_image(path: Path) -> bool:
-    """An rtsar image file (``format = "rtsar-image"``), e.g. a previous batch's output."""
-    try:
-        with h5py.File(path, "r") as f:
-            return f.attrs.get("format") == "rtsar-image"
-    except OSError:
-        return False
-
-
-def find_recordings(inputs: list[str]) -> list[Path]:
-    """The recordings named: files as given, folders by their ``*.h5``/``*.hdf5`` files (sorted,
-    rtsar image files left out: a folder may hold an earlier batch's images).
-
-    Raises ValueError for a path that does not exist or a list with no recording.
-    """
-    found: list[Path] = []
-    for item in inputs:
-        path = Path(item)
-        if path.is_dir():
-            found.extend(
-                sorted(
-                    p
-                    for p in path.iterdir()
-                    if p.suffix.lower() in RECORDING_SUFFIXES and not _is_image(p)
-                )
-            )
-        elif path.is_file():
-            found.append(path)
-        else:
-            raise ValueError(f"{item}: no such file or folder")
-    unique = list(dict.fromkeys(p.resolve() for p in found))
-    if not unique:
-        raise ValueError(f"no recording (*.h5) in {', '.join(inputs)}")
-    return unique
-
-
-def output_paths(recordings: list[Path], out_dir: Path, suffix: str = "-img.h5") -> list[Path]:
-    """``OUT_DIR/STEM-img.h5`` for every recording; two recordings with one stem, or an output
-    that is one of the recordings, are refused (before any work)."""
-    outputs = [out_dir.resolve() / f"{r.stem}{suffix}" for r in recordings]
-    inputs = {r.resolve() for r in recordings}
-    seen: dict[Path, Path] = {}
-    for rec, out in zip(recordings, outputs, strict=True):
-        if out in inputs:
-            raise ValueError(f"{rec}'s image {out} would overwrite a recording of this batch")
-        if out in seen:
-            raise ValueError(
-                f"{seen[out]} and {rec} would both write {out}: give them different names"
-            )
-        seen[out] = rec
-    return outputs
-
-
+# ---- one file, in a worker ----------------------------------------------------------------
 def process_one(options: dict, recording: str, output: str) -> FileResult:
     """Run ``rtsar process RECORDING -o OUTPUT`` with ``options`` in this (worker) process.
 
@@ -116,19 +74,164 @@ def process_one(options: dict, recording: str, output: str) -> FileResult:
     if status != 0:
         reason = err.getvalue().strip().splitlines()
         text = reason[-1] if reason else f"exit status {status}"
-        reason = text.removeprefix("rtsar: ")
+        reason = text.removeprefix("rtsar: error: ").removeprefix("rtsar: ")
         return FileResult(recording, output, "failed", seconds, reason, worker)
     summary = out.getvalue().strip().splitlines()
     return FileResult(recording, output, "ok", seconds, summary[-1] if summary else "", worker)
 
 
+def _announce_then_run(task, index: int, options: dict, recording: str, output: str):
+    """The task: say "file ``index`` started" (an event on START_TOPIC), then run it."""
+    from distributed import get_worker
+
+    global _worker_quiet
+    if not _worker_quiet:  # a worker started after a death writes to the terminal: keep its
+        _drop_records(_quiet_loggers())  # shutdown chatter off it
+        _worker_quiet = True
+    with contextlib.suppress(ValueError):  # not in a worker (a client's local run)
+        get_worker().log_event(START_TOPIC, index)
+    return task(options, recording, output)
+
+
+# ---- signals and logs -----------------------------------------------------------------------
+class StopSignal:
+    """SIGINT, SIGTERM and SIGHUP, while entered, are noted (the first one's ``signum``), not
+    raised: the batch looks at it between steps, so no step of Dask is cut in the middle (a
+    KeyboardInterrupt inside Dask's start or close left tracebacks and no table)."""
+
+    NAMES = ("SIGINT", "SIGTERM", "SIGHUP")
+
+    def __init__(self):
+        self.signum: int | None = None
+        self._saved: dict = {}
+
+    def __enter__(self) -> StopSignal:
+        if threading.current_thread() is threading.main_thread():
+            for name in self.NAMES:
+                sig = getattr(signal, name, None)
+                if sig is not None:
+                    self._saved[sig] = signal.signal(sig, self._note)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for sig, handler in self._saved.items():
+            signal.signal(sig, handler)
+        self._saved.clear()
+
+    def _note(self, signum, frame) -> None:
+        if self.signum is None:
+            self.signum = signum
+
+    def __bool__(self) -> bool:
+        return self.signum is not None
+
+    @property
+    def cause(self) -> KeyboardInterrupt:
+        """The signal as the exception it raises elsewhere (rtsar.app.signals)."""
+        if self.signum in (None, signal.SIGINT):
+            return KeyboardInterrupt()
+        return signals.Terminated(self.signum)
+
+
+@contextlib.contextmanager
+def _workers_write_nowhere():
+    """While the LocalCluster spawns its workers this process's stderr (file descriptor 2) is
+    the null device, which the workers keep: nothing a worker writes reaches the terminal (a
+    terminal's Ctrl-C reaches every process of the group, and a worker hit answered with a
+    traceback).  This process keeps its handlers: a signal during the start is not lost
+    (ignoring it here, for the workers to inherit, lost it).  multiprocessing's resource tracker
+    is started here too, with SIGHUP blocked (it ignores SIGINT and SIGTERM itself): a hangup
+    killed it and its relaunch printed tracebacks."""
+    from multiprocessing import resource_tracker
+
+    sys.stderr.flush()
+    saved, null = os.dup(2), os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, 2)
+    os.close(null)
+    try:
+        main = threading.current_thread() is threading.main_thread()
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGHUP}) if main else None
+        try:
+            resource_tracker.ensure_running()
+        finally:
+            if main:
+                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+class _Drop(logging.Filter):
+    def filter(self, record) -> bool:
+        return False
+
+
+class _Deaths(logging.Handler):
+    """The nannies' "Worker process PID exited with status N / was killed by signal N" lines,
+    by PID (the reason a worker died, for the row of the file it ran)."""
+
+    PATTERN = re.compile(r"Worker process (\d+) (.+)")
+
+    def __init__(self):
+        super().__init__(logging.INFO)
+        self.by_pid: dict[int, str] = {}
+
+    def emit(self, record) -> None:
+        found = self.PATTERN.match(record.getMessage())
+        if found:
+            self.by_pid[int(found.group(1))] = found.group(2)
+
+
+def _quiet_loggers() -> list[logging.Logger]:
+    names = [n for n in logging.root.manager.loggerDict if n.split(".")[0] in _QUIET_ROOTS]
+    return [logging.getLogger(n) for n in [*_QUIET_ROOTS, *names]]
+
+
+def _drop_records(loggers) -> list[tuple[logging.Handler, logging.Filter]]:
+    """Every handler of ``loggers`` drops every record; the (handler, filter) pairs added."""
+    added = []
+    for handler in {h for lg in loggers for h in lg.handlers}:
+        drop = _Drop()
+        handler.addFilter(drop)
+        added.append((handler, drop))
+    return added
+
+
+@contextlib.contextmanager
+def quiet_dask_logs():
+    """Dask's, tornado's and asyncio's log records kept off stderr (and off logging's last-resort
+    handler) inside the block; yields the :class:`_Deaths` record of the nannies' lines."""
+    loggers = _quiet_loggers()
+    added = _drop_records([*loggers, logging.root])
+    asyncio_log = logging.getLogger("asyncio")
+    was_disabled, asyncio_log.disabled = asyncio_log.disabled, True
+    last_resort, logging.lastResort = logging.lastResort, logging.NullHandler()
+    nanny = logging.getLogger("distributed.nanny")
+    level, deaths = nanny.level, _Deaths()
+    nanny.setLevel(logging.INFO)
+    nanny.addHandler(deaths)
+    try:
+        yield deaths
+    finally:
+        nanny.removeHandler(deaths)
+        nanny.setLevel(level)
+        logging.lastResort = last_resort
+        asyncio_log.disabled = was_disabled
+        for handler, drop in added:
+            handler.removeFilter(drop)
+
+
+# ---- the cluster ----------------------------------------------------------------------------
 def start_client(workers: int, scheduler: str | None, retries: int = 2):
     """A Dask client: on ``scheduler`` (``tcp://HOST:PORT``) or a LocalCluster of ``workers``
     single-threaded processes (the lens and the correlator use their own threads).
 
     A task whose worker dies is retried by the scheduler's ``allowed-failures``, not by the
     task's own retries: the LocalCluster's scheduler is given ``retries``; a cluster of one's own
-    keeps its setting (``distributed.scheduler.allowed-failures``, Dask's default 3).
+    keeps its setting (``distributed.scheduler.allowed-failures``, Dask's default 3).  The
+    LocalCluster's workers write nowhere (:func:`_workers_write_nowhere`) and take one task at
+    a time (worker-saturation 1: a file waits for a free worker, not behind another file).
     """
     try:
         import dask
@@ -139,34 +242,46 @@ def start_client(workers: int, scheduler: str | None, retries: int = 2):
         ) from exc
     if scheduler:
         return Client(scheduler, timeout="10s"), None
-    # The workers are started with Ctrl-C ignored (they inherit it): a terminal's Ctrl-C reaches
-    # every process of the group, and Dask's workers answered it with tracebacks; this process
-    # ends them when it is interrupted.
-    main = threading.current_thread() is threading.main_thread()
-    before = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
-    try:
-        with dask.config.set({"distributed.scheduler.allowed-failures": retries}):
-            cluster = LocalCluster(
-                n_workers=workers,
-                threads_per_worker=1,
-                processes=True,
-                dashboard_address=None,
-                silence_logs=40,  # logging.ERROR: Dask's chatter would bury the progress line
-            )
-    finally:
-        if main:
-            signal.signal(signal.SIGINT, before)
-    return Client(cluster), cluster
+    settings = {
+        "distributed.scheduler.allowed-failures": retries,
+        "distributed.scheduler.worker-saturation": 1.0,
+    }
+    with _workers_write_nowhere(), dask.config.set(settings):
+        cluster = LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.CRITICAL,
+        )
+        try:
+            client = Client(cluster)
+        except BaseException:
+            cluster.close()
+            raise
+    return client, cluster
 
 
-class BatchInterrupted(KeyboardInterrupt):
-    """Ctrl-C (or SIGTERM/SIGHUP) during a batch: ``results`` has every file, those not finished
-    marked "interrupted"; ``cause`` is the interrupt itself."""
+def _bounded(fn, seconds: float):
+    """``fn()`` in a thread of its own, waited for ``seconds`` at most; its result, or None when
+    it raised or had not returned by then."""
+    out: list = []
 
-    def __init__(self, results: list, cause: KeyboardInterrupt):
-        super().__init__(str(cause))
-        self.results, self.cause = results, cause
-        self.signum = getattr(cause, "signum", signal.SIGINT)
+    def run():
+        with contextlib.suppress(Exception):
+            out.append(fn())
+
+    thread = threading.Thread(target=run, name="rtsar-batch", daemon=True)
+    thread.start()
+    thread.join(seconds)
+    return out[0] if out else None
+
+
+def _close(client, cluster) -> None:
+    for closable in (client, cluster):
+        if closable is not None:
+            with contextlib.suppress(Exception):
+                closable.close()
 
 
 def run_batch(
@@ -178,51 +293,72 @@ def run_batch(
     retries: int = 2,
     stream=None,
     task=None,
+    stop: StopSignal | None = None,
 ) -> list[FileResult]:
     """Process every recording on Dask; one FileResult per recording, in the input order.
 
-    Interrupted (Ctrl-C, SIGTERM, SIGHUP): :class:`BatchInterrupted` with every file's result.
+    ``stop``: an entered :class:`StopSignal`; once it is set (before the start, during it, while
+    the files run) the batch stops: files not done are "interrupted" (their worker was on them)
+    or "not started", or "ok" when their image appeared as the batch stopped (images take their
+    name only when complete).  The cluster is closed within :data:`CLOSE_TIMEOUT_S` in any case.
 
     ``task(options, recording, output) -> FileResult`` runs each file (default ``process_one``;
     the tests give one whose worker dies)."""
     stream = stream or sys.stderr
+    stop = stop if stop is not None else StopSignal()
     started = time.time()
-    client, cluster = start_client(workers, scheduler, retries)
     results: list[FileResult | None] = [None] * len(recordings)
-    interrupted = None
-    try:
-        futures = {
-            client.submit(
-                task or process_one,
-                options,
-                str(rec),
-                str(out),
-                key=f"rtsar-process-{i}-{rec.name}",
-                retries=retries,
-                pure=False,
-            ): i
-            for i, (rec, out) in enumerate(zip(recordings, outputs, strict=True))
-        }
-        prog = Progress(len(recordings), "batch", unit="files", stream=stream, every_s=5.0)
-        try:
-            _collect(futures, recordings, outputs, retries, results, prog)
-        except KeyboardInterrupt as exc:
-            for fut in futures:
-                fut.cancel()
-            interrupted = exc
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-    if interrupted is not None:  # closed now: a file a worker was on may be finished
-        left = [r or _unfinished(recordings[i], outputs[i], started) for i, r in enumerate(results)]
-        raise BatchInterrupted(left, interrupted) from None
-    return [r for r in results if r is not None]
+    running: set[int] = set()
+    if not stop:
+        import distributed  # noqa: F401  (its loggers exist before they are quieted)
+
+        with quiet_dask_logs() as deaths:
+            client = cluster = None
+            try:
+                try:
+                    client, cluster = start_client(workers, scheduler, retries)
+                except Exception:
+                    if not stop:  # a start cut short by the stop (a worker hit) is no error
+                        raise
+                if client is not None and not stop:
+                    futures = _submit(
+                        client, task or process_one, recordings, outputs, options, retries
+                    )
+                    prog = Progress(len(recordings), "batch", unit="files", stream=stream)
+                    why = (deaths.by_pid, retries)
+                    _collect(futures, recordings, outputs, results, prog, stop, why)
+                    if stop:
+                        events = _bounded(lambda: client.get_events(START_TOPIC), 5.0) or ()
+                        running = {int(msg) for _, msg in events}
+                        _bounded(lambda: client.cancel(list(futures)), 5.0)
+            finally:
+                _bounded(lambda: _close(client, cluster), CLOSE_TIMEOUT_S)
+    return [
+        r or _unfinished(recordings[i], outputs[i], started, i in running)
+        for i, r in enumerate(results)
+    ]
 
 
-def _unfinished(recording: Path, output: Path, started: float) -> FileResult:
-    """A file without a result when the batch was interrupted: its image is whole if it is there
-    and new (images take their name only when complete), else it was not done."""
+def _submit(client, task, recordings, outputs, options, retries) -> dict:
+    return {
+        client.submit(
+            _announce_then_run,
+            task,
+            i,
+            options,
+            str(rec),
+            str(out),
+            key=f"rtsar-process-{i}-{rec.name}",
+            retries=retries,
+            pure=False,
+        ): i
+        for i, (rec, out) in enumerate(zip(recordings, outputs, strict=True))
+    }
+
+
+def _unfinished(recording: Path, output: Path, started: float, running: bool) -> FileResult:
+    """A file without a result when the batch stopped: its image is whole if it is there and new
+    (images take their name only when complete), else it was interrupted or not started."""
     try:
         new = output.stat().st_mtime >= started
     except OSError:
@@ -231,30 +367,49 @@ def _unfinished(recording: Path, output: Path, started: float) -> FileResult:
         return FileResult(
             str(recording), str(output), "ok", message="finished as the batch stopped"
         )
-    return FileResult(str(recording), str(output), "interrupted")
+    return FileResult(str(recording), str(output), "interrupted" if running else "not started")
 
 
-def _collect(futures, recordings, outputs, retries, results, prog) -> None:
-    """Fill ``results`` as the files finish (run_batch's loop)."""
+def _collect(futures, recordings, outputs, results, prog, stop, why) -> None:
+    """Fill ``results`` as the files finish (run_batch's loop), until all are or ``stop``."""
     from distributed import as_completed
 
     done = failed = 0
-    for fut in as_completed(futures):
-        i = futures[fut]
-        try:
-            result = fut.result()
-        except Exception as exc:  # the worker died on every try (KilledWorker, ...)
-            result = FileResult(
-                str(recordings[i]),
-                str(outputs[i]),
-                "failed",
-                message=f"{type(exc).__name__}: {exc} (after {retries} retries)",
-            )
-        results[i] = result
-        done += 1
-        failed += result.status != "ok"
-        prog.update(done, f"{failed} failed" if failed else "")
-    prog.done(done, f"{failed} failed" if failed else "")
+    pending = as_completed(futures)
+    while not stop and not pending.is_empty():
+        ready = pending.next_batch(block=False)
+        if not ready:
+            time.sleep(0.05)
+            continue
+        for fut in ready:
+            i = futures[fut]
+            try:
+                result = fut.result()
+            except Exception as exc:  # raised by the task on every try, or its worker died
+                result = FileResult(
+                    str(recordings[i]), str(outputs[i]), "failed", message=_why(exc, *why)
+                )
+            results[i] = result
+            done += 1
+            failed += result.status != "ok"
+            prog.update(done, f"{failed} failed" if failed else "")
+    if not stop:
+        prog.done(done, f"{failed} failed" if failed else "")
+
+
+def _why(exc: Exception, deaths: dict[int, str], retries: int) -> str:
+    """A failed task's row: the exception it raised, or how its worker ended (Dask's
+    KilledWorker: the nanny's exit status or signal of the last one, where known)."""
+    if type(exc).__name__ != "KilledWorker":
+        return f"{type(exc).__name__}: {exc} (raised on each of {retries + 1} tries)"
+    tries = int(getattr(exc, "allowed_failures", 0)) + 1
+    said = deaths.get(getattr(getattr(exc, "last_worker", None), "pid", None))
+    found = re.fullmatch(r"was killed by signal (\d+)", said or "")
+    if found:
+        with contextlib.suppress(ValueError):
+            said += f" ({signal.Signals(int(found.group(1))).name})"
+    how = f"the last {said}" if said else "how is not known (killed by the OS? out of memory?)"
+    return f"its worker process died on each of {tries} tries; {how}"
 
 
 def summary_table(results: list[FileResult]) -> str:

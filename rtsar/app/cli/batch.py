@@ -1,16 +1,163 @@
-"""The ``batch`` command: many recordings through ``process`` on Dask distributed."""
+"""The ``batch`` command: many recordings through ``process`` on Dask distributed.
+
+Which files it takes (:func:`find_recordings`) and what it checks before it starts a cluster
+(:func:`refusal`: process's own checks on each file's header) live here; running them is
+``rtsar.app.batch``.
+"""
 
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 from pathlib import Path
 
+import h5py
+
+from ...focus.chain import parse_spec
+from ...lens import range_axis_m
 from .. import batch, signals
-from .options import add_process_options, die
+from .inputs import open_input
+from .options import (
+    add_process_options,
+    check_channels,
+    correction_chain,
+    die,
+    height_stage,
+    processor_changes,
+)
 
 # The options of ``batch`` itself; every other parsed option is a ``process`` option.
 BATCH_ONLY = {"command", "func", "inputs", "out_dir", "workers", "scheduler", "retries"}
+RECORDING_SUFFIXES = (".h5", ".hdf5")
+OTHER_FORMATS = (".cphd", ".sigmf-meta", ".sigmf")  # CPHD, SigMF (metadata file or archive)
+FOLDER_RULE = (
+    "a folder gives every file that process reads: rtsar recordings (*.h5, *.hdf5; rtsar image "
+    "files, such as an earlier batch's, are left out), CPHD (*.cphd) and SigMF (*.sigmf-meta "
+    "with its .sigmf-data, or a *.sigmf archive); the files of a folder not taken are named on "
+    "one line with the reason; hidden files and folders inside are not looked at"
+)
+
+
+# ---- which files ------------------------------------------------------------------------------
+def _is_image(path: Path) -> bool:
+    """An rtsar image file (``format = "rtsar-image"``), e.g. a previous batch's output."""
+    try:
+        with h5py.File(path, "r") as f:
+            return f.attrs.get("format") == "rtsar-image"
+    except OSError:
+        return False
+
+
+def _not_taken(path: Path) -> str | None:
+    """Why a folder's entry is not a recording to process (None: it is one; "": it is read as
+    part of another file taken, a SigMF pair's data)."""
+    name = path.name.lower()
+    if path.is_dir():
+        return "a folder (folders inside are not searched)"
+    if name.endswith(".sigmf-data"):
+        meta = path.with_name(path.name[: -len(".sigmf-data")] + ".sigmf-meta")
+        return "" if meta.is_file() else "SigMF data without its .sigmf-meta"
+    if name.endswith(OTHER_FORMATS):
+        return None
+    if path.suffix.lower() in RECORDING_SUFFIXES:
+        return "an rtsar image, not a recording" if _is_image(path) else None
+    return "not a format process reads"
+
+
+def find_recordings(inputs: list[str]) -> tuple[list[Path], list[tuple[Path, str]]]:
+    """The recordings named, and the entries of the folders named that were not taken, each
+    with its reason (:data:`FOLDER_RULE`).  A file named is taken as it is (process says what
+    is wrong with it).  Raises ValueError for a path that does not exist or no recording."""
+    found: list[Path] = []
+    skipped: list[tuple[Path, str]] = []
+    for item in inputs:
+        path = Path(item)
+        if path.is_dir():
+            for entry in sorted(p for p in path.iterdir() if not p.name.startswith(".")):
+                why = _not_taken(entry)
+                if why is None:
+                    found.append(entry)
+                elif why:
+                    skipped.append((entry, why))
+        elif path.is_file():
+            found.append(path)
+        else:
+            raise ValueError(f"{item}: no such file or folder")
+    unique = list(dict.fromkeys(p.resolve() for p in found))
+    if not unique:
+        said = f" ({skipped_line(skipped)})" if skipped else ""
+        raise ValueError(
+            f"no recording (*.h5, *.hdf5, *.cphd, *.sigmf-meta, *.sigmf) in {', '.join(inputs)}"
+            + said
+        )
+    return unique, skipped
+
+
+def skipped_line(skipped: list[tuple[Path, str]], most: int = 6) -> str:
+    """``skipped 2 files: a-img.h5 (an rtsar image, not a recording); notes.txt (...)``."""
+    by_reason: dict[str, list[str]] = {}
+    for path, why in skipped:
+        by_reason.setdefault(why, []).append(path.name)
+    parts = []
+    for why, names in by_reason.items():
+        more = f" and {len(names) - most} more" if len(names) > most else ""
+        parts.append(f"{', '.join(names[:most])}{more} ({why})")
+    return f"skipped {_count(len(skipped), 'file')}: " + "; ".join(parts)
+
+
+def output_paths(recordings: list[Path], out_dir: Path, suffix: str = "-img.h5") -> list[Path]:
+    """``OUT_DIR/STEM-img.h5`` for every recording; two recordings with one stem, or an output
+    that is one of the recordings, are refused (before any work)."""
+    outputs = [out_dir.resolve() / f"{r.stem}{suffix}" for r in recordings]
+    inputs = {r.resolve() for r in recordings}
+    seen: dict[Path, Path] = {}
+    for rec, out in zip(recordings, outputs, strict=True):
+        if out in inputs:
+            raise ValueError(f"{rec}'s image {out} would overwrite a recording of this batch")
+        if out in seen:
+            raise ValueError(
+                f"{seen[out]} and {rec} would both write {out}: give them different names"
+            )
+        seen[out] = rec
+    return outputs
+
+
+# ---- checks before the cluster ----------------------------------------------------------------
+def refusal(options: dict, recording: Path) -> str | None:
+    """Why ``process`` would refuse ``recording`` with ``options``, found from its header before
+    any lens is built (None: it would start): the checks process makes first, in its order (the
+    file's format, the processor knobs, the corrections against the waveform and the scene, the
+    height stage, the channels they read, the aperture).  A bare ``pra`` is checked with a
+    stand-in retro-reflector: process finds the real one in a first pass over the file."""
+    args = argparse.Namespace(**options, recording=str(recording), output="")
+    try:
+        with open_input(recording) as rec:
+            cfg = processor_changes(args, rec.config)
+            scene = rec.scene_object()
+            mid_m = float(range_axis_m(cfg).mean())
+            stand_in = f"pra:along_track_m={rec.start_along_track_m},range_m={mid_m}"
+            bare = [
+                stand_in if s.split(":")[0].strip() == "pra" and "=" not in s else s
+                for s in args.correct or []
+            ]
+            checked = argparse.Namespace(**{**vars(args), "correct": bare or None})
+            chain = correction_chain(checked, cfg, scene, rec.start_along_track_m, None)
+            heights = height_stage(args, cfg, scene)
+            check_channels(rec, chain, heights)
+            if heights is not None and chain:  # process's words (rtsar.app.cli.files)
+                return (
+                    "--height with --correct is not supported: the corrections act on the main "
+                    "receiver only and would bias the height phase between the receivers"
+                )
+            if rec.pulses < cfg.processor.aperture_pulses:
+                return (
+                    f"{recording} holds {rec.pulses} shots, fewer than the aperture of "
+                    f"{cfg.processor.aperture_pulses}: no full-aperture line to write"
+                )
+    except (ValueError, OSError, RuntimeError) as exc:
+        return str(exc)
+    return None
 
 
 def _count(n: int, noun: str) -> str:
@@ -18,35 +165,74 @@ def _count(n: int, noun: str) -> str:
 
 
 def cmd_batch(args) -> int:
-    recordings = batch.find_recordings(args.inputs)
-    out_dir = Path(args.out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    if not os.access(out_dir, os.W_OK):
-        return die(f"{out_dir}: cannot write there")
-    outputs = batch.output_paths(recordings, out_dir)
     if args.workers < 1:
         return die("--workers must be at least 1")
+    if args.retries < 0:
+        return die(f"--retries must be >= 0, got {args.retries}")
     options = {k: v for k, v in vars(args).items() if k not in BATCH_ONLY}
-    procs = f"{args.workers} worker process{'' if args.workers == 1 else 'es'}"
-    where = args.scheduler or f"a local cluster of {procs}"
-    n = len(recordings)
-    print(f"rtsar batch: {_count(n, 'recording')} on {where} → {out_dir}", file=sys.stderr)
-    try:
-        results = batch.run_batch(
-            recordings, outputs, options, args.workers, args.scheduler, args.retries
-        )
-    except batch.BatchInterrupted as exc:  # what finished is listed; their images are whole
-        print(batch.summary_table(exc.results))
-        ok = sum(r.status == "ok" for r in exc.results)
-        print(f"{signals.describe(exc.cause)}: {ok} of {_count(n, 'recording')} focused")
-        return signals.exit_status(exc.cause)
+    for spec in args.correct or []:
+        parse_spec(spec)  # an unknown correction stops here, as in process (exit status 2)
+    with batch.StopSignal() as stop:  # a signal from here on ends with the table
+        recordings, skipped = find_recordings(args.inputs)
+        out_dir = Path(args.out_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        if not os.access(out_dir, os.W_OK):
+            return die(f"{out_dir}: cannot write there")
+        outputs = output_paths(recordings, out_dir)
+        if skipped:
+            print(f"rtsar batch: {skipped_line(skipped)}", file=sys.stderr)
+        refused: dict[int, str] = {}
+        for i, rec in enumerate(recordings):
+            if stop:
+                break
+            why = refusal(options, rec)
+            if why:
+                refused[i] = why
+        n = len(recordings)
+        if len(refused) == n:
+            reasons = set(refused.values())
+            if len(reasons) == 1:  # process's one line, e.g. "unknown correction 'foo'"
+                return die(reasons.pop())
+        todo = [i for i in range(n) if i not in refused]
+        procs = f"{args.workers} worker process{'' if args.workers == 1 else 'es'}"
+        where = args.scheduler or f"a local cluster of {procs}"
+        also = f" ({len(refused)} more refused: see the table)" if refused else ""
+        if todo:
+            print(
+                f"rtsar batch: {_count(len(todo), 'recording')} on {where} → {out_dir}{also}",
+                file=sys.stderr,
+            )
+        ran = []
+        if todo:
+            ran = batch.run_batch(
+                [recordings[i] for i in todo],
+                [outputs[i] for i in todo],
+                options,
+                args.workers,
+                args.scheduler,
+                args.retries,
+                stop=stop,
+            )
+    results = [
+        batch.FileResult(str(r), str(o), "failed", message=refused.get(i, ""))
+        for i, (r, o) in enumerate(zip(recordings, outputs, strict=True))
+    ]
+    for i, result in zip(todo, ran, strict=True):
+        results[i] = result
     print(batch.summary_table(results))
-    failed = [r for r in results if r.status != "ok"]
+    ok = sum(r.status == "ok" for r in results)
+    if stop:  # what finished is listed; their images are whole
+        print(f"{signals.describe(stop.cause)}: {ok} of {_count(n, 'recording')} focused")
+        return signals.exit_status(stop.cause)
+    failed = n - ok
     total_s = sum(r.seconds for r in results)
     print(
-        f"{len(results) - len(failed)} of {_count(len(results), 'recording')} focused "
-        f"({total_s:.1f} s of processing in all)" + (f"; {len(failed)} failed" if failed else "")
+        f"{ok} of {_count(n, 'recording')} focused ({total_s:.1f} s of processing in all)"
+        + (f"; {failed} failed" if failed else "")
+        + (f" ({len(refused)} refused before the start)" if refused else "")
     )
+    if not todo:
+        return 2  # nothing could start: as process, an input error
     return 1 if failed else 0
 
 
@@ -54,15 +240,24 @@ def add_parsers(sub) -> None:
     s = sub.add_parser(
         "batch",
         help="focus many recordings with `process` on Dask (local processes or a cluster)",
-        description="Run `rtsar process` on every recording named (files, or folders of *.h5) as "
+        description="Run `rtsar process` on every recording named (files, or folders) as "
         "Dask tasks: a LocalCluster of --workers processes by default, or the cluster at "
         "--scheduler tcp://HOST:PORT (its workers need rtsar installed and the files at the "
         "same paths).  Each image is the one `rtsar process` writes for the same options: "
-        "OUT_DIR/STEM-img.h5.  A file that process refuses is reported with its reason and "
-        "not retried; a task whose worker died is retried.  Prints a summary table; exit "
-        "status 1 when any file failed.",
+        f"OUT_DIR/STEM-img.h5.  Files: {FOLDER_RULE}.  Before any cluster starts, the options "
+        "and each file's header are checked as process checks them: an option error stops "
+        "the batch (exit status 2), a file that process would refuse is reported in the table "
+        "and the others run.  A file that process refuses while it runs is not retried; a task "
+        "whose worker died is retried.  Prints a summary table, also when interrupted "
+        "(Ctrl-C, SIGTERM, SIGHUP: each file done, finished as the batch stopped, interrupted "
+        "or not started; exit status 128 + the signal).  Exit status 1 when any file failed, "
+        "2 when none could start.",
     )
-    s.add_argument("inputs", nargs="+", help="recordings (.h5) and/or folders holding them")
+    s.add_argument(
+        "inputs",
+        nargs="+",
+        help="recordings (.h5, .cphd, .sigmf-meta) and/or folders holding them",
+    )
     s.add_argument("--out-dir", required=True, help="folder for the images (created if missing)")
     s.add_argument(
         "--workers",
@@ -80,8 +275,8 @@ def add_parsers(sub) -> None:
         type=int,
         default=2,
         help="retries of a file whose worker died (killed, out of memory) before it is "
-        "reported as failed (default 2; with --scheduler, that scheduler's own "
-        "distributed.scheduler.allowed-failures applies)",
+        "reported as failed with how the worker ended (default 2; with --scheduler, that "
+        "scheduler's own distributed.scheduler.allowed-failures applies)",
     )
     add_process_options(s)
     s.set_defaults(func=cmd_batch)

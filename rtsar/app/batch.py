@@ -38,7 +38,6 @@ from . import signals
 from .cli import files
 from .progress import Progress
 
-START_TOPIC = "rtsar-batch-start"  # each task's index, logged by its worker as it starts
 CLOSE_TIMEOUT_S = 10.0  # the longest wait for the cluster's close once the files are done
 _QUIET_ROOTS = ("distributed", "tornado", "bokeh", "asyncio")
 _worker_quiet = False  # this worker process's log records are dropped
@@ -80,16 +79,13 @@ def process_one(options: dict, recording: str, output: str) -> FileResult:
     return FileResult(recording, output, "ok", seconds, summary[-1] if summary else "", worker)
 
 
-def _announce_then_run(task, index: int, options: dict, recording: str, output: str):
-    """The task: say "file ``index`` started" (an event on START_TOPIC), then run it."""
-    from distributed import get_worker
-
+def _quiet_then_run(task, options: dict, recording: str, output: str):
+    """The task: this worker's log records dropped (once), then ``task``.  A worker started
+    after a death writes to the terminal; its shutdown chatter would land in the table."""
     global _worker_quiet
-    if not _worker_quiet:  # a worker started after a death writes to the terminal: keep its
-        _drop_records(_quiet_loggers())  # shutdown chatter off it
+    if not _worker_quiet:
+        _drop_records(_quiet_loggers())
         _worker_quiet = True
-    with contextlib.suppress(ValueError):  # not in a worker (a client's local run)
-        get_worker().log_event(START_TOPIC, index)
     return task(options, recording, output)
 
 
@@ -308,7 +304,7 @@ def run_batch(
     stop = stop if stop is not None else StopSignal()
     started = time.time()
     results: list[FileResult | None] = [None] * len(recordings)
-    running: set[int] = set()
+    submitted: set[int] = set()
     if not stop:
         import distributed  # noqa: F401  (its loggers exist before they are quieted)
 
@@ -317,43 +313,89 @@ def run_batch(
             try:
                 try:
                     client, cluster = start_client(workers, scheduler, retries)
-                except Exception:
+                except Exception as exc:
                     if not stop:  # a start cut short by the stop (a worker hit) is no error
-                        raise
+                        where = scheduler or "the local cluster"
+                        raise RuntimeError(f"Dask did not start on {where}: {exc}") from exc
                 if client is not None and not stop:
-                    futures = _submit(
-                        client, task or process_one, recordings, outputs, options, retries
-                    )
+                    slots = workers if cluster is not None else _threads(client)
+                    run = _Files(client, task or process_one, recordings, outputs, options)
+                    run.retries, run.deaths = retries, deaths.by_pid
                     prog = Progress(len(recordings), "batch", unit="files", stream=stream)
-                    why = (deaths.by_pid, retries)
-                    _collect(futures, recordings, outputs, results, prog, stop, why)
+                    run.collect(results, slots, prog, stop)
+                    submitted = set(run.futures.values())
                     if stop:
-                        events = _bounded(lambda: client.get_events(START_TOPIC), 5.0) or ()
-                        running = {int(msg) for _, msg in events}
-                        _bounded(lambda: client.cancel(list(futures)), 5.0)
+                        _bounded(lambda: client.cancel(list(run.futures)), 5.0)
             finally:
                 _bounded(lambda: _close(client, cluster), CLOSE_TIMEOUT_S)
     return [
-        r or _unfinished(recordings[i], outputs[i], started, i in running)
+        r or _unfinished(recordings[i], outputs[i], started, i in submitted)
         for i, r in enumerate(results)
     ]
 
 
-def _submit(client, task, recordings, outputs, options, retries) -> dict:
-    return {
-        client.submit(
-            _announce_then_run,
-            task,
-            i,
-            options,
-            str(rec),
-            str(out),
-            key=f"rtsar-process-{i}-{rec.name}",
-            retries=retries,
+def _threads(client) -> int:
+    """The threads of a running cluster's workers (at least 1: the tasks wait for a worker)."""
+    return max(1, sum((_bounded(client.nthreads, 10.0) or {}).values()))
+
+
+class _Files:
+    """The files as Dask tasks, at most ``slots`` in flight: a file goes to a worker when one is
+    free, so the files submitted and not done are the ones being processed ("interrupted" if
+    the batch stops), the rest "not started", and a worker's death fails only its own file
+    (given all at once, the scheduler sent each worker two files when there were few, Dask's
+    queuing being for larger groups: a death failed the file waiting behind the one it hit)."""
+
+    def __init__(self, client, task, recordings, outputs, options):
+        self.client, self.task, self.options = client, task, options
+        self.recordings, self.outputs = recordings, outputs
+        self.futures: dict = {}  # future → file index
+        self.retries, self.deaths = 0, {}
+
+    def submit(self, i: int):
+        fut = self.client.submit(
+            _quiet_then_run,
+            self.task,
+            self.options,
+            str(self.recordings[i]),
+            str(self.outputs[i]),
+            key=f"rtsar-process-{i}-{self.recordings[i].name}",
+            retries=self.retries,
             pure=False,
-        ): i
-        for i, (rec, out) in enumerate(zip(recordings, outputs, strict=True))
-    }
+        )
+        self.futures[fut] = i
+        return fut
+
+    def collect(self, results, slots, prog, stop) -> None:
+        """Fill ``results`` as the files finish, until all are or ``stop``."""
+        from distributed import as_completed
+
+        n = len(self.recordings)
+        pending = as_completed([self.submit(i) for i in range(min(slots, n))])
+        following = iter(range(min(slots, n), n))
+        done = failed = 0
+        while not stop and not pending.is_empty():
+            ready = pending.next_batch(block=False)
+            if not ready:
+                time.sleep(0.05)
+                continue
+            for fut in ready:
+                i = self.futures[fut]
+                try:
+                    result = fut.result()
+                except Exception as exc:  # raised by the task on every try, or its worker died
+                    why = _why(exc, self.deaths, self.retries)
+                    result = FileResult(str(self.recordings[i]), str(self.outputs[i]), "failed")
+                    result.message = why
+                results[i] = result
+                done += 1
+                failed += result.status != "ok"
+                prog.update(done, f"{failed} failed" if failed else "")
+                after = next(following, None)
+                if after is not None and not stop:
+                    pending.add(self.submit(after))
+        if not stop:
+            prog.done(done, f"{failed} failed" if failed else "")
 
 
 def _unfinished(recording: Path, output: Path, started: float, running: bool) -> FileResult:
@@ -370,33 +412,6 @@ def _unfinished(recording: Path, output: Path, started: float, running: bool) ->
     return FileResult(str(recording), str(output), "interrupted" if running else "not started")
 
 
-def _collect(futures, recordings, outputs, results, prog, stop, why) -> None:
-    """Fill ``results`` as the files finish (run_batch's loop), until all are or ``stop``."""
-    from distributed import as_completed
-
-    done = failed = 0
-    pending = as_completed(futures)
-    while not stop and not pending.is_empty():
-        ready = pending.next_batch(block=False)
-        if not ready:
-            time.sleep(0.05)
-            continue
-        for fut in ready:
-            i = futures[fut]
-            try:
-                result = fut.result()
-            except Exception as exc:  # raised by the task on every try, or its worker died
-                result = FileResult(
-                    str(recordings[i]), str(outputs[i]), "failed", message=_why(exc, *why)
-                )
-            results[i] = result
-            done += 1
-            failed += result.status != "ok"
-            prog.update(done, f"{failed} failed" if failed else "")
-    if not stop:
-        prog.done(done, f"{failed} failed" if failed else "")
-
-
 def _why(exc: Exception, deaths: dict[int, str], retries: int) -> str:
     """A failed task's row: the exception it raised, or how its worker ended (Dask's
     KilledWorker: the nanny's exit status or signal of the last one, where known)."""
@@ -408,8 +423,12 @@ def _why(exc: Exception, deaths: dict[int, str], retries: int) -> str:
     if found:
         with contextlib.suppress(ValueError):
             said += f" ({signal.Signals(int(found.group(1))).name})"
-    how = f"the last {said}" if said else "how is not known (killed by the OS? out of memory?)"
-    return f"its worker process died on each of {tries} tries; {how}"
+    if not said:
+        how = "how is not known (killed by the OS? out of memory?)"
+    else:
+        how = f"the last {said}" if tries > 1 else f"it {said}"
+    died = f"on each of {tries} tries" if tries > 1 else "(no retries)"
+    return f"its worker process died {died}; {how}"
 
 
 def summary_table(results: list[FileResult]) -> str:

@@ -17,6 +17,7 @@ import h5py
 from ...focus.chain import parse_spec
 from ...lens import range_axis_m
 from .. import batch, signals
+from .files import process_refusal
 from .inputs import open_input
 from .options import (
     add_process_options,
@@ -145,16 +146,7 @@ def refusal(options: dict, recording: Path) -> str | None:
             chain = correction_chain(checked, cfg, scene, rec.start_along_track_m, None)
             heights = height_stage(args, cfg, scene)
             check_channels(rec, chain, heights)
-            if heights is not None and chain:  # process's words (rtsar.app.cli.files)
-                return (
-                    "--height with --correct is not supported: the corrections act on the main "
-                    "receiver only and would bias the height phase between the receivers"
-                )
-            if rec.pulses < cfg.processor.aperture_pulses:
-                return (
-                    f"{recording} holds {rec.pulses} shots, fewer than the aperture of "
-                    f"{cfg.processor.aperture_pulses}: no full-aperture line to write"
-                )
+            return process_refusal(rec, cfg, chain, heights, recording)
     except (ValueError, OSError, RuntimeError) as exc:
         return str(exc)
     return None

@@ -130,6 +130,22 @@ def _ccd_words(cfg, physical) -> str:
     return f"physical CCD, carrier in {physical.carrier}"
 
 
+def process_refusal(rec, cfg, chain, heights, name) -> str | None:
+    """Why process refuses a recording that opened and whose options parsed (None: it goes
+    on); ``batch`` asks the same before its cluster starts."""
+    if heights is not None and chain:
+        return (
+            "--height with --correct is not supported: the corrections act on the main "
+            "receiver only and would bias the height phase between the receivers"
+        )
+    if rec.pulses < cfg.processor.aperture_pulses:
+        return (
+            f"{name} holds {rec.pulses} shots, fewer than the aperture of "
+            f"{cfg.processor.aperture_pulses}: no full-aperture line to write"
+        )
+    return None
+
+
 def cmd_process(args) -> int:
     with open_input(args.recording) as rec:
         cfg = processor_changes(args, rec.config)
@@ -138,13 +154,11 @@ def cmd_process(args) -> int:
         heights = height_stage(args, cfg, scene)
         # Before the lens is built: a wrong request fails at once; only these are read.
         channels = check_channels(rec, chain, heights)
+        problem = process_refusal(rec, cfg, chain, heights, args.recording)
+        if problem:
+            raise ValueError(problem)
         receivers = {}  # each auxiliary receiver's lens and CCD, in step with the main ones
         if heights is not None:
-            if chain:
-                raise ValueError(
-                    "--height with --correct is not supported: the corrections act on the main "
-                    "receiver only and would bias the height phase between the receivers"
-                )
             receivers = {
                 c: StreamProcessor(cfg, args.lens, args.device, rec.start_along_track_m)
                 for c in heights.channels
@@ -152,11 +166,6 @@ def cmd_process(args) -> int:
         eng = StreamProcessor(
             cfg, args.lens, args.device, rec.start_along_track_m, chain, physical_ccd(args)
         )
-        if rec.pulses < cfg.processor.aperture_pulses:
-            return die(
-                f"{args.recording} holds {rec.pulses} shots, fewer than the aperture of "
-                f"{cfg.processor.aperture_pulses}: no full-aperture line to write"
-            )
         prog = Progress(rec.pulses, "process")
         done = 0
         t0 = time.perf_counter()

@@ -368,3 +368,20 @@ def test_a_sink_that_is_not_a_strip_sink_is_refused_at_once(tiny):
     cfg, _, shots = tiny
     with pytest.raises(TypeError, match="StripSink"):
         Pipeline(cfg, replay(cfg, shots), [object()], PipelineSettings())
+
+
+def test_bench_rounds_are_summarized_by_label():
+    """`rtsar bench --repeats R`: each figure is the median [min–max] of its label's rounds;
+    a figure some runs lack is taken over the runs that have it."""
+    from rtsar.app.bench_pipeline import _spread, summarize_runs
+
+    runs = [
+        {"label": "a", "real_time_factor": x, "dropped_pulses": d, "latency_median_ms": m}
+        for x, d, m in ((1.9, 0, 2.5), (1.2, 40, 9.0), (1.7, 0, 3.0))
+    ] + [{"label": "b", "real_time_factor": 2.0, "ccd_stage_over_isolated": 0.6}]
+    s = summarize_runs(runs)
+    assert s["a"]["real_time_factor"] == (1.7, 1.2, 1.9)
+    assert s["a"]["dropped_pulses"] == (0.0, 0.0, 40.0)
+    assert "ccd_stage_over_isolated" not in s["a"] and s["b"]["ccd_stage_over_isolated"][0] == 0.6
+    assert _spread(s["a"]["latency_median_ms"], ".1f") == "3.0 [2.5–9.0]"
+    assert _spread(s["b"]["real_time_factor"], ".2f") == "2.00"

@@ -146,6 +146,15 @@ def add_arguments(parser) -> None:
         default=10.0,
         help="length of each real-rate pipeline run (default 10 s)",
     )
+    parser.add_argument(
+        "--repeats",
+        type=int,
+        default=1,
+        metavar="R",
+        help="make every live-pipeline run R times, in rounds (each configuration once per "
+        "round), and report each figure as median [min–max]: on a shared machine whose speed "
+        "swings, one run of each says little (default 1; R times the pipeline part's time)",
+    )
     parser.add_argument("--device", help="OpenCL platform/device name substring")
 
 
@@ -158,6 +167,8 @@ def run_bench(args) -> int:
     cfg = preset(name)
     out = sys.stdout
     seconds = args.seconds
+    if args.repeats < 1:
+        raise ValueError(f"--repeats must be >= 1, got {args.repeats}")
     if args.json:
         check_writable(args.json)  # before the minutes of measuring
     reason = None if args.device else opencl_unavailable()
@@ -240,6 +251,7 @@ def run_bench(args) -> int:
                 seconds=max(2.0, 2 * seconds),
                 real_seconds=args.real_seconds,
                 log=lambda m: print(m, file=out, flush=True),
+                repeats=args.repeats,
             )
         )
     if args.json:

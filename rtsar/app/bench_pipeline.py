@@ -201,18 +201,28 @@ __all__ = [
     "isolated_correlator_rate",
     "numpy_range_doppler",
     "stream_run",
+    "summarize_runs",
 ]
 
 
-def bench_pipeline(name: str, cfg: Config, seconds: float, real_seconds: float, log=print) -> dict:
-    """The streaming figures of one preset, all measured in this call (see module docstring)."""
-    shots = bench_shots(cfg, 2048)
-    result = {"preset": name, "prf_hz": cfg.geometry.prf_hz, "runs": []}
+def bench_pipeline(
+    name: str, cfg: Config, seconds: float, real_seconds: float, log=print, repeats: int = 1
+) -> dict:
+    """The streaming figures of one preset, all measured in this call (see module docstring).
 
-    def run(label, c, rate, secs, **kw):
+    ``repeats`` > 1: every run is made that many times, in rounds (each configuration once per
+    round, always in the same order), so that a shared machine's slow swings fall on all of
+    them alike; ``summary`` then gives each figure's median and range over the rounds."""
+    if repeats < 1:
+        raise ValueError(f"repeats must be >= 1, got {repeats}")
+    shots = bench_shots(cfg, 2048)
+    result = {"preset": name, "prf_hz": cfg.geometry.prf_hz, "repeats": repeats, "runs": []}
+    part = cfg.with_processor(correlator="partitioned")
+
+    def run(label, c, rate, secs, round_, **kw):
         stalled = kw.pop("stalled_subscriber", False)
         r = stream_run(c, shots, secs, rate, PipelineSettings(**kw), stalled_subscriber=stalled)
-        r["label"] = label
+        r["label"], r["round"] = label, round_
         result["runs"].append(r)
         log(
             f"  {label:34} {r['real_time_factor']:6.2f}x RT  dropped {r['dropped_pulses']:5d}  "
@@ -224,53 +234,117 @@ def bench_pipeline(name: str, cfg: Config, seconds: float, real_seconds: float, 
     log(
         f"{name}: PRF {cfg.geometry.prf_hz:g} Hz, CCD {cfg.processor.aperture_pulses} x "
         f"{cfg.processor.range_bins}, {cfg.waveform.samples_per_shot} samples/shot"
+        + (f"; {repeats} rounds of every run" if repeats > 1 else "")
     )
     # Warm-up (OpenCL build, numba cache, FFT plans), not recorded.
-    stream_run(cfg.with_processor(correlator="partitioned"), shots, 0.5, "max", PipelineSettings())
-    for kind in ("partitioned", "nonuniform", "fft"):
-        c = cfg.with_processor(correlator=kind)
-        top = run(f"{kind}: max rate", c, "max", seconds)
-        run(f"{kind}: real rate ({real_seconds:g} s)", c, "real", real_seconds)
-        iso = isolated_correlator_rate(c, top["max_batch"], seconds=min(seconds, 1.0))
-        top["isolated_correlator_pulses_per_s"] = iso
-        if "ccd_stage_pulses_per_s" in top:
-            top["ccd_stage_over_isolated"] = top["ccd_stage_pulses_per_s"] / iso
-    part = cfg.with_processor(correlator="partitioned")
-    run("partitioned: max rate, fused stages", part, "max", seconds, stages="fused")
-    base = result["runs"][0]
-    # A stalled subscriber (connected, never reads) against no subscriber, back to back.
-    none = run("partitioned: max rate (repeat)", part, "max", seconds)
-    stalled = run(
-        "partitioned: max rate, stalled sub.", part, "max", seconds, stalled_subscriber=True
-    )
-    result["stalled_subscriber_over_none"] = stalled["pulses_per_s"] / none["pulses_per_s"]
-    for mb in (8, 16, 256):
-        run(f"partitioned: max rate, max batch {mb}", part, "max", seconds, max_batch=mb)
-    # Placement: lens + CCD in two worker processes, a range half each (rtsar.stream.swath).
-    for kind in ("partitioned", "nonuniform"):
-        c = cfg.with_processor(correlator=kind)
-        run(f"{kind}: max rate, 2 swath processes", c, "max", seconds, swath_workers=2)
-        run(f"{kind}: real rate, 2 swath processes", c, "real", real_seconds, swath_workers=2)
+    stream_run(part, shots, 0.5, "max", PipelineSettings())
+    stalled_ratios = []
+    for round_ in range(repeats):
+        if repeats > 1:
+            log(f"  round {round_ + 1} of {repeats}")
+        for kind in ("partitioned", "nonuniform", "fft"):
+            c = cfg.with_processor(correlator=kind)
+            top = run(f"{kind}: max rate", c, "max", seconds, round_)
+            run(f"{kind}: real rate ({real_seconds:g} s)", c, "real", real_seconds, round_)
+            iso = isolated_correlator_rate(c, top["max_batch"], seconds=min(seconds, 1.0))
+            top["isolated_correlator_pulses_per_s"] = iso
+            if "ccd_stage_pulses_per_s" in top:
+                top["ccd_stage_over_isolated"] = top["ccd_stage_pulses_per_s"] / iso
+        run("partitioned: max rate, fused stages", part, "max", seconds, round_, stages="fused")
+        # A stalled subscriber (connected, never reads) against no subscriber, back to back.
+        none = run("partitioned: max rate (repeat)", part, "max", seconds, round_)
+        stalled = run(
+            "partitioned: max rate, stalled sub.",
+            part,
+            "max",
+            seconds,
+            round_,
+            stalled_subscriber=True,
+        )
+        stalled_ratios.append(stalled["pulses_per_s"] / none["pulses_per_s"])
+        for mb in (8, 16, 256):
+            label = f"partitioned: max rate, max batch {mb}"
+            run(label, part, "max", seconds, round_, max_batch=mb)
+        # Placement: lens + CCD in two worker processes, a range half each (rtsar.stream.swath).
+        for kind in ("partitioned", "nonuniform"):
+            c = cfg.with_processor(correlator=kind)
+            run(f"{kind}: max rate, 2 swath processes", c, "max", seconds, round_, swath_workers=2)
+            run(
+                f"{kind}: real rate, 2 swath processes",
+                c,
+                "real",
+                real_seconds,
+                round_,
+                swath_workers=2,
+            )
+    result["stalled_subscriber_over_none"] = float(np.median(stalled_ratios))
     rd = bench_numpy_range_doppler(cfg, np.concatenate([shots] * 2))
     result["numpy_range_doppler_pulses_per_s"] = rd
     result["pipeline_over_numpy_range_doppler"] = {
         r["label"]: r["pulses_per_s"] / rd for r in result["runs"] if r["rate"] == "max"
     }
+    result["summary"] = summarize_runs(result["runs"])
+    base = result["summary"]["partitioned: max rate"]
     log(
         f"  plain NumPy batch range-Doppler (4096 pulses): {rd:,.0f} pulses/s = "
         f"{rd / cfg.geometry.prf_hz:.2f}x RT; pipeline (partitioned) / NumPy = "
-        f"{base['pulses_per_s'] / rd:.2f}"
+        f"{base['pulses_per_s'][0] / rd:.2f}"
     )
-    for r in result["runs"]:
-        if "ccd_stage_over_isolated" in r:
+    for label, f in result["summary"].items():
+        if "ccd_stage_over_isolated" in f:
             log(
-                f"  {r['correlator']} CCD stage in the pipeline: "
-                f"{r['ccd_stage_pulses_per_s']:,.0f} pulses/s = "
-                f"{r['ccd_stage_over_isolated']:.2f} of the same correlator alone "
-                f"({r['isolated_correlator_pulses_per_s']:,.0f})"
+                f"  {label.split(':')[0]} CCD stage in the pipeline: "
+                f"{_spread(f['ccd_stage_pulses_per_s'], ',.0f')} pulses/s = "
+                f"{_spread(f['ccd_stage_over_isolated'], '.2f')} of the same correlator alone "
+                f"({_spread(f['isolated_correlator_pulses_per_s'], ',.0f')})"
             )
     log(
         f"  throughput with a stalled subscriber / with none: "
         f"{result['stalled_subscriber_over_none']:.2f}"
     )
+    if repeats > 1:
+        log(f"  median [min–max] over {repeats} rounds:")
+        for label, f in result["summary"].items():
+            log(
+                f"  {label:34} {_spread(f['real_time_factor'], '.2f')}x RT  dropped "
+                f"{int(f['dropped_pulses'][2])} at most  latency median "
+                f"{_spread(f['latency_median_ms'], '.2f')} ms  p99 "
+                f"{_spread(f['latency_p99_ms'], '.2f')} ms"
+            )
     return result
+
+
+SUMMARIZED = (
+    "real_time_factor",
+    "pulses_per_s",
+    "dropped_pulses",
+    "latency_median_ms",
+    "latency_p99_ms",
+    "ccd_stage_pulses_per_s",
+    "isolated_correlator_pulses_per_s",
+    "ccd_stage_over_isolated",
+)
+
+
+def summarize_runs(runs: list[dict]) -> dict:
+    """label → figure → (median, min, max) over the runs of that label (its rounds); the
+    figures of SUMMARIZED that the runs have."""
+    by_label: dict[str, list[dict]] = {}
+    for r in runs:
+        by_label.setdefault(r["label"], []).append(r)
+    out = {}
+    for label, group in by_label.items():
+        out[label] = {
+            key: (float(np.median(v)), float(min(v)), float(max(v)))
+            for key in SUMMARIZED
+            if (v := [r[key] for r in group if key in r])
+        }
+    return out
+
+
+def _spread(figure: tuple, fmt: str) -> str:
+    """'median' (one round) or 'median [min–max]'."""
+    median, low, high = figure
+    if low == high:
+        return f"{median:{fmt}}"
+    return f"{median:{fmt}} [{low:{fmt}}–{high:{fmt}}]"

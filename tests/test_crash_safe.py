@@ -216,24 +216,31 @@ def test_a_stale_temporary_name_does_not_block_the_next_run(tmp_path, monkeypatc
 
 def test_temporaries_left_by_killed_runs_are_removed_and_live_ones_kept(tmp_path):
     """From the kill test: a SIGKILL leaves `.NAME.partial-…` beside the output, and every later
-    kill added one more.  The next write of NAME removes those of writers on this host that are
-    gone, and keeps a running writer's and another host's (a shared folder)."""
-    import socket
-
+    kill added one more.  The next write of NAME removes those of writers on this host and in
+    this PID namespace that are gone, and keeps a running writer's, another host's (a shared
+    folder; also a host whose name extends ours, "node-101" beside "node": a cold review found
+    its files read as ours) and another container's (same host name, another PID namespace:
+    its PIDs mean nothing here)."""
     from rtsar.presets import preset as named_preset
     from rtsar.sinks.image_file import ImageWriter
-    from rtsar.sinks.io import partial_prefix, replace_when_complete
+    from rtsar.sinks.io import _owner_of_pid, partial_prefix, replace_when_complete
 
     gone = subprocess.Popen([sys.executable, "-c", "pass"])
     gone.wait(30)  # its pid names no running process now
-    host = socket.gethostname()
+    ours = _owner_of_pid(gone.pid)  # HOST@NS.PID
+    host, ns_pid = ours.split("@")
+    kept_owners = (
+        (_owner_of_pid(os.getppid()), "xyz.h5"),  # running
+        (f"otherhost@{ns_pid}", "q.h5"),  # another host
+        (f"{host}-101@{ns_pid}", "e.h5"),  # a host whose name extends ours
+        (f"{host}@999999999.{gone.pid}", "c.h5"),  # another PID namespace
+    )
     for name in ("out.h5", "live.h5"):
-        prefix = partial_prefix(tmp_path / name)
-        assert prefix.startswith(f".{name}.partial-{host}-{os.getpid()}-")
-        (tmp_path / f".{name}.partial-{host}-{gone.pid}-abc.h5").write_bytes(b"killed run")
-        (tmp_path / f".{name}.partial-{host}-{gone.pid}-live").write_bytes(b"killed live run")
-        (tmp_path / f".{name}.partial-{host}-{os.getppid()}-xyz.h5").write_bytes(b"running")
-        (tmp_path / f".{name}.partial-otherhost-{gone.pid}-q.h5").write_bytes(b"other host")
+        assert partial_prefix(tmp_path / name) == f".{name}.partial-{_owner_of_pid(os.getpid())}-"
+        (tmp_path / f".{name}.partial-{ours}-abc.h5").write_bytes(b"killed run")
+        (tmp_path / f".{name}.partial-{ours}-live").write_bytes(b"killed live run")
+        for owner, tail in kept_owners:
+            (tmp_path / f".{name}.partial-{owner}-{tail}").write_bytes(b"keep")
     with replace_when_complete(tmp_path / "out.h5") as tmp:
         tmp.write_bytes(b"new")
     writer = ImageWriter(
@@ -242,9 +249,9 @@ def test_temporaries_left_by_killed_runs_are_removed_and_live_ones_kept(tmp_path
     writer.close()
     left = sorted(p.name for p in tmp_path.glob(".*partial*"))
     assert left == sorted(
-        f".{name}.partial-{h}-{pid}-{tail}"
+        f".{name}.partial-{owner}-{tail}"
         for name in ("out.h5", "live.h5")
-        for h, pid, tail in ((host, os.getppid(), "xyz.h5"), ("otherhost", gone.pid, "q.h5"))
+        for owner, tail in kept_owners
     )
     assert (tmp_path / "out.h5").read_bytes() == b"new"
 

@@ -57,17 +57,18 @@ def check_writable(path: str | Path) -> None:
 
 def partial_prefix(path: Path) -> str:
     """Start of the hidden temporary name of an output of ``path`` written by this process:
-    ``.NAME.partial-HOST-PID-`` (the host and the process tell :func:`remove_stale_partials`
-    whose it is)."""
-    return f".{path.name}.partial-{_host()}-{os.getpid()}-"
+    ``.NAME.partial-OWNER-`` with OWNER = HOST@NS.PID, the host, the PID namespace and the
+    process (what tells :func:`remove_stale_partials` whose it is; no host name holds "@")."""
+    return f".{path.name}.partial-{_owner_of_pid(os.getpid())}-"
 
 
 def remove_stale_partials(path: str | Path) -> list[Path]:
-    """Delete the temporary files of ``path`` left by writers on this host that are no longer
-    running (a SIGKILL, a power cut); returns them.  Another host's (a shared folder) and a
-    running process's are kept: they may still become the file."""
+    """Delete the temporary files of ``path`` left by writers that are no longer running (a
+    SIGKILL, a power cut): those of this host and PID namespace whose process has ended;
+    returns them.  Another host's (a shared folder), another container's (another PID
+    namespace) and a running process's are kept: they may still become the file."""
     path = Path(path)
-    start = f".{path.name}.partial-{_host()}-"
+    start = f".{path.name}.partial-{_owner_of_pid(None)}"
     removed = []
     for stale in path.parent.glob(glob.escape(start) + "*"):
         pid = stale.name[len(start) :].split("-", 1)[0]
@@ -82,8 +83,15 @@ def remove_stale_partials(path: str | Path) -> list[Path]:
     return removed
 
 
-def _host() -> str:
-    return socket.gethostname().replace("/", "_") or "host"
+def _owner_of_pid(pid: int | None) -> str:
+    """HOST@NS.PID (HOST@NS. for None): NS is this process's PID namespace (0 where unknown),
+    so that a process of another container with the same host name never reads our PIDs."""
+    host = socket.gethostname().replace("/", "_").replace("@", "_") or "host"
+    try:
+        ns = os.stat("/proc/self/ns/pid").st_ino
+    except OSError:
+        ns = 0
+    return f"{host}@{ns}." + ("" if pid is None else str(pid))
 
 
 def _running(pid: int) -> bool:

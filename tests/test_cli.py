@@ -176,11 +176,20 @@ def test_an_output_never_replaces_the_commands_input(tmp_path, capsys, monkeypat
         ["quicklook", "img.h5", "-o", "img.h5"],
         ["export", "rec.h5", "--cphd", "rec.h5"],
         ["spotlight", "rec.h5", "-o", "out.h5", "--png", "out.h5"],
+        # From a cold read of the guard: quicklook's --height PNG is an output too.
+        ["quicklook", "img.h5", "-o", "x.png", "--height", "img.h5"],
+        ["quicklook", "img.h5", "-o", "same.png", "--height", "same.png"],
+        ["projective", "--simulate", "s.toml", "-o", "s.toml"],
     ):
         assert main(args) == 2, args
         err = capsys.readouterr().err
         assert "choose another output name" in err or "two outputs" in err, (args, err)
     assert {p: (tmp_path / p).read_bytes() for p in before} == before
+    # A built-in scene's name is not a file: an output of that name replaces nothing.
+    from rtsar.app.cli import build_parser
+    from rtsar.app.cli.options import check_outputs_spare_inputs
+
+    check_outputs_spare_inputs(build_parser().parse_args(["simulate", "tiny", "-o", "tiny"]))
 
 
 def test_an_image_says_how_it_was_focused(tmp_path, capsys):

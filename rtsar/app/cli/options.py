@@ -34,7 +34,10 @@ def die(msg: str) -> int:
 # Options naming files a command reads, and files it writes (``--sigmf BASE`` writes
 # BASE.sigmf-meta and BASE.sigmf-data).
 INPUT_OPTIONS = ("scene", "recording", "image", "input", "images", "inputs")
+INPUT_OPTIONS += ("curve_key", "curve_server_key", "curve_client_key")
 OUTPUT_OPTIONS = ("output", "png", "json", "out", "cphd", "sicd", "sigmf")
+COMMAND_INPUTS = {"spotlight": ("live",), "projective": ("simulate",)}  # named like others
+COMMAND_OUTPUTS = {"quicklook": ("height",)}  # --height PNG (elsewhere --height is a method)
 
 
 def check_outputs_spare_inputs(args) -> None:
@@ -42,13 +45,15 @@ def check_outputs_spare_inputs(args) -> None:
     another of its outputs): ``process rec.h5 -o rec.h5`` replaced the recording by its image.
     A SigMF recording exported onto itself (``export rec.sigmf-meta --sigmf rec``) is the
     exception: that export reads the recording whole first."""
+    command = getattr(args, "command", None)
     inputs = {}
-    for name in INPUT_OPTIONS:
+    for name in INPUT_OPTIONS + COMMAND_INPUTS.get(command, ()):
         for value in _values(getattr(args, name, None)):
             for path in _files_of(value, name):
-                inputs[_identity(path)] = path
+                if path.exists():  # a built-in scene's name is not a file the output replaces
+                    inputs[_identity(path)] = path
     outputs = {}
-    for name in OUTPUT_OPTIONS:
+    for name in OUTPUT_OPTIONS + COMMAND_OUTPUTS.get(command, ()):
         for value in _values(getattr(args, name, None)):
             for path in _files_of(value, name):
                 key = _identity(path)

@@ -325,3 +325,19 @@ def test_linearizer_counts_shots_whose_beat_aliases():
     stage = ChirpLinearizer(CFG)
     stage.process(main, aux)
     assert stage.shots_beat_aliased == 0
+
+
+def test_whole_number_keys_take_whole_numbers():
+    """From a cold read: `--correct linearize:taps=16` was refused ("taps must be an even
+    integer >= 2, got 16.0": the spec's numbers are read as floats), `pga:block_pulses=12.9`
+    was cut to 12 without a word, and hcn's resampler keys were taken and ignored beside
+    linearize."""
+    from rtsar.focus.chain import CorrectionChain
+
+    chain = CorrectionChain.from_specs(["linearize:taps=16"], CFG)
+    assert chain.named[0][1].taps == 16 and isinstance(chain.named[0][1].taps, int)
+    assert CorrectionChain.from_specs(["hcn:taps=8"], CFG).named[0][1].taps == 8
+    with pytest.raises(ValueError, match="block_pulses must be a whole number, got 12.9"):
+        CorrectionChain.from_specs(["pga:block_pulses=12.9"], CFG)
+    with pytest.raises(ValueError, match="linearize:KEY=VALUE"):
+        CorrectionChain.from_specs(["linearize", "hcn:taps=8"], CFG)

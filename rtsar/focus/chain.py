@@ -40,16 +40,6 @@ from .reference_region import ReferenceGeometry, ReferenceRegionCorrector
 from .stage import DOMAINS, CorrectionStage
 
 ORDER = ("hcn", "linearize", "reference_region", "pra", "pga")
-_PGA_INTEGERS = {
-    "block_pulses",
-    "hop_pulses",
-    "initial_window_bins",
-    "min_window_bins",
-    "max_iterations",
-    "max_range_bins",
-    "segments",
-    "min_pulses",
-}
 
 
 @dataclass(frozen=True)
@@ -104,21 +94,29 @@ def stage_keys(name: str) -> list[str]:
     return ["along_track_m", "range_m", *keys] if name == "pra" else keys
 
 
+def _typed_keys(name: str) -> dict[str, str]:
+    """Each key of correction ``name`` and its annotation, as text."""
+    if name == "pga":
+        return {f.name: str(f.type) for f in fields(PGASettings)}
+    target = {
+        "hcn": HCNAligner,
+        "linearize": ChirpLinearizer,
+        "reference_region": ReferenceRegionCorrector,
+        "pra": PhaseToRetro,
+    }[name]
+    return {k: str(p.annotation) for k, p in inspect.signature(target).parameters.items()}
+
+
 def _numeric_keys(name: str) -> set[str]:
     """The keys of correction ``name`` whose values are numbers (by their annotations)."""
-    if name == "pga":
-        typed = {f.name: str(f.type) for f in fields(PGASettings)}
-    else:
-        target = {
-            "hcn": HCNAligner,
-            "linearize": ChirpLinearizer,
-            "reference_region": ReferenceRegionCorrector,
-            "pra": PhaseToRetro,
-        }[name]
-        params = inspect.signature(target).parameters
-        typed = {k: str(p.annotation) for k, p in params.items()}
+    typed = _typed_keys(name)
     numeric = {k for k, t in typed.items() if ("float" in t or "int" in t) and "str" not in t}
     return numeric | ({"along_track_m", "range_m"} if name == "pra" else set())
+
+
+def _integer_keys(name: str) -> set[str]:
+    """The keys of correction ``name`` that take whole numbers (``taps``, ``block_pulses``)."""
+    return {k for k, t in _typed_keys(name).items() if "int" in t and "float" not in t}
 
 
 def make_stage(
@@ -141,10 +139,14 @@ def make_stage(
             f"correction {name}: unknown key(s) {', '.join(unknown)}; "
             f"it takes {', '.join(stage_keys(name))}"
         )
-    numeric = _numeric_keys(name)
+    numeric, integer = _numeric_keys(name), _integer_keys(name)
     for key, value in params.items():
         if key in numeric and isinstance(value, str):
             raise ValueError(f"correction {name}: {key} must be a number, got {value!r}")
+        if key in integer and isinstance(value, float):  # the spec's numbers read as floats
+            if not value.is_integer():
+                raise ValueError(f"correction {name}: {key} must be a whole number, got {value:g}")
+            params[key] = int(value)
     context = context or CorrectionContext()
     if name == "hcn":
         return HCNAligner(config, **params)
@@ -169,8 +171,7 @@ def make_stage(
         x, r = params.pop("along_track_m"), params.pop("range_m")
         return PhaseToRetro(config, x, r, context.start_along_track_m, **params)
     if name == "pga":
-        ints = {k: int(v) if k in _PGA_INTEGERS else v for k, v in params.items()}
-        return PGAStage(config, PGASettings(**ints))
+        return PGAStage(config, PGASettings(**params))
     raise ValueError(f"unknown correction {name!r}")  # pragma: no cover - parse_spec checks
 
 
@@ -202,6 +203,12 @@ class CorrectionChain:
             raise ValueError(f"correction named twice: {sorted(dup)}")
         both = "hcn" in names and "linearize" in names  # one resampling does both
         hcn_params = dict(parsed)["hcn"] if both else None
+        resampler = sorted({"taps", "kaiser_beta"} & set(hcn_params or {}))
+        if resampler:
+            raise ValueError(
+                f"hcn with linearize is one resampling, linearize's: give {', '.join(resampler)} "
+                "as linearize:KEY=VALUE (hcn's would be ignored)"
+            )
         stages = [
             (
                 "hcn+linearize" if both and n == "linearize" else n,

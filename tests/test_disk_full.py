@@ -189,3 +189,40 @@ def test_a_full_disk_under_any_writer_names_the_output(tmp_path):
         with replace_when_complete(out) as tmp:
             raise FileNotFoundError(errno.ENOENT, "no input")
     assert os.listdir(tmp_path) == ["out.nitf"]
+
+
+SIGMF_CHILD = r"""
+import contextlib, io, resource, signal, sys
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+from rtsar.app.cli import main
+rec, base = sys.argv[1], sys.argv[2]
+_, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+resource.setrlimit(resource.RLIMIT_FSIZE, (100_000, hard))
+err = io.StringIO()
+with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+    rc = main(["export", rec, "--sigmf", base])
+resource.setrlimit(resource.RLIMIT_FSIZE, (hard, hard))
+print(rc)
+print(err.getvalue(), end="")
+"""
+
+
+def test_a_sigmf_export_the_disk_refuses_names_its_data_file(tmp_path):
+    """From a cold read: numpy's tofile reported a full disk as "1638400 requested and 157696
+    written" (an OSError without errno), naming no file."""
+    pytest.importorskip("sigmf")
+    from rtsar.app.cli import main
+
+    (tmp_path / "s.toml").write_text(SCENE)
+    rec = tmp_path / "rec.h5"
+    assert main(["simulate", str(tmp_path / "s.toml"), "-o", str(rec), "--pulses", "600"]) == 0
+    base = tmp_path / "out"
+    child = subprocess.run(
+        [sys.executable, "-c", SIGMF_CHILD, str(rec), str(base)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    rc, *err = child.stdout.splitlines()
+    assert rc == "2" and err == [f"rtsar: error: cannot write {base}.sigmf-data: File too large"]
+    assert not [p for p in os.listdir(tmp_path) if p.startswith((".out", "out"))]

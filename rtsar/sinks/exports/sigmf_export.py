@@ -56,7 +56,9 @@ def _write_channel(files, shots, sample_rate_hz, global_extra, annotations, rec)
     data, meta_path = files
     with open(data, "wb") as f:
         for i in range(0, rec.pulses, BLOCK):
-            np.asarray(shots[i : i + BLOCK], "<c8").tofile(f)
+            # f.write, not ndarray.tofile: a full disk is an OSError with its errno (ENOSPC)
+            # that names the output; tofile's says only "N requested and M written".
+            f.write(np.ascontiguousarray(shots[i : i + BLOCK], "<c8").data)
     meta = SigMFFile(
         data_file=None,  # written by us beside its final name: none to check or name
         global_info={

@@ -68,7 +68,9 @@ def telemetry_problem(cfg: Config, pulse_index, along_track_m) -> str | None:
     depends on it), so no shot is missing, and the numbers then advance by one (a skip with a
     regular platform contradicts itself: process would read the file as gapless and replay
     would zero-fill the skip, two images of one file).  Every recording reader checks this."""
-    pulse_index, along_track_m = np.asarray(pulse_index), np.asarray(along_track_m)
+    # int64: an unsigned index that steps back would wrap (a "jump" of 2**32 - 1).
+    pulse_index = np.asarray(pulse_index).astype(np.int64)
+    along_track_m = np.asarray(along_track_m)
     if len(pulse_index) < 2:
         return None
     if not np.all(np.diff(pulse_index) > 0):

@@ -1,7 +1,10 @@
 """The swath split: K workers, a range slice each, give the single process's image."""
 
 import json
+import signal
 import socket
+import subprocess
+import sys
 import threading
 import time
 
@@ -24,10 +27,10 @@ from rtsar.stream.swath import (
     SwathEngine,
     SwathWorkers,
     parse_bind,
-    serve,
     split_columns,
     worker_endpoints,
 )
+from rtsar.stream.swath_worker import serve
 
 
 class Collect(StripSink):
@@ -287,9 +290,9 @@ def _serving(shots_ep, results_ep, timeout_s, index=0):
     return t, box, said
 
 
-def _setup(push, pull, cfg):
+def _setup(push, pull, cfg, columns=(0, 4)):
     setup = {"config": cfg.to_dict(), "lens_backend": "numpy", "device": None}
-    push.send_multipart([b"setup", json.dumps({**setup, "columns": [0, 4]}).encode()])
+    push.send_multipart([b"setup", json.dumps({**setup, "columns": list(columns)}).encode()])
     assert pull.poll(60_000) and pull.recv_multipart()[0] == b"ready"
 
 
@@ -310,6 +313,51 @@ def test_a_worker_whose_coordinator_falls_silent_ends():
     assert len(said) == 1 and f"no word from the coordinator {results_ep} for 0.5 s" in said[0]
     push.close(0)
     pull.close(0)
+
+
+DYING_COORDINATOR = r"""
+import json, os, signal, sys, time
+import numpy as np, zmq
+from rtsar.presets import preset
+cfg = preset("tiny").with_processor(correlator="direct")
+ctx = zmq.Context()
+push, pull = ctx.socket(zmq.PUSH), ctx.socket(zmq.PULL)
+push.setsockopt(zmq.SNDHWM, 8)
+pull.setsockopt(zmq.RCVHWM, 1)
+push.bind(sys.argv[1])
+pull.bind(sys.argv[2])
+setup = {"config": cfg.to_dict(), "lens_backend": "numpy", "device": None}
+push.send_multipart([b"setup", json.dumps({**setup, "columns": [0, 64]}).encode()])
+assert pull.recv_multipart()[0] == b"ready"
+shot = np.ones((1, cfg.waveform.samples_per_shot), np.complex64).tobytes()
+sent, t0 = 0, time.time()
+while time.time() - t0 < 30 and push.poll(300, zmq.POLLOUT):  # results are never read again
+    head = {"first_pulse": sent, "count": 1, "zero": False, "dtype": "<c8"}
+    push.send_multipart([b"block", json.dumps(head).encode(), shot])
+    sent += 1
+os.kill(os.getpid(), signal.SIGKILL)  # the worker blocked sending its lines: die now
+"""
+
+
+def test_a_worker_blocked_sending_to_a_coordinator_that_dies_ends():
+    """From a cold read: the timeout was checked only while the worker waited for pulses.  A
+    coordinator that stopped taking lines (its downstream stalls: a wait without limit) and
+    then died (SIGKILL) left the worker blocked in its send forever.  Now, once the connection
+    has been down for the timeout while lines wait to go, it ends with status 1 and says why."""
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))
+    port = sock.getsockname()[1]
+    sock.close()
+    shots_ep, results_ep = f"tcp://127.0.0.1:{port}", f"tcp://127.0.0.1:{port + 1}"
+    coordinator = subprocess.Popen([sys.executable, "-c", DYING_COORDINATOR, shots_ep, results_ep])
+    t, box, said = _serving(shots_ep, results_ep, 1.0)
+    assert coordinator.wait(60) == -signal.SIGKILL
+    start = time.monotonic()
+    t.join(15)
+    took = time.monotonic() - start
+    assert not t.is_alive(), "the worker hangs in its send"
+    assert box["rc"] == 1 and took < 8.0
+    assert len(said) == 1 and f"connection to the coordinator {results_ep}" in said[0]
 
 
 def test_beats_keep_an_idle_worker_and_are_no_pulses(tiny):

@@ -18,13 +18,15 @@ Transport (ZeroMQ, one context per process):
 Messages are multipart: ``[b"setup", JSON]`` (configuration, columns, lens choice), ``[b"block",
 JSON {first_pulse, count, zero}, samples]``, ``[b"beat"]``, ``[b"end"]``; back: ``[b"ready",
 JSON]``, ``[b"lines", JSON {index, first_line, count}, lines]``, ``[b"done", JSON]``, ``[b"error",
-JSON]``.  The same worker loop (:func:`serve`) runs in a local process (``rtsar run
---swath-workers K`` spawns them) or on another host (``rtsar swath-worker --connect``).
+JSON]``.  The same worker loop (rtsar.stream.swath_worker.serve) runs in a local process
+(``rtsar run --swath-workers K`` spawns them) or on another host (``rtsar swath-worker
+--connect``).
 
 Liveness (ZeroMQ reconnects silently: a worker cannot see its coordinator die): from its setup
 on, a worker sent nothing for ``BEAT_S`` gets a ``beat`` (no pulses; sent without waiting, skipped
-when the worker's queue is full); a worker that hears nothing for its coordinator timeout ends
-(:func:`serve`).  The converse, a worker taking no pulses, is the coordinator's stall error.
+when the worker's queue is full); a worker that hears nothing for its coordinator timeout, or
+whose connection to it stays down that long while it sends its lines, ends (swath_worker).
+The converse, a worker taking no pulses, is the coordinator's stall error.
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ import zmq
 from ..ccd import processor_correlator
 from ..ccd.base import design_mask
 from ..lens import make_lens, make_plan
-from ..params import Config, config_from_dict
+from ..params import Config
 from ..samples import precision_dtype
 from .engine import Lines
 
@@ -147,93 +149,6 @@ class SwathEngine:
 
 def _json(frame: bytes) -> dict:
     return json.loads(frame.decode("utf-8"))
-
-
-def serve(
-    shots_endpoint: str,
-    results_endpoint: str,
-    index: int,
-    log=None,
-    parent_pid: int | None = None,
-    coordinator_timeout_s: float = COORDINATOR_TIMEOUT_S,
-) -> int:
-    """A worker: connect, take the setup, process blocks until "end"; 0 on a clean end.
-
-    Before the setup it waits for its coordinator without limit (it may start first).  After
-    it, a coordinator silent (no block, no beat) for ``coordinator_timeout_s`` (0: no limit) is
-    gone: the worker says so through ``log`` and returns 1, dropping what it still holds.
-    ``parent_pid``: a worker started by a coordinator ends when that process is gone.
-    """
-    ctx = zmq.Context()
-    pull, push = ctx.socket(zmq.PULL), ctx.socket(zmq.PUSH)
-    pull.setsockopt(zmq.RCVHWM, HWM_MESSAGES)
-    push.setsockopt(zmq.LINGER, 10_000)
-    pull.connect(shots_endpoint)
-    push.connect(results_endpoint)
-    engine = None
-    limit = coordinator_timeout_s > 0
-    heard_at = None  # when the last message was handled (None: no setup yet)
-    try:
-        while True:
-            wait_s = 1.0
-            if heard_at is not None and limit:
-                wait_s = min(wait_s, heard_at + coordinator_timeout_s - time.monotonic())
-            if not pull.poll(max(1, int(1000 * wait_s))):
-                orphan = parent_pid is not None and os.getppid() != parent_pid
-                silent = limit and heard_at is not None
-                silent = silent and time.monotonic() - heard_at >= coordinator_timeout_s
-                if not (orphan or silent):
-                    continue
-                push.setsockopt(zmq.LINGER, 0)  # the coordinator is gone: nobody to deliver to
-                if silent and log:
-                    log(
-                        f"swath worker {index}: no word from the coordinator {results_endpoint} "
-                        f"for {coordinator_timeout_s:g} s (it is gone or cut off); ending "
-                        "(--coordinator-timeout)"
-                    )
-                return 1
-            frames = pull.recv_multipart(copy=True)
-            kind = frames[0]
-            if kind == b"setup":
-                setup = _json(frames[1])
-                config = config_from_dict(setup["config"])
-                engine = SwathEngine(
-                    config, tuple(setup["columns"]), setup["lens_backend"], setup["device"]
-                )
-                shape = (config.waveform.samples_per_shot,)
-                push.send_multipart(
-                    [b"ready", json.dumps({"index": index, "lens": engine.lens.backend}).encode()]
-                )
-            elif kind == b"beat":
-                pass  # the coordinator is alive: heard_at is all a beat carries
-            elif kind == b"block":
-                head = _json(frames[1])
-                count = int(head["count"])
-                shots = None
-                if not head["zero"]:
-                    dtype = np.dtype(head["dtype"])
-                    shots = np.frombuffer(frames[2], dtype).reshape(count, *shape)
-                _send_lines(push, index, engine.push(shots, count))
-            elif kind == b"end":
-                _send_lines(push, index, engine.flush())
-                push.send_multipart([b"done", json.dumps({"index": index}).encode()])
-                return 0
-            heard_at = time.monotonic()  # after the work: a long setup or block is no silence
-    except Exception as exc:  # told to the coordinator, which stops the run with it
-        push.send_multipart([b"error", json.dumps({"index": index, "message": f"{exc}"}).encode()])
-        if log:
-            log(f"swath worker {index}: {exc}")
-        return 1
-    finally:
-        pull.close(0)
-        push.close()
-        ctx.term()
-
-
-def _send_lines(push, index: int, out: Lines) -> None:
-    if len(out.lines):
-        head = {"index": index, "first_line": out.first_line, "count": len(out.lines)}
-        push.send_multipart([b"lines", json.dumps(head).encode(), out.lines.tobytes()])
 
 
 class SwathWorkers:

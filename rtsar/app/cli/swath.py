@@ -9,9 +9,9 @@ from ...stream.swath import (
     COORDINATOR_TIMEOUT_S,
     MIN_COORDINATOR_TIMEOUT_S,
     READY_TIMEOUT_S,
-    serve,
     worker_endpoints,
 )
+from ...stream.swath_worker import serve
 from .options import die
 
 

@@ -63,8 +63,9 @@ def add_parsers(sub) -> None:
         default=COORDINATOR_TIMEOUT_S,
         metavar="SECONDS",
         help="after the setup, end (exit status 1) when the coordinator has sent nothing, not "
-        f"even a beat, for this long (default {COORDINATOR_TIMEOUT_S:g}; 0: wait forever; "
-        f"else at least {MIN_COORDINATOR_TIMEOUT_S:g})",
+        "even a beat, for this long, or when lines wait to go and the connection to it has "
+        f"been down this long (default {COORDINATOR_TIMEOUT_S:g}; 0: wait forever; else at "
+        f"least {MIN_COORDINATOR_TIMEOUT_S:g})",
     )
     s.add_argument("--shots", help="the pulse endpoint itself (as the coordinator spawns them)")
     s.add_argument("--results", help="the results endpoint itself")

@@ -87,6 +87,22 @@ def test_inputs_are_checked_before_any_work(tmp_path):
         batch_cli.output_paths(recs, tmp_path / "out")
 
 
+def test_a_link_names_its_image(tmp_path):
+    """From a cold read: flight1.h5 -> x/rec.h5 and flight2.h5 -> y/rec.h5 were refused as
+    "would both write rec-img.h5" (named after their targets); a link's own name names its
+    image, and a file reached twice (named, and through a link) is still focused once."""
+    x, y = tmp_path / "x", tmp_path / "y"
+    x.mkdir(), y.mkdir()
+    (x / "rec.h5").touch(), (y / "rec.h5").touch()
+    (tmp_path / "flight1.h5").symlink_to(x / "rec.h5")
+    (tmp_path / "flight2.h5").symlink_to(y / "rec.h5")
+    named = [str(tmp_path / "flight1.h5"), str(tmp_path / "flight2.h5"), str(x / "rec.h5")]
+    recs, _ = batch_cli.find_recordings(named)
+    assert [r.name for r in recs] == ["flight1.h5", "flight2.h5"]
+    outs = batch_cli.output_paths(recs, tmp_path / "out")
+    assert [o.name for o in outs] == ["flight1-img.h5", "flight2-img.h5"]
+
+
 def test_no_input_is_overwritten_and_earlier_images_are_not_inputs(recordings, tmp_path):
     """From a cold review: `batch bt --out-dir bt` with bt/x.h5 and bt/x-img.h5 replaced the
     recording x-img.h5 by x.h5's image; a second run took the first run's images as inputs."""

@@ -85,7 +85,12 @@ def find_recordings(inputs: list[str]) -> tuple[list[Path], list[tuple[Path, str
             found.append(path)
         else:
             raise ValueError(f"{item}: no such file or folder")
-    unique = list(dict.fromkeys(p.resolve() for p in found))
+    # One entry per file (a file named twice, or through a link, is focused once), under the
+    # name it was given: a link's name, not its target's, names the image.
+    named: dict[Path, Path] = {}
+    for p in found:
+        named.setdefault(p.resolve(), p.absolute())
+    unique = list(named.values())
     if not unique:
         said = f" ({skipped_line(skipped)})" if skipped else ""
         raise ValueError(

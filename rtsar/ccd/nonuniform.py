@@ -149,25 +149,8 @@ class _Group:
 
     def run(self, events, valid_end: int, ring, out, assign: bool) -> None:
         """tiled.run_blocks on these segments' blocks ``events``."""
-        segs, h_re, h_im, d_re, d_im, tw_re, tw_im, x_re, x_im, y_re, y_im = self.arrays
-        tiled.run_blocks(
-            events,
-            valid_end,
-            segs,
-            *ring,
-            h_re,
-            h_im,
-            d_re,
-            d_im,
-            tw_re,
-            tw_im,
-            x_re,
-            x_im,
-            y_re,
-            y_im,
-            *out,
-            assign,
-        )
+        segs, *arrays = self.arrays  # spectra, delay lines, twiddles, work rows (re, im each)
+        tiled.run_blocks(events, valid_end, segs, *ring, *arrays, *out, assign)
 
     def events(self, end: int, limit: int | None = None) -> np.ndarray:
         """(segment, block) of the blocks complete at ``end`` pulses (and, with ``limit``,

@@ -17,15 +17,11 @@ import h5py
 from ...focus.chain import parse_spec
 from ...lens import range_axis_m
 from .. import batch, signals
-from .files import process_refusal
+from .files import process_setup
 from .inputs import open_input
 from .options import (
     add_process_options,
-    check_channels,
-    correction_chain,
     die,
-    height_stage,
-    processor_changes,
 )
 
 # The options of ``batch`` itself; every other parsed option is a ``process`` option.
@@ -139,19 +135,15 @@ def refusal(options: dict, recording: Path) -> str | None:
     args = argparse.Namespace(**options, recording=str(recording), output="")
     try:
         with open_input(recording) as rec:
-            cfg = processor_changes(args, rec.config)
-            scene = rec.scene_object()
-            mid_m = float(range_axis_m(cfg).mean())
+            # process's knobs leave the range window as the recording's configuration has it
+            mid_m = float(range_axis_m(rec.config).mean())
             stand_in = f"pra:along_track_m={rec.start_along_track_m},range_m={mid_m}"
             bare = [
                 stand_in if s.split(":")[0].strip() == "pra" and "=" not in s else s
                 for s in args.correct or []
             ]
             checked = argparse.Namespace(**{**vars(args), "correct": bare or None})
-            chain = correction_chain(checked, cfg, scene, rec.start_along_track_m, None)
-            heights = height_stage(args, cfg, scene)
-            check_channels(rec, chain, heights)
-            return process_refusal(rec, cfg, chain, heights, recording)
+            process_setup(checked, rec)
     except (ValueError, OSError, RuntimeError) as exc:
         return str(exc)
     return None

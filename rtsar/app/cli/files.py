@@ -130,42 +130,42 @@ def _ccd_words(cfg, physical) -> str:
     return f"physical CCD, carrier in {physical.carrier}"
 
 
-def process_refusal(rec, cfg, chain, heights, name) -> str | None:
-    """Why process refuses a recording that opened and whose options parsed (None: it goes
-    on); ``batch`` asks the same before its cluster starts."""
+def process_setup(args, rec, retro_from=None):
+    """What process derives from its options and the opened recording before any lens is
+    built, in its order: (configuration, correction chain, height stage, the auxiliary
+    channels they read); a request it refuses is a ValueError.  ``retro_from``: the recording
+    a bare ``pra`` finds its retro-reflector in (a first pass over it); ``batch`` checks its
+    files with this before its cluster starts."""
+    cfg = processor_changes(args, rec.config)
+    scene = rec.scene_object()
+    chain = correction_chain(args, cfg, scene, rec.start_along_track_m, retro_from)
+    heights = height_stage(args, cfg, scene)
+    channels = check_channels(rec, chain, heights)
     if heights is not None and chain:
-        return (
+        raise ValueError(
             "--height with --correct is not supported: the corrections act on the main "
             "receiver only and would bias the height phase between the receivers"
         )
     if rec.pulses < cfg.processor.aperture_pulses:
-        return (
-            f"{name} holds {rec.pulses} shots, fewer than the aperture of "
+        raise ValueError(
+            f"{args.recording} holds {rec.pulses} shots, fewer than the aperture of "
             f"{cfg.processor.aperture_pulses}: no full-aperture line to write"
         )
-    return None
+    return cfg, chain, heights, channels
 
 
 def cmd_process(args) -> int:
     with open_input(args.recording) as rec:
-        cfg = processor_changes(args, rec.config)
-        scene = rec.scene_object()
-        chain = correction_chain(args, cfg, scene, rec.start_along_track_m, rec)
-        heights = height_stage(args, cfg, scene)
-        # Before the lens is built: a wrong request fails at once; only these are read.
-        channels = check_channels(rec, chain, heights)
-        problem = process_refusal(rec, cfg, chain, heights, args.recording)
-        if problem:
-            raise ValueError(problem)
+        # Before the lens is built: a wrong request fails at once; only ``channels`` are read.
+        cfg, chain, heights, channels = process_setup(args, rec, rec)
+        physical = physical_ccd(args)
         receivers = {}  # each auxiliary receiver's lens and CCD, in step with the main ones
         if heights is not None:
             receivers = {
                 c: StreamProcessor(cfg, args.lens, args.device, rec.start_along_track_m)
                 for c in heights.channels
             }
-        eng = StreamProcessor(
-            cfg, args.lens, args.device, rec.start_along_track_m, chain, physical_ccd(args)
-        )
+        eng = StreamProcessor(cfg, args.lens, args.device, rec.start_along_track_m, chain, physical)
         prog = Progress(rec.pulses, "process")
         done = 0
         t0 = time.perf_counter()
@@ -197,7 +197,6 @@ def cmd_process(args) -> int:
             counted = eng.corrections.counters() if eng.corrections else {}
             if counted:  # what each correction did (PGA: blocks estimated and why not, …)
                 extra["correction_counters"] = json.dumps(counted)
-            physical = physical_ccd(args)
             img.close(
                 lens=eng.lens.backend,
                 nonfinite_pulses=eng.nonfinite_pulses,

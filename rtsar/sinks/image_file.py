@@ -121,10 +121,8 @@ class ImageWriter:
         self._image = self._azimuth = self._height = self._valid = self._coherence = None
         self._final = False  # crash-safe: the lines are closed, the final attributes follow
         libver = ("v110", "v110") if crash_safe else None
-        try:
+        with self._reported():
             self._out = H5Output(target, libver=libver, shown=self.path)
-        except WriteFailed as exc:
-            raise self._failed(exc) from None
         self._f = self._out.file
         with self._writing():
             self._create(config, range_m, chunk_lines, heights, attrs)
@@ -166,9 +164,14 @@ class ImageWriter:
     @contextmanager
     def _writing(self):
         """HDF5 work on the file: a failure (a full disk) ends the file, WriteFailed."""
+        with self._reported(), self._out.writing(tidy=self._trim) as f:
+            yield f
+
+    @contextmanager
+    def _reported(self):
+        """A WriteFailed inside is told as :meth:`_failed` tells it (what stays of the file)."""
         try:
-            with self._out.writing(tidy=self._trim) as f:
-                yield f
+            yield
         except WriteFailed as exc:
             raise self._failed(exc) from None
 
@@ -273,10 +276,8 @@ class ImageWriter:
         if self.crash_safe:
             # Attributes cannot be added in SWMR mode: close (the data is safe from here on),
             # reopen in normal mode for the final attributes.
-            try:
+            with self._reported():
                 self._out.close()
-            except WriteFailed as exc:
-                raise self._failed(exc) from None
             self.saved_lines = self.lines
             self._final = True
             if self._target != self.path:  # closed before its first line
@@ -300,18 +301,14 @@ class ImageWriter:
                     f"its {self.lines} lines are saved, marked incomplete (complete = False); "
                     "no room for the final attributes (counters, gaps)",
                 ) from None
-            try:
+            with self._reported():
                 self._out = H5Output(self.path, "r+")
-            except WriteFailed as exc:
-                raise self._failed(exc) from None
             self._f = self._out.file
         with self._writing() as f:
             for k, v in attrs.items():
                 f.attrs[k] = v
-        try:
+        with self._reported():
             self._out.close()
-        except WriteFailed as exc:
-            raise self._failed(exc) from None
 
     def __enter__(self):
         return self

@@ -77,19 +77,24 @@ def parse_spec(text: str) -> tuple[str, dict]:
     return name, params
 
 
+# The class each correction (but pga: PGASettings) is made of, and its constructor's arguments
+# that are not ``name:key=value`` keys.
+_STAGE_CLASSES = {
+    "hcn": (HCNAligner, {"config"}),
+    "linearize": (ChirpLinearizer, {"config", "aligner"}),
+    "reference_region": (ReferenceRegionCorrector, {"config", "geometry"}),
+    "pra": (
+        PhaseToRetro,
+        {"config", "retro_along_track_m", "retro_range_m", "start_along_track_m", "range_m"},
+    ),
+}
+
+
 def stage_keys(name: str) -> list[str]:
     """The ``name:key=value`` keys a correction takes (its constructor's or PGASettings')."""
     if name == "pga":
         return [f.name for f in fields(PGASettings)]
-    target, skip = {
-        "hcn": (HCNAligner, {"config"}),
-        "linearize": (ChirpLinearizer, {"config", "aligner"}),
-        "reference_region": (ReferenceRegionCorrector, {"config", "geometry"}),
-        "pra": (
-            PhaseToRetro,
-            {"config", "retro_along_track_m", "retro_range_m", "start_along_track_m", "range_m"},
-        ),
-    }[name]
+    target, skip = _STAGE_CLASSES[name]
     keys = [k for k in inspect.signature(target).parameters if k not in skip]
     return ["along_track_m", "range_m", *keys] if name == "pra" else keys
 
@@ -98,12 +103,7 @@ def _typed_keys(name: str) -> dict[str, str]:
     """Each key of correction ``name`` and its annotation, as text."""
     if name == "pga":
         return {f.name: str(f.type) for f in fields(PGASettings)}
-    target = {
-        "hcn": HCNAligner,
-        "linearize": ChirpLinearizer,
-        "reference_region": ReferenceRegionCorrector,
-        "pra": PhaseToRetro,
-    }[name]
+    target, _ = _STAGE_CLASSES[name]
     return {k: str(p.annotation) for k, p in inspect.signature(target).parameters.items()}
 
 

@@ -73,15 +73,16 @@ def telemetry_problem(cfg: Config, pulse_index, along_track_m) -> str | None:
     along_track_m = np.asarray(along_track_m)
     if len(pulse_index) < 2:
         return None
-    if not np.all(np.diff(pulse_index) > 0):
+    counted = np.diff(pulse_index)
+    if not np.all(counted > 0):
         return "pulse_index must increase from shot to shot"
     steps = np.diff(along_track_m)
     if not np.allclose(steps, cfg.geometry.along_track_step_m, rtol=1e-6, atol=1e-9):
         return "along_track_m does not advance by the configured step"
-    skips = np.flatnonzero(np.diff(pulse_index) != 1)
+    skips = np.flatnonzero(counted != 1)
     if len(skips):
         k = int(skips[0])
-        jump = int(pulse_index[k + 1] - pulse_index[k])
+        jump = int(counted[k])
         return (
             f"pulse_index jumps by {jump} after shot {k} while along_track_m advances by one "
             "step: the file contradicts itself (a dropped shot moves both)"

@@ -385,8 +385,9 @@ class _Files:
                     result = fut.result()
                 except Exception as exc:  # raised by the task on every try, or its worker died
                     why = _why(exc, self.deaths, self.retries)
-                    result = FileResult(str(self.recordings[i]), str(self.outputs[i]), "failed")
-                    result.message = why
+                    result = FileResult(
+                        str(self.recordings[i]), str(self.outputs[i]), "failed", message=why
+                    )
                 results[i] = result
                 done += 1
                 failed += result.status != "ok"

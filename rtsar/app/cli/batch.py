@@ -19,10 +19,7 @@ from ...lens import range_axis_m
 from .. import batch, signals
 from .files import process_setup
 from .inputs import open_input
-from .options import (
-    add_process_options,
-    die,
-)
+from .options import add_process_options, die
 
 # The options of ``batch`` itself; every other parsed option is a ``process`` option.
 BATCH_ONLY = {"command", "func", "inputs", "out_dir", "workers", "scheduler", "retries"}

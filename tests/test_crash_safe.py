@@ -87,6 +87,59 @@ def test_a_writer_killed_at_random_moments_leaves_a_readable_file(tmp_path):
     assert max(kept) > 0  # the kills landed while lines were being written
 
 
+DIES_IN_CLOSE = """
+import os, signal, sys, numpy as np, h5py
+from rtsar.presets import preset
+from rtsar.sinks.image_file import ImageWriter
+cfg = preset("tiny")
+nr = cfg.processor.range_bins
+w = ImageWriter(sys.argv[1], cfg, np.arange(nr, dtype=float), crash_safe=True)
+w.write(np.full((48, nr), 0, np.complex64) + np.arange(1, 49)[:, None], np.arange(48) * 0.5)
+written = []
+set_attr = h5py.AttributeManager.__setitem__
+def dies_on_the_third(self, key, value):  # the final attributes: killed amid them
+    set_attr(self, key, value)
+    written.append(key)
+    if len(written) == 3:
+        os.kill(os.getpid(), signal.SIGKILL)
+h5py.AttributeManager.__setitem__ = dies_on_the_third
+w.close(counters="{}", missing_lines=0, gaps="[]", flags="[]")
+"""
+
+
+def test_a_writer_killed_amid_its_final_attributes_leaves_a_readable_file(tmp_path):
+    """From a kill review: a writer killed while it added the final attributes (it had reopened
+    the file normally) left a file no reader opened ("file is already open for write") until
+    `h5clear -s`.  It reopens in SWMR mode now: the file opens, with every line."""
+    path = tmp_path / "img.h5"
+    proc = subprocess.run([sys.executable, "-c", DIES_IN_CLOSE, str(path)], timeout=60)
+    assert proc.returncode == -signal.SIGKILL
+    image, az, rg, attrs = read_image(path)
+    assert image.shape[0] == 48
+    np.testing.assert_array_equal(image.real[:, 0], np.arange(1, 49))
+    assert not attrs["complete"]  # the last attribute written: never reached
+    assert [p.name for p in tmp_path.iterdir()] == ["img.h5"]
+
+
+LEFT_OPEN = """
+import os, signal, sys
+from rtsar.sinks.h5_output import create
+f = create(sys.argv[1], "w", ("v110", "v110"))  # written (not in SWMR mode), then killed
+f.attrs["format"] = "rtsar-image"
+f.flush()
+os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+
+def test_a_file_its_writer_left_open_is_named_so_not_called_not_hdf5(tmp_path):
+    """A file another program's writer left open said "not an HDF5 file"; it says what
+    happened and what clears it."""
+    path = tmp_path / "img.h5"
+    subprocess.run([sys.executable, "-c", LEFT_OPEN, str(path)], timeout=60)
+    with pytest.raises(ValueError, match=r"did not close it .*h5clear -s"):
+        read_image(path)
+
+
 def test_a_writer_killed_before_its_first_line_leaves_the_earlier_file(tmp_path):
     """From a kill test: a live writer SIGKILLed before its first line replaced the user's file
     with an empty image.  The file takes its name with its first flushed lines."""

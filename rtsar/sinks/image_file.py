@@ -201,11 +201,12 @@ class ImageWriter:
             return exc.naming(self.path, kept="")
         if self._final and not self._out.closed_cleanly:
             # Its lines are all on disk, but the reopening for the final attributes marked the
-            # file open for writing (HDF5's superblock flag), and no close could clear it.
+            # file as being written (HDF5's superblock flag, SWMR), and no close could clear it.
             return exc.naming(
                 self.path,
-                kept=f"its {self.lines} lines are saved, but HDF5 readers refuse the file until "
-                f"`h5clear -s {self.path}` clears its open-for-writing flag",
+                kept=f"its {self.lines} lines are saved, marked incomplete; rtsar and SWMR "
+                f"readers open it, other HDF5 readers once `h5clear -s {self.path}` clears "
+                "the writer's flag",
             )
         if self._out.closed_cleanly:  # every line written went to disk, and the metadata too
             saved = f"its {self.lines} lines are saved"
@@ -274,8 +275,11 @@ class ImageWriter:
         complete = attrs.pop("complete", True)
         attrs["complete"] = complete  # written last: a failure before it leaves False
         if self.crash_safe:
-            # Attributes cannot be added in SWMR mode: close (the data is safe from here on),
-            # reopen in normal mode for the final attributes.
+            # Close (the lines are safe from here on), then reopen for the final attributes,
+            # in SWMR mode again: a writer killed before that close ends leaves a file that
+            # SWMR readers open, as one killed mid-stream does.  (Reopened normally, the file
+            # would carry HDF5's open-for-writing flag, and no reader would open it until
+            # `h5clear -s`.)
             with self._reported():
                 self._out.close()
             self.saved_lines = self.lines
@@ -286,10 +290,10 @@ class ImageWriter:
                 except OSError as exc:
                     raise self._failed(WriteFailed(self.path, reason(exc))) from None
                 self._target = self.path
-            # Reopened normally, the file carries HDF5's open-for-writing flag until it is
-            # closed, and a close that fails (a full disk) would lock every reader out: the
-            # room the final attributes take is asked of the disk first, and without it the
-            # file stays as it is now (every line, complete False).
+            # Reopened, the file carries the writer's flag until it is closed, and a close
+            # that fails (a full disk) would leave it to SWMR readers only: the room the final
+            # attributes take is asked of the disk first, and without it the file stays as it
+            # is now (every line, complete False, readable by all).
             try:
                 make_room(self.path, _room_for(attrs))
             except OSError as exc:
@@ -302,7 +306,7 @@ class ImageWriter:
                     "no room for the final attributes (counters, gaps)",
                 ) from None
             with self._reported():
-                self._out = H5Output(self.path, "r+")
+                self._out = H5Output(self.path, "r+", libver=("v110", "v110"), swmr=True)
             self._f = self._out.file
         with self._writing() as f:
             for k, v in attrs.items():

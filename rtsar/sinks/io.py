@@ -353,6 +353,11 @@ def open_checked(path: str | Path, fmt: str) -> h5py.File:
         try:  # an image still being written by a live stream (crash-safe SWMR mode)
             f = h5py.File(path, "r", swmr=True)
         except OSError:
+            if "already open for write" in str(exc):  # a writer died before it closed the file
+                raise ValueError(
+                    f"{path}: its writer did not close it (killed?), and HDF5 refuses it until "
+                    f"`h5clear -s {path}` clears the writer's flag"
+                ) from None
             raise ValueError(f"{path}: not an HDF5 file ({exc})") from None
     found = f.attrs.get("format")
     if found != fmt:

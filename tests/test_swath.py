@@ -439,3 +439,67 @@ def test_swath_workers_beat_while_idle_and_never_wait_to(tiny, rng):
     closer.start()
     closer.join(2)
     assert not closer.is_alive()
+
+
+def test_a_coordinator_that_fails_tells_remote_workers_to_stop(tiny):
+    """From the last review: a worker on another host learnt that its coordinator's run had
+    failed only from its coordinator timeout (30 s by default).  A run that ends without its
+    end now sends the workers a "stop" with the reason: they end at once, status 1."""
+    cfg, shots = tiny
+    port = _free_port()
+    bind = f"tcp://127.0.0.1:{port}"
+    served = []
+    for k in range(2):
+        shots_ep, results_ep = worker_endpoints(bind, k)
+        served.append(_serving(shots_ep, results_ep, 60.0, index=k))
+    workers = SwathWorkers(cfg, 2, "numpy", spawn=False, bind=bind)
+    workers.send(0, shots[:16], False)
+    start = time.monotonic()
+    workers.close(wait_s=0.0, reason="the lens stage failed: boom")  # no end was sent
+    for t, box, said in served:
+        t.join(10)
+        assert not t.is_alive() and box["rc"] == 1
+        assert len(said) == 1 and "the coordinator stopped the run (the lens stage" in said[0]
+    assert time.monotonic() - start < 5.0  # not the 60 s timeout
+
+
+def test_a_clean_end_sends_no_stop(tiny):
+    cfg, shots = tiny
+    port = _free_port()
+    bind = f"tcp://127.0.0.1:{port}"
+    shots_ep, results_ep = worker_endpoints(bind, 0)
+    t, box, said = _serving(shots_ep, results_ep, 60.0)
+    workers = SwathWorkers(cfg, 1, "numpy", spawn=False, bind=bind)
+    workers.send(0, shots[:16], False)
+    workers.end()
+    while not workers.finished:
+        workers.receive(0.1)
+    workers.close()
+    t.join(10)
+    assert box["rc"] == 0 and said == []
+
+
+def test_a_pipeline_that_fails_stops_its_remote_workers_with_the_reason(tiny):
+    """The pipeline hands its error to the stop; workers blocked sending their lines (the
+    failed coordinator reads no more) see it too."""
+    cfg, shots = tiny
+
+    class Fails(StripSink):
+        def strip(self, strip, info):
+            raise RuntimeError("the disk went away")
+
+    port = _free_port()
+    bind = f"tcp://127.0.0.1:{port}"
+    served = [_serving(*worker_endpoints(bind, k), 60.0, index=k) for k in range(2)]
+    shots = np.concatenate([shots] * 40)  # the failure comes long before the end of the stream
+    seq = np.arange(len(shots))
+    src = ReplaySource(shots, seq, seq / cfg.geometry.prf_hz, cfg.geometry.prf_hz, "max", 16)
+    settings = PipelineSettings(
+        lens_backend="numpy", swath_workers=2, swath_spawn=False, swath_bind=bind
+    )
+    with pytest.raises(RuntimeError, match="the disk went away"):
+        Pipeline(cfg, src, [Fails()], settings).run()
+    for t, box, said in served:
+        t.join(10)
+        assert not t.is_alive() and box["rc"] == 1
+        assert "stopped the run (the disk went away)" in said[0]

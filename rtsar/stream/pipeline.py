@@ -232,7 +232,7 @@ class Pipeline:
                     self._forward(out)
                 if batches is None:
                     break
-            if self.swath is not None:
+            if self.swath is not None and not self._stop.is_set():  # failed: join() stops them
                 self.swath.end()
             if self._holding:
                 self._forward(self._held.release(self.engine.flush_range()))
@@ -461,7 +461,8 @@ class Pipeline:
             raise
         finally:
             if self.swath is not None:  # workers that were told the end finish; others go
-                self.swath.close(wait_s=0.0 if self._errors else 5.0)
+                reason = f"{self._errors[0]}" if self._errors else ""
+                self.swath.close(wait_s=0.0 if self._errors else 5.0, reason=reason)
             if self._errors:
                 raise self._errors[0]
         return self.stats

@@ -16,7 +16,8 @@ Transport (ZeroMQ, one context per process):
 * workers → coordinator: one PULL socket the coordinator binds; each worker PUSHes its lines.
 
 Messages are multipart: ``[b"setup", JSON]`` (configuration, columns, lens choice), ``[b"block",
-JSON {first_pulse, count, zero}, samples]``, ``[b"beat"]``, ``[b"end"]``; back: ``[b"ready",
+JSON {first_pulse, count, zero}, samples]``, ``[b"beat"]``, ``[b"end"]``, ``[b"stop", reason]``
+(the run ended without an end: the worker drops what it holds and exits); back: ``[b"ready",
 JSON]``, ``[b"lines", JSON {index, first_line, count}, lines]``, ``[b"done", JSON]``, ``[b"error",
 JSON]``.  The same worker loop (rtsar.stream.swath_worker.serve) runs in a local process
 (``rtsar run --swath-workers K`` spawns them) or on another host (``rtsar swath-worker
@@ -55,6 +56,7 @@ READY_TIMEOUT_S = 120.0  # a worker's first start compiles numba kernels and bui
 BEAT_S = 1.0  # the coordinator beats to a worker it has sent nothing for this long
 COORDINATOR_TIMEOUT_S = 30.0  # a worker that hears nothing for this long after its setup ends
 MIN_COORDINATOR_TIMEOUT_S = 3 * BEAT_S  # below it a loaded coordinator's beats may come too late
+STOP_LINGER_MS = 1000  # how long closing waits for a "stop" to leave
 
 
 def split_columns(range_bins: int, workers: int) -> list[tuple[int, int]]:
@@ -390,15 +392,24 @@ class SwathWorkers:
             if p.poll() is not None and not self._done[k]:
                 raise RuntimeError(f"swath worker {k} exited with status {p.returncode}")
 
-    def close(self, wait_s: float = 5.0) -> None:
+    def close(self, wait_s: float = 5.0, reason: str = "") -> None:
         """Wait up to ``wait_s`` (in all) for the workers started here, kill the rest, close
-        the sockets.  Call it once no thread sends or receives any more."""
+        the sockets.  Call it once no thread sends or receives any more.  Unless every worker
+        is done (the run failed or was given up), the workers are sent a ``stop`` with
+        ``reason``, so that those on other hosts end now, not after their coordinator timeout
+        (a worker whose queue is full learns it from that timeout)."""
         if self._closed:
             return
         self._closed = True
         self._beats_off.set()
         if self._beater is not None:
             self._beater.join()  # within beat_s / 4: it never waits on a socket
+        told = self._tell_stop(reason or "the coordinator ended before the end of the stream")
+        if told:  # a worker blocked sending its lines reads its stop once they go: take them
+            until = time.monotonic() + STOP_LINGER_MS / 1000
+            while time.monotonic() < until:
+                if self._results.poll(50):
+                    self._results.recv_multipart(copy=False)  # dropped: the run has failed
         deadline = time.monotonic() + wait_s
         for p in self._procs:
             try:
@@ -406,7 +417,24 @@ class SwathWorkers:
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()
-        for s in (*self._pushes, self._results):
-            if s is not None:
-                s.close(0)
+        for k, s in enumerate(self._pushes):
+            s.close(STOP_LINGER_MS if k in told else 0)
+        if self._results is not None:
+            self._results.close(0)
         self._ctx.term()
+
+    def _tell_stop(self, reason: str) -> set[int]:
+        """Send ``stop`` to every set-up worker, unless all are done, without waiting; the
+        workers it went to."""
+        if not hasattr(self, "_done") or self.finished:  # never started, or all done
+            return set()
+        told = set()
+        for k, s in enumerate(self._pushes):
+            if self._sent_at[k] is None:  # never set up: it has nothing to stop
+                continue
+            try:
+                s.send_multipart([b"stop", reason.encode()], zmq.NOBLOCK)
+                told.add(k)
+            except zmq.ZMQError:  # its queue is full or it is gone: its timeout tells it
+                pass
+        return told

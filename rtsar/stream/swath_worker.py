@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import os
 import time
+from collections import deque
 
 import numpy as np
 import zmq
@@ -33,6 +34,40 @@ class CoordinatorGone(Exception):
     """The coordinator no longer takes this worker's messages (the reason in words)."""
 
 
+class Stopped(Exception):
+    """The coordinator sent ``stop``: its run failed or was given up (the reason in words)."""
+
+
+class _Inbox:
+    """The worker's pulse socket.  While a send of lines waits, what arrives is read early (up
+    to the high-water mark, so flow control holds) to see a ``stop``; the rest is handled
+    afterwards, in order."""
+
+    def __init__(self, ctx, endpoint: str):
+        self.socket = s = ctx.socket(zmq.PULL)
+        s.setsockopt(zmq.RCVHWM, HWM_MESSAGES)
+        s.connect(endpoint)
+        self._early: deque = deque()
+
+    def poll(self, timeout_ms: int) -> bool:
+        return bool(self._early) or bool(self.socket.poll(timeout_ms))
+
+    def recv(self) -> list[bytes]:
+        return self._early.popleft() if self._early else self.socket.recv_multipart(copy=True)
+
+    def look_for_stop(self) -> None:
+        """Raise Stopped if a ``stop`` has come (called while a send waits)."""
+        while len(self._early) < HWM_MESSAGES and self.socket.poll(0):
+            frames = self.socket.recv_multipart(copy=True)
+            if frames[0] == b"stop":
+                raise Stopped(_reason(frames))
+            self._early.append(frames)
+
+
+def _reason(frames: list[bytes]) -> str:
+    return frames[1].decode("utf-8", "replace") if len(frames) > 1 else "no reason given"
+
+
 class _Results:
     """The worker's PUSH of results to the coordinator, with the state of its connection."""
 
@@ -46,6 +81,7 @@ class _Results:
         s.connect(endpoint)
         self.endpoint, self.timeout_s = endpoint, timeout_s
         self._down_since = time.monotonic()  # not connected yet
+        self.waiting = None  # called while a send waits (the inbox's look for a stop)
 
     def _read_events(self) -> None:
         while self._monitor.poll(0):
@@ -59,6 +95,8 @@ class _Results:
         """Send, waiting while the coordinator is connected (however long it takes); raise
         CoordinatorGone once the connection has been down for the timeout (0: wait)."""
         while not self.socket.poll(200, zmq.POLLOUT):
+            if self.waiting is not None:
+                self.waiting()
             self._read_events()
             down = self._down_since
             if self.timeout_s > 0 and down is not None:
@@ -94,10 +132,9 @@ def serve(
     ``parent_pid``: a worker started by a coordinator ends when that process is gone.
     """
     ctx = zmq.Context()
-    pull = ctx.socket(zmq.PULL)
-    pull.setsockopt(zmq.RCVHWM, HWM_MESSAGES)
-    pull.connect(shots_endpoint)
+    pull = _Inbox(ctx, shots_endpoint)
     results = _Results(ctx, results_endpoint, coordinator_timeout_s)
+    results.waiting = pull.look_for_stop
     engine = None
     limit = coordinator_timeout_s > 0
     heard_at = None  # when the last message was handled (None: no setup yet)
@@ -121,7 +158,7 @@ def serve(
                         "(--coordinator-timeout)"
                     )
                 return 1
-            frames = pull.recv_multipart(copy=True)
+            frames = pull.recv()
             kind = frames[0]
             if kind == b"setup":
                 setup = _json(frames[1])
@@ -142,11 +179,18 @@ def serve(
                     dtype = np.dtype(head["dtype"])
                     shots = np.frombuffer(frames[2], dtype).reshape(count, *shape)
                 _send_lines(results, index, engine.push(shots, count))
+            elif kind == b"stop":  # the run failed or was given up: nothing to deliver to
+                raise Stopped(_reason(frames))
             elif kind == b"end":
                 _send_lines(results, index, engine.flush())
                 results.send([b"done", json.dumps({"index": index}).encode()])
                 return 0
             heard_at = time.monotonic()  # after the work: a long setup or block is no silence
+    except Stopped as exc:
+        gone = True
+        if log:
+            log(f"swath worker {index}: the coordinator stopped the run ({exc}); ending")
+        return 1
     except CoordinatorGone as exc:
         gone = True
         if log:
@@ -161,7 +205,7 @@ def serve(
             log(f"swath worker {index}: {exc}")
         return 1
     finally:
-        pull.close(0)
+        pull.socket.close(0)
         results.close(0 if gone else None)
         ctx.term()
 

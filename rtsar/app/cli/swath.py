@@ -48,8 +48,9 @@ def add_parsers(sub) -> None:
         f"on the coordinator speaks at least every {BEAT_S:g} s (pulse blocks, or beats while "
         "its source is idle), and a worker that hears nothing for --coordinator-timeout ends "
         "with exit status 1 and a one-line message: the coordinator was killed, its host lost "
-        "or the network cut.  Local workers are started by the coordinator itself (plain "
-        "--swath-bind HOST).",
+        "or the network cut.  A coordinator whose run fails tells its workers (a stop message "
+        "with the reason): they end at once, exit status 1.  Local workers are started by "
+        "the coordinator itself (plain --swath-bind HOST).",
     )
     s.add_argument(
         "--connect",

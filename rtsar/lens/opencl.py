@@ -196,6 +196,7 @@ class AOLens:
         )
         self._capacity = 0
         self._shots_buf = self._lines_buf = None
+        self._args_lines = None  # the output buffer the kernel's fixed arguments were set with
         self._lock = threading.Lock()
 
     def __repr__(self) -> str:
@@ -278,14 +279,18 @@ class AOLens:
             else:
                 shots_buf = self._shots_buf
                 cl.enqueue_copy(self.queue, shots_buf, x, is_blocking=False)
-            self._kernel(
-                self.queue,
-                (groups * self.group_size,),
-                (self.group_size,),
-                shots_buf,
-                self._lines_buf,
-                *self._constants,
-                np.uint32(pulses),
+            # The arguments that change are set alone (pyopencl's kernel call sets all seven,
+            # holding the GIL twice as long: 30-58 µs against 14-23 µs a launch on PoCL).
+            kernel = self._kernel
+            kernel.set_arg(0, shots_buf)
+            if self._args_lines is not self._lines_buf:
+                kernel.set_arg(1, self._lines_buf)
+                for i, buf in enumerate(self._constants):
+                    kernel.set_arg(2 + i, buf)
+                self._args_lines = self._lines_buf
+            kernel.set_arg(2 + len(self._constants), np.uint32(pulses))
+            cl.enqueue_nd_range_kernel(
+                self.queue, kernel, (groups * self.group_size,), (self.group_size,)
             )
             # blocking: x stays referenced until the kernel is done; the GIL is released
             cl.enqueue_copy(self.queue, out, self._lines_buf, is_blocking=True)

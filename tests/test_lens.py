@@ -197,3 +197,29 @@ def test_no_platform_message(monkeypatch):
     monkeypatch.setattr(cl_loader.cl, "get_platforms", lambda: [])
     with pytest.raises(RuntimeError, match=r"pip install pyopencl\[pocl\]"):
         cl_loader.select_device()
+
+
+def test_launches_release_the_gil_and_match_pyopencls(opencl, monkeypatch):
+    """The lens launches its kernel through ctypes, which releases the GIL (pyopencl held it
+    through PoCL's 14-150 µs enqueue, stalling the pipeline's other threads); the lines are bit
+    for bit those of pyopencl's launch, which stays the fallback."""
+    import ctypes
+
+    from rtsar.lens import cl_launch
+
+    plan = make_plan(preset("psaltis-max"))
+    x = noise(np.random.default_rng(5), 64, plan.samples_per_shot)
+    lens = AOLens(plan, kernel="lanes")
+    assert lens._enqueue is not None  # a Linux loader is found (pyopencl's own)
+    # A CDLL function, not a PyDLL one: ctypes releases the GIL for the call.
+    assert not cl_launch._enqueue._flags_ & ctypes._FUNCFLAG_PYTHONAPI
+    real, calls = cl_launch._enqueue, []
+    monkeypatch.setattr(cl_launch, "_enqueue", lambda *a: calls.append(a) or real(*a))
+    got = AOLens(plan, kernel="lanes").compress(x)
+    assert len(calls) == 1  # launched through cl_launch
+    monkeypatch.setenv("RTSAR_CL_GIL_FREE", "0")
+    monkeypatch.setattr(cl_launch, "_resolved", False)
+    fallback = AOLens(plan, kernel="lanes")
+    assert fallback._enqueue is None
+    np.testing.assert_array_equal(got, fallback.compress(x))
+    np.testing.assert_array_equal(lens.compress(x), got)

@@ -182,6 +182,22 @@ def test_latency_histogram_percentiles(rng):
         assert stats.percentile(q) == pytest.approx(np.percentile(lat, q), rel=0.01)
 
 
+def test_latency_histogram_bins_every_value_as_floor_of_its_log_does(rng):
+    """The histogram's bins (bincount of truncated log-decades) against the plain rule: bin
+    floor(460·log10(max(t, 1 µs) / 1 µs)) + 1, clipped to the last bin (10^3 s and beyond)."""
+    lat = np.concatenate([rng.lognormal(np.log(2e-3), 3.0, 5000), [0.0, 1e-9, 1e-6, 5e3, 1e7]])
+    stats = LatencyStats()
+    for part in np.array_split(lat, 37):  # strip by strip, as the pipeline adds them
+        stats.add(part)
+    last = len(stats.counts) - 1
+    want = np.zeros_like(stats.counts)
+    for t in lat:
+        k = int(np.floor(460 * np.log10(max(t, 1e-6) / 1e-6))) + 1
+        want[min(k, last)] += 1
+    np.testing.assert_array_equal(stats.counts, want)
+    assert stats.total == len(lat) and stats.max_s == lat.max()
+
+
 def test_parse_rate():
     assert parse_rate("real") == 1.0 and parse_rate("max") is None and parse_rate("2.5") == 2.5
     for bad in ("fast", "0", "-1", "nan"):

@@ -26,15 +26,19 @@ class LatencyStats:
         self.max_s = 0.0
 
     def add(self, latency_s: np.ndarray) -> None:
-        latency_s = np.asarray(latency_s, np.float64)
+        latency_s = np.asarray(latency_s, np.float64).ravel()
         if not latency_s.size:
             return
-        decades = np.log10(np.maximum(latency_s, self.LOW_S) / self.LOW_S)
-        k = np.floor(decades * self.BINS_PER_DECADE)
-        np.add.at(self.counts, np.clip(k.astype(np.int64) + 1, 0, len(self.counts) - 1), 1)
-        self.recent.extend(latency_s[-self.recent.maxlen :].tolist())
-        self.total += latency_s.size
-        self.max_s = max(self.max_s, float(latency_s.max()))
+        # Called for every strip on the publishing thread, holding the GIL: bincount, not
+        # add.at (and no floor: the decades are >= 0), half the time of a 16-line strip.
+        decades = np.log10(np.fmax(latency_s, self.LOW_S) / self.LOW_S)
+        k = (decades * self.BINS_PER_DECADE).astype(np.int64) + 1
+        np.clip(k, 0, len(self.counts) - 1, out=k)
+        self.counts += np.bincount(k, minlength=len(self.counts))
+        values = latency_s.tolist()
+        self.recent.extend(values[-self.recent.maxlen :])
+        self.total += len(values)
+        self.max_s = max(self.max_s, max(values))
 
     def percentile(self, q: float) -> float:
         """q-th percentile (s), to the histogram's 0.5 %; NaN when empty."""

@@ -296,3 +296,47 @@ def test_files_process_would_refuse_are_rows_and_a_folder_says_what_it_skipped(
     assert set(rows) == {"broken.h5", "s.sigmf-meta", "x.cphd"}
     assert all(r.split()[1] == "failed" for r in rows.values())
     assert "x.cphd" in rows["x.cphd"].split("failed", 1)[1]
+
+
+AUX_SCENE = """
+preset = "crouch-sal"
+pulses = 40
+seed = 2
+[processor]
+aperture_pulses = 16
+range_bins = 64
+[geometry]
+along_track_step_m = 50e-6
+[[targets]]
+along_track_m = 0.0
+slant_range_m = 1.5002
+[[effects]]
+name = "reference_interferometer"
+"""
+
+
+def test_a_sigmf_exports_channel_files_are_read_with_it_not_as_recordings(tmp_path, capsys):
+    """From a cold review: `batch` on a folder holding a SigMF export with an auxiliary channel
+    counted the channel's .sigmf-meta as a failed recording (exit 1) beside the focused one;
+    `process` of it said "give a configuration", which no option does."""
+    scene = tmp_path / "s.toml"
+    scene.write_text(AUX_SCENE)
+    folder = tmp_path / "in"
+    folder.mkdir()
+    assert main(["simulate", str(scene), "-o", str(tmp_path / "r.h5")]) == 0
+    assert main(["export", str(tmp_path / "r.h5"), "--sigmf", str(folder / "r")]) == 0
+    aux = folder / "r.reference_interferometer.sigmf-meta"
+    assert aux.is_file()
+    recs, skipped = batch_cli.find_recordings([str(folder)])
+    assert [p.name for p in recs] == ["r.sigmf-meta"] and skipped == []
+    (folder / "r.sigmf-meta").rename(tmp_path / "moved.sigmf-meta")
+    recs, skipped = batch_cli.find_recordings([str(folder / "r.sigmf-data"), str(folder)])
+    assert [(p.name, why) for p, why in skipped if p == aux] == [
+        ("r.reference_interferometer.sigmf-meta", "the auxiliary channel of a SigMF export whose "
+         "r.sigmf-meta is missing")
+    ]  # fmt: skip
+    capsys.readouterr()
+    assert main(["process", str(aux), "-o", str(tmp_path / "x.h5")]) == 2
+    err = capsys.readouterr().err
+    assert "auxiliary channel 'reference_interferometer' of a SigMF export" in err
+    assert "give its recording" in err and "r.sigmf-meta" in err

@@ -8,6 +8,7 @@ Which files it takes (:func:`find_recordings`) and what it checks before it star
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
@@ -16,6 +17,7 @@ import h5py
 
 from ...focus.chain import parse_spec
 from ...lens import range_axis_m
+from ...sources.formats.sigmf_reader import auxiliary_of
 from .. import batch, signals
 from .files import process_setup
 from .inputs import open_input
@@ -28,7 +30,8 @@ OTHER_FORMATS = (".cphd", ".sigmf-meta", ".sigmf")  # CPHD, SigMF (metadata file
 FOLDER_RULE = (
     "a folder gives every file that process reads: rtsar recordings (*.h5, *.hdf5; rtsar image "
     "files, such as an earlier batch's, are left out), CPHD (*.cphd) and SigMF (*.sigmf-meta "
-    "with its .sigmf-data, or a *.sigmf archive); the files of a folder not taken are named on "
+    "with its .sigmf-data, or a *.sigmf archive; an export's auxiliary channel files are read "
+    "with it); the files of a folder not taken are named on "
     "one line with the reason; hidden files and folders inside are not looked at"
 )
 
@@ -52,11 +55,30 @@ def _not_taken(path: Path) -> str | None:
     if name.endswith(".sigmf-data"):
         meta = path.with_name(path.name[: -len(".sigmf-data")] + ".sigmf-meta")
         return "" if meta.is_file() else "SigMF data without its .sigmf-meta"
+    if name.endswith(".sigmf-meta"):
+        return _sigmf_channel(path)
     if name.endswith(OTHER_FORMATS):
         return None
     if path.suffix.lower() in RECORDING_SUFFIXES:
         return "an rtsar image, not a recording" if _is_image(path) else None
     return "not a format process reads"
+
+
+def _sigmf_channel(meta: Path) -> str | None:
+    """No reason ("") for an auxiliary channel's metadata whose recording is beside it (read
+    with it), a reason when that recording is missing, None for a recording (or a file that
+    process judges)."""
+    try:
+        info = json.loads(meta.read_text(encoding="utf-8")).get("global", {})
+    except (OSError, ValueError, AttributeError):
+        return None
+    base = meta.with_name(meta.name[: -len(".sigmf-meta")])
+    main = auxiliary_of(info, base) if isinstance(info, dict) else None
+    if main is None:
+        return None
+    if main.with_name(main.name + ".sigmf-meta").is_file():
+        return ""
+    return f"the auxiliary channel of a SigMF export whose {main.name}.sigmf-meta is missing"
 
 
 def find_recordings(inputs: list[str]) -> tuple[list[Path], list[tuple[Path, str]]]:

@@ -62,18 +62,38 @@ def _shots(samples: np.ndarray, width: int, path) -> np.ndarray:
     return samples.reshape(-1, width)
 
 
+def auxiliary_of(global_info: dict, base: Path) -> Path | None:
+    """The base name of the recording whose auxiliary channel this SigMF file holds (an
+    ``rtsar:channel`` file of an export, named ``BASE.CHANNEL``); None for a recording."""
+    name = global_info.get("rtsar:channel")
+    if not isinstance(name, str):
+        return None
+    suffix = "." + name
+    main = base.name[: -len(suffix)] if base.name.endswith(suffix) else base.name
+    return base.with_name(main)
+
+
 def open_sigmf(path: str | Path, config=None) -> ForeignRecording:
     """Open a SigMF recording; ``config`` (rtsar.params.Config) where it carries none."""
     require_formats(sigmffile, "reading SigMF")
     base = sigmf_base(Path(path)) or Path(path)
     g, annotations, samples = _load(base)
+    main = auxiliary_of(g, base)
+    if main is not None:
+        raise ValueError(
+            f"{base}.sigmf-meta holds the auxiliary channel {g['rtsar:channel']!r} of a SigMF "
+            f"export, not a recording: give its recording, {main}.sigmf-meta"
+        )
     try:
         if "rtsar:config" in g:
             cfg = config_from_dict(g["rtsar:config"])
         elif config is not None:
             cfg = config
         else:
-            raise ValueError("no rtsar:config in the global object: give a configuration")
+            raise ValueError(
+                "no rtsar:config in the global object: rtsar reads the SigMF recordings that "
+                "carry their configuration (`rtsar export --sigmf` writes it)"
+            )
         width = int(g.get("rtsar:samples_per_shot", cfg.waveform.samples_per_shot))
         if width != cfg.waveform.samples_per_shot:
             raise ValueError(

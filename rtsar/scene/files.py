@@ -7,13 +7,15 @@ Crouch's coin relief) can be simulated, recorded and processed from the command 
 
     [surface]
     shape = "ridge"          # ridge | drawing_pin | slanted_plane | coin
-    height_m = 2.5e-3        # shape parameters, as rtsar.scene.relief names them
+    height_m = 2.5e-3        # shape parameters, as rtsar.scene.relief names them (a key the
+                             # shape does not take is an error that lists the accepted keys)
     lines = 96               # image lines to cover (the scene simulates lines + N - 1 pulses)
     scatterers_per_cell = 2.0
 """
 
 from __future__ import annotations
 
+import inspect
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -77,6 +79,12 @@ def scene_from_table(d: dict, name: str = "scene") -> Scene:
     ):
         raise ValueError(f"surface.scatterers_per_cell must be in (0, 50], got {per_cell!r}")
     params = {k: v for k, v in table.items() if k not in _SURFACE_KEYS}
+    accepted = sorted(_SURFACE_KEYS) + list(inspect.signature(SHAPES[shape]).parameters)
+    unknown = sorted(set(params) - set(accepted))
+    if unknown:
+        raise ValueError(
+            f"surface (shape {shape!r}): unknown keys {unknown}; accepted keys: {accepted}"
+        )
     try:
         surface = SHAPES[shape](**params)
     except TypeError as exc:

@@ -17,6 +17,12 @@ return.  Phases are accumulated in cycles in float64 and reduced mod 1 before th
 shots are cast to complex64 only at the end.  Effects named by the scene are applied in order;
 others are neither imported nor called.  Auxiliary receive channels (effects' ``aux_channels``)
 travel beside the main channel in ``Shot.aux``.
+
+Errors common to every receiver of the pass (rtsar.scene.effects.base lists which) reach the
+auxiliary receivers as they reach the main one: the platform position through each channel's
+geometry, the chirp deviation through ``PulseContext.echo``, and the shot phase of the
+``common_to_receivers`` effects (piston, the reference region's target path), applied to the
+main echo and to every echo ``PulseContext.echo`` returns, before any receiver's own noise.
 """
 
 from __future__ import annotations
@@ -53,7 +59,9 @@ class Simulator:
         self.config = cfg
         self.effects = load_effects(scene.effects, cfg)
         self._gain_effects = self._overriding("target_gain")
-        self._shot_effects = self._overriding("apply_to_shot")
+        shot_effects = self._overriding("apply_to_shot")
+        self._common_effects = [e for e in shot_effects if e.common_to_receivers]
+        self._shot_effects = [e for e in shot_effects if not e.common_to_receivers]
         self._chirp_effects = self._overriding("chirp_deviation_cycles")
         self._position_effects = self._overriding("along_track_error_m")
         self._aux_effects = self._overriding("aux_channels")
@@ -231,11 +239,22 @@ class Simulator:
         for e in self._gain_effects:
             gain *= e.target_gain(pulse, offset, r)
         deviation = self._deviation(pulse)
-        out = self.echo(r, gain, deviation)
+
+        def common(samples: np.ndarray) -> np.ndarray:
+            """The pass's common shot errors, in place on a fresh complex128 echo."""
+            for e in self._common_effects:
+                e.apply_to_shot(pulse, samples, self._rng)
+            return samples
+
+        out = common(self.echo(r, gain, deviation))
         for e in self._shot_effects:
             e.apply_to_shot(pulse, out, self._rng)
         aux = {}
         if self._aux_effects:
+
+            def bare(range_m, g, lo_range_m=None):
+                return self.echo(range_m, g, deviation, lo_range_m)
+
             ctx = PulseContext(
                 pulse,
                 self.config,
@@ -246,8 +265,9 @@ class Simulator:
                 gain,
                 self._t,
                 deviation,
-                lambda range_m, g, lo_range_m=None: self.echo(range_m, g, deviation, lo_range_m),
+                lambda range_m, g, lo_range_m=None: common(bare(range_m, g, lo_range_m)),
                 self._rng,
+                bare,
             )
             for e in self._aux_effects:
                 for name, samples in e.aux_channels(ctx).items():

@@ -1,5 +1,9 @@
 """Platform phase errors: piston (Crouch eq. 4.12) and along-track step jitter (Crouch eq. 4.13).
 
+Both are errors of the platform, common to every receiver of a pass: piston reaches each
+receiver's echo as the same phase (``common_to_receivers``), the along-track error moves the
+platform, which each receiver sees through its own geometry.
+
 Both are driven by ``PulseProcess``, a seeded random sequence indexed by pulse number: white
 (independent per pulse) + random walk + integrated random walk ("drift", the smooth, roughly
 quadratic wander under the fast errors of Crouch Fig. 20) + a sinusoidal vibration.  The sequence
@@ -125,7 +129,7 @@ class PistonError(Effect):
     """Piston phase error: a shot-to-shot phase constant within each shot (Crouch eq. 4.12).
 
     Crouch writes the shot as E_n ∝ exp[-iφ(n)]·Σ_j exp[-i(μu_j + ξw_j)] with
-    φ(n) = PistonError(n)·2π/λ.  Here the effect multiplies the main channel by exp(iε(n)),
+    φ(n) = PistonError(n)·2π/λ.  Here the effect multiplies the shot by exp(iε(n)),
     ε(n) = -φ(n) the *phase added to the shot* (the processes are symmetric, so only the sign
     convention differs); ``truth(pulses)`` returns ε(n) in radians and ``displacement_m`` the
     line-of-sight platform displacement λε/(4π) that causes it in rtsar's two-way convention.
@@ -135,9 +139,15 @@ class PistonError(Effect):
     ``vibration_rad`` amplitude at ``vibration_hz``; ``seed`` of the error sequence.
     Crouch Fig. 20 scale (several hundred radians over 2048 shots, fast content on top):
     drift_rad ≈ 5e-3, random_walk_rad ≈ 0.3, vibration_rad of a few radians.
+
+    A platform error, common to every receiver of the pass (``common_to_receivers``): the main
+    channel and each auxiliary receiver (second InSAL receiver, SAM masks) get the same ε(n), so
+    an interferogram between them cancels it (Zhao 2014: one transmitter, both receivers on the
+    platform; INO 3D patent: S0, S1, S2 share every pulse).
     """
 
     name = "piston"
+    common_to_receivers = True
 
     def __init__(
         self,

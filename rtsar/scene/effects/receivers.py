@@ -22,9 +22,14 @@ track ``k · along_track_offset_m`` (a registration error in azimuth).
 The scatterers must carry ``ground_range_m`` and ``height_m`` (rtsar.scene.surfaces builds such
 scenes) and ``slant_range_m = hypot(ground_range_m, H - height_m)``.  ``snr_db`` adds the
 receiver noise of rtsar.scene.effects.noise to every auxiliary channel (independent draws from
-the simulator's generator; the main channel's noise is the "noise" effect's).  Effects that
-act on the main channel's samples through ``apply_to_shot`` (e.g. a piston phase) do not reach
-the auxiliary channels; platform position errors and chirp deviations do (through ctx.echo).
+the simulator's generator; the main channel's noise is the "noise" effect's).
+
+The scene's platform and transmitter errors reach every receiver (rtsar.scene.effects.base):
+along-track position errors through each receiver's own geometry (x = ctx.along_offset_m),
+chirp deviations and the common shot phase (``piston``, the reference region's target path)
+through ``ctx.echo``, identically on every receiver, so the one-pass interferogram cancels a
+piston.  In two-pass mode pass k repeats the scene's errors, and ψ_k / along_track_offset_m
+are its errors relative to pass 0 (``truth`` row 0 is zeros).
 """
 
 from __future__ import annotations

@@ -30,8 +30,12 @@ memory is bounded.  The aux receivers mix with an LO delayed to ``lo_range_m`` (
 region centre), so the region sits in the middle of their range window.
 
 The errors are applied as phases (the patent's eq. 4 assumption: fluctuations small against the
-range cell).  α also reaches the main channel through ``apply_to_shot``; a ``piston`` effect in
-the same scene stays a target-path-only error (e.g. fibre length), unseen by the reference.
+range cell).  The target path's 2α + dβ is common to the receivers of the target returns
+(``common_to_receivers``): the main channel and any auxiliary target receiver (SAM masks behind
+the same aperture H; a second InSAL receiver, whose own roll lever arm — its cross-track
+baseline × β — is not modelled).  The reference channels model their own paths (eqs. 4a-4b) and
+are synthesised without the common effects (``ctx.bare_echo``): a ``piston`` effect in the same
+scene stays a target-path error (e.g. fibre length), unseen by the reference.
 Truth: ``alpha_m``, ``beta_rad``, ``target_phase_rad`` (φ1t, also ``truth``).  Only FMCW
 waveforms.  A gradient estimate of α and β needs each reference channel's round-trip path error
 to change by less than λ/2 per pulse; choose the processes accordingly.
@@ -67,6 +71,7 @@ class ReferenceRegion(Effect):
     """
 
     name = "reference_region"
+    common_to_receivers = True  # apply_to_shot: the target path's phase, on every target receiver
 
     def __init__(
         self,
@@ -238,7 +243,7 @@ class ReferenceRegion(Effect):
             (CHANNELS[0], 0.5 * (r + h), a * w),
             (CHANNELS[1], r, a * w * w),
         ):
-            s = ctx.echo(half_path, gain, self.lo_range_m) * self._phasor(float(errors[name]))
+            s = ctx.bare_echo(half_path, gain, self.lo_range_m) * self._phasor(float(errors[name]))
             if self.noise_sigma is not None:
                 z = ctx.rng.standard_normal((2, s.shape[-1]))
                 s = s + self.noise_sigma * (z[0] + 1j * z[1])

@@ -11,9 +11,11 @@ import sys
 import time
 
 from ..params import Config
+from ..scene.effects import REGISTRY as EFFECTS
 from ..sinks.io import check_writable
 from ..sinks.publish import STALL_TIMEOUT_S, ZmqPublisher
 from ..sinks.record import ImageFileSink
+from ..sources.channel_map import ChannelMap
 from ..stream.pipeline import Pipeline, PipelineSettings
 from . import signals
 
@@ -132,6 +134,107 @@ def format_status(d: dict, total: int | None = None) -> str:
     )
 
 
+def check_source_channels(source, corrections=None, height=None, fix=None) -> None:
+    """Refuse, before any work, a --correct or --height stage that reads an auxiliary channel
+    the source cannot deliver (``source.aux_channels()``; None: unknown before the stream, no
+    check here): check_channels_delivered."""
+    if _readers(corrections, height):
+        have = source.aux_channels()
+        if have is not None:
+            check_channels_delivered(have, source.description, corrections, height, fix)
+
+
+def _readers(corrections, height) -> list[tuple[str, tuple]]:
+    """(option, channels) of each stage that reads auxiliary channels."""
+    named = corrections.named if corrections else []
+    readers = [(f"--correct {name}", stage.channels) for name, stage in named]
+    if height is not None:
+        readers.append((f"--height {height.kind}", tuple(height.channels)))
+    return [(option, channels) for option, channels in readers if channels]
+
+
+def check_channels_delivered(have, description, corrections=None, height=None, fix=None) -> None:
+    """One-line ValueError when a stage reads an auxiliary channel not in ``have`` (the source
+    ``description`` delivers those): it names the option(s), the missing channel(s) and
+    ``fix(missing)``, what gives the source that channel.  The stages also check every block
+    (a stream that breaks its declaration)."""
+    options, missing = [], []
+    for option, channels in _readers(corrections, height):
+        lack = [c for c in channels if c not in have]
+        if lack:
+            options.append(option)
+            missing += [c for c in lack if c not in missing]
+    if not missing:
+        return
+    held = ", ".join(have) if have else "the main channel only"
+    raise ValueError(
+        f"{' and '.join(options)} {'reads' if len(options) == 1 else 'read'} the auxiliary "
+        f"channel{'s' if len(missing) > 1 else ''} {', '.join(missing)}, but the source "
+        f"({description}) delivers {held}" + (f": {fix(missing)}" if fix else "")
+    )
+
+
+def _map_entries(missing, scene) -> tuple[list[str], bool]:
+    """``NAME*K`` for each missing channel, K from the scene's map (K unknown: ``NAME*K``);
+    True when some K is unknown."""
+    try:
+        known = dict(ChannelMap.for_scene(scene).entries) if scene is not None else {}
+    except (ValueError, AttributeError):  # widths that do not fit frames, or no aux at all
+        known = {}
+    entries = [
+        (name if known[name] == 1 else f"{name}*{known[name]}") if name in known else f"{name}*K"
+        for name in missing
+    ]
+    return entries, any(name not in known for name in missing)
+
+
+_K_WORDS = " (K: the frame channels each spans, its samples per shot / S)"
+
+
+def serial_channel_fix(cmap, scene):
+    """What --serial needs to deliver missing auxiliary channels: their entries in the map."""
+
+    def fix(missing) -> str:
+        entries, unknown = _map_entries(missing, scene)
+        current = cmap.text if cmap is not None else "main"
+        scene_map = None if scene is None else ChannelMap.for_scene(scene)
+        default = (
+            f"; or leave --channel-map out: --scene's map is {scene_map.text}"
+            if scene_map is not None and all(n in scene_map.aux_names for n in missing)
+            else ""
+        )
+        return (
+            f"add {','.join(entries)} to --channel-map where the instrument's frames carry "
+            f"{'it' if len(missing) == 1 else 'them'} (e.g. --channel-map "
+            f"{current},{','.join(entries)}){_K_WORDS if unknown else ''}{default}"
+        )
+
+    return fix
+
+
+def zmq_channel_fix(scene):
+    """--zmq-in carries one complex stream: the channels cannot come that way."""
+
+    def fix(missing) -> str:
+        entries, unknown = _map_entries(missing, scene)
+        return (
+            "a GNU Radio ZMQ PUB Sink stream (--zmq-in) carries the main channel only; process "
+            "without it, or send the shots with their channels as instrument frames: "
+            f"--serial URL --channel-map main,{','.join(entries)}" + (_K_WORDS if unknown else "")
+        )
+
+    return fix
+
+
+def scene_channel_fix(missing) -> str:
+    """A simulated scene makes an auxiliary channel only with the effect of that name."""
+    effects = [n for n in missing if n in EFFECTS]
+    if len(effects) == len(missing):
+        named = " and ".join(f'[[effects]] name = "{n}"' for n in effects)
+        return f"add {named} to the scene (README 'Scene files')"
+    return "add the effect that makes them to the scene (README 'Scene files')"
+
+
 def run_stream(
     config: Config,
     source,
@@ -150,6 +253,7 @@ def run_stream(
     curve_clients=None,
     expected_rate_hz: float | None = None,
     height=None,
+    channel_fix=None,
 ) -> int:
     """Run until the source ends, Ctrl-C or a signal; print status lines and a summary.
 
@@ -157,7 +261,14 @@ def run_stream(
     lost for good) or nothing could be written to ``output``, 128 + the signal number when
     interrupted (130 for Ctrl-C).  ``expected_rate_hz``: the rate the source should deliver (a
     simulation's PRF, a paced replay's): a stream processed slower is warned about.
+    ``channel_fix(missing)``: how to give the source the auxiliary channels a stage reads and it
+    lacks (check_source_channels, before anything starts).
     """
+    try:
+        check_source_channels(source, corrections, height, channel_fix)
+    except ValueError:
+        source.close()  # a port already open is let go at once
+        raise
     stream = stream or sys.stdout
     err = sys.stderr
 

@@ -66,5 +66,12 @@ class Source(ABC):
     def __iter__(self) -> Iterator[ShotBatch]:
         """Yield batches until the source ends or ``close()`` is called."""
 
+    def aux_channels(self) -> tuple[str, ...] | None:
+        """The auxiliary channels this source delivers with every shot, known before the run
+        starts (rtsar.app.live refuses a correction or height stage that reads another one
+        before any work); None when only the stream itself can tell.  Here: none (the main
+        channel only)."""
+        return ()
+
     def close(self) -> None:
         self._stop = True

@@ -90,6 +90,10 @@ class ReplaySource(Source):
             aux={name: recording.channels[name] for name in channels},
         )
 
+    def aux_channels(self) -> tuple[str, ...]:
+        """The auxiliary channels given (``aux``): those it releases with every shot."""
+        return tuple(self.aux)
+
     def __iter__(self) -> Iterator[ShotBatch]:
         pacer = None if self.factor is None else Pacer(self.prf_hz * self.factor)
         p = 0

@@ -109,6 +109,11 @@ class SerialSource(Source):
         except (serial.SerialException, OSError, ValueError) as exc:
             raise ValueError(f"cannot open instrument port {url!r}: {exc}") from None
 
+    def aux_channels(self) -> tuple[str, ...]:
+        """The channel map's auxiliary channels (none without a map: frame channel
+        ``channel`` is the shot)."""
+        return () if self.channel_map is None else tuple(self.channel_map.aux_names)
+
     def _open(self) -> None:
         # Non-blocking reads: waiting is done by select() on the descriptor where there is
         # one, so a read returns whatever has arrived instead of waiting to fill a size.

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 
 import numpy as np
 
@@ -32,7 +33,16 @@ class SimSource(Source):
         self.chunk = chunk or release_chunk(self.prf_hz)
         self.released = 0
         self.counters = {"late_releases": 0}
+        self._aux_names: tuple[str, ...] | None = None
         self.description = f"simulated scene '{scene.name}' at {self.prf_hz:g} Hz"
+
+    def aux_channels(self) -> tuple[str, ...]:
+        """The auxiliary channels the scene's effects make (one pulse of a separate simulator
+        says which: effects declare them only by making them)."""
+        if self._aux_names is None:
+            _, aux = Simulator(replace(self.scene, pulses=1)).block_with_aux(1)
+            self._aux_names = tuple(sorted(aux))
+        return self._aux_names
 
     def prepare(self) -> None:
         """Ready the simulator's kernels before the schedule starts (rtsar.app.live calls it

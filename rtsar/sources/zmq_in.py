@@ -73,6 +73,11 @@ class ZmqSource(Source):
         self._clock: tuple[int, float, bool] | None = None  # (item offset, rx_time, flat?)
         self.stop_reason = ""
 
+    def aux_channels(self) -> tuple[str, ...]:
+        """None of them: a ZMQ PUB Sink sends one complex item stream (a multipart message's last
+        part; tags only number, cut and time the shots), so it carries the main channel only."""
+        return ()
+
     def _time(self, offset: int, flat: bool) -> float:
         if self._clock is None:
             return float("nan")

@@ -23,7 +23,13 @@ from ...sources.replay import ReplaySource
 from ...sources.serial import SerialSource
 from ...sources.sim import SimSource
 from ...sources.zmq_in import ZmqSource
-from ..live import run_stream
+from ..live import (
+    check_channels_delivered,
+    run_stream,
+    scene_channel_fix,
+    serial_channel_fix,
+    zmq_channel_fix,
+)
 from ..subscribe import subscribe
 from ..view import view
 from .files import simulate_to
@@ -92,6 +98,9 @@ def cmd_run(args) -> int:
             cfg, start_m = described.config, described.start_along_track_m
         cfg = processor_changes(args, cfg)
         strip_lines(args, cfg.geometry.prf_hz)
+        # The stages before the source: their errors come before a port opens.
+        chain = correction_chain(args, cfg, described, start_m)
+        heights = height_stage(args, cfg, described)
         if args.zmq_in:  # a GNU Radio flowgraph's ZMQ PUB Sink (rtsar.sources.zmq_in)
             source = ZmqSource(
                 args.zmq_in,
@@ -100,14 +109,19 @@ def cmd_run(args) -> int:
                 cfg.geometry.prf_hz,
                 idle_timeout_s=args.duration,
             )
+            fix = zmq_channel_fix(described)
         else:
+            cmap = channel_map(args, described)
+            fix = serial_channel_fix(cmap, described)
+            have = () if cmap is None else cmap.aux_names  # refused before the port opens
+            check_channels_delivered(have, f"instrument at {args.serial}", chain, heights, fix)
             source = SerialSource(
                 args.serial,
                 cfg.waveform.samples_per_shot,
                 baudrate=args.baudrate,
                 idle_timeout_s=args.duration,
                 reconnect=args.reconnect,
-                channel_map=channel_map(args, described),
+                channel_map=cmap,
             )
         return run_stream(
             cfg,
@@ -118,11 +132,12 @@ def cmd_run(args) -> int:
             start_m,
             output=args.output,
             curve_secret_key=args.curve_key,
-            corrections=correction_chain(args, cfg, described, start_m),
-            height=height_stage(args, cfg, described),
+            corrections=chain,
+            height=heights,
             physical=physical_ccd(args),
             stall_timeout_s=args.stall_timeout,
             curve_clients=args.curve_clients,
+            channel_fix=fix,
         )
 
     if args.preset:
@@ -150,6 +165,7 @@ def cmd_run(args) -> int:
         physical=physical_ccd(args),
         stall_timeout_s=args.stall_timeout,
         curve_clients=args.curve_clients,
+        channel_fix=scene_channel_fix,
     )
 
 
@@ -309,7 +325,9 @@ def add_parsers(sub) -> None:
         metavar="ENDPOINT",
         help="read shots from a GNU Radio ZMQ PUB Sink at ENDPOINT (e.g. tcp://127.0.0.1:5600): "
         "complex64 vector items of one shot each, or a flat stream cut by packet_len tags "
-        "(pass tags on); processed with --preset or --scene like --serial (README 'GNU Radio')",
+        "(pass tags on); processed with --preset or --scene like --serial (README 'GNU Radio'); "
+        "the main channel only: a --correct or --height stage reading an auxiliary channel is "
+        "refused before start",
     )
     src.add_argument(
         "--preset",
@@ -325,7 +343,8 @@ def add_parsers(sub) -> None:
         help="with --serial: the shot's channels in frame order, e.g. "
         "main,reference_interferometer,hcn_cell*8 (NAME*K: K frame channels); default: main "
         "and every auxiliary channel of --scene's effects, by name (fake_instrument prints its "
-        "map); main only without a scene",
+        "map); main only without a scene. A --correct or --height stage reading a channel the "
+        "map lacks is refused before the port opens",
     )
     src.add_argument(
         "--duration",

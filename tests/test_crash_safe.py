@@ -360,3 +360,53 @@ def test_a_png_or_key_pair_that_fails_midway_leaves_the_earlier_files(tmp_path, 
     assert main(["keygen", str(keys), "--name", "pub", "--force"]) != 0
     assert {p.name: p.read_bytes() for p in keys.iterdir()} == before
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_a_reader_following_the_live_file_does_not_stop_its_final_attributes(tmp_path):
+    """From a kill review: a reader that kept the growing file open (h5py, swmr=True, as the
+    README invites) made the writer's close fail ("Resource temporarily unavailable": the
+    reopening for the final attributes wanted an exclusive file lock), leaving the run's file
+    incomplete and without its counters.  The reopening takes no lock now."""
+    from rtsar.presets import preset
+    from rtsar.sinks.image_file import ImageWriter
+
+    cfg = preset("tiny")
+    nr = cfg.processor.range_bins
+    path = tmp_path / "img.h5"
+    w = ImageWriter(path, cfg, np.arange(nr, dtype=float), crash_safe=True)
+    w.write(np.ones((32, nr), np.complex64), np.arange(32) * 0.5)
+    w._flush()
+    follow = (
+        "import sys, h5py\n"
+        "f = h5py.File(sys.argv[1], 'r', swmr=True)\n"
+        "f['image'].refresh()\n"
+        "print('open', flush=True)\n"
+        "sys.stdin.read()\n"
+    )
+    reader = subprocess.Popen(
+        [sys.executable, "-c", follow, str(path)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert reader.stdout.readline().strip() == "open"  # it holds the file (a shared lock)
+        w.close(counters='{"x": 1}')
+    finally:
+        reader.communicate("", timeout=30)
+    image, _, _, attrs = read_image(path)
+    assert image.shape[0] == 32 and attrs["complete"] and attrs["counters"] == '{"x": 1}'
+
+
+def test_a_growing_file_read_between_its_two_resizes_gives_matching_lines(tmp_path):
+    """From a kill review: read_image on a growing file returned more image rows than azimuth
+    positions in 7 of 5865 reads (the writer grows the image, then the axis)."""
+    path = tmp_path / "img.h5"
+    with h5py.File(path, "w") as f:  # the state between the two resizes
+        f["image"] = np.ones((40, 3), np.complex64)
+        f["azimuth_m"] = np.arange(32.0)
+        f["range_m"] = np.arange(3.0)
+        f.attrs["format"] = "rtsar-image"
+        f.attrs["format_version"] = 1
+    image, az, rg, attrs = read_image(path)
+    assert image.shape == (32, 3) and az.shape == (32,)

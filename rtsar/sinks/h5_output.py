@@ -83,8 +83,12 @@ def create(path: str | Path, mode: str = "w", libver=None, swmr: bool = False) -
     buffer (see the module's docstring): a failed write fails at the write, and closing a
     dataset writes nothing.  The datasets' chunks should be as long as the usual write.
     ``swmr`` with ``mode="r+"``: opened in HDF5's single-writer/multiple-reader mode (a writer
-    that dies leaves a file SWMR readers open)."""
+    that dies leaves a file SWMR readers open), without HDF5's file lock: the file is this
+    process's own, being finished, and SWMR readers following it hold a shared lock that the
+    writer's exclusive one would wait on and fail ("Resource temporarily unavailable")."""
     fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
+    if swmr and mode == "r+":
+        fapl.set_file_locking(False, True)
     low, high = ("earliest", "latest") if libver is None else libver
     fapl.set_libver_bounds(_LIBVER[low], _LIBVER[high])
     mdc, slots, _, w0 = fapl.get_cache()

@@ -56,8 +56,12 @@ def write_image(
 
 
 def read_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """(image, azimuth_m, range_m, attributes).  Of a file still being written (SWMR), the
+    lines both the image and its azimuth axis hold: the writer grows them one after the
+    other, and a reader may come between."""
     with open_checked(path, IMAGE_FORMAT) as f:
-        return (f["image"][...], f["azimuth_m"][...], f["range_m"][...], dict(f.attrs))
+        rows = min(f["image"].shape[0], f["azimuth_m"].shape[0])
+        return (f["image"][:rows], f["azimuth_m"][:rows], f["range_m"][...], dict(f.attrs))
 
 
 def read_heights(path: str | Path) -> tuple[np.ndarray, np.ndarray] | None:

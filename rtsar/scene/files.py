@@ -82,9 +82,7 @@ def scene_from_table(d: dict, name: str = "scene") -> Scene:
     accepted = sorted(_SURFACE_KEYS) + list(inspect.signature(SHAPES[shape]).parameters)
     unknown = sorted(set(params) - set(accepted))
     if unknown:
-        raise ValueError(
-            f"surface (shape {shape!r}): unknown keys {unknown}; accepted keys: {accepted}"
-        )
+        raise ValueError(f"surface ({shape}): unknown keys {unknown}; accepted keys: {accepted}")
     try:
         surface = SHAPES[shape](**params)
     except TypeError as exc:

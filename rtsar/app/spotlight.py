@@ -21,6 +21,8 @@ import numpy as np
 from ..samples import nonfinite_rows, zero_nonfinite_rows
 from ..sinks.image_file import read_image, write_image
 from ..sinks.io import RecordingWriter, open_recording, replace_when_complete
+from ..sources.formats.cphd_reader import open_cphd
+from ..sources.formats.sigmf_reader import open_sigmf, sigmf_base
 from ..spot.backprojection import backproject
 from ..spot.geometry import cross_range_resolution_m, geometry_from_dict
 from ..spot.pfa import PfaSettings, PolarFormatPlan, ProgressivePolarFormat, polar_format
@@ -54,15 +56,32 @@ def simulate_to(scene: SpotScene, output: str | Path, batch: int = 64) -> int:
     return sim.pulses
 
 
+def open_spot_input(path: str | Path):
+    """A recording by its name: ``*.cphd`` → CPHD, a SigMF file (or the base name of one whose
+    ``.sigmf-meta`` exists) → SigMF, anything else → an rtsar recording (HDF5)."""
+    path = Path(path)
+    if path.suffix.lower() == ".cphd":
+        return open_cphd(path)
+    if sigmf_base(path) is not None:
+        return open_sigmf(path)
+    if not path.exists() and path.with_name(path.name + ".sigmf-meta").exists():
+        return open_sigmf(path.with_name(path.name + ".sigmf-meta"))
+    return open_recording(path)
+
+
 class SpotRecording:
-    """A spotlight recording, checked: its configuration, geometry, rotation and channels."""
+    """A spotlight recording, checked: its configuration, geometry, rotation and channels.
+    Read from rtsar's .h5 or from the CPHD / SigMF that ``rtsar export`` made of one."""
 
     def __init__(self, path: str | Path):
-        self.rec = open_recording(path)
+        self.rec = open_spot_input(path)
         spot = self.rec.scene.get(SPOT_KEY)
         if not isinstance(spot, dict) or "spotlight_geometry" not in spot:
             self.rec.close()
-            raise ValueError(f"{path}: not a spotlight recording (no spotlight geometry)")
+            raise ValueError(
+                f"{path}: not a spotlight recording (no spotlight geometry): a strip-map "
+                "recording is imaged by `rtsar process`"
+            )
         self.config = self.rec.config
         self.geometry = geometry_from_dict(spot["spotlight_geometry"])
         self.rotation_rad = float(spot.get("rotation_rad", 0.0))

@@ -265,6 +265,10 @@ def recorded_scene(d: dict | None, source) -> Scene | None:
     when it does not parse."""
     if not d:
         return None
+    if isinstance(d, dict) and "spotlight" in d:  # rtsar.app.spotlight's recordings
+        raise ValueError(
+            f"{source} is a spotlight recording: form its image with `rtsar spotlight {source}`"
+        )
     try:
         return scene_from_dict(d, name=d.get("name", "scene"))
     except (ValueError, TypeError) as exc:

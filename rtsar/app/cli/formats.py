@@ -3,6 +3,7 @@ formats").  The writers are rtsar.sinks.exports; they need the optional extra ``
 
 from __future__ import annotations
 
+import sys
 import time
 
 from ...sinks.exports.cphd import write_cphd
@@ -47,9 +48,18 @@ def cmd_export(args) -> int:
         if args.cphd:
             info = write_cphd(rec, args.cphd, frame)
             print(
-                f"wrote {args.cphd}: CPHD 1.0.1, {info['vectors']} vectors × {info['samples']} "
-                f"samples, {info['domain']} domain ({time.perf_counter() - t0:.1f} s)"
+                f"wrote {args.cphd}: CPHD 1.0.1 {info['mode']}, {info['vectors']} vectors × "
+                f"{info['samples']} samples, channel(s) {', '.join(info['channels'])}, "
+                f"{info['domain']} domain ({time.perf_counter() - t0:.1f} s)"
             )
+            if info["left_out"]:
+                print(
+                    f"note: {args.cphd} leaves out the auxiliary channel(s) "
+                    f"{', '.join(info['left_out'])} (rtsar's strip-map CPHD export writes the "
+                    f"main channel only): {args.input} keeps them, and so does "
+                    f"`rtsar export {args.input} --sigmf OUT`",
+                    file=sys.stderr,
+                )
         if args.sigmf:
             info = write_sigmf(rec, args.sigmf)
             more = f" + channels {', '.join(info['channels'])}" if info["channels"] else ""
@@ -66,7 +76,9 @@ def add_parsers(sub) -> None:
         help="a recording as CPHD or SigMF, an image as SICD",
         description="Write a recording (rtsar .h5, or a CPHD / SigMF file rtsar reads) as "
         "CPHD 1.0.1 (NGA phase history: FX domain, per-pulse positions, the scene reference "
-        "point on the centre line) and/or SigMF (one capture, one annotation per shot, every "
+        "point on the centre line; a spotlight recording on its arc, the SRP at the scene "
+        "centre, its bistatic receiver as a second channel; strip-map auxiliary channels are "
+        "left out, and named) and/or SigMF (one capture, one annotation per shot, every "
         "channel), or an image file as SICD (NITF).  Needs the optional packages: "
         'pip install "rtsar[formats]".  Fields filled: README "Standard formats".',
     )

@@ -400,6 +400,13 @@ def check_channels(recording, chain=None, heights=None) -> list[str]:
         missing = [c for c in stage.channels if c not in have]
         if missing:
             held = ", ".join(sorted(have)) or "the main channel only"
+            if str(recording.path).lower().endswith(".cphd"):  # rtsar's CPHD export drops them
+                raise ValueError(
+                    f"{option} reads the auxiliary channel(s) {', '.join(missing)}, but "
+                    f"{recording.path} holds {held} (a CPHD export leaves auxiliary channels "
+                    "out): process the .h5 recording it was exported from, or its SigMF "
+                    "export (`rtsar export REC.h5 --sigmf OUT`), which keep every channel"
+                )
             raise ValueError(
                 f"{option} reads the auxiliary channel(s) {', '.join(missing)}, but "
                 f"{recording.path} holds {held}: simulate the scene with the effect that makes "

@@ -49,7 +49,12 @@ def add_parsers(sub) -> None:
         "is formed (resolution 0.886·λ/2Δθ_so_far) and published on the ZeroMQ topic 'spot'; "
         "the last one equals the batch image.",
     )
-    s.add_argument("recording", nargs="?", help="spotlight recording (.h5); omit with --live")
+    s.add_argument(
+        "recording",
+        nargs="?",
+        help="spotlight recording (.h5, or its `rtsar export` as .cphd / .sigmf-meta); omit "
+        "with --live",
+    )
     s.add_argument("-o", "--output", help="image file to write (.h5, image[x, y])")
     s.add_argument(
         "--live",

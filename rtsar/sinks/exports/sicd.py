@@ -193,6 +193,12 @@ def write_sicd(image_path: str | Path, path: str | Path, frame: LocalFrame | Non
     """Write the rtsar image file ``image_path`` as SICD (NITF) at ``path``."""
     require_formats(SICDType, "SICD export")
     image, azimuth_m, range_m, attrs = read_image(image_path)
+    if "spotlight" in attrs:  # rtsar.app.spotlight.write_spot_image: an arc, not a track
+        raise ValueError(
+            f"{image_path} is a spotlight image: SICD export of spotlight images is not "
+            "supported (rtsar's SICD geometry is a straight strip-map track); export the "
+            "recording's phase history with `rtsar export REC.h5 --cphd OUT.cphd` instead"
+        )
     if image.shape[0] < 2 or image.shape[1] < 2:
         raise ValueError(f"{image_path}: an image of {image.shape} has no grid to describe")
     text = attrs["config"]

@@ -11,6 +11,12 @@ annotation per shot (``core:sample_start`` = p·S, ``core:sample_count`` = S) un
 ``rtsar:channels``: every auxiliary channel of a version 2 recording is a SigMF recording of its
 own beside it, ``OUT.NAME.sigmf-data``/``-meta`` (its own sample rate and shot length), listed
 there by name and file.  rtsar.sources.formats.sigmf_reader reads all of it back.
+
+A spotlight recording (rtsar.spot) keeps its geometry in ``rtsar:scene`` and its per-shot
+``rtsar:along_track_m`` is the arc position R₀θ_n; each annotation adds the station's position
+on the arc, ``rtsar:station_position_m`` (the spotlight frame of rtsar.spot.geometry: x
+cross-range, y down-range, z out of the collection plane, origin at the scene centre), and the
+bistatic channel's global ``rtsar:receiver_position_m``, so the true geometry travels per shot.
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ... import __version__
+from ...sources.formats.cphd_reader import spot_geometry_of
 from ...sources.formats.requirements import require_formats
 from ...sources.formats.sigmf_reader import RTSAR_EXTENSION, sigmf_base
 from ..io import replace_when_complete
@@ -117,16 +124,25 @@ def _write_all(rec, base: Path, files: list) -> dict:
     time_s = np.asarray(rec.time_s, np.float64)
     along = rec.start_along_track_m + cfg.geometry.along_track_step_m * np.arange(rec.pulses)
     position = rec.position_m
+    spot = spot_geometry_of(rec.scene, rec.path)
+    station = None if spot is None else spot.station_m()
+    if station is not None and len(station) != rec.pulses:
+        raise ValueError(
+            f"{rec.path}: {rec.pulses} shots, the spotlight geometry plans {len(station)}"
+        )
     channels = []
     for (name, ds), pair in zip(rec.channels.items(), files, strict=False):
         width = ds.shape[1]
         cbase = base.with_name(f"{base.name}.{name}")
         rate = cfg.waveform.sample_rate_hz * width / s
+        extra = {"rtsar:channel": name, "rtsar:samples_per_shot": int(width)}
+        if spot is not None and spot.bistatic and name == "bistatic":
+            extra["rtsar:receiver_position_m"] = [float(v) for v in spot.receiver_m()]
         _write_channel(
             pair,
             ds,
             rate,
-            {"rtsar:channel": name, "rtsar:samples_per_shot": int(width)},
+            extra,
             [(p * width, width, {"rtsar:pulse_index": int(index[p])}) for p in range(rec.pulses)],
             rec,
         )
@@ -140,6 +156,8 @@ def _write_all(rec, base: Path, files: list) -> dict:
         }
         if position is not None:
             md["rtsar:position_m"] = [float(v) for v in position[p]]
+        if station is not None:
+            md["rtsar:station_position_m"] = [float(v) for v in station[p]]
         annotations.append((p * s, s, md))
     _write_channel(
         files[-1],

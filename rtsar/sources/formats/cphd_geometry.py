@@ -120,3 +120,46 @@ def derived_config(pvp, num_samples: int):
         }
     )
     return cfg, local[:, 0], local
+
+
+# A spotlight collection (rtsar.spot.geometry) in rtsar's local frame, for the exports and their
+# reader.  The spotlight frame is right-handed: x cross-range, y down-range (away from the
+# station at θ = 0), z out of the collection plane, origin at the scene centre.  The local frame
+# is x east, y south, z up with its origin on the ellipsoid.  The bench has no "up": the
+# collection plane is placed through the local origin (the scene centre, the CPHD's SRP) with
+# x east and y pointing north and down at SPOT_GRAZE_DEG (CPHD's schema needs an incidence
+# below 90°, i.e. a station above the ground), so the station at θ = 0 sits south of the scene
+# and above it.  A rotation: every distance, hence every path length, is kept.
+SPOT_GRAZE_DEG = 30.0
+_G = np.radians(SPOT_GRAZE_DEG)
+SPOT_TO_LOCAL = np.array(  # rows: spotlight x, y, z in local (east, south, up) coordinates
+    [[1.0, 0.0, 0.0], [0.0, -np.cos(_G), -np.sin(_G)], [0.0, -np.sin(_G), np.cos(_G)]]
+)
+SPOT_CHANNELS_PARAMETER = "rtsar:channels"  # ProductInfo: CPHD identifier → rtsar channel
+
+
+def spot_to_local_m(points_m: np.ndarray) -> np.ndarray:
+    """Spotlight-frame points or vectors [..., 3] → rtsar's local frame (x east, y south, z up)."""
+    return np.asarray(points_m, np.float64) @ SPOT_TO_LOCAL
+
+
+def spot_station_local(geometry, time_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(positions, velocities) [pulse, 3] of the spotlight Tx/Rx station in the local frame:
+    P_n = -R₀ (sin θ_n, cos θ_n, 0) (rtsar.spot.geometry) and its exact derivative along the arc,
+    dθ/dt from the shots' times (constant: θ advances by step/R₀ each shot)."""
+    pos = spot_to_local_m(geometry.station_m())
+    t = np.asarray(time_s, np.float64)
+    th = geometry.angles_rad()
+    rate = geometry.step_rad * (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 else 0.0
+    vel = -geometry.range_m * rate * np.stack([np.cos(th), -np.sin(th), 0 * th], -1)
+    return pos, spot_to_local_m(vel)
+
+
+def channel_config(cfg, reference_range_m: float):
+    """``cfg`` with the dechirp reference (LO delay as a one-way range) and the range centre at
+    ``reference_range_m``: the configuration of a receive channel with its own LO (the
+    spotlight's bistatic receiver), whose range window is centred on that reference."""
+    d = cfg.to_dict()
+    d["waveform"]["reference_range_m"] = float(reference_range_m)
+    d["processor"]["range_centre_m"] = float(reference_range_m)
+    return config_from_dict(d)

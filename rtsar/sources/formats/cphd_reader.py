@@ -6,7 +6,9 @@ processing configuration (ProductInfo parameter ``rtsar:config``) and reads back
 shots it was made of; for any other file a configuration is derived from the PVPs
 (rtsar.sources.formats.cphd_geometry).  The signal vectors go back to shots through the inverse
 of rtsar.sources.formats.phase_history; anything else (TOA domain, several channels, a curved
-track) is refused in one line.
+track) is refused in one line.  A spotlight recording rtsar exported (its scene holds the
+spotlight geometry, rtsar.spot) is read back with its arc checked against that geometry and its
+other channels (the bistatic receiver, ``rtsar:channels``) as auxiliary channels.
 """
 
 from __future__ import annotations
@@ -17,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from ...params import C_M_PER_S, config_from_dict
-from .cphd_geometry import derived_config
+from ...spot.geometry import geometry_from_dict
+from .cphd_geometry import SPOT_CHANNELS_PARAMETER, channel_config, derived_config, spot_to_local_m
 from .foreign import ForeignRecording, check_telemetry
 from .geometry import LocalFrame
 from .phase_history import fx_mapping, fx_to_shots
@@ -35,6 +38,22 @@ def srp_delay_s(pvp, srp_range_m: float) -> np.ndarray:
     tx = np.linalg.norm(pvp["TxPos"] - pvp["SRPPos"], axis=-1)
     rcv = np.linalg.norm(pvp["RcvPos"] - pvp["SRPPos"], axis=-1)
     return (tx + rcv - 2.0 * srp_range_m) / C_M_PER_S
+
+
+SPOT_KEY = "spotlight"  # a spotlight recording's scene: {"spotlight": SpotScene.to_dict()}
+SPOT_ARC_TOLERANCE_M = 1e-6  # the stored positions against the arc of the recorded geometry
+
+
+def spot_geometry_of(scene: dict | None, path):
+    """The spotlight geometry (rtsar.spot.geometry) a recording's scene carries; None for a
+    strip-map recording; ValueError naming ``path`` when it does not parse."""
+    spot = (scene or {}).get(SPOT_KEY)
+    if not isinstance(spot, dict) or "spotlight_geometry" not in spot:
+        return None
+    try:
+        return geometry_from_dict(spot["spotlight_geometry"])
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
 
 
 class _FxShots:
@@ -106,10 +125,14 @@ def open_cphd(path: str | Path) -> ForeignRecording:
         if root.findtext("./{*}Global/{*}DomainType") != "FX":
             raise ValueError("only FX-domain CPHD is read (this one is TOA domain)")
         channels = root.findall("./{*}Data/{*}Channel")
-        if len(channels) != 1:
-            raise ValueError(f"{len(channels)} channels: rtsar reads one-channel CPHD")
-        channel = channels[0].findtext("./{*}Identifier")
         params = _parameters(tree)
+        scene = json.loads(params.get("rtsar:scene", "{}") or "{}")
+        spot = spot_geometry_of(scene, path) if "rtsar:config" in params else None
+        if len(channels) != 1 and spot is None:
+            raise ValueError(f"{len(channels)} channels: rtsar reads one-channel CPHD")
+        ref_id = root.findtext("./{*}Channel/{*}RefChId")
+        channels.sort(key=lambda c: c.findtext("./{*}Identifier") != ref_id)  # reference first
+        channel = channels[0].findtext("./{*}Identifier")
         pvp = reader.read_pvps(channel)
         vectors = len(pvp)
         derived = None
@@ -118,7 +141,6 @@ def open_cphd(path: str | Path) -> ForeignRecording:
         else:  # made elsewhere: a configuration from the collection's geometry
             derived = derived_config(pvp, int(channels[0].findtext("./{*}NumSamples")))
             cfg = derived[0]
-        scene = json.loads(params.get("rtsar:scene", "{}") or "{}")
         m = fx_mapping(cfg)
         if int(channels[0].findtext("./{*}NumSamples")) != m.num_samples:
             raise ValueError(
@@ -135,6 +157,9 @@ def open_cphd(path: str | Path) -> ForeignRecording:
             local = LocalFrame(lat, lon).from_ecf(pvp["TxPos"])
         else:
             local = derived[2]
+        aux, along = {}, local[:, 0]
+        if spot is not None:
+            along, aux = _spot_channels(reader, channels, params, spot, cfg, local, vectors)
         names = pvp.dtype.names
         index = (
             np.asarray(pvp["rtsar_pulse_index"], np.int64)
@@ -142,7 +167,6 @@ def open_cphd(path: str | Path) -> ForeignRecording:
             else np.arange(vectors, dtype=np.int64)
         )
         time_s = np.asarray(pvp["TxTime"], np.float64)
-        along = local[:, 0]
         check_telemetry(path, cfg, index, along)
         start = float(along[0])  # the derived frame: x = 0 abeam of the middle vector's SRP
         if derived is None:
@@ -160,7 +184,35 @@ def open_cphd(path: str | Path) -> ForeignRecording:
         _FxShots(reader, channel, m, vectors, srp_delay_s(pvp, m.srp_range_m)),
         index,
         time_s,
-        {},
-        position,
+        aux,
+        position if spot is None else None,
         f.close,
     )
+
+
+def _spot_channels(reader, channels, params: dict, spot, cfg, local, vectors: int):
+    """(along-arc positions as the recording's ``along_track_m``, auxiliary channels) of a
+    spotlight CPHD rtsar wrote: the reference channel's TxPos must lie on the recorded arc
+    (within SPOT_ARC_TOLERANCE_M), every other channel is read with its own LO delay."""
+    if vectors != spot.pulses:
+        raise ValueError(f"{vectors} vectors, the spotlight geometry plans {spot.pulses}")
+    arc = spot_to_local_m(spot.station_m())
+    off = float(np.abs(local - arc).max()) if vectors else 0.0
+    if off > SPOT_ARC_TOLERANCE_M:
+        raise ValueError(f"TxPos leaves the recorded spotlight arc by {off:.3g} m")
+    known = json.loads(params.get(SPOT_CHANNELS_PARAMETER, "{}") or "{}")
+    aux = {}
+    for c in channels[1:]:
+        ident = c.findtext("./{*}Identifier")
+        if ident not in known:
+            raise ValueError(
+                f"channel {ident!r} is not one rtsar wrote ({SPOT_CHANNELS_PARAMETER})"
+            )
+        m = fx_mapping(channel_config(cfg, known[ident]["reference_range_m"]))
+        pvp = reader.read_pvps(ident)
+        if len(pvp) != vectors:
+            raise ValueError(f"channel {ident!r} holds {len(pvp)} vectors, not {vectors}")
+        aux[known[ident]["name"]] = _FxShots(
+            reader, ident, m, vectors, srp_delay_s(pvp, m.srp_range_m)
+        )
+    return spot.range_m * spot.angles_rad(), aux  # R₀θ_n, as rtsar spot-simulate records it

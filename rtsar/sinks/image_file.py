@@ -26,6 +26,7 @@ from .h5_output import H5Output, WriteFailed, is_write_error, make_room, reason
 from .io import (
     FORMAT_VERSION,
     IMAGE_FORMAT,
+    NameClaim,
     open_checked,
     partial_prefix,
     remove_stale_partials,
@@ -113,8 +114,10 @@ class ImageWriter:
         self.path = Path(path)
         self.crash_safe = crash_safe
         self.flush_every_s = float(flush_every_s)
+        self._claim = None  # crash-safe: this run's claim on the name (io.NameClaim)
         if crash_safe:
             remove_stale_partials(self.path)
+            self._claim = NameClaim(self.path)
         target = (
             self.path.with_name(partial_prefix(self.path) + "live") if crash_safe else self.path
         )
@@ -125,8 +128,12 @@ class ImageWriter:
         self._image = self._azimuth = self._height = self._valid = self._coherence = None
         self._final = False  # crash-safe: the lines are closed, the final attributes follow
         libver = ("v110", "v110") if crash_safe else None
-        with self._reported():
-            self._out = H5Output(target, libver=libver, shown=self.path)
+        try:
+            with self._reported():
+                self._out = H5Output(target, libver=libver, shown=self.path)
+        except BaseException:
+            self._release()
+            raise
         self._f = self._out.file
         with self._writing():
             self._create(config, range_m, chunk_lines, heights, attrs)
@@ -194,12 +201,19 @@ class ImageWriter:
             if ds is not None and ds.shape[0] > n:  # (None: not created when it failed)
                 ds.resize(n, axis=0)
 
+    def _release(self) -> None:
+        """Remove this run's mark on the name (crash-safe files)."""
+        if self._claim is not None:
+            self._claim.release()
+            self._claim = None
+
     def _failed(self, exc: WriteFailed) -> WriteFailed:
         """A crash-safe file that failed: still under its temporary name (no line flushed), it
         is removed and an earlier file of the name stays; else what was written stays, readable,
         marked incomplete, and the error says how many lines."""
         if not self.crash_safe:
             return exc  # a temporary name, removed by its owner (replace_when_complete)
+        self._release()
         if self._target != self.path:
             self._target.unlink(missing_ok=True)
             return exc.naming(self.path, kept="")
@@ -274,6 +288,12 @@ class ImageWriter:
     def close(self, **attrs) -> None:
         """Close with the final attributes; ``complete`` True unless ``complete=False`` given.
         WriteFailed when the disk refuses the last bytes; nothing after an earlier failure."""
+        try:
+            self._close(attrs)
+        finally:
+            self._release()
+
+    def _close(self, attrs: dict) -> None:
         if not self._out.open:
             return
         complete = attrs.pop("complete", True)

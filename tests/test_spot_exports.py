@@ -4,6 +4,8 @@ generic FX-domain processor focuses it; rtsar reads its CPHD/SigMF back into the
 process/replay/SICD say in one line what a spotlight file is; a strip-map CPHD export names the
 auxiliary channels it leaves out, and a missing channel in a CPHD points to the .h5/SigMF."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -15,14 +17,14 @@ from rtsar.app.cli import main  # noqa: E402
 from rtsar.params import C_M_PER_S  # noqa: E402
 from rtsar.sinks.image_file import read_image  # noqa: E402
 
-R0_M, RB_M = 4.6, 4.0
+R0_M, RB_M, STEP_M = 4.6, 4.0, 5e-4
 TARGET_M = (0.4e-3, -0.3e-3, 0.0)  # off the scene centre: its phase depends on the geometry
 
 
 SPOT_SCENE = f"""
 preset = "crouch-spotlight"
 [geometry]
-along_track_step_m = 5e-4
+along_track_step_m = {STEP_M}
 antenna_length_m = 1e-3
 [processor]
 aperture_pulses = 8
@@ -122,6 +124,20 @@ def test_rtsar_reads_its_spotlight_cphd_and_sigmf_back_into_the_same_image(spot)
             assert main(["spotlight", str(d / src), "-o", str(out), *common]) == 0
             got = read_image(out)[0]
             assert np.abs(got - want).max() <= 1e-5 * np.abs(want).max(), (channel, src)
+
+
+def test_spotlight_sigmf_carries_the_station_on_its_arc_and_the_receiver(spot):
+    d = spot
+    meta = json.loads((d / "sig.sigmf-meta").read_text())
+    got = np.array([a["rtsar:station_position_m"] for a in meta["annotations"]])
+    n = np.arange(len(got))
+    theta = (n - 0.5 * (len(n) - 1)) * STEP_M / R0_M  # rtsar.spot.geometry: θ_n, P_n
+    want = -R0_M * np.stack([np.sin(theta), np.cos(theta), 0 * theta], -1)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    bi = json.loads((d / "sig.bistatic.sigmf-meta").read_text())["global"]
+    b = np.radians(8.0)
+    want_b = [-RB_M * np.sin(b), -RB_M * np.cos(b), 0.0]
+    np.testing.assert_allclose(bi["rtsar:receiver_position_m"], want_b, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("name", ["spot.h5", "spot.cphd", "sig.sigmf-meta"])

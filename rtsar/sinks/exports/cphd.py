@@ -128,7 +128,7 @@ class ExportChannel:
     rcv_m: np.ndarray
     rcv_vel: np.ndarray
     srp_m: np.ndarray  # [3]
-    reference_range_m: float  # the LO delay of the channel as a one-way range
+    reference_range_m: float | None  # the channel's LO delay as a one-way range (FMCW)
 
     def dtau_s(self, frame: LocalFrame) -> np.ndarray:
         """Each vector's SRP delay minus τ_c, from the ECF positions the PVPs will hold."""
@@ -154,7 +154,7 @@ def _strip_collection(rec, frame: LocalFrame):
         g["pos"],
         g["vel"],
         g["srp"],
-        rec.config.waveform.reference_range_m if not m.pulsed else m.srp_range_m,
+        getattr(rec.config.waveform, "reference_range_m", None),  # pulsed: no LO
     )
     scene, dwell = _strip_scene(rec, m, g, frame)
     return [ch], scene, dwell, "STRIPMAP", sorted(rec.channels)

@@ -401,3 +401,54 @@ def test_bench_rounds_are_summarized_by_label():
     assert "ccd_stage_over_isolated" not in s["a"] and s["b"]["ccd_stage_over_isolated"][0] == 0.6
     assert _spread(s["a"]["latency_median_ms"], ".1f") == "3.0 [2.5–9.0]"
     assert _spread(s["b"]["real_time_factor"], ".2f") == "2.00"
+
+
+def test_ctrl_c_during_join_never_ends_it_before_the_stages(tiny):
+    """From a kill review: four quick Ctrl-Cs at the end of `run -o` printed "no image
+    written" while the file was still being completed (and once the interpreter's exit under
+    the writing thread segfaulted).  A KeyboardInterrupt inside Thread.join can mark a running
+    thread as ended (CPython 3.11); the pipeline now waits on events its stages set."""
+    import _thread
+
+    cfg, _, shots = tiny
+    ended = []
+
+    class SlowEnd(StripSink):
+        def strip(self, strip, info):
+            pass
+
+        def end(self, stats, info):
+            time.sleep(1.0)  # the file's final write
+            ended.append(True)
+
+    seq = np.arange(len(shots))
+    src = ReplaySource(shots, seq, seq / cfg.geometry.prf_hz, cfg.geometry.prf_hz, "max", 16)
+    pipe = Pipeline(cfg, src, [SlowEnd()], PipelineSettings(lens_backend="numpy"))
+    pipe.start()
+
+    done = threading.Event()
+
+    def interrupts():
+        for _ in range(12):  # more than join takes: it gives up, and the next join too
+            time.sleep(0.03)
+            if done.is_set():
+                return
+            _thread.interrupt_main()
+
+    interrupter = threading.Thread(target=interrupts, daemon=True)
+    interrupter.start()
+    returned_early = None
+    while returned_early is None:
+        try:
+            pipe.join()
+            returned_early = not ended
+        except KeyboardInterrupt:
+            continue
+    done.set()
+    while interrupter.is_alive() or not ended:  # a late interrupt must not reach pytest
+        try:
+            interrupter.join(0.05)
+            time.sleep(0.05)
+        except KeyboardInterrupt:
+            pass
+    assert not returned_early  # join returned only once the sinks had ended

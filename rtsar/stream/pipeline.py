@@ -35,10 +35,8 @@ publication of the strip holding it.
 ``swath_workers`` = K: lens and CCD run in K processes, a range slice each
 (rtsar.stream.swath); the lens thread sends them the pulses, the CCD thread merges their lines.
 
-This module holds the threads and their wiring only; the pieces are: rtsar.stream.queue (bounded
-queues), ingest (sequence checks), engine (lens and CCD), hold (metadata of held pulses), timing
-(arrivals and flags of lines), height (the second receiver), strips (strips, sinks), swath
-(worker processes) and stats.
+The threads and their wiring only; the pieces: rtsar.stream.queue, ingest (sequence checks),
+engine (lens, CCD), hold (held pulses), timing (of lines), height, strips, swath and stats.
 """
 
 from __future__ import annotations
@@ -161,7 +159,7 @@ class Pipeline:
         self.own = dict.fromkeys(OWN_COUNTERS, 0)  # source and ingest keep theirs
         self._errors: list[BaseException] = []
         self._stop = threading.Event()
-        self._threads: list[threading.Thread] = []
+        self._ended: list[threading.Event] = []  # set by each stage thread as it ends
         self._height_seq = 0
         self.info = StreamInfo(
             stream_id=stream_id or new_stream_id(),
@@ -410,7 +408,7 @@ class Pipeline:
             self.on_stats(d)
 
     # ---- control ----------------------------------------------------------------------------
-    def _guard(self, target):
+    def _guard(self, target, ended: threading.Event):
         def run():
             try:
                 target()
@@ -422,6 +420,8 @@ class Pipeline:
                 self.source.close()
                 for q in (self.q_shots, self.q_lines, self.q_image):
                     q.close()
+            finally:
+                ended.set()
 
         return run
 
@@ -431,11 +431,10 @@ class Pipeline:
         if self.settings.stages == "split":
             stages.insert(2, self._ccd_stage if self.swath is None else self._swath_stage)
         for target in stages:
-            t = threading.Thread(
-                target=self._guard(target), name=f"rtsar-{target.__name__[1:]}", daemon=True
-            )
-            self._threads.append(t)
-            t.start()
+            ended = threading.Event()
+            self._ended.append(ended)
+            name = f"rtsar-{target.__name__[1:]}"
+            threading.Thread(target=self._guard(target, ended), name=name, daemon=True).start()
 
     def stop(self) -> None:
         """Stop the source; what is in flight is still processed and published, promptly: the
@@ -468,9 +467,11 @@ class Pipeline:
         return self.stats
 
     def _wait(self) -> None:
-        for t in self._threads:
-            while t.is_alive():
-                t.join(0.1)
+        # Events, not Thread.join: a Ctrl-C inside Thread.join can mark a running thread ended
+        # (CPython 3.11), and the run went on while the file was still being written.
+        for ended in self._ended:
+            while not ended.wait(0.1):
+                pass
 
     def run(self) -> PipelineStats:
         self.start()

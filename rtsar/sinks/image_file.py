@@ -26,11 +26,11 @@ from .h5_output import H5Output, WriteFailed, is_write_error, make_room, reason
 from .io import (
     FORMAT_VERSION,
     IMAGE_FORMAT,
-    NameClaim,
     open_checked,
     partial_prefix,
     remove_stale_partials,
 )
+from .name_claim import NameClaim
 
 
 def write_image(

@@ -17,7 +17,6 @@ Complex values are HDF5 compounds of two floats named r and i (h5py's convention
 
 from __future__ import annotations
 
-import fcntl
 import glob
 import json
 import os
@@ -82,59 +81,6 @@ def remove_stale_partials(path: str | Path) -> list[Path]:
                 continue
             removed.append(stale)
     return removed
-
-
-class NameClaim:
-    """This process's claim on an output name for a whole run (a live file, which takes its
-    name with its first lines and grows under it): the empty file ``.NAME.partial-OWNER-
-    writing``, held under an exclusive ``flock`` until :meth:`release` (the system drops the
-    lock when the process dies, however it dies).  Two live writers of one name would each
-    rename their file over the other's, and one run's lines would end in no file: a claim
-    whose lock another process holds refuses the name (ValueError), one left unlocked by a
-    dead writer is removed."""
-
-    def __init__(self, path: str | Path):
-        path = Path(path)
-        start = f".{path.name}.partial-"
-        self.path = path.with_name(partial_prefix(path) + "writing")
-        try:
-            self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError as exc:
-            raise ValueError(f"cannot write {path}: {exc.strerror or exc}") from None
-        # Made first, then compared: of two writers starting together one sees the other.
-        for other in sorted(path.parent.glob(glob.escape(start) + "*-writing")):
-            if other != self.path and _held(other):
-                self.release()
-                host, _, pid = other.name[len(start) : -len("-writing")].rpartition(".")
-                raise ValueError(
-                    f"cannot write {path}: another rtsar process (pid {pid} on "
-                    f"{host.split('@')[0]}) is writing it now; give another name"
-                )
-
-    def release(self) -> None:
-        if self._fd is not None:
-            self.path.unlink(missing_ok=True)
-            os.close(self._fd)  # the lock goes with it
-            self._fd = None
-
-
-def _held(mark: Path) -> bool:
-    """Whether a running process holds ``mark``'s lock; an unheld mark is removed."""
-    try:
-        fd = os.open(mark, os.O_RDWR)
-    except OSError:  # removed meanwhile, or not ours to open: not in the way
-        return False
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        return True
-    except OSError:  # a file system without locks: trust the mark
-        return True
-    finally:
-        os.close(fd)
-    mark.unlink(missing_ok=True)  # its writer is gone
-    return False
 
 
 def _owner_of_pid(pid: int | None) -> str:

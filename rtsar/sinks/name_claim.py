@@ -1,0 +1,67 @@
+"""A live writer's claim on its output name, held for the whole run (rtsar.sinks.image_file).
+
+A live image file takes its name with its first lines and grows under it; two live writers of
+one name would each rename their file over the other's, and one run's lines would end in no
+file.  The claim is an empty hidden file beside the output, named like the writer's temporaries
+(rtsar.sinks.io.partial_prefix), under an exclusive ``flock`` that the system drops when the
+process dies, however it dies: a claim whose lock is held refuses the name to another writer,
+one left unlocked by a dead writer is removed by the next.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import glob
+import os
+from pathlib import Path
+
+from .io import partial_prefix
+
+
+class NameClaim:
+    """This process's claim on ``path`` (module docstring): the empty file ``.NAME.partial-
+    OWNER-writing``, locked until :meth:`release`.  ValueError when another running process
+    holds a claim on the name."""
+
+    def __init__(self, path: str | Path):
+        path = Path(path)
+        start = f".{path.name}.partial-"
+        self.path = path.with_name(partial_prefix(path) + "writing")
+        try:
+            self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            raise ValueError(f"cannot write {path}: {exc.strerror or exc}") from None
+        # Made first, then compared: of two writers starting together one sees the other.
+        for other in sorted(path.parent.glob(glob.escape(start) + "*-writing")):
+            if other != self.path and _held(other):
+                self.release()
+                host, _, pid = other.name[len(start) : -len("-writing")].rpartition(".")
+                raise ValueError(
+                    f"cannot write {path}: another rtsar process (pid {pid} on "
+                    f"{host.split('@')[0]}) is writing it now; give another name"
+                )
+
+    def release(self) -> None:
+        if self._fd is not None:
+            self.path.unlink(missing_ok=True)
+            os.close(self._fd)  # the lock goes with it
+            self._fd = None
+
+
+def _held(mark: Path) -> bool:
+    """Whether a running process holds ``mark``'s lock; an unheld mark is removed."""
+    try:
+        fd = os.open(mark, os.O_RDWR)
+    except OSError:  # removed meanwhile, or not ours to open: not in the way
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    except OSError:  # a file system without locks: trust the mark
+        return True
+    finally:
+        os.close(fd)
+    mark.unlink(missing_ok=True)  # its writer is gone
+    return False

@@ -322,3 +322,35 @@ def test_knobs_that_would_do_nothing_or_less_than_asked_are_said(tmp_path, capsy
     assert "give --physical" in capsys.readouterr().err
     assert main(["process", rec, "-o", out, "--lens", "numpy", "--range-migration-taps", "4"]) == 0
     assert "critically sampled range axis" in capsys.readouterr().err
+
+
+def test_an_image_keeps_the_corrections_keys_it_was_focused_with(tmp_path, capsys):
+    """From a cold review: `--correct linearize` and `linearize:taps=4` gave different pixels
+    with identical attributes (only the stage names were kept).  Images now keep the
+    `--correct` values as given, from process, from a live run's -o and through the strip
+    header (correction_specs, a JSON list in the order the stages run)."""
+    import json
+
+    from rtsar.sinks.record import processing_from_header
+
+    (tmp_path / "s.toml").write_text(SCENE.format(correlator="fft"))
+    rec = str(tmp_path / "rec.h5")
+    assert main(["simulate", str(tmp_path / "s.toml"), "-o", rec, "--pulses", "300"]) == 0
+    given = ["--correct", "pga:follow_walk=0", "--correct", "pra:along_track_m=0,range_m=2000"]
+    want = ["pra:along_track_m=0,range_m=2000", "pga:follow_walk=0"]  # the order they run in
+    batch_img, live_img = str(tmp_path / "b.h5"), str(tmp_path / "l.h5")
+    assert main(["process", rec, "-o", batch_img, "--lens", "numpy", *given]) == 0
+    assert main(["replay", rec, "--rate", "max", "-o", live_img, "--lens", "numpy", *given]) == 0
+    for img in (batch_img, live_img):
+        attrs = read_image(img)[3]
+        assert attrs["corrections"] == "pra,pga"
+        assert json.loads(attrs["correction_specs"]) == want
+    plain = str(tmp_path / "p.h5")
+    assert main(["process", rec, "-o", plain, "--lens", "numpy"]) == 0
+    assert read_image(plain)[3]["correction_specs"] == ""
+    header = {"processing": {"lens": "numpy", "correlator": "fft", "corrections": ["pga"],
+                             "correction_specs": ["pga:follow_walk=0"], "physical": None}}  # fmt: skip
+    assert json.loads(processing_from_header(header)["correction_specs"]) == ["pga:follow_walk=0"]
+    del header["processing"]["correction_specs"]  # an older publisher's header
+    assert processing_from_header(header)["correction_specs"] == ""
+    capsys.readouterr()

@@ -175,12 +175,19 @@ def make_stage(
     raise ValueError(f"unknown correction {name!r}")  # pragma: no cover - parse_spec checks
 
 
+def _spec_text(name: str, params: dict) -> str:
+    """``name:key=value,…`` of a parsed spec."""
+    keys = ",".join(f"{k}={v}" for k, v in params.items())
+    return f"{name}:{keys}" if keys else name
+
+
 class CorrectionChain:
     """The chosen stages in ORDER: ``raw`` before the lens, ``lines`` after it, ``flush`` at end."""
 
     def __init__(self, named_stages: list[tuple[str, CorrectionStage]]):
         """(name, stage) pairs, run in the given order (``from_specs`` sorts them by ORDER)."""
         self.named = list(named_stages)
+        self.specs = [n for n, _ in self.named]  # what the user gave (from_specs: with keys)
         bad = [
             n
             for n, s in self.named
@@ -217,7 +224,11 @@ class CorrectionChain:
             for n, p in sorted(parsed, key=lambda np_: ORDER.index(np_[0]))
             if not (both and n == "hcn")
         ]
-        return cls(stages)
+        chain = cls(stages)
+        given = [s.strip() if isinstance(s, str) else _spec_text(*s) for s in specs]
+        pairs = sorted(zip(names, given, strict=True), key=lambda p: ORDER.index(p[0]))
+        chain.specs = [g for _, g in pairs]
+        return chain
 
     def __bool__(self) -> bool:
         return bool(self.named)

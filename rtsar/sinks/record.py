@@ -29,13 +29,18 @@ from .wire import height_header, strip_header
 MAX_FILL_BYTES = 64 << 20  # the most zeros written for one gap of missing lines
 
 
-def processing_attrs(correlator: str, corrections=(), physical: dict | None = None) -> dict:
+def processing_attrs(
+    correlator: str, corrections=(), physical: dict | None = None, specs=()
+) -> dict:
     """The image attributes that say how it was focused: ``correlator``; ``corrections`` (the
-    stages, comma-separated, "" for none); ``physical`` (JSON of the physical mode's settings
-    where the emulated CCD ran in place of the correlator, else "")."""
+    stages, comma-separated, "" for none); ``correction_specs`` (JSON list of the
+    ``--correct`` values as given, keys and all, in the order the stages run; "" for none);
+    ``physical`` (JSON of the physical mode's settings where the emulated CCD ran in place of
+    the correlator, else "")."""
     return {
         "correlator": correlator,
         "corrections": ",".join(corrections),
+        "correction_specs": json.dumps(list(specs)) if specs else "",
         "physical": json.dumps(physical) if physical else "",
     }
 
@@ -50,15 +55,18 @@ def processing_from_header(header: dict) -> dict:
     lens, correlator, names, physical = (
         p.get(k) for k in ("lens", "correlator", "corrections", "physical")
     )
+    specs = p.get("correction_specs", [])  # (absent from an older publisher's headers)
     if not (
         isinstance(lens, str)
         and isinstance(correlator, str)
         and isinstance(names, list)
         and all(isinstance(n, str) for n in names)
         and (physical is None or isinstance(physical, dict))
+        and isinstance(specs, list)
+        and all(isinstance(s, str) for s in specs)
     ):
         return {}
-    return {"lens": lens, **processing_attrs(correlator, names, physical)}
+    return {"lens": lens, **processing_attrs(correlator, names, physical, specs)}
 
 
 class StripRecorder:
@@ -268,5 +276,10 @@ class ImageFileSink(StripSink):
         self.lines = self.recorder.finish(
             stats["counters"],
             lens=info.lens_backend,
-            **processing_attrs(info.config.processor.correlator, info.corrections, info.physical),
+            **processing_attrs(
+                info.config.processor.correlator,
+                info.corrections,
+                info.physical,
+                info.correction_specs,
+            ),
         )

@@ -59,6 +59,7 @@ def strip_header(strip: Strip, info: StreamInfo) -> dict:
             "lens": info.lens_backend,
             "correlator": info.config.processor.correlator,
             "corrections": list(info.corrections),
+            "correction_specs": list(info.correction_specs),
             "physical": info.physical,
         },
     }

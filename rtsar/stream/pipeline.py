@@ -168,11 +168,11 @@ class Pipeline:
             lens_backend=self.engine.lens.backend,
             range_m=self.engine.range_m,
             start_along_track_m=float(start_along_track_m),
-            # perf_counter times (latency) + this offset = UNIX times (headers).
-            clock_offset_s=time.time() - time.perf_counter(),
+            clock_offset_s=time.time() - time.perf_counter(),  # + perf_counter = UNIX time
             heights=self.height is not None,
             height_kind="" if height is None else height.kind,
             corrections=tuple(corrections.names) if corrections else (),
+            correction_specs=tuple(corrections.specs) if corrections else (),
             physical=None if physical is None else physical.to_dict(),
         )
         self.strips = StripAssembler(self.info)

@@ -67,6 +67,7 @@ class StreamInfo:
     height_kind: str = ""  # their method: "insal" or "sam"
     config_dict: dict = field(default_factory=dict)  # config.to_dict(), formed once
     corrections: tuple = ()  # names of the correction stages, in the order they run
+    correction_specs: tuple = ()  # the --correct values as given (keys and all), in that order
     physical: dict | None = None  # the physical mode's settings (PhysicalSettings.to_dict)
 
     def __post_init__(self):

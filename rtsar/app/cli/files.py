@@ -204,6 +204,7 @@ def cmd_process(args) -> int:
                     cfg.processor.correlator,
                     chain.names if chain else (),
                     None if physical is None else physical.to_dict(),
+                    chain.specs if chain else (),
                 ),
                 **extra,
             )

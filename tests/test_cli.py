@@ -348,8 +348,9 @@ def test_an_image_keeps_the_corrections_keys_it_was_focused_with(tmp_path, capsy
     plain = str(tmp_path / "p.h5")
     assert main(["process", rec, "-o", plain, "--lens", "numpy"]) == 0
     assert read_image(plain)[3]["correction_specs"] == ""
-    header = {"processing": {"lens": "numpy", "correlator": "fft", "corrections": ["pga"],
-                             "correction_specs": ["pga:follow_walk=0"], "physical": None}}  # fmt: skip
+    specs = ["pga:follow_walk=0"]
+    header = {"processing": {"lens": "numpy", "correlator": "fft", "corrections": ["pga"]}}
+    header["processing"].update(correction_specs=specs, physical=None)
     assert json.loads(processing_from_header(header)["correction_specs"]) == ["pga:follow_walk=0"]
     del header["processing"]["correction_specs"]  # an older publisher's header
     assert processing_from_header(header)["correction_specs"] == ""

@@ -355,3 +355,23 @@ def test_an_image_keeps_the_corrections_keys_it_was_focused_with(tmp_path, capsy
     del header["processing"]["correction_specs"]  # an older publisher's header
     assert processing_from_header(header)["correction_specs"] == ""
     capsys.readouterr()
+
+
+def test_a_correction_value_the_stage_refuses_names_the_correction(tmp_path, capsys):
+    """From a cold review: a stage's own check named its class ("PGASettings.follow_walk must
+    be 0 or 1", "HCNAligner.max_lines …") or nothing ("taps must be an even integer"), and
+    `--correct hcn+linearize`, the stage's name in the README, was an unknown correction."""
+    from rtsar.focus.chain import CorrectionChain
+    from rtsar.presets import preset as named
+
+    cfg = named("crouch-sal")
+    for spec, said in (
+        ("pga:follow_walk=2", "correction pga: follow_walk must be 0 or 1"),
+        ("hcn:max_lines=-3", "correction hcn: max_lines must be None or an integer >= 1"),
+        ("linearize:taps=7", "correction linearize: taps must be an even integer >= 2"),
+        ("hcn+linearize", "give those two"),
+    ):
+        with pytest.raises(ValueError) as caught:
+            CorrectionChain.from_specs([spec], cfg)
+        assert str(caught.value).startswith(said) or said in str(caught.value), spec
+        assert "Settings." not in str(caught.value) and "Aligner." not in str(caught.value)

@@ -63,6 +63,11 @@ def parse_spec(text: str) -> tuple[str, dict]:
     """``"name"`` or ``"name:key=value,key=value"`` (numbers as floats) → (name, params)."""
     name, _, rest = text.partition(":")
     name = name.strip().replace("-", "_")
+    if name == "hcn+linearize":
+        raise ValueError(
+            "hcn+linearize is the stage that --correct hcn --correct linearize make together: "
+            "give those two (hcn's keys as hcn:KEY=VALUE, the resampling's as linearize:…)"
+        )
     if name not in ORDER:
         raise ValueError(f"unknown correction {name!r}; choose from {', '.join(ORDER)}")
     params = {}
@@ -147,7 +152,18 @@ def make_stage(
             if not value.is_integer():
                 raise ValueError(f"correction {name}: {key} must be a whole number, got {value:g}")
             params[key] = int(value)
-    context = context or CorrectionContext()
+    try:
+        return _build(name, config, params, context or CorrectionContext(), hcn_params)
+    except ValueError as exc:  # a stage's own check of a value: told as this --correct's
+        text = str(exc)
+        if text.startswith(("correction ", "the reference_region", "pra needs")):
+            raise
+        for cls, _ in _STAGE_CLASSES.values():  # "PGASettings.follow_walk …" → "follow_walk …"
+            text = text.replace(f"{cls.__name__}.", "")
+        raise ValueError(f"correction {name}: {text.replace('PGASettings.', '')}") from None
+
+
+def _build(name, config, params, context, hcn_params) -> CorrectionStage:
     if name == "hcn":
         return HCNAligner(config, **params)
     if name == "linearize":

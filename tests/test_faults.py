@@ -296,3 +296,57 @@ def test_the_subscribers_own_stream_is_never_forgotten():
         assert sub.counters["missed_strips"] == 45
     finally:
         sub.close()
+
+
+def test_subscribe_says_by_its_status_whether_the_stream_ended(tmp_path, capsys):
+    """From reviews: `subscribe` stopped by --timeout after its publisher died exited 0 though
+    its file said complete = False; and an end message before any strip (a spotlight
+    publisher's) was ignored, so subscribe waited for its timeout (forever without one)."""
+    import threading
+    import time
+
+    import zmq
+
+    from rtsar.sinks.image_file import read_image
+
+    def bare_publisher():
+        pub = zmq.Context.instance().socket(zmq.XPUB)
+        pub.bind("tcp://127.0.0.1:*")
+        return pub, pub.getsockopt_string(zmq.LAST_ENDPOINT)
+
+    def subscribing(endpoint, out, timeout):
+        result = {}
+        args = ["subscribe", endpoint, "-o", str(out), "--timeout", str(timeout)]
+        t = threading.Thread(target=lambda: result.setdefault("rc", main(args)), daemon=True)
+        t.start()
+        return t, result
+
+    bins = 8
+    header = {"format": "rtsar-strip", "version": 1, "stream_id": "s", "seq": 0, "first_line": 0,
+              "line_count": 2, "range_bins": bins, "dtype": "complex64", "byte_order": "little",
+              "azimuth_first_m": 0.0, "azimuth_step_m": 1.0, "range_first_m": 100.0,
+              "range_step_m": 3.0, "flagged_lines": [], "counters": {}}  # fmt: skip
+    header["config"] = CFG.to_dict()
+    pub, endpoint = bare_publisher()
+    t, result = subscribing(endpoint, tmp_path / "cut.h5", 1.0)
+    assert pub.poll(10_000)
+    pub.recv()
+    time.sleep(0.2)
+    pub.send_multipart([b"strip", json.dumps(header).encode(), bytes(2 * bins * 8)])
+    t.join(20)  # the publisher sends nothing more: --timeout stops it
+    assert not t.is_alive() and result["rc"] == 1
+    assert not read_image(tmp_path / "cut.h5")[3]["complete"]
+    pub.close(0)
+
+    pub, endpoint = bare_publisher()
+    t, result = subscribing(endpoint, tmp_path / "none.h5", 60.0)
+    assert pub.poll(10_000)
+    pub.recv()
+    time.sleep(0.2)
+    start = time.monotonic()
+    pub.send_multipart([b"end", json.dumps({"stream_id": "x", "counters": {}}).encode()])
+    t.join(20)
+    assert not t.is_alive() and time.monotonic() - start < 10  # not the 60 s timeout
+    assert result["rc"] == 1  # nothing to write
+    assert "the publisher's stream ended before any strip" in capsys.readouterr().err
+    pub.close(0)

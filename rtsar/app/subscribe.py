@@ -20,7 +20,9 @@ def subscribe(
     stream=None,
 ) -> int:
     """Write every strip received into ``output`` until the stream's end message, Ctrl-C, or
-    ``timeout_s`` without a message.  Missed strips become zero lines, counted and listed."""
+    ``timeout_s`` without a message.  Missed strips become zero lines, counted and listed.
+    Exit status 0 once the end came, 1 when the timeout stopped it first (or nothing came),
+    128 + n after signal n."""
     stream = stream or sys.stderr
     check_writable(output)  # before listening, not at the first strip
     sub = StripSubscriber(endpoint, curve_server_key, curve_client_key, hwm_messages=0)
@@ -44,7 +46,10 @@ def subscribe(
                 rec.add_strip(msg.header, msg.lines)
             elif msg.topic == "height":
                 rec.add_height(msg.header, msg.lines, msg.valid, msg.coherence)
-            elif msg.topic == "end" and rec.writer is not None:
+            elif msg.topic == "end" and rec.writer is None:  # (a spotlight publisher's too)
+                print("subscribe: the publisher's stream ended before any strip", file=stream)
+                break
+            elif msg.topic == "end":
                 if msg.header.get("stream_id") == rec.stream_id:
                     counters = msg.header.get("counters")
                     final = counters if is_counters(counters) else rec.counters
@@ -66,7 +71,10 @@ def subscribe(
             complete=final is not None,
         )
         sub.close()
-    status = 0 if interrupted is None else signals.exit_status(interrupted)
+    if interrupted is not None:
+        status = signals.exit_status(interrupted)
+    else:  # 1: --timeout stopped it before the stream's end (its publisher gone or stalled)
+        status = 0 if final is not None else 1
     if rec.writer is None:
         print(
             "subscribe: no strip received; nothing written"

@@ -418,7 +418,8 @@ def add_parsers(sub) -> None:
         "--timeout",
         type=float,
         help="stop after this many seconds of silence (default: none, until the stream's end "
-        "message or Ctrl-C)",
+        "message or Ctrl-C); stopped so, before the end, the file says complete = False and "
+        "the exit status is 1",
     )
     s.add_argument(
         "--sicd",

@@ -375,3 +375,28 @@ def test_a_correction_value_the_stage_refuses_names_the_correction(tmp_path, cap
             CorrectionChain.from_specs([spec], cfg)
         assert str(caught.value).startswith(said) or said in str(caught.value), spec
         assert "Settings." not in str(caught.value) and "Aligner." not in str(caught.value)
+
+
+def test_the_pra_retro_an_image_was_focused_on_is_kept(tmp_path):
+    """From a cold review: `--correct pra` without a position took the scene's retro or the
+    brightest point of a first pass (printed once), and the image kept only "pra"; images of
+    the two differ by the error's own slope (61 lines).  correction_specs holds the point."""
+    import json
+
+    from rtsar.focus.chain import CorrectionChain, CorrectionContext
+    from rtsar.presets import preset as named
+
+    cfg = named("tiny")
+    chain = CorrectionChain.from_specs(["pga", "pra"], cfg, CorrectionContext(retro_m=(1.5, 2e3)))
+    assert chain.specs == ["pra:along_track_m=1.5,range_m=2000", "pga"]
+    given = CorrectionChain.from_specs(["pra:range_m=1990"], cfg, CorrectionContext(retro_m=(0, 1)))
+    assert given.specs == ["pra:along_track_m=0,range_m=1990"]  # what the user gave wins
+    (tmp_path / "s.toml").write_text(SCENE.format(correlator="fft"))
+    rec = str(tmp_path / "rec.h5")
+    assert main(["simulate", str(tmp_path / "s.toml"), "-o", rec, "--pulses", "300"]) == 0
+    with h5py.File(rec, "r+") as f:  # a recording without its scene: pra finds the point
+        del f.attrs["scene"]
+    img = str(tmp_path / "img.h5")
+    assert main(["process", rec, "-o", img, "--lens", "numpy", "--correct", "pra"]) == 0
+    (spec,) = json.loads(read_image(img)[3]["correction_specs"])
+    assert spec.startswith("pra:along_track_m=") and ",range_m=" in spec

@@ -192,8 +192,10 @@ def _build(name, config, params, context, hcn_params) -> CorrectionStage:
 
 
 def _spec_text(name: str, params: dict) -> str:
-    """``name:key=value,…`` of a parsed spec."""
-    keys = ",".join(f"{k}={v}" for k, v in params.items())
+    """``name:key=value,…`` of a parsed spec (numbers to 12 significant digits)."""
+    keys = ",".join(
+        f"{k}={v:.12g}" if isinstance(v, float) else f"{k}={v}" for k, v in params.items()
+    )
     return f"{name}:{keys}" if keys else name
 
 
@@ -242,6 +244,11 @@ class CorrectionChain:
         ]
         chain = cls(stages)
         given = [s.strip() if isinstance(s, str) else _spec_text(*s) for s in specs]
+        retro = (context or CorrectionContext()).retro_m
+        for i, (name, params) in enumerate(parsed):  # pra's retro as it ran, from the context
+            if name == "pra" and retro is not None:
+                where = {"along_track_m": retro[0], "range_m": retro[1]}
+                given[i] = _spec_text("pra", {**where, **params})
         pairs = sorted(zip(names, given, strict=True), key=lambda p: ORDER.index(p[0]))
         chain.specs = [g for _, g in pairs]
         return chain

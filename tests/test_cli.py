@@ -400,3 +400,17 @@ def test_the_pra_retro_an_image_was_focused_on_is_kept(tmp_path):
     assert main(["process", rec, "-o", img, "--lens", "numpy", "--correct", "pra"]) == 0
     (spec,) = json.loads(read_image(img)[3]["correction_specs"])
     assert spec.startswith("pra:along_track_m=") and ",range_m=" in spec
+
+
+def test_a_missing_channel_names_the_options_that_ask_for_it():
+    """From a cold read: the channel refusal named `--correct hcn+linearize`, a spelling that
+    is itself refused; it names `--correct hcn --correct linearize`."""
+    from rtsar.app.live import check_channels_delivered
+    from rtsar.focus.chain import CorrectionChain, correct_option
+    from rtsar.presets import preset as named
+
+    assert correct_option("pga") == "--correct pga"
+    chain = CorrectionChain.from_specs(["hcn", "linearize"], named("crouch-sal"))
+    with pytest.raises(ValueError) as caught:
+        check_channels_delivered((), "a ZeroMQ stream", chain)
+    assert str(caught.value).startswith("--correct hcn --correct linearize read the auxiliary")

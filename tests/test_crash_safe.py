@@ -440,3 +440,50 @@ def test_two_live_writers_of_one_name_refuse_the_second(tmp_path):
     w.close()
     assert read_image(path)[0].shape[0] == 16
     assert [p.name for p in tmp_path.iterdir()] == ["img.h5"]  # the dead claim went too
+
+
+def test_a_name_claim_is_released_on_every_failure_and_never_leaks(tmp_path, monkeypatch):
+    """From a cold read of the claim: a writer that failed to start with another error than a
+    full disk (a bad attribute, a Ctrl-C) kept its claim, its temporary and a descriptor, and
+    the process could not write the name again ("Resource temporarily unavailable"); a second
+    claim in one process leaked a descriptor; a file system without locks refused every live
+    writer."""
+    import errno
+    import fcntl
+
+    from rtsar.presets import preset
+    from rtsar.sinks import name_claim
+    from rtsar.sinks.image_file import ImageWriter
+    from rtsar.sinks.record import StripRecorder
+
+    cfg = preset("tiny")
+    axis = np.arange(cfg.processor.range_bins, dtype=float)
+    path = tmp_path / "img.h5"
+    with pytest.raises(TypeError):
+        ImageWriter(path, cfg, axis, crash_safe=True, bad=object())
+    assert list(tmp_path.iterdir()) == []  # no claim, no temporary left
+    fds = len(os.listdir("/proc/self/fd"))
+    w = ImageWriter(path, cfg, axis, crash_safe=True)  # the name is free again
+    for _ in range(20):
+        with pytest.raises(ValueError, match="this process is writing it already"):
+            ImageWriter(path, cfg, axis, crash_safe=True)
+    w.close()
+    assert len(os.listdir("/proc/self/fd")) <= fds + 1  # (h5py may keep one for itself)
+
+    # The recorder claims the name when its run starts, not at its first strip.
+    rec = StripRecorder(tmp_path / "live.h5", "test")
+    with pytest.raises(ValueError, match="this process is writing it already"):
+        StripRecorder(tmp_path / "live.h5", "test")
+    assert rec.finish() == 0  # no strip came: the claim goes
+    StripRecorder(tmp_path / "live.h5", "test").finish()
+
+    def no_locks(fd, op):
+        raise OSError(errno.ENOLCK, "No locks available")
+
+    monkeypatch.setattr(name_claim, "fcntl", type("NoLocks", (), {
+        "flock": staticmethod(no_locks), "LOCK_EX": fcntl.LOCK_EX, "LOCK_NB": fcntl.LOCK_NB
+    }))  # fmt: skip
+    w = ImageWriter(tmp_path / "nfs.h5", cfg, axis, crash_safe=True)  # marks alone tell
+    w.write(np.ones((16, len(axis)), np.complex64), np.arange(16) * 0.5)
+    w.close()
+    assert read_image(tmp_path / "nfs.h5")[0].shape[0] == 16

@@ -217,7 +217,7 @@ def test_launches_release_the_gil_and_match_pyopencls(opencl, monkeypatch):
     monkeypatch.setattr(cl_launch, "_enqueue", lambda *a: calls.append(a) or real(*a))
     got = AOLens(plan, kernel="lanes").compress(x)
     assert len(calls) == 1  # launched through cl_launch
-    monkeypatch.setenv("RTSAR_CL_GIL_FREE", "0")
+    monkeypatch.setenv("RTSAR_CL_GIL_FREE", "Off")  # 0, false, no, off: any case
     monkeypatch.setattr(cl_launch, "_resolved", False)
     fallback = AOLens(plan, kernel="lanes")
     assert fallback._enqueue is None

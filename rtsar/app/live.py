@@ -10,6 +10,7 @@ import math
 import sys
 import time
 
+from ..focus.chain import correct_option
 from ..params import Config
 from ..scene.effects import REGISTRY as EFFECTS
 from ..sinks.io import check_writable
@@ -147,7 +148,7 @@ def check_source_channels(source, corrections=None, height=None, fix=None) -> No
 def _readers(corrections, height) -> list[tuple[str, tuple]]:
     """(option, channels) of each stage that reads auxiliary channels."""
     named = corrections.named if corrections else []
-    readers = [(f"--correct {name}", stage.channels) for name, stage in named]
+    readers = [(correct_option(name), stage.channels) for name, stage in named]
     if height is not None:
         readers.append((f"--height {height.kind}", tuple(height.channels)))
     return [(option, channels) for option, channels in readers if channels]
@@ -168,7 +169,8 @@ def check_channels_delivered(have, description, corrections=None, height=None, f
         return
     held = ", ".join(have) if have else "the main channel only"
     raise ValueError(
-        f"{' and '.join(options)} {'reads' if len(options) == 1 else 'read'} the auxiliary "
+        f"{' and '.join(options)} {'reads' if ' '.join(options).count('--') == 1 else 'read'} "
+        "the auxiliary "
         f"channel{'s' if len(missing) > 1 else ''} {', '.join(missing)}, but the source "
         f"({description}) delivers {held}" + (f": {fix(missing)}" if fix else "")
     )
@@ -374,6 +376,8 @@ def run_stream(
         return signals.exit_status(exc)
     finally:
         publisher.close()
+        if recorder is not None:  # (a run that never started: its claim on the name goes)
+            recorder.recorder.release_claim()
     if tty:
         stream.write("\n")
     d = stats.as_dict()

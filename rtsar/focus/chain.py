@@ -191,6 +191,12 @@ def _build(name, config, params, context, hcn_params) -> CorrectionStage:
     raise ValueError(f"unknown correction {name!r}")  # pragma: no cover - parse_spec checks
 
 
+def correct_option(stage_name: str) -> str:
+    """How a user asks for a stage: ``--correct NAME`` (the stage ``hcn+linearize`` is asked
+    for as ``--correct hcn --correct linearize``)."""
+    return " ".join(f"--correct {n}" for n in stage_name.split("+"))
+
+
 def _spec_text(name: str, params: dict) -> str:
     """``name:key=value,…`` of a parsed spec (numbers to 12 significant digits)."""
     keys = ",".join(

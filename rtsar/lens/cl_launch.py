@@ -7,9 +7,9 @@ publishing threads of the pipeline cannot run a line of Python.  A ctypes call r
 so :func:`gil_free_enqueue` calls the same OpenCL entry point through ctypes on the objects
 pyopencl made (their handles, ``int_ptr``): every OpenCL object carries its driver's dispatch
 table, so any ICD loader routes the call to the right driver.  The loader is the one already in
-the process (pyopencl's), found in /proc/self/maps, else the system's ``libOpenCL``; without one
-(or when ``RTSAR_CL_GIL_FREE=0``) :func:`gil_free_enqueue` returns None and the lens launches
-through pyopencl.
+the process (pyopencl's), found in /proc/self/maps, else the system's ``libOpenCL``.  Without
+one, or with ``RTSAR_CL_GIL_FREE`` set to 0, false, no or off (read once per process),
+:func:`gil_free_enqueue` returns None and the lens launches through pyopencl.
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ def _loader_path() -> str | None:
 
 
 def _resolve():
-    if os.environ.get("RTSAR_CL_GIL_FREE", "1") == "0":
+    if os.environ.get("RTSAR_CL_GIL_FREE", "1").strip().lower() in ("0", "false", "no", "off"):
         return None
     path = _loader_path()
     if path is None:

@@ -109,13 +109,16 @@ class ImageWriter:
         crash_safe: bool = False,
         flush_every_s: float = 0.5,
         heights: bool = False,
+        claim: NameClaim | None = None,
         **attrs,
     ):
         self.path = Path(path)
         self.crash_safe = crash_safe
         self.flush_every_s = float(flush_every_s)
-        self._claim = None  # crash-safe: this run's claim on the name (io.NameClaim)
-        if crash_safe:
+        # Crash-safe: this run's claim on the name (rtsar.sinks.name_claim), taken here or
+        # handed over by a recorder that took it when its run started; released at close.
+        self._claim = claim
+        if crash_safe and claim is None:
             remove_stale_partials(self.path)
             self._claim = NameClaim(self.path)
         target = (
@@ -128,15 +131,23 @@ class ImageWriter:
         self._image = self._azimuth = self._height = self._valid = self._coherence = None
         self._final = False  # crash-safe: the lines are closed, the final attributes follow
         libver = ("v110", "v110") if crash_safe else None
+        self._out = None
         try:
             with self._reported():
                 self._out = H5Output(target, libver=libver, shown=self.path)
-        except BaseException:
+            self._f = self._out.file
+            with self._writing():
+                self._create(config, range_m, chunk_lines, heights, attrs)
+        except BaseException:  # (a WriteFailed has been told already: _failed)
+            if self._out is not None and self._out.open:
+                try:
+                    self._out.close()
+                except (OSError, RuntimeError, ValueError):  # the first error is the one told
+                    pass
+            if crash_safe and self._target != self.path:
+                self._target.unlink(missing_ok=True)  # our temporary, no line in it
             self._release()
             raise
-        self._f = self._out.file
-        with self._writing():
-            self._create(config, range_m, chunk_lines, heights, attrs)
         self._flushed_s = time.monotonic()
         self._dirty = False
 

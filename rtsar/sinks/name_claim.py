@@ -27,12 +27,21 @@ class NameClaim:
         path = Path(path)
         start = f".{path.name}.partial-"
         self.path = path.with_name(partial_prefix(path) + "writing")
+        self._fd = None
         try:
             self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as exc:
             raise ValueError(f"cannot write {path}: {exc.strerror or exc}") from None
-        # Made first, then compared: of two writers starting together one sees the other.
+        try:
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:  # our own mark, locked: this process writes the name already
+            os.close(self._fd)
+            self._fd = None
+            raise ValueError(f"cannot write {path}: this process is writing it already") from None
+        except OSError:  # a file system without locks: the marks alone tell (as in _held)
+            pass
+        # Made first, then compared: of two writers starting together, at least one sees the
+        # other (often both do, and both refuse; never do both go on).
         for other in sorted(path.parent.glob(glob.escape(start) + "*-writing")):
             if other != self.path and _held(other):
                 self.release()

@@ -24,6 +24,8 @@ import numpy as np
 from ..params import config_from_dict
 from ..stream.strips import StreamInfo, Strip, StripSink
 from .image_file import ImageWriter
+from .io import remove_stale_partials
+from .name_claim import NameClaim
 from .wire import height_header, strip_header
 
 MAX_FILL_BYTES = 64 << 20  # the most zeros written for one gap of missing lines
@@ -75,6 +77,10 @@ class StripRecorder:
     def __init__(self, path: str | Path, source: str, max_fill_bytes: int = MAX_FILL_BYTES):
         self.path = Path(path)
         self.source = source
+        # The name is claimed now, when the run starts (a second live writer of it is refused
+        # before any work), and handed to the file's writer at the first strip.
+        remove_stale_partials(self.path)
+        self._claim: NameClaim | None = NameClaim(self.path)
         self.max_fill_bytes = int(max_fill_bytes)
         self.writer: ImageWriter | None = None
         self.stream_id: str | None = None
@@ -116,11 +122,13 @@ class StripRecorder:
                 return
             nr = int(header["range_bins"])
             range_m = header["range_first_m"] + header["range_step_m"] * np.arange(nr)
+            claim, self._claim = self._claim, None  # the writer releases it now
             self.writer = ImageWriter(
                 self.path,
                 cfg,
                 range_m,
                 crash_safe=True,
+                claim=claim,
                 heights=bool(header.get("height_strips", False)),
                 source=self.source,
                 first_line=first,
@@ -216,6 +224,12 @@ class StripRecorder:
         if self.writer is not None:
             self.writer.flush_if_due()
 
+    def release_claim(self) -> None:
+        """Give up the claim on the name if no writer took it (no strip came)."""
+        if self._claim is not None:
+            self._claim.release()
+            self._claim = None
+
     def _write(self, lines: np.ndarray) -> None:
         j = self.next_line + np.arange(len(lines))
         self.writer.write(lines, self._az0 + j * self._daz)
@@ -224,6 +238,7 @@ class StripRecorder:
 
     def finish(self, final_counters: dict | None = None, **attrs) -> int:
         """Close the file (attributes: counters, gaps, flags); return the number of lines."""
+        self.release_claim()
         if self.writer is None:
             return 0
         if self._candidate is not None:  # the stream ended on it: kept, as ingest keeps its last

@@ -12,7 +12,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from ...focus.chain import ORDER as CORRECTIONS
-from ...focus.chain import CorrectionChain
+from ...focus.chain import CorrectionChain, correct_option
 from ...lens import LENS_BACKENDS, range_axis_m
 from ...params import PRECISIONS, Processor
 from ...physical import CARRIERS, paper_ccd
@@ -392,7 +392,7 @@ def correction_chain(args, cfg, scene=None, start_along_track_m=0.0, recording=N
 def check_channels(recording, chain=None, heights=None) -> list[str]:
     """The auxiliary channels the --correct stages and the --height stage read (the only ones
     to read from ``recording``); a clear error when the recording lacks one."""
-    readers = [(f"--correct {name}", stage) for name, stage in (chain.named if chain else [])]
+    readers = [(correct_option(name), stage) for name, stage in (chain.named if chain else [])]
     if heights is not None:
         readers.append((f"--height {heights.kind}", heights))
     have, needed = set(recording.channels), set()

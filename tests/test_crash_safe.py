@@ -487,3 +487,38 @@ def test_a_name_claim_is_released_on_every_failure_and_never_leaks(tmp_path, mon
     w.write(np.ones((16, len(axis)), np.complex64), np.arange(16) * 0.5)
     w.close()
     assert read_image(tmp_path / "nfs.h5")[0].shape[0] == 16
+
+
+def test_strips_go_to_the_file_a_chunk_at_a_time_and_all_by_each_flush(tmp_path):
+    """From a new-user review: with `-o`, the live demo beside one busy process fell behind
+    (1 549 Hz, median latency 76 ms against 1 599 Hz and 9 ms without -o): each 16-line strip
+    was its own HDF5 write, holding the GIL, 100 times a second.  Lines now go to the file a
+    chunk (64 lines) at a time, the first ones at once (the file takes its name), and every
+    line handed over is in the file by the next flush and at the close."""
+    from rtsar.presets import preset
+    from rtsar.sinks.image_file import ImageWriter
+
+    cfg = preset("tiny")
+    nr = cfg.processor.range_bins
+    path = tmp_path / "img.h5"
+    w = ImageWriter(path, cfg, np.arange(nr, dtype=float), crash_safe=True, flush_every_s=1e9)
+
+    def strip(k):
+        return np.full((16, nr), k + 1, np.complex64), np.arange(16 * k, 16 * k + 16) * 0.5
+
+    w.write(*strip(0))
+    assert (w.lines, w.lines_handed) == (16, 16) and path.exists()  # named with its first lines
+    for k in range(1, 4):
+        w.write(*strip(k))
+    assert (w.lines, w.lines_handed) == (16, 64)  # 48 waiting: less than a chunk
+    w.write(*strip(4))
+    assert w.lines == 80  # a chunk's worth went in one write
+    w.write(*strip(5))
+    w._flush()  # what a flush_if_due does when due, or the owner when the stream is idle
+    assert w.lines == 96 and read_image(path)[0].shape[0] == 96
+    w.write(*strip(6))
+    w.close()
+    image, az, _, attrs = read_image(path)
+    assert image.shape[0] == 112 and attrs["complete"]
+    np.testing.assert_array_equal(image.real[:, 0], np.repeat(np.arange(1, 8), 16))
+    np.testing.assert_array_equal(az, np.arange(112) * 0.5)

@@ -210,7 +210,7 @@ class StripRecorder:
         if not len(rows):
             self.inconsistent_heights += 1
             return
-        limit = w.lines + self.max_fill_bytes // 8 // height_m.shape[1]
+        limit = w.lines_handed + self.max_fill_bytes // 8 // height_m.shape[1]
         if rows[-1] >= limit:  # far beyond the image's rows: not obeyed
             self.inconsistent_heights += 1
             return

@@ -7,7 +7,8 @@ image file has taken its name, lets it stream for a random 0 .. --max-delay seco
 it with SIGKILL (what an OOM kill or a power cut does to a process).  Kills alternate between
 `run -o IMG` and `subscribe -o IMG` (fed by a `run` on a private ipc:// endpoint).  Every file
 must open with `rtsar.sinks.image_file.read_image`, hold whole lines with finite positions, and say
-`complete = False`; no temporary file may be left.  Prints one line per kill and a summary;
+`complete = False`; no temporary file may be left (the writer's empty claim mark, which the next
+writer of the name removes, may).  Prints one line per kill and a summary;
 exit status 1 if any file failed.  Not a test (tests/test_crash_safe.py is the fast one).
 """
 
@@ -69,7 +70,13 @@ def one_kill(folder: Path, k: int, mode: str, delay_s: float) -> dict:
         image, az, rg, attrs = read_image(out)
     except ValueError as exc:
         return {**row, "ok": False, "why": str(exc)}
-    leftovers = [p.name for p in folder.iterdir() if p.name.startswith(f".img{k}.h5")]
+    # The writer's claim on the name (an empty `-writing` mark, unlocked by its death) stays
+    # for the next writer of the name to remove; a data temporary must not.
+    leftovers = [
+        p.name
+        for p in folder.iterdir()
+        if p.name.startswith(f".img{k}.h5") and not p.name.endswith("-writing")
+    ]
     good = (
         len(image) == len(az)
         and bool(np.isfinite(az).all())

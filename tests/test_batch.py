@@ -340,3 +340,25 @@ def test_a_sigmf_exports_channel_files_are_read_with_it_not_as_recordings(tmp_pa
     err = capsys.readouterr().err
     assert "auxiliary channel 'reference_interferometer' of a SigMF export" in err
     assert "give its recording" in err and "r.sigmf-meta" in err
+
+
+def test_a_batch_refused_before_its_start_leaves_no_empty_out_dir(tmp_path, capsys):
+    """From a new-user review: a batch refused before any file started (every file refused)
+    still created its --out-dir, empty."""
+    folder = tmp_path / "in"
+    folder.mkdir()
+    with h5py.File(folder / "broken.h5", "w") as f:
+        f["x"] = 1  # an HDF5 file that is no recording
+    out = tmp_path / "out"
+    assert main(["batch", str(folder), "--out-dir", str(out)]) == 2
+    assert not out.exists()
+    out.mkdir()  # a folder the user made stays, empty or not
+    assert main(["batch", str(folder), "--out-dir", str(out)]) == 2
+    assert out.is_dir()
+    capsys.readouterr()
+
+
+def test_rtsar_demo_alone_runs_the_insal_demo():
+    from rtsar.app.cli import build_parser
+
+    assert build_parser().parse_args(["demo"]).which == "insal"

@@ -180,9 +180,18 @@ def cmd_batch(args) -> int:
     options = {k: v for k, v in vars(args).items() if k not in BATCH_ONLY}
     for spec in args.correct or []:
         parse_spec(spec)  # an unknown correction stops here, as in process (exit status 2)
+    out_dir = Path(args.out_dir)
+    made = not out_dir.exists()
+    try:
+        return _batch(args, options, out_dir)
+    finally:  # a folder this run made and left empty (refused before the start) goes
+        if made and out_dir.is_dir() and not any(out_dir.iterdir()):
+            out_dir.rmdir()
+
+
+def _batch(args, options: dict, out_dir: Path) -> int:
     with batch.StopSignal() as stop:  # a signal from here on ends with the table
         recordings, skipped = find_recordings(args.inputs)
-        out_dir = Path(args.out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
         if not os.access(out_dir, os.W_OK):
             return die(f"{out_dir}: cannot write there")

@@ -396,7 +396,13 @@ def add_parsers(sub) -> None:
         "and draw with `rtsar quicklook demo.h5 -o demo.png --height demo-height.png`, or give "
         "-o here.",
     )
-    s.add_argument("which", choices=("insal",), help="the demo to run (insal)")
+    s.add_argument(
+        "which",
+        nargs="?",
+        default="insal",
+        choices=("insal",),
+        help="the demo to run (insal, the default)",
+    )
     s.add_argument(
         "--rate", default="5", help="replay rate: a factor of the PRF (default 5: 10 s), or max"
     )

@@ -414,3 +414,16 @@ def test_a_missing_channel_names_the_options_that_ask_for_it():
     with pytest.raises(ValueError) as caught:
         check_channels_delivered((), "a ZeroMQ stream", chain)
     assert str(caught.value).startswith("--correct hcn --correct linearize read the auxiliary")
+
+
+def test_an_hdf5_output_named_like_a_picture_is_refused(tmp_path, capsys):
+    """From a new-user review: `process rec.h5 -o x.png` wrote an HDF5 image under a picture's
+    name without a word."""
+    for args in (
+        ["process", "rec.h5", "-o", str(tmp_path / "x.png")],
+        ["simulate", "tiny", "-o", str(tmp_path / "x.CSV")],
+        ["run", "--duration", "1", "-o", str(tmp_path / "x.nitf")],
+    ):
+        assert main(args) == 2, args
+        assert "writes an HDF5 file (.h5)" in capsys.readouterr().err, args
+    assert list(tmp_path.iterdir()) == []

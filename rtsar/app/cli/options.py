@@ -38,6 +38,15 @@ INPUT_OPTIONS += ("curve_key", "curve_server_key", "curve_client_key")
 OUTPUT_OPTIONS = ("output", "png", "json", "out", "cphd", "sicd", "sigmf")
 COMMAND_INPUTS = {"spotlight": ("live",), "projective": ("simulate",)}  # named like others
 COMMAND_OUTPUTS = {"quicklook": ("height",)}  # --height PNG (elsewhere --height is a method)
+# Commands whose -o writes an HDF5 file (a recording or an image), and the suffixes of what
+# such a file is not: `process rec.h5 -o x.png` wrote HDF5 under a picture's name.
+HDF5_OUTPUT_COMMANDS = (
+    "simulate", "process", "run", "replay", "subscribe", "demo", "spot-simulate", "spotlight"
+)  # fmt: skip
+NOT_HDF5_SUFFIXES = (
+    ".png", ".jpg", ".jpeg", ".gif", ".pdf", ".svg", ".tif", ".tiff", ".csv", ".json", ".txt",
+    ".md", ".toml", ".cphd", ".nitf", ".ntf", ".sigmf", ".sigmf-meta", ".sigmf-data",
+)  # fmt: skip
 
 
 def check_outputs_spare_inputs(args) -> None:
@@ -46,6 +55,14 @@ def check_outputs_spare_inputs(args) -> None:
     A SigMF recording exported onto itself (``export rec.sigmf-meta --sigmf rec``) is the
     exception: that export reads the recording whole first."""
     command = getattr(args, "command", None)
+    output = getattr(args, "output", None)
+    suffix = Path(output).suffix.lower() if output else ""
+    if command in HDF5_OUTPUT_COMMANDS and suffix in NOT_HDF5_SUFFIXES:
+        raise ValueError(
+            f"-o {output}: {command} writes an HDF5 file (.h5), not a {suffix} file; "
+            "pictures come from `rtsar quicklook IMG.h5 -o PICTURE`, CPHD/SICD/SigMF from "
+            "`rtsar export`"
+        )
     inputs = {}
     for name in INPUT_OPTIONS + COMMAND_INPUTS.get(command, ()):
         for value in _values(getattr(args, name, None)):

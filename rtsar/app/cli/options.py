@@ -53,16 +53,9 @@ def check_outputs_spare_inputs(args) -> None:
     """ValueError before any work when an output of the command names one of its inputs (or
     another of its outputs): ``process rec.h5 -o rec.h5`` replaced the recording by its image.
     A SigMF recording exported onto itself (``export rec.sigmf-meta --sigmf rec``) is the
-    exception: that export reads the recording whole first."""
+    exception: that export reads the recording whole first.  An HDF5 output named like
+    another kind of file (``process rec.h5 -o x.png``) is refused too."""
     command = getattr(args, "command", None)
-    output = getattr(args, "output", None)
-    suffix = Path(output).suffix.lower() if output else ""
-    if command in HDF5_OUTPUT_COMMANDS and suffix in NOT_HDF5_SUFFIXES:
-        raise ValueError(
-            f"-o {output}: {command} writes an HDF5 file (.h5), not a {suffix} file; "
-            "pictures come from `rtsar quicklook IMG.h5 -o PICTURE`, CPHD/SICD/SigMF from "
-            "`rtsar export`"
-        )
     inputs = {}
     for name in INPUT_OPTIONS + COMMAND_INPUTS.get(command, ()):
         for value in _values(getattr(args, name, None)):
@@ -85,6 +78,14 @@ def check_outputs_spare_inputs(args) -> None:
                         f"the output {path} is this command's input {inputs[key]}: writing it "
                         "would replace what it reads; choose another output name"
                     )
+    output = getattr(args, "output", None)
+    suffix = Path(output).suffix.lower() if output else ""
+    if command in HDF5_OUTPUT_COMMANDS and suffix in NOT_HDF5_SUFFIXES:
+        raise ValueError(
+            f"-o {output}: {command} writes an HDF5 file (.h5), not a {suffix} file; "
+            "pictures come from `rtsar quicklook IMG.h5 -o PICTURE`, CPHD/SICD/SigMF from "
+            "`rtsar export`"
+        )
 
 
 def _values(value) -> list[str]:

@@ -158,9 +158,9 @@ def make_stage(
         text = str(exc)
         if text.startswith(("correction ", "the reference_region", "pra needs")):
             raise
-        for cls, _ in _STAGE_CLASSES.values():  # "PGASettings.follow_walk …" → "follow_walk …"
-            text = text.replace(f"{cls.__name__}.", "")
-        raise ValueError(f"correction {name}: {text.replace('PGASettings.', '')}") from None
+        for cls in (PGASettings, *(c for c, _ in _STAGE_CLASSES.values())):
+            text = text.replace(f"{cls.__name__}.", "")  # "PGASettings.follow_walk …"
+        raise ValueError(f"correction {name}: {text}") from None
 
 
 def _build(name, config, params, context, hcn_params) -> CorrectionStage:

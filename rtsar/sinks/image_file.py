@@ -28,7 +28,6 @@ from .io import (
     IMAGE_FORMAT,
     open_checked,
     partial_prefix,
-    remove_stale_partials,
 )
 from .name_claim import NameClaim
 
@@ -119,7 +118,6 @@ class ImageWriter:
         # handed over by a recorder that took it when its run started; released at close.
         self._claim = claim
         if crash_safe and claim is None:
-            remove_stale_partials(self.path)
             self._claim = NameClaim(self.path)
         target = (
             self.path.with_name(partial_prefix(self.path) + "live") if crash_safe else self.path

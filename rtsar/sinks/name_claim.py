@@ -15,16 +15,18 @@ import glob
 import os
 from pathlib import Path
 
-from .io import partial_prefix
+from .io import partial_prefix, remove_stale_partials
 
 
 class NameClaim:
     """This process's claim on ``path`` (module docstring): the empty file ``.NAME.partial-
     OWNER-writing``, locked until :meth:`release`.  ValueError when another running process
-    holds a claim on the name."""
+    holds a claim on the name.  Temporaries of the name that killed writers left are removed
+    first (rtsar.sinks.io.remove_stale_partials)."""
 
     def __init__(self, path: str | Path):
         path = Path(path)
+        remove_stale_partials(path)
         start = f".{path.name}.partial-"
         self.path = path.with_name(partial_prefix(path) + "writing")
         self._fd = None

@@ -24,7 +24,6 @@ import numpy as np
 from ..params import config_from_dict
 from ..stream.strips import StreamInfo, Strip, StripSink
 from .image_file import ImageWriter
-from .io import remove_stale_partials
 from .name_claim import NameClaim
 from .wire import height_header, strip_header
 
@@ -79,7 +78,6 @@ class StripRecorder:
         self.source = source
         # The name is claimed now, when the run starts (a second live writer of it is refused
         # before any work), and handed to the file's writer at the first strip.
-        remove_stale_partials(self.path)
         self._claim: NameClaim | None = NameClaim(self.path)
         self.max_fill_bytes = int(max_fill_bytes)
         self.writer: ImageWriter | None = None

@@ -31,3 +31,23 @@ def opencl():
         if os.environ.get("RTSAR_REQUIRE_OPENCL") == "1":
             pytest.fail(f"OpenCL required (RTSAR_REQUIRE_OPENCL=1) but unavailable: {reason}")
         pytest.skip(f"OpenCL unavailable here: {reason}")
+
+
+def fmcw_scene_with_reference(pulses: int, aperture_pulses: int, range_bins: int) -> str:
+    """A small crouch-sal scene file: one point and the reference interferometer's channel
+    (a recording with an auxiliary channel, for the export and batch tests)."""
+    return f"""
+preset = "crouch-sal"
+pulses = {pulses}
+seed = 2
+[processor]
+aperture_pulses = {aperture_pulses}
+range_bins = {range_bins}
+[geometry]
+along_track_step_m = 50e-6
+[[targets]]
+along_track_m = 0.0
+slant_range_m = 1.5002
+[[effects]]
+name = "reference_interferometer"
+"""

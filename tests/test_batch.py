@@ -8,6 +8,7 @@ import time
 import h5py
 import numpy as np
 import pytest
+from conftest import fmcw_scene_with_reference
 
 from rtsar.app import batch
 from rtsar.app.cli import batch as batch_cli
@@ -298,21 +299,7 @@ def test_files_process_would_refuse_are_rows_and_a_folder_says_what_it_skipped(
     assert "x.cphd" in rows["x.cphd"].split("failed", 1)[1]
 
 
-AUX_SCENE = """
-preset = "crouch-sal"
-pulses = 40
-seed = 2
-[processor]
-aperture_pulses = 16
-range_bins = 64
-[geometry]
-along_track_step_m = 50e-6
-[[targets]]
-along_track_m = 0.0
-slant_range_m = 1.5002
-[[effects]]
-name = "reference_interferometer"
-"""
+AUX_SCENE = fmcw_scene_with_reference(40, 16, 64)
 
 
 def test_a_sigmf_exports_channel_files_are_read_with_it_not_as_recordings(tmp_path, capsys):

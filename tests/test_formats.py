@@ -6,6 +6,7 @@ import re
 
 import numpy as np
 import pytest
+from conftest import fmcw_scene_with_reference
 
 sarkit_cphd = pytest.importorskip("sarkit.cphd")
 skver = pytest.importorskip("sarkit.verification")
@@ -40,21 +41,7 @@ name = "noise"
 snr_db = 10.0
 """
 
-FMCW = """
-preset = "crouch-sal"
-pulses = 80
-seed = 2
-[processor]
-aperture_pulses = 32
-range_bins = 128
-[geometry]
-along_track_step_m = 50e-6
-[[targets]]
-along_track_m = 0.0
-slant_range_m = 1.5002
-[[effects]]
-name = "reference_interferometer"
-"""
+FMCW = fmcw_scene_with_reference(80, 32, 128)
 
 
 def _recording(tmp_path, text, name):

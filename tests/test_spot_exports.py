@@ -8,6 +8,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import fmcw_scene_with_reference
 
 sarkit_cphd = pytest.importorskip("sarkit.cphd")
 pytest.importorskip("sigmf")
@@ -162,21 +163,7 @@ def test_sicd_export_of_a_spotlight_image_is_refused_in_one_line(spot, capsys):
     assert not (d / "img.nitf").exists()
 
 
-STRIP_WITH_CHANNEL = """
-preset = "crouch-sal"
-pulses = 64
-seed = 2
-[processor]
-aperture_pulses = 32
-range_bins = 128
-[geometry]
-along_track_step_m = 50e-6
-[[targets]]
-along_track_m = 0.0
-slant_range_m = 1.5002
-[[effects]]
-name = "reference_interferometer"
-"""
+STRIP_WITH_CHANNEL = fmcw_scene_with_reference(64, 32, 128)
 
 
 def test_strip_cphd_export_names_the_channels_it_leaves_out_and_process_points_to_them(

@@ -20,17 +20,78 @@ def opencl_unavailable_here() -> str | None:
     return opencl_unavailable()
 
 
+def opencl_required() -> bool:
+    """In CI (CI=true, as CI services set it) or with RTSAR_REQUIRE_OPENCL=1, the OpenCL lens
+    must run: a test of it that cannot build its kernels fails instead of skipping."""
+    ci = os.environ.get("CI", "").strip().lower() in ("true", "1", "yes")
+    return ci or os.environ.get("RTSAR_REQUIRE_OPENCL") == "1"
+
+
+def skip_or_fail_without_opencl(reason: str):
+    if opencl_required():
+        pytest.fail(f"OpenCL required here (CI=true or RTSAR_REQUIRE_OPENCL=1): {reason}")
+    pytest.skip(f"OpenCL unavailable here: {reason}")
+
+
 @pytest.fixture(scope="session")
 def opencl():
     """For tests of the OpenCL kernels themselves: skipped, with the driver's reason, where no
-    OpenCL device can build a kernel (e.g. PoCL 3.0 on a CPU its LLVM does not know); the rest
-    of the suite then runs on the NumPy lens through ``--lens auto``.  Set RTSAR_REQUIRE_OPENCL=1
-    to make that a failure on machines where OpenCL must work."""
+    OpenCL device can build the lens (`rtsar devices` says why); a failure instead in CI
+    (CI=true) and with RTSAR_REQUIRE_OPENCL=1, where a skipped core path is not a pass."""
     reason = opencl_unavailable_here()
     if reason is not None:
-        if os.environ.get("RTSAR_REQUIRE_OPENCL") == "1":
-            pytest.fail(f"OpenCL required (RTSAR_REQUIRE_OPENCL=1) but unavailable: {reason}")
-        pytest.skip(f"OpenCL unavailable here: {reason}")
+        skip_or_fail_without_opencl(reason)
+
+
+def working_devices() -> list:
+    """The survey's devices that build the lens and compute it right (none without pyopencl)."""
+    try:
+        from rtsar.lens import cl_devices
+
+        return [r for r in cl_devices.survey() if r.reason is None]
+    except (ImportError, RuntimeError):
+        return []
+
+
+def pytest_generate_tests(metafunc):
+    """``cl_device``: a test runs once on every OpenCL device that builds the lens here."""
+    if "cl_device" in metafunc.fixturenames:
+        found = working_devices()
+        metafunc.parametrize(
+            "cl_device",
+            found or [None],
+            ids=[f"{r.index}-{r.short_label}" for r in found] or ["no-device"],
+        )
+
+
+@pytest.fixture
+def cl_device(request):
+    if request.param is None:
+        skip_or_fail_without_opencl(opencl_unavailable_here() or "no device builds the lens")
+    return request.param
+
+
+def pytest_terminal_summary(terminalreporter):
+    """Which OpenCL device ran the lens in this test run, and every device's probe result."""
+    try:
+        from rtsar.lens import cl_devices
+
+        best, why = cl_devices.default_device()
+        reports = cl_devices.survey()
+    except (ImportError, RuntimeError) as exc:
+        terminalreporter.write_sep("-", "OpenCL lens")
+        terminalreporter.write_line(f"no OpenCL here: {exc}")
+        return
+    terminalreporter.write_sep("-", "OpenCL lens")
+    if best is None:
+        terminalreporter.write_line(f"no OpenCL device: the lens ran on NumPy: {why}")
+    else:
+        terminalreporter.write_line(
+            f"OpenCL device of this run: [{best.index}] {best.short_label}: {why}"
+        )
+    for r in reports:
+        state = "refused: " + r.reason if r.reason else f"builds, error {r.error:.1e}"
+        terminalreporter.write_line(f"  [{r.index}] {r.short_label} ({r.kind}): {state}")
 
 
 def fmcw_scene_with_reference(pulses: int, aperture_pulses: int, range_bins: int) -> str:

@@ -194,8 +194,13 @@ def test_program_cache_and_devices(monkeypatch, opencl):
 
 
 def test_no_platform_message(monkeypatch):
+    from rtsar.lens import cl_devices, cl_vendors
+
     monkeypatch.setattr(cl_loader.cl, "get_platforms", lambda: [])
-    with pytest.raises(RuntimeError, match=r"pip install pyopencl\[pocl\]"):
+    monkeypatch.setattr(cl_vendors, "find_pip_drivers", lambda: {})
+    monkeypatch.setattr(cl_devices._platform, "machine", lambda: "x86_64")
+    monkeypatch.setattr(cl_devices.sys, "platform", "linux")
+    with pytest.raises(RuntimeError, match=r"no OpenCL platform.*pip install intel-opencl-rt"):
         cl_loader.select_device()
 
 

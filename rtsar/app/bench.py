@@ -173,9 +173,11 @@ def run_bench(args) -> int:
         check_writable(args.json)  # before the minutes of measuring
     reason = None if args.device else opencl_unavailable()
     if reason is None:
-        from ..lens.cl_loader import device_info
+        from ..lens.cl_loader import default_device, device_info
 
         device = device_info(args.device)
+        if not args.device:
+            device += f", the default device: {default_device()[1]} (`rtsar devices`)"
     else:
         device = f"unavailable ({reason}); OpenCL columns empty, pipelines on the NumPy lens"
     print(

@@ -11,6 +11,7 @@ import sys
 import time
 
 from ..focus.chain import correct_option
+from ..lens.base import survey_devices_first
 from ..params import Config
 from ..scene.effects import REGISTRY as EFFECTS
 from ..sinks.io import check_writable
@@ -104,7 +105,7 @@ def lens_label(lens) -> str:
     """The lens in use, for the banner: "opencl lens", or the fallback and why."""
     if lens.fallback_reason:
         return "NumPy lens (OpenCL unavailable, see the warning above)"
-    return f"{lens.backend} lens"
+    return "OpenCL lens" if lens.backend == "opencl" else "NumPy lens"
 
 
 def problems(counters: dict) -> list[str]:
@@ -312,6 +313,11 @@ def run_stream(
     interrupted = None
     try:
         print("rtsar: preparing the lens and the correlator …", file=stream, flush=True)
+        survey_devices_first(
+            settings.lens_backend,
+            settings.device,
+            lambda m: print(f"rtsar: {m} …", file=stream, flush=True),
+        )
         if settings.swath_workers:
             print(
                 f"rtsar: starting {settings.swath_workers} swath workers (each loads rtsar and "
@@ -358,6 +364,8 @@ def run_stream(
             file=stream,
             flush=True,
         )
+        if getattr(pipe.engine.lens, "choice", None):
+            print(f"rtsar: lens: {pipe.engine.lens.choice}", file=stream, flush=True)
         if wait_subscribers:
             print(
                 f"waiting for {wait_subscribers} subscriber(s) on {endpoint} …",

@@ -29,7 +29,8 @@ class Lens(Protocol):
 
     plan: LensPlan
     backend: str  # "opencl" or "numpy": the backend in use
-    fallback_reason: str | None  # why "auto" did not get OpenCL; None otherwise
+    fallback_reason: str | None  # why "auto" could not run OpenCL at all; None otherwise
+    choice: str | None  # what runs and why, for the banner (set by make_lens)
     precision: str  # Processor.precision
     dtype: type  # the sample type of its output lines
 
@@ -41,59 +42,73 @@ def make_lens(
     backend: str = "auto",
     device: str | None = None,
     precision: str = "complex64",
+    batch: int | None = None,
 ) -> Lens:
     """The AO lens on OpenCL or NumPy's FFT, in ``precision`` (Processor.precision).
 
-    ``backend="auto"``: OpenCL when :func:`opencl_unavailable` finds a working device, else the
-    NumPy lens, with a RuntimeWarning and the reason in the lens's ``fallback_reason`` (unless a
-    device was asked for by ``device`` or RTSAR_OPENCL_DEVICE: then its error is raised).  The
-    backend in use is the lens's ``backend`` attribute.
+    ``backend="auto"``: :func:`rtsar.lens.auto.choose`: the OpenCL lens on a device asked for
+    (``device`` or RTSAR_OPENCL_DEVICE; its error raised if it cannot build), else on the
+    default device where it is faster than the NumPy plan at the run's batch sizes (``batch``:
+    the run's largest), else the NumPy lens, with a RuntimeWarning and the reason in
+    ``fallback_reason`` where OpenCL cannot run at all.  Every lens says what runs
+    and why in its ``choice`` line; the backend in use is its ``backend`` attribute.
     """
     if backend == "auto":
-        requested = _device_requested(device)  # a device asked for by name is never replaced
-        reason = opencl_unavailable(device)
-        if reason is None or requested:
-            from .opencl import AOLens
-
-            try:
-                return AOLens(plan, device=device, precision=precision)
-            except (RuntimeError, ValueError) as exc:  # the probe built, this plan did not
-                if requested:
-                    raise
-                reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        warnings.warn(
-            f"OpenCL lens unavailable, using the NumPy lens (same results, slower): {reason}."
-            " `--lens numpy` says so without this warning.",
-            RuntimeWarning,
-            stacklevel=2,
-        )
-        lens = NumpyLens(plan, precision=precision)
-        lens.fallback_reason = reason
+        try:
+            from .auto import choose
+        except ImportError as exc:  # pyopencl missing or its driver library broken
+            lens = NumpyLens(plan, precision=precision)
+            lens.fallback_reason = f"pyopencl cannot be imported ({exc})"
+            lens.choice = f"NumPy lens ({lens.fallback_reason})"
+        else:
+            lens = choose(plan, precision, batch, device)
+        if lens.fallback_reason:
+            warnings.warn(
+                f"OpenCL lens unavailable, using the NumPy lens (same results, slower): "
+                f"{lens.fallback_reason}. `--lens numpy` says so without this warning.",
+                RuntimeWarning,
+                stacklevel=2,
+            )
         return lens
     if backend == "opencl":
         # Imported here, not above: pyopencl takes a while to load and the NumPy backend and
         # the tools that never compress (presets, quicklook, subscribe) do without it.
         from .opencl import AOLens
 
-        return AOLens(plan, device=device, precision=precision)
+        lens = AOLens(plan, device=device, precision=precision)
+        lens.choice = f"OpenCL lens on {lens.device_label} (--lens opencl)"
+        return lens
     if backend == "numpy":
-        return NumpyLens(plan, precision=precision)
+        lens = NumpyLens(plan, precision=precision)
+        lens.choice = "NumPy lens (--lens numpy)"
+        return lens
     raise ValueError(f"lens backend must be one of {LENS_BACKENDS}, got {backend!r}")
 
 
-def _device_requested(device) -> bool:
-    from .cl_loader import ENV_DEVICE
+def survey_devices_first(backend: str, device: str | None, say) -> None:
+    """Probe the OpenCL devices now where the lens will need them (``auto`` or ``opencl`` with
+    no device asked for), so the first run on a machine says what its pause is (``say``: one
+    line before the probing; nothing when the survey is cached)."""
+    if backend == "numpy" or device is not None or os.environ.get("RTSAR_OPENCL_DEVICE", ""):
+        return
+    try:
+        from .cl_devices import survey
+    except ImportError:  # pyopencl missing: make_lens says so
+        return
+    try:
+        survey(say=say)
+    except RuntimeError:  # no platform: make_lens says so
+        pass
 
-    return device is not None or bool(os.environ.get(ENV_DEVICE, "").strip())
 
-
-def opencl_unavailable(device: str | None = None) -> str | None:
-    """None if an OpenCL lens can run on ``device`` here, else the reason (one line)."""
+def opencl_unavailable(device: str | None = None, say=None) -> str | None:
+    """None if an OpenCL lens can run on ``device`` (default: the survey's choice) here, else
+    the reason (one line, with what to install where nothing runs)."""
     try:
         from . import cl_loader
     except ImportError as exc:  # pyopencl missing or its driver library broken
         return f"pyopencl cannot be imported ({exc})"
-    return cl_loader.probe(device)
+    return cl_loader.probe(device, say=say)
 
 
 def compress_reference(plan: LensPlan, shots: np.ndarray) -> np.ndarray:

@@ -1,30 +1,31 @@
-"""The one OpenCL kernel loader of rtsar: device choice, kernel sources, cached program builds.
+"""The one OpenCL kernel loader of rtsar: kernel sources, shared contexts, cached program builds.
 
 Kernels live in ``.cl`` files, one per stage, in the top-level ``kernels/`` folder of a source
 checkout; ``pip install`` ships the same folder as the package ``rtsar.kernels``.  Programs are
 specialised with ``-D`` build options (never by editing the source text) and built once per
-(context, file, options).
-
-Device choice, in order: an explicit ``device`` argument (a ``pyopencl.Device`` or a
-case-insensitive substring of "platform name / device name"), the environment variable
-``RTSAR_OPENCL_DEVICE`` (same substring rule), else PoCL's CPU device, else any CPU device, else
-the first device found.
+(context, file, options).  Which device runs them is chosen in :mod:`rtsar.lens.cl_devices`
+(every device is a candidate; by default the fastest that builds the lens).
 """
 
 from __future__ import annotations
 
-import importlib.resources
 import os
 import threading
+import warnings
 import weakref
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 
 import pyopencl as cl
+
+# cl_devices registers the pip-installed drivers on import, before the ICD loader's first call
+from .cl_devices import ENV_DEVICE, default_device, install_hint, list_devices, select_device
+from .cl_probe import first_line
+from .cl_sources import kernel_path, kernel_source, kernels_dir
 
 __all__ = [
     "ENV_DEVICE",
     "build_program",
+    "default_context_queue",
     "default_queue",
     "device_info",
     "kernel_path",
@@ -35,122 +36,14 @@ __all__ = [
     "select_device",
 ]
 
-ENV_DEVICE = "RTSAR_OPENCL_DEVICE"
-
-_NO_PLATFORM = (
-    "no OpenCL platform found.  rtsar runs its kernels on any OpenCL device; the portable CPU "
-    "driver PoCL comes with `pip install pyopencl[pocl]` (or install an ICD for your GPU)."
-)
-
 _lock = threading.RLock()
 _programs: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # ctx -> {key: Program}
-_queues: dict[int, cl.CommandQueue] = {}  # device.int_ptr -> queue on a context of its own
+_queues: dict[int, tuple[cl.Context, cl.CommandQueue]] = {}  # device.int_ptr -> its own
 
 
 # --------------------------------------------------------------------------------------------
-# kernel sources
+# devices: chosen in rtsar.lens.cl_devices; one context and queue each, shared
 # --------------------------------------------------------------------------------------------
-
-
-def kernels_dir():
-    """Folder holding the ``.cl`` sources (a ``Traversable``; a ``Path`` in a source checkout).
-
-    The installed package ``rtsar.kernels`` is preferred; without it (a checkout on
-    ``sys.path``) the top-level ``kernels/`` folder next to the ``rtsar`` package is used.
-    """
-    try:
-        folder = importlib.resources.files("rtsar.kernels")
-        if folder.joinpath("lens.cl").is_file():
-            return folder
-    except ModuleNotFoundError:
-        pass
-    checkout = Path(__file__).resolve().parents[2] / "kernels"
-    if (checkout / "__init__.py").is_file():
-        return checkout
-    raise FileNotFoundError(
-        "rtsar's OpenCL kernels were not found: neither the package rtsar.kernels nor the "
-        f"folder {checkout} exists (reinstall rtsar, or run from a complete source checkout)"
-    )
-
-
-def kernel_path(name: str):
-    """The kernel file ``name`` (e.g. ``"lens.cl"``); FileNotFoundError if it is missing."""
-    path = kernels_dir().joinpath(name)
-    if not path.is_file():
-        raise FileNotFoundError(f"OpenCL kernel file {name!r} not found in {kernels_dir()}")
-    return path
-
-
-def kernel_source(name: str) -> str:
-    """Text of the kernel file ``name``."""
-    return kernel_path(name).read_text(encoding="utf-8")
-
-
-# --------------------------------------------------------------------------------------------
-# devices
-# --------------------------------------------------------------------------------------------
-
-
-def list_devices() -> list[cl.Device]:
-    """All OpenCL devices of all platforms; RuntimeError if there is no platform at all."""
-    try:
-        platforms = cl.get_platforms()
-    except cl.Error as exc:  # PLATFORM_NOT_FOUND_KHR from the ICD loader
-        raise RuntimeError(_NO_PLATFORM) from exc
-    devices = []
-    for platform in platforms:
-        try:
-            devices.extend(platform.get_devices())
-        except cl.Error:  # a platform without devices
-            continue
-    if not devices:
-        raise RuntimeError(_NO_PLATFORM)
-    return devices
-
-
-def _label(device: cl.Device) -> str:
-    return f"{device.platform.name.strip()} / {device.name.strip()}"
-
-
-def _is_pocl(device: cl.Device) -> bool:
-    name = device.platform.name.lower()
-    return "portable computing language" in name or "pocl" in name
-
-
-def select_device(device: cl.Device | str | None = None) -> cl.Device:
-    """Pick the OpenCL device (see the module docstring for the order of preference).
-
-    Parameters
-    ----------
-    device : pyopencl.Device or str, optional
-        A device, or a case-insensitive substring of ``"platform name / device name"``.
-        Without it the environment variable ``RTSAR_OPENCL_DEVICE`` is consulted.
-
-    Raises
-    ------
-    RuntimeError
-        No OpenCL platform, or no device matches the requested name.
-    """
-    if isinstance(device, cl.Device):
-        return device
-    devices = list_devices()
-    wanted = device if device is not None else os.environ.get(ENV_DEVICE, "").strip()
-    if wanted:
-        matches = [d for d in devices if wanted.lower() in _label(d).lower()]
-        if not matches:
-            names = "; ".join(_label(d) for d in devices)
-            source = "" if device is not None else f" (from {ENV_DEVICE})"
-            raise RuntimeError(f"no OpenCL device matches {wanted!r}{source}; available: {names}")
-        return matches[0]
-    for accept in (
-        lambda d: _is_pocl(d) and d.type & cl.device_type.CPU,
-        lambda d: d.type & cl.device_type.CPU,
-        lambda d: True,
-    ):
-        for d in devices:
-            if accept(d):
-                return d
-    raise AssertionError("unreachable")
 
 
 def default_queue(device: cl.Device | str | None = None) -> cl.CommandQueue:
@@ -158,13 +51,24 @@ def default_queue(device: cl.Device | str | None = None) -> cl.CommandQueue:
 
     All users of one device share the context, so programs built for it are built once.
     """
+    return default_context_queue(device)[1]
+
+
+def default_context_queue(device: cl.Device | str | None = None):
+    """``(context, queue)`` shared by every user of the selected device.
+
+    The context is kept beside its queue: a queue's implicit reference to its context is not
+    enough on every driver (Intel's CPU runtime answers ``queue.context`` with INVALID_CONTEXT
+    once the application's own reference is gone).
+    """
     dev = select_device(device)
     with _lock:
-        queue = _queues.get(dev.int_ptr)
-        if queue is None:
-            queue = cl.CommandQueue(cl.Context([dev]))
-            _queues[dev.int_ptr] = queue
-        return queue
+        pair = _queues.get(dev.int_ptr)
+        if pair is None:
+            context = cl.Context([dev])
+            pair = (context, cl.CommandQueue(context))
+            _queues[dev.int_ptr] = pair
+        return pair
 
 
 def device_info(device: cl.Device | cl.Context | cl.CommandQueue | str | None = None) -> str:
@@ -224,7 +128,9 @@ def build_program(
         return program
     source = kernel_source(name)
     try:
-        program = cl.Program(context, source).build(options=list(opts))
+        with warnings.catch_warnings():  # a driver's build log (Intel's: vectoriser remarks)
+            warnings.simplefilter("ignore", cl.CompilerWarning)  # is not a message for users
+            program = cl.Program(context, source).build(options=list(opts))
     except cl.RuntimeError as exc:
         text = str(exc)
         errors = [ln.strip() for ln in text.splitlines() if ln.strip().startswith("error:")]
@@ -241,50 +147,44 @@ def _build_hint(log: str) -> str:
     """What a user can do about a build failure the driver, not the kernel, caused."""
     if "unknown target CPU" in log:
         return (
-            "\nThis OpenCL driver's compiler (PoCL's LLVM) does not know this CPU model, so it "
-            "cannot build any kernel here.  Use `--lens numpy` (or `--lens auto`, the default, "
-            "which falls back by itself), pick another device with RTSAR_OPENCL_DEVICE, or "
-            f"install a newer PoCL.  {FALLBACK_HINT}"
+            "\nThis OpenCL driver's compiler (PoCL 3.0's LLVM) does not know this CPU model, so "
+            "it cannot build any kernel here.  Pick another device (`rtsar devices` lists them; "
+            f"RTSAR_OPENCL_DEVICE or --device), or {install_hint()}."
         )
     return ""
-
-
-FALLBACK_HINT = (
-    "Any OpenCL driver works: a newer PoCL (e.g. the distribution's pocl-opencl-icd), a GPU's "
-    "ICD, or Intel's CPU OpenCL runtime."
-)
 
 
 _probes: dict[str, str | None] = {}
 _PROBE_KERNEL = "__kernel void probe(__global float *x) { x[get_global_id(0)] *= 2.0f; }"
 
 
-def probe(device: cl.Device | str | None = None) -> str | None:
-    """None if OpenCL can build and run a kernel on the selected device, else why not (one line).
+def probe(device: cl.Device | str | None = None, say=None) -> str | None:
+    """None if the OpenCL lens can run on the device asked for, else why not (one line).
 
-    Done once per process and device request; ``make_lens(backend="auto")`` uses it to choose
-    between the OpenCL lens and the NumPy one.
+    Without a device asked for (``device`` or RTSAR_OPENCL_DEVICE), the answer is the survey's
+    (:func:`rtsar.lens.cl_devices.default_device`: some device builds the lens, or why none
+    does, with what to install).  A device asked for is probed in this process, once.
     """
-    key = device if isinstance(device, str) or device is None else _label(device)
-    if device is None:  # the environment chooses the device: a change of it is another probe
-        key = f"env:{os.environ.get(ENV_DEVICE, '')}"
+    wanted = device if device is not None else os.environ.get(ENV_DEVICE, "").strip()
+    if not wanted:
+        try:
+            best, why = default_device(say=say)
+        except RuntimeError as exc:  # no platform at all
+            return str(exc)
+        return None if best is not None else why
+    key = wanted if isinstance(wanted, str) else f"{wanted.platform.name} / {wanted.name}"
     with _lock:
         if key in _probes:
             return _probes[key]
     try:
-        queue = default_queue(device)
-        program = cl.Program(queue.context, _PROBE_KERNEL).build()
-        buf = cl.Buffer(queue.context, cl.mem_flags.READ_WRITE, 4)
+        context, queue = default_context_queue(device)
+        program = cl.Program(context, _PROBE_KERNEL).build()
+        buf = cl.Buffer(context, cl.mem_flags.READ_WRITE, 4)
         program.probe(queue, (1,), None, buf)
         queue.finish()
         reason = None
     except (cl.Error, RuntimeError) as exc:
-        text = str(exc)
-        lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
-        errors = [ln for ln in lines if ln.startswith("error:")]
-        reason = (errors or lines or [type(exc).__name__])[0]
-        if "unknown target CPU" in text:
-            reason = f"PoCL's compiler does not know this CPU model ({reason})"
+        reason = first_line(exc)
     with _lock:
         _probes[key] = reason
     return reason

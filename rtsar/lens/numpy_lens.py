@@ -20,6 +20,7 @@ class NumpyLens:
 
     backend = "numpy"
     fallback_reason: str | None = None  # set by make_lens("auto") when OpenCL was unavailable
+    choice: str | None = None  # what runs and why (set by make_lens)
 
     def __init__(self, plan: LensPlan, library: str = "numpy", precision: str = "complex64"):
         if library == "numpy":

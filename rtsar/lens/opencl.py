@@ -87,6 +87,7 @@ class AOLens:
 
     backend = "opencl"
     fallback_reason: str | None = None
+    choice: str | None = None  # what runs and why (set by make_lens)
 
     def __init__(
         self,
@@ -114,12 +115,15 @@ class AOLens:
 
         if queue is None:
             if context is None:
-                queue = cl_loader.default_queue(device)
+                context, queue = cl_loader.default_context_queue(device)
             else:
                 queue = cl.CommandQueue(context)
+        elif context is None:
+            context = queue.context
         self.queue = queue
-        self.context = queue.context
+        self.context = context  # held here too: a queue's own reference is not enough everywhere
         self.device = queue.device
+        self.device_label = f"{self.device.platform.name.strip()} / {self.device.name.strip()}"
 
         if kernel is None:
             kernel = "lanes" if self.device.type & cl.device_type.CPU else "group"

@@ -58,11 +58,13 @@ class StreamProcessor:
         corrections=None,
         physical=None,
         azimuth: bool = True,
+        max_batch: int | None = None,
     ):
         self.config = config
         check_memory(config)
         self.plan = make_plan(config)
-        self.lens = make_lens(self.plan, lens_backend, device, config.processor.precision)
+        batch = max_batch or config.processor.micro_batch  # the largest lens batch of the run
+        self.lens = make_lens(self.plan, lens_backend, device, config.processor.precision, batch)
         self.dtype = self.lens.dtype
         self.corrections = corrections
         self.ao_cell = None

@@ -124,7 +124,8 @@ class SwathEngine:
     def __init__(self, config: Config, columns: tuple[int, int], lens_backend="auto", device=None):
         check_splittable(config)
         self.plan = make_plan(config)
-        self.lens = make_lens(self.plan, lens_backend, device, config.processor.precision)
+        p = config.processor
+        self.lens = make_lens(self.plan, lens_backend, device, p.precision, p.micro_batch)
         b0, b1 = columns
         mask = design_mask(config, self.plan.range_m)[:, b0:b1]
         self.correlator = processor_correlator(config.processor, mask)

@@ -1,11 +1,26 @@
-"""Measuring commands: ``bench``, ``tradeoff``, ``table1`` (each declares its own options)."""
+"""Measuring commands: ``devices``, ``bench``, ``tradeoff``, ``table1`` (each declares its own
+options)."""
 
 from __future__ import annotations
 
-from .. import bench, table1, tradeoff
+from .. import bench, devices, table1, tradeoff
 
 
 def add_parsers(sub) -> None:
+    s = sub.add_parser(
+        "devices",
+        help="every OpenCL device: does it build the lens, is it right, how fast; the default",
+        description="Lists every OpenCL device the loader sees (pyopencl's PoCL, the system's "
+        "drivers, drivers installed with pip such as Intel's CPU runtime, GPUs).  Each is "
+        "probed in a process of its own: the lens kernel of --preset built, 8 pulses compared "
+        "with the float64 reference, pulses/s timed at each batch size; the NumPy lens of the "
+        "same plan beside them.  Says which device runs the lens by default (the fastest that "
+        "builds, on psaltis-max at batch 64) and why a device is refused.  About 1-2 s a "
+        "device.  Exit status 1 where no device can run the lens.",
+    )
+    devices.add_arguments(s)
+    s.set_defaults(func=devices.run)
+
     s = sub.add_parser(
         "bench",
         help="throughput of the lens and correlators, and the live pipeline, in one run",

@@ -1,0 +1,134 @@
+"""``--lens auto``: the OpenCL lens where it is faster than the NumPy plan for the run, else NumPy.
+
+The rule, measured rather than assumed (a CPU OpenCL driver's launch costs tens of microseconds,
+so on small plans and batches NumPy's FFT can win):
+
+1. the default OpenCL device (:func:`rtsar.lens.cl_devices.default_device`: the fastest that
+   builds the lens), none → the NumPy lens, with a warning naming what to install;
+2. the run's own plan timed on that device and on NumPy's FFT at the run's batch sizes, the
+   largest (what a run falling behind uses) and 16 or fewer (what a live run keeping up
+   uses): the backend with the smaller mean time per pulse over these sizes runs the lens.
+
+The timings are kept in the cache folder (:mod:`rtsar.lens.cache`) per plan shape, device and
+survey, so a run pays them once (about 0.2 s).  The choice and its figures are the lens's
+``choice`` line, which the run's banner prints.  A device asked for (``--device``,
+``RTSAR_OPENCL_DEVICE``) is used as asked, never replaced.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+
+from . import cl_devices
+from .cache import read_json, write_json
+from .cl_probe import throughput
+from .numpy_lens import NumpyLens
+from .opencl import AOLens
+from .plan import LensPlan
+
+__all__ = ["SMALL_BATCH", "batch_sizes", "choose", "plan_rates"]
+
+SMALL_BATCH = 16
+_CACHE = "lens-choice.json"
+_SECONDS = 0.05  # per backend and batch size
+
+
+def batch_sizes(batch: int | None) -> tuple[int, ...]:
+    """The batch sizes the choice is measured at for a run whose largest batch is ``batch``."""
+    b = max(1, int(batch or 64))
+    return tuple(sorted({min(SMALL_BATCH, b), b}))
+
+
+def _key(plan: LensPlan, precision: str, sizes, device_label: str, survey_key: str) -> str:
+    shape = [
+        plan.samples_per_shot,
+        plan.nfft,
+        plan.bin_count,
+        bool(plan.two_pass),
+        precision,
+        list(sizes),
+        device_label,
+        survey_key,
+    ]
+    return hashlib.sha256(json.dumps(shape).encode()).hexdigest()[:24]
+
+
+def plan_rates(cl_lens, np_lens, sizes, key: str | None = None) -> dict:
+    """``{"opencl": {b: pulses/s}, "numpy": {b: pulses/s}}`` for the two lenses (cached by key)."""
+    cache = read_json(_CACHE) if key else {}
+    hit = cache.get(key) if key else None
+    if isinstance(hit, dict) and set(hit) == {"opencl", "numpy"}:
+        try:
+            return {k: {int(b): float(v) for b, v in d.items()} for k, d in hit.items()}
+        except (TypeError, ValueError, AttributeError):
+            pass
+    rates = {"opencl": {}, "numpy": {}}
+    for b in sizes:  # interleaved, so a neighbour's burst of load hits both
+        for name, lens in (("opencl", cl_lens), ("numpy", np_lens)):
+            rates[name][int(b)] = throughput(lens, int(b), _SECONDS)
+    if key:
+        cache = read_json(_CACHE)
+        if len(cache) > 200:  # plans come and go; keep the file small
+            cache = {}
+        cache[key] = {k: {str(b): round(v, 1) for b, v in d.items()} for k, d in rates.items()}
+        write_json(_CACHE, cache)
+    return rates
+
+
+def _mean_time(rates: dict) -> float:
+    return sum(1.0 / max(r, 1e-9) for r in rates.values()) / len(rates)
+
+
+def _figures(rates: dict) -> str:
+    return ", ".join(f"{rates[b]:,.0f}" for b in sorted(rates))
+
+
+def choose(
+    plan: LensPlan, precision: str = "complex64", batch: int | None = None, device=None
+):
+    """The lens for ``--lens auto`` (see the module docstring).
+
+    Returns a lens whose ``choice`` says what runs and why; ``fallback_reason`` is set (and a
+    RuntimeWarning given by the caller) only where OpenCL could not run at all.
+    """
+    asked = (
+        f"--device {device}" if device is not None
+        else f"{cl_devices.ENV_DEVICE}={os.environ.get(cl_devices.ENV_DEVICE, '').strip()}"
+    )  # fmt: skip
+    if device is not None or os.environ.get(cl_devices.ENV_DEVICE, "").strip():
+        lens = AOLens(plan, device=device, precision=precision)  # never replaced: errors raise
+        lens.choice = f"OpenCL lens on {lens.device_label} (asked for: {asked})"
+        return lens
+    try:
+        best, why = cl_devices.default_device()
+    except RuntimeError as exc:  # no platform at all
+        best, why = None, str(exc)
+    cl_lens = None
+    if best is not None:
+        try:
+            cl_lens = AOLens(plan, precision=precision)
+        except (RuntimeError, ValueError) as exc:  # the survey's plan built, this one did not
+            why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    np_lens = NumpyLens(plan, precision=precision)
+    if cl_lens is None:
+        np_lens.fallback_reason = why
+        np_lens.choice = f"NumPy lens (no OpenCL: {why})"
+        return np_lens
+    sizes = batch_sizes(batch)
+    key = _key(plan, precision, sizes, best.full_label, cl_devices.survey_fingerprint())
+    rates = plan_rates(cl_lens, np_lens, sizes, key)
+    at = f"at batch{'es' if len(sizes) > 1 else ''} {', '.join(map(str, sizes))}"
+    cl_fig, np_fig = _figures(rates["opencl"]), _figures(rates["numpy"])
+    if _mean_time(rates["opencl"]) <= _mean_time(rates["numpy"]):
+        cl_lens.choice = (
+            f"OpenCL lens on {best.label} ({why}); for this plan {cl_fig} pulses/s against "
+            f"NumPy's {np_fig} {at}"
+        )
+        return cl_lens
+    np_lens.choice = (
+        f"NumPy lens: faster than OpenCL on {best.label} for this plan ({np_fig} pulses/s "
+        f"against {cl_fig} {at}; `--lens opencl` to use it anyway)"
+    )
+    return np_lens

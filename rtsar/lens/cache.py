@@ -1,0 +1,47 @@
+"""Measurements kept between runs: one JSON file per kind, in the user's cache folder.
+
+The folder is ``$RTSAR_CACHE_DIR``, else ``$XDG_CACHE_HOME/rtsar``, else ``~/.cache/rtsar``.
+Files are replaced atomically, so concurrent processes never read half a file; a file that
+cannot be read (missing, damaged, another version's) counts as empty and is measured again.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+__all__ = ["cache_dir", "read_json", "write_json"]
+
+
+def cache_dir() -> Path:
+    """The folder of rtsar's cached measurements (not created here)."""
+    own = os.environ.get("RTSAR_CACHE_DIR", "").strip()
+    if own:
+        return Path(own)
+    xdg = os.environ.get("XDG_CACHE_HOME", "").strip()
+    return (Path(xdg) if xdg else Path.home() / ".cache") / "rtsar"
+
+
+def read_json(name: str) -> dict:
+    """The cached object ``name`` (a file name), or {} when there is none to trust."""
+    try:
+        data = json.loads((cache_dir() / name).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def write_json(name: str, data: dict) -> Path | None:
+    """Replace the cached object ``name``; None (nothing kept) where the folder is not writable."""
+    folder = cache_dir()
+    path = folder / name
+    tmp = folder / f".{name}.{os.getpid()}.tmp"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        tmp.write_text(json.dumps(data, indent=1, sort_keys=True), encoding="utf-8")
+        os.replace(tmp, path)
+    except OSError:
+        tmp.unlink(missing_ok=True)
+        return None
+    return path

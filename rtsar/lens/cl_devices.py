@@ -1,0 +1,269 @@
+"""Which OpenCL device runs the AO lens: every device the loader sees, probed and measured.
+
+Every device of every platform is a candidate: pyopencl's bundled PoCL, the system's drivers
+(``/etc/OpenCL/vendors``), a driver installed with pip (:mod:`rtsar.lens.cl_vendors`), GPUs.
+The *survey* probes each one in a child process of its own (a driver that crashes or hangs
+while compiling takes only that process down): it builds the lens kernel for the
+``psaltis-max`` plan, compares 8 pulses with the float64 reference
+(:func:`rtsar.lens.base.compress_reference`; refused beyond 1e-5 of the peak) and measures the
+lens's throughput.  The survey is kept in the cache folder (:mod:`rtsar.lens.cache`), keyed by
+a fingerprint of the devices, their drivers, the CPU, the host and the kernel source: it is
+measured once per machine, and again when any of these changes (``rtsar devices`` measures
+anew and shows it all).
+
+The default device (no ``--device``, no ``RTSAR_OPENCL_DEVICE``) is the fastest device that
+builds and computes the lens right, at batch 64 on ``psaltis-max``; with one such device, that
+one.  A device asked for is a case-insensitive substring of ``"platform version / device
+(driver version)"`` (``"platform / device"`` as before, or a driver version to tell two PoCLs
+apart), or its index in ``rtsar devices``; several matches: the fastest that builds.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import platform as _platform
+import sys
+import threading
+import time
+from dataclasses import asdict
+
+import pyopencl as cl
+
+from . import cl_probe, cl_vendors
+from .cache import read_json, write_json
+from .cl_probe import (
+    NO_PLATFORM,
+    SURVEY_BATCH,
+    SURVEY_PRESET,
+    TOLERANCE,
+    DeviceReport,
+    describe,
+    identity,
+    probe_all,
+)
+from .cl_sources import kernel_source
+
+__all__ = [
+    "ENV_DEVICE",
+    "SURVEY_BATCH",
+    "SURVEY_PRESET",
+    "TOLERANCE",
+    "DeviceReport",
+    "default_device",
+    "install_hint",
+    "list_devices",
+    "measure",
+    "select_device",
+    "survey",
+]
+
+ENV_DEVICE = "RTSAR_OPENCL_DEVICE"
+_CACHE = "opencl-devices.json"
+
+
+def list_devices() -> list[cl.Device]:
+    """All OpenCL devices of all platforms, in the loader's order; RuntimeError (with what to
+    install) if there is none."""
+    return cl_probe.list_devices(install_hint())
+
+
+def _cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return _platform.processor() or _platform.machine()
+
+
+def fingerprint(reports: list[DeviceReport]) -> str:
+    """What the survey's result depends on: devices and drivers, CPU, host, kernel source."""
+    h = hashlib.sha256()
+    for part in (
+        json.dumps([identity(r) for r in reports]),
+        _cpu_model(),
+        _platform.node(),
+        kernel_source("lens.cl"),
+        json.dumps([SURVEY_PRESET, SURVEY_BATCH, TOLERANCE]),
+    ):
+        h.update(part.encode("utf-8", "replace"))
+        h.update(b"\0")
+    return h.hexdigest()[:32]
+
+
+# --------------------------------------------------------------------------------------------
+# the survey and the choice
+# --------------------------------------------------------------------------------------------
+
+_lock = threading.RLock()
+_survey: list[DeviceReport] | None = None
+_survey_key: str | None = None
+
+
+def measure(
+    preset_name: str = SURVEY_PRESET, batches=(SURVEY_BATCH,), seconds: float = 0.3, say=None
+) -> tuple[list[DeviceReport], dict]:
+    """Probe every device now (:func:`rtsar.lens.cl_probe.probe_all`): the reports, and the
+    NumPy lens's pulses/s timed beside them.  The result becomes the survey where it measured
+    what the survey needs (``SURVEY_PRESET`` at ``SURVEY_BATCH``)."""
+    with _lock:
+        reports = [describe(i, d) for i, d in enumerate(list_devices())]
+        if say is not None:
+            say(
+                f"probing {len(reports)} OpenCL device{'s' if len(reports) != 1 else ''} "
+                f"with the lens of {preset_name} (a second or two each; kept for later runs)"
+            )
+        measured, numpy_rates = probe_all(reports, preset_name, batches, seconds)
+        if preset_name == SURVEY_PRESET and SURVEY_BATCH in [int(b) for b in batches]:
+            key = fingerprint(reports)
+            write_json(
+                _CACHE,
+                {
+                    "fingerprint": key,
+                    "measured_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                    "preset": SURVEY_PRESET,
+                    "devices": [asdict(r) for r in measured],
+                },
+            )
+            _keep(measured, key)
+        return measured, numpy_rates
+
+
+def survey(say=None) -> list[DeviceReport]:
+    """Every device with its probe result (:func:`measure` on ``SURVEY_PRESET``), from the
+    cache when it still describes this machine; ``say`` gets a line before any probing (the
+    first run on a machine takes about a second a device)."""
+    with _lock:
+        reports = [describe(i, d) for i, d in enumerate(list_devices())]
+        key = fingerprint(reports)
+        if _survey is not None and _survey_key == key:
+            return _survey
+        cached = read_json(_CACHE)
+        if cached.get("fingerprint") == key:
+            try:
+                found = [DeviceReport(**d) for d in cached["devices"]]
+            except (KeyError, TypeError):
+                found = None
+            if found and [identity(r) for r in found] == [identity(r) for r in reports]:
+                return _keep(found, key)
+        return measure(say=say)[0]
+
+
+def survey_fingerprint() -> str:
+    """The fingerprint of the devices the survey of this process described ("" before one)."""
+    return _survey_key or ""
+
+
+def _keep(reports: list[DeviceReport], key: str) -> list[DeviceReport]:
+    global _survey, _survey_key
+    _survey, _survey_key = reports, key
+    return reports
+
+
+def _fastest(reports: list[DeviceReport]) -> list[DeviceReport]:
+    ok = [r for r in reports if r.reason is None]
+    return sorted(ok, key=lambda r: -(r.rate() or 0.0))
+
+
+def default_device(say=None) -> tuple[DeviceReport | None, str]:
+    """The device the lens runs on by default, and why (one line); None where none builds."""
+    reports = survey(say=say)
+    ok = _fastest(reports)
+    if not ok:
+        return None, refusal_summary(reports)
+    best = ok[0]
+    if len(ok) == 1:
+        others = len(reports) - 1
+        why = "the only OpenCL device here" if not others else (
+            f"the only one of {len(reports)} OpenCL devices that builds the lens"
+        )
+        return best, why
+    second = ok[1]
+    return best, (
+        f"the fastest of {len(ok)} OpenCL devices that build the lens: "
+        f"{best.rate():,.0f} pulses/s at batch {SURVEY_BATCH} on {SURVEY_PRESET} "
+        f"(next: {second.short_label}, {second.rate() or 0:,.0f})"
+    )
+
+
+def refusal_summary(reports: list[DeviceReport]) -> str:
+    """Why no device runs the lens, with what to install (one line)."""
+    if not reports:
+        return f"{NO_PLATFORM}; {install_hint()}"
+    parts = "; ".join(f"{r.label}: {r.reason}" for r in reports)
+    return f"no OpenCL device builds the lens ({parts}); {install_hint()}"
+
+
+def install_hint() -> str:
+    """Exactly what to install for a working OpenCL CPU device on this machine (one phrase)."""
+    machine = _platform.machine().lower()
+    pip = f"{os.path.basename(sys.executable)} -m pip install intel-opencl-rt intel-cmplr-lib-rt"
+    if sys.platform.startswith("linux"):
+        apt = _system_pocl_command()
+        if machine in ("x86_64", "amd64"):
+            if cl_vendors.find_pip_drivers():
+                return (
+                    "Intel's CPU runtime is installed but refused (see `rtsar devices`); "
+                    f"install the system's PoCL: {apt}"
+                )
+            return (
+                f"install Intel's CPU OpenCL runtime into this environment: {pip} "
+                f"(rtsar registers it itself), or the system's PoCL: {apt}"
+            )
+        return f"install the system's PoCL: {apt}"
+    if sys.platform == "darwin":
+        return "install PoCL into this environment: pip install 'pyopencl[pocl]'"
+    return "install an OpenCL driver for this machine (a GPU's, Intel's CPU runtime, or PoCL)"
+
+
+def _system_pocl_command() -> str:
+    from shutil import which
+
+    for tool, cmd in (
+        ("apt-get", "sudo apt-get install pocl-opencl-icd"),
+        ("dnf", "sudo dnf install pocl"),
+        ("pacman", "sudo pacman -S pocl"),
+        ("zypper", "sudo zypper install pocl"),
+    ):
+        if which(tool):
+            return cmd
+    return "your distribution's pocl package"
+
+
+def _matches(wanted: str, reports: list[DeviceReport]) -> list[DeviceReport]:
+    text = wanted.strip()
+    if text.isdigit():
+        return [r for r in reports if r.index == int(text)]
+    low = text.lower()
+    return [r for r in reports if low in r.full_label.lower()]
+
+
+def select_device(device: cl.Device | str | None = None, say=None) -> cl.Device:
+    """The OpenCL device for ``device`` (a device, a name substring or an index), else
+    ``RTSAR_OPENCL_DEVICE``, else :func:`default_device`.
+
+    Raises RuntimeError when nothing matches, or no device builds the lens by default.
+    """
+    if isinstance(device, cl.Device):
+        return device
+    devices = list_devices()
+    wanted = device if device is not None else os.environ.get(ENV_DEVICE, "").strip()
+    if wanted:
+        reports = [describe(i, d) for i, d in enumerate(devices)]
+        matches = _matches(str(wanted), reports)
+        if not matches:
+            names = "; ".join(f"[{r.index}] {r.full_label}" for r in reports)
+            source = "" if device is not None else f" (from {ENV_DEVICE})"
+            raise RuntimeError(f"no OpenCL device matches {wanted!r}{source}; available: {names}")
+        if len(matches) > 1:  # the fastest of them that builds, by the survey
+            ranked = {r.index: k for k, r in enumerate(_fastest(survey(say=say)))}
+            matches.sort(key=lambda r: ranked.get(r.index, len(ranked) + r.index))
+        return devices[matches[0].index]
+    best, why = default_device(say=say)
+    if best is None:
+        raise RuntimeError(why)
+    return devices[best.index]

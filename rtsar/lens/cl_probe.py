@@ -1,0 +1,217 @@
+"""Probing OpenCL devices for the AO lens, each driver in a child process of its own.
+
+A driver that crashes or hangs while compiling must not take rtsar down with it, so every
+device is probed by ``python -m rtsar.lens.cl_probe probe …`` in a process of its own: the lens
+kernel of a preset built, 8 pulses compared with the float64 reference
+(:func:`rtsar.lens.base.compress_reference`; refused beyond ``TOLERANCE`` of the peak).  The
+devices that pass are then timed together by one more child process, ``… time …``,
+interleaved in rounds with the NumPy lens of the same plan (each keeps its best round), so a
+neighbour's burst of load on a shared machine favours none of them.  A crash, a hang or an
+error becomes that device's ``reason``.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+
+import pyopencl as cl
+
+from . import cl_vendors
+
+# The ICD loader reads OCL_ICD_VENDORS at its first call (importing pyopencl makes none).
+cl_vendors.register()
+
+__all__ = [
+    "SURVEY_BATCH",
+    "SURVEY_PRESET",
+    "TOLERANCE",
+    "DeviceReport",
+    "describe",
+    "first_line",
+    "identity",
+    "list_devices",
+    "probe_all",
+    "throughput",
+]
+
+SURVEY_PRESET = "psaltis-max"
+SURVEY_BATCH = 64
+TOLERANCE = 1e-5  # max |lens − reference| / peak, complex64
+NO_PLATFORM = "no OpenCL platform found"
+_TIMEOUT_S = 180.0
+
+
+@dataclass
+class DeviceReport:
+    """One device as probed (``reason`` None: it builds and its lines are right)."""
+
+    index: int
+    platform: str
+    platform_version: str
+    name: str
+    driver_version: str
+    kind: str
+    reason: str | None = None
+    error: float | None = None  # max |lens − reference| / peak
+    build_s: float | None = None  # kernel build and first batch, s (a driver's cache shortens it)
+    rates: dict = field(default_factory=dict)  # batch (str) → pulses/s on the probed preset
+
+    @property
+    def label(self) -> str:
+        return f"{self.platform} / {self.name}"
+
+    @property
+    def short_label(self) -> str:
+        return f"{self.platform} {self.driver_version} / {self.name}"
+
+    @property
+    def full_label(self) -> str:
+        driver = f"(driver {self.driver_version})"
+        return f"{self.platform} {self.platform_version} / {self.name} {driver}"
+
+    def rate(self, batch: int = SURVEY_BATCH) -> float | None:
+        return self.rates.get(str(batch))
+
+
+def _clean(text) -> str:
+    return " ".join(str(text).split())
+
+
+def _kind(device_type: int) -> str:
+    for bit, name in (
+        (cl.device_type.GPU, "GPU"),
+        (cl.device_type.CPU, "CPU"),
+        (cl.device_type.ACCELERATOR, "accelerator"),
+    ):
+        if device_type & bit:
+            return name
+    return cl.device_type.to_string(device_type)
+
+
+def list_devices(hint: str = "") -> list[cl.Device]:
+    """All OpenCL devices of all platforms, in the loader's order; RuntimeError if none."""
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error as exc:  # PLATFORM_NOT_FOUND_KHR from the ICD loader
+        raise RuntimeError(f"{NO_PLATFORM}{'; ' + hint if hint else ''}") from exc
+    devices = []
+    for plat in platforms:
+        try:
+            devices.extend(plat.get_devices())
+        except cl.Error:  # a platform without devices
+            continue
+    if not devices:
+        raise RuntimeError(f"{NO_PLATFORM}{'; ' + hint if hint else ''}")
+    return devices
+
+
+def describe(index: int, device: cl.Device) -> DeviceReport:
+    """The identity of a device (nothing probed yet)."""
+    return DeviceReport(
+        index=index,
+        platform=_clean(device.platform.name),
+        platform_version=_clean(device.platform.version),
+        name=_clean(device.name),
+        driver_version=_clean(device.driver_version),
+        kind=_kind(device.type),
+    )
+
+
+def identity(r: DeviceReport) -> list:
+    return [r.platform, r.platform_version, r.name, r.driver_version, r.kind]
+
+
+def first_line(exc: BaseException) -> str:
+    """The line of a driver's error that says what went wrong."""
+    text = str(exc)
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    errors = [ln for ln in lines if ln.startswith("error:")]
+    reason = (errors or lines or [type(exc).__name__])[0]
+    if "unknown target CPU" in text:
+        reason = f"the driver's compiler does not know this CPU model ({reason})"
+    return reason
+
+
+def throughput(lens, batch: int, seconds: float, rng=None) -> float:
+    """Pulses/s of ``lens.compress`` on batches of ``batch`` random pulses: ``batch`` over the
+    median time of a call, after 3 warm-up calls, over at least ``seconds`` and 10 calls (the
+    median, so a neighbour's burst of load on a shared machine does not decide)."""
+    import numpy as np
+
+    rng = rng or np.random.default_rng(0)
+    S = lens.plan.samples_per_shot
+    x = (rng.standard_normal((batch, S)) + 1j * rng.standard_normal((batch, S))).astype(lens.dtype)
+    for _ in range(3):
+        lens.compress(x)
+    times, start = [], time.perf_counter()
+    while len(times) < 10 or time.perf_counter() - start < seconds:
+        t0 = time.perf_counter()
+        lens.compress(x)
+        times.append(time.perf_counter() - t0)
+    return batch / float(np.median(times))
+
+
+# --------------------------------------------------------------------------------------------
+# in the parent process
+# --------------------------------------------------------------------------------------------
+
+
+def _child(args: list[str], timeout_s: float) -> tuple[dict | None, str | None]:
+    """Run ``python -m rtsar.lens.cl_probe_child ARGS``: (its JSON answer, None) or (None, why)."""
+    cmd = [sys.executable, "-m", "rtsar.lens.cl_probe_child", *args]
+    try:
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, check=False)
+    except subprocess.TimeoutExpired:
+        return None, f"no answer within {timeout_s:.0f} s"
+    if done.returncode < 0:
+        try:
+            name = signal.Signals(-done.returncode).name
+        except ValueError:
+            name = f"signal {-done.returncode}"
+        return None, f"the driver crashed ({name})"
+    for line in reversed(done.stdout.splitlines()):
+        if line.startswith("{"):
+            try:
+                return json.loads(line), None
+            except ValueError:
+                break
+    tail = (done.stderr.strip().splitlines() or ["no output"])[-1]
+    return None, f"the probe failed (exit {done.returncode}): {tail}"
+
+
+def probe_all(
+    reports: list[DeviceReport], preset_name: str, batches, seconds: float
+) -> tuple[list[DeviceReport], dict]:
+    """Every device probed in a child process of its own, then the passing ones timed together
+    with the NumPy lens in one more; returns the reports and the NumPy lens's rates."""
+    out = []
+    for r in reports:
+        args = ["probe", str(r.index), json.dumps(identity(r)), preset_name]
+        answer, why = _child(args, _TIMEOUT_S)
+        if answer is None:
+            r.reason = f"{why} while building the lens"
+            out.append(r)
+        else:
+            out.append(DeviceReport(**answer))
+    by_index = {r.index: r for r in out}
+    ok = [r.index for r in out if r.reason is None]
+    spec = [preset_name, ",".join(str(int(b)) for b in batches), repr(float(seconds))]
+    answer, why = _child(["time", ",".join(map(str, ok)), *spec], _TIMEOUT_S)
+    if answer is None:  # a driver that builds and then fails: time each alone to find it
+        answer = {}
+        for i in ok:
+            one, why_one = _child(["time", str(i), *spec], _TIMEOUT_S)
+            if one is None:
+                by_index[i].reason = f"{why_one} while timing the lens"
+            else:
+                answer.update({k: v for k, v in one.items() if k != "numpy"})
+                answer.setdefault("numpy", one.get("numpy", {}))
+    for i in ok:
+        if by_index[i].reason is None:
+            by_index[i].rates = answer.get(str(i), {})
+    return out, answer.get("numpy", {})

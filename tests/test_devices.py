@@ -1,0 +1,252 @@
+"""Every OpenCL device is a candidate: probed, checked against the float64 reference, measured;
+the default is the fastest that builds; --lens auto takes OpenCL only where it is faster."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pyopencl")
+
+from rtsar.app.cli import main  # noqa: E402
+from rtsar.lens import auto, base, cl_devices, cl_probe, cl_vendors, make_plan  # noqa: E402
+from rtsar.lens.cache import read_json  # noqa: E402
+from rtsar.lens.cl_probe import DeviceReport  # noqa: E402
+from rtsar.lens.numpy_lens import NumpyLens  # noqa: E402
+from rtsar.lens.opencl import KERNELS, AOLens  # noqa: E402
+from rtsar.presets import preset  # noqa: E402
+
+PRESETS = ("psaltis-max", "psaltis-jpl", "crouch-sal", "zhao-insal", "tiny")
+
+
+def _peak_error(y, ref) -> float:
+    return float(np.max(np.abs(y - ref)) / np.max(np.abs(ref)))
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+@pytest.mark.parametrize("name", PRESETS)
+def test_every_device_matches_the_reference(cl_device, name, kernel):
+    """Lines within 1e-5 of the peak of the float64 reference on every device that builds here
+    (bundled PoCL, the system's PoCL, Intel's CPU runtime, a GPU: whatever the loader sees).
+    The lens made on a device of its own keeps that device's context (Intel's runtime refused
+    ``queue.context`` once the application's reference was gone)."""
+    device = cl_devices.list_devices()[cl_device.index]
+    plan = make_plan(preset(name))
+    lens = AOLens(plan, device=device, kernel=kernel)
+    assert lens.device.int_ptr == device.int_ptr
+    rng = np.random.default_rng(11)
+    S = plan.samples_per_shot
+    for pulses in (1, 9, 64):
+        x = (rng.standard_normal((pulses, S)) + 1j * rng.standard_normal((pulses, S))).astype(
+            np.complex64
+        )
+        ref = base.compress_reference(plan, x)
+        assert _peak_error(lens.compress(x), ref) <= 1e-5, (cl_device.short_label, pulses)
+
+
+def _report(index, rate=None, reason=None, name="dev"):
+    return DeviceReport(
+        index=index,
+        platform=f"Platform{index}",
+        platform_version=f"OpenCL 3.0 v{index}",
+        name=f"{name}{index}",
+        driver_version=f"{index}.0",
+        kind="CPU",
+        reason=reason,
+        error=None if reason else 1e-7,
+        rates={} if rate is None else {"64": rate},
+    )
+
+
+def test_default_is_the_fastest_device_that_builds(monkeypatch):
+    reports = [
+        _report(0, 50_000.0),
+        _report(1, reason="the driver's compiler does not know this CPU model (error: x)"),
+        _report(2, 90_000.0),
+    ]
+    monkeypatch.setattr(cl_devices, "survey", lambda say=None: reports)
+    best, why = cl_devices.default_device()
+    assert best.index == 2
+    assert "fastest of 2" in why and "90,000" in why and "Platform0 0.0 / dev0, 50,000" in why
+    monkeypatch.setattr(cl_devices, "survey", lambda say=None: reports[:2])
+    best, why = cl_devices.default_device()
+    assert best.index == 0 and why == "the only one of 2 OpenCL devices that builds the lens"
+
+
+def test_no_working_device_names_what_to_install(monkeypatch):
+    refused = [_report(0, reason="the driver's compiler does not know this CPU model (e)")]
+    monkeypatch.setattr(cl_devices, "survey", lambda say=None: refused)
+    monkeypatch.setattr(cl_vendors, "find_pip_drivers", lambda: {})
+    monkeypatch.setattr(cl_devices._platform, "machine", lambda: "x86_64")
+    monkeypatch.setattr(cl_devices.sys, "platform", "linux")
+    best, why = cl_devices.default_device()
+    assert best is None
+    assert "Platform0 / dev0: the driver's compiler does not know this CPU model" in why
+    assert "-m pip install intel-opencl-rt intel-cmplr-lib-rt" in why
+    # --lens auto then runs the NumPy lens and warns with that one line
+    monkeypatch.delenv(cl_devices.ENV_DEVICE, raising=False)
+    with pytest.warns(RuntimeWarning, match="using the NumPy lens.*pip install intel-opencl-rt"):
+        lens = base.make_lens(make_plan(preset("tiny")), "auto")
+    assert isinstance(lens, NumpyLens) and lens.fallback_reason == why
+    assert lens.choice.startswith("NumPy lens (no OpenCL:")
+
+
+def test_a_device_asked_for_by_substring_or_index(monkeypatch):
+    reports = [_report(0, 10.0, name="pocl"), _report(1, 30.0, name="pocl"), _report(2, 20.0)]
+    monkeypatch.setattr(cl_devices, "survey", lambda say=None: reports)
+    assert [r.index for r in cl_devices._matches("POCL", reports)] == [0, 1]
+    assert [r.index for r in cl_devices._matches("v1 / pocl1 (driver 1.0", reports)] == [1]
+    assert [r.index for r in cl_devices._matches("2", reports)] == [2]
+    assert cl_devices._matches("no-such", reports) == []
+
+
+def test_asking_for_a_device_that_is_not_there_lists_them(monkeypatch):
+    monkeypatch.setenv(cl_devices.ENV_DEVICE, "no-such-device-anywhere")
+    with pytest.raises(RuntimeError, match=r"no OpenCL device matches .*available: \[0\]"):
+        cl_devices.select_device()
+
+
+def test_survey_is_cached_per_machine_and_measured_again_when_devices_change(
+    monkeypatch, tmp_path
+):
+    monkeypatch.setenv("RTSAR_CACHE_DIR", str(tmp_path))
+    calls = []
+
+    def fake_probe_all(reports, preset_name, batches, seconds):
+        calls.append(len(reports))
+        for r in reports:
+            r.rates = {"64": 1000.0 + r.index}
+            r.error = 1e-7
+        return reports, {"64": 5.0}
+
+    monkeypatch.setattr(cl_devices, "probe_all", fake_probe_all)
+    monkeypatch.setattr(cl_devices, "_survey", None)
+    said = []
+    first = cl_devices.survey(say=said.append)
+    assert calls == [len(first)] and said and "probing" in said[0]
+    assert read_json("opencl-devices.json")["fingerprint"] == cl_devices.survey_fingerprint()
+    monkeypatch.setattr(cl_devices, "_survey", None)  # a new process: from the file
+    cl_devices.survey(say=said.append)
+    assert calls == [len(first)] and len(said) == 1
+    # another driver version (or CPU, host, kernel source): another fingerprint, probed again
+    real = cl_devices.describe
+    monkeypatch.setattr(
+        cl_devices,
+        "describe",
+        lambda i, d: DeviceReport(**{**real(i, d).__dict__, "driver_version": "new"}),
+    )
+    monkeypatch.setattr(cl_devices, "_survey", None)
+    cl_devices.survey()
+    assert len(calls) == 2
+
+
+def test_a_driver_that_crashes_while_probing_is_refused_not_fatal(monkeypatch):
+    def crash(cmd, **kw):
+        return subprocess.CompletedProcess(cmd, -11, "", "")
+
+    monkeypatch.setattr(cl_probe.subprocess, "run", crash)
+    r = _report(0)
+    reports, numpy_rates = cl_probe.probe_all([r], "tiny", [16], 0.01)
+    assert reports[0].reason == "the driver crashed (SIGSEGV) while building the lens"
+
+    def silent(cmd, timeout, **kw):
+        raise subprocess.TimeoutExpired(cmd, timeout)
+
+    monkeypatch.setattr(cl_probe.subprocess, "run", silent)
+    reports, _ = cl_probe.probe_all([_report(0)], "tiny", [16], 0.01)
+    assert reports[0].reason.startswith("no answer within")
+
+
+def test_the_child_probe_answers_in_json(cl_device):
+    """The real child process: builds, checks and reports one device."""
+    ident = json.dumps(cl_probe.identity(cl_device))
+    out = subprocess.run(
+        [sys.executable, "-m", "rtsar.lens.cl_probe_child", "probe", str(cl_device.index),
+         ident, "tiny"],
+        capture_output=True, text=True, timeout=120, check=True,
+    )  # fmt: skip
+    doc = json.loads(out.stdout.strip().splitlines()[-1])
+    assert doc["reason"] is None and doc["error"] <= 1e-5 and doc["index"] == cl_device.index
+    wrong = json.dumps(["not", "this", "device", "at", "all"])
+    refused = subprocess.run(
+        [sys.executable, "-m", "rtsar.lens.cl_probe_child", "probe", "0", wrong, "tiny"],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert refused.returncode == 3 and "device list changed" in refused.stderr
+
+
+def test_pip_installed_driver_is_registered_inside_the_environment(monkeypatch, tmp_path):
+    prefix = tmp_path / "venv"
+    (prefix / "lib").mkdir(parents=True)
+    lib = prefix / "lib" / "libintelocl.so"
+    lib.write_bytes(b"")
+    system = tmp_path / "etc-vendors"
+    system.mkdir()
+    (system / "pocl.icd").write_text("libpocl.so.2\n")
+    monkeypatch.setattr(cl_vendors.sys, "prefix", str(prefix))
+    monkeypatch.setattr(cl_vendors, "_lib_dirs", lambda: [prefix / "lib"])
+    monkeypatch.setattr(cl_vendors, "SYSTEM_VENDORS", system)
+    env = {}
+    reg = cl_vendors.register(env)
+    folder = prefix / "etc" / "OpenCL" / "vendors"
+    assert env["OCL_ICD_VENDORS"] == str(folder) == reg.vendors_dir
+    assert (folder / "rtsar-intel-cpu.icd").read_text().strip() == str(lib.resolve())
+    assert (folder / "system-pocl.icd").read_text() == "libpocl.so.2\n"  # the system's stay
+    # a user's own OCL_ICD_VENDORS is never replaced
+    env = {"OCL_ICD_VENDORS": "/my/vendors"}
+    reg = cl_vendors.register(env)
+    assert env == {"OCL_ICD_VENDORS": "/my/vendors"} and "set by the user" in reg.note
+
+
+def test_auto_takes_opencl_only_where_it_is_faster(monkeypatch, opencl):
+    plan = make_plan(preset("tiny"))
+    monkeypatch.delenv(cl_devices.ENV_DEVICE, raising=False)
+
+    def rates(cl_fast: bool):
+        def fake(cl_lens, np_lens, sizes, key=None):
+            fast, slow = {b: 9e4 for b in sizes}, {b: 3e4 for b in sizes}
+            return {"opencl": fast, "numpy": slow} if cl_fast else {"opencl": slow, "numpy": fast}
+
+        return fake
+
+    monkeypatch.setattr(auto, "plan_rates", rates(True))
+    lens = base.make_lens(plan, "auto", batch=64)
+    assert lens.backend == "opencl" and "against NumPy's 30,000, 30,000 at batches 16, 64" in (
+        lens.choice
+    )
+    monkeypatch.setattr(auto, "plan_rates", rates(False))
+    lens = base.make_lens(plan, "auto", batch=8)
+    assert lens.backend == "numpy" and lens.fallback_reason is None
+    assert lens.choice.startswith("NumPy lens: faster than OpenCL on") and "at batch 8;" in (
+        lens.choice
+    )
+
+
+def test_auto_choice_agrees_with_its_own_measurement(monkeypatch, opencl, tmp_path):
+    """Unfaked: the choice is the backend with the smaller time per pulse it measured."""
+    monkeypatch.setenv("RTSAR_CACHE_DIR", str(tmp_path))
+    monkeypatch.delenv(cl_devices.ENV_DEVICE, raising=False)
+    plan = make_plan(preset("tiny"))
+    lens = base.make_lens(plan, "auto", batch=32)
+    cached = read_json("lens-choice.json")
+    assert len(cached) == 1
+    (measured,) = cached.values()
+    per_pulse = {k: np.mean([1 / v for v in d.values()]) for k, d in measured.items()}
+    assert lens.backend == min(per_pulse, key=per_pulse.get)
+    assert set(measured["opencl"]) == {"16", "32"}
+
+
+def test_devices_command_lists_every_device(capsys, cl_device, tmp_path, monkeypatch):
+    monkeypatch.setenv("RTSAR_CACHE_DIR", str(tmp_path))
+    status = main(["devices", "--preset", "tiny", "--batches", "8", "--seconds", "0.02",
+                   "--json", str(tmp_path / "d.json")])  # fmt: skip
+    out = capsys.readouterr().out
+    assert status == 0
+    assert f"{cl_device.index:>2}  {cl_device.short_label[:50]}" in out
+    assert "NumPy lens (the same plan)" in out and "default: [" in out
+    doc = json.loads((tmp_path / "d.json").read_text())
+    assert {d["index"] for d in doc["devices"]} >= {cl_device.index}
+    assert sum(d["default"] for d in doc["devices"]) == 1
+    assert doc["numpy_pulses_per_s"]["8"] > 0

@@ -83,7 +83,7 @@ def test_run_banner_names_the_opencl_device_and_why(monkeypatch, capsys, tmp_pat
     status = main(["run", "--duration", "0.3", "--endpoint", "ipc://" + str(tmp_path / "s")])
     out = capsys.readouterr().out
     assert status == 0
-    assert f"rtsar: lens: OpenCL lens on {best.label} ({why}); for this plan 200,000" in out
+    assert f"rtsar: lens: OpenCL lens on {best.short_label} ({why}); for this plan 200,000" in out
 
 
 def test_probe_reports_a_driver_that_cannot_build(monkeypatch, opencl):

@@ -123,12 +123,12 @@ def choose(
     cl_fig, np_fig = _figures(rates["opencl"]), _figures(rates["numpy"])
     if _mean_time(rates["opencl"]) <= _mean_time(rates["numpy"]):
         cl_lens.choice = (
-            f"OpenCL lens on {best.label} ({why}); for this plan {cl_fig} pulses/s against "
+            f"OpenCL lens on {best.short_label} ({why}); for this plan {cl_fig} pulses/s against "
             f"NumPy's {np_fig} {at}"
         )
         return cl_lens
     np_lens.choice = (
-        f"NumPy lens: faster than OpenCL on {best.label} for this plan ({np_fig} pulses/s "
+        f"NumPy lens: faster than OpenCL on {best.short_label} for this plan ({np_fig} pulses/s "
         f"against {cl_fig} {at}; `--lens opencl` to use it anyway)"
     )
     return np_lens

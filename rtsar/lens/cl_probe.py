@@ -132,6 +132,8 @@ def first_line(exc: BaseException) -> str:
     lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
     errors = [ln for ln in lines if ln.startswith("error:")]
     reason = (errors or lines or [type(exc).__name__])[0]
+    parts = reason.split(" - ")  # pyopencl repeats "clBuildProgram failed: X - …" per layer
+    reason = " - ".join(dict.fromkeys(p.strip() for p in parts))
     if "unknown target CPU" in text:
         reason = f"the driver's compiler does not know this CPU model ({reason})"
     return reason

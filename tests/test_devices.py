@@ -216,6 +216,11 @@ def test_auto_takes_opencl_only_where_it_is_faster(monkeypatch, opencl):
     assert lens.backend == "opencl" and "against NumPy's 30,000, 30,000 at batches 16, 64" in (
         lens.choice
     )
+    # the line names the device whose kernel runs the lens, with its driver version
+    assert lens.choice.startswith(
+        f"OpenCL lens on {lens.device.platform.name.strip()} "
+        f"{lens.device.driver_version.strip()} / {lens.device.name.strip()} ("
+    )
     monkeypatch.setattr(auto, "plan_rates", rates(False))
     lens = base.make_lens(plan, "auto", batch=8)
     assert lens.backend == "numpy" and lens.fallback_reason is None

@@ -166,6 +166,8 @@ def cmd_process(args) -> int:
                 for c in heights.channels
             }
         eng = StreamProcessor(cfg, args.lens, args.device, rec.start_along_track_m, chain, physical)
+        if args.lens == "auto":  # which lens runs, on which device, and why
+            print(f"rtsar: lens: {eng.lens.choice}", file=sys.stderr)
         prog = Progress(rec.pulses, "process")
         done = 0
         t0 = time.perf_counter()

@@ -51,7 +51,7 @@ def replay(cfg, shots, seq=None, batch=16, rate="max"):
     return ReplaySource(shots, seq, seq / cfg.geometry.prf_hz, cfg.geometry.prf_hz, rate, batch)
 
 
-@pytest.mark.parametrize("stages", ["split", "fused"])
+@pytest.mark.parametrize("stages", ["split", "fused", "overlapped"])
 @pytest.mark.parametrize("correlator", ["direct", "fft"])
 def test_streaming_equals_batch(tiny, stages, correlator):
     cfg, scene, shots = tiny
@@ -305,7 +305,7 @@ class Delay(CorrectionStage):
         return self.held
 
 
-@pytest.mark.parametrize("stages", ["split", "fused"])
+@pytest.mark.parametrize("stages", ["split", "fused", "overlapped"])
 def test_a_stage_that_holds_pulses_keeps_lines_and_flags_exact(tiny, stages):
     cfg, scene, shots = tiny
     lost = np.arange(200, 202)

@@ -251,6 +251,14 @@ def bench_pipeline(
             if "ccd_stage_pulses_per_s" in top:
                 top["ccd_stage_over_isolated"] = top["ccd_stage_pulses_per_s"] / iso
         run("partitioned: max rate, fused stages", part, "max", seconds, round_, stages="fused")
+        run(
+            "partitioned: max rate, overlapped stages",
+            part,
+            "max",
+            seconds,
+            round_,
+            stages="overlapped",
+        )
         # A stalled subscriber (connected, never reads) against no subscriber, back to back.
         none = run("partitioned: max rate (repeat)", part, "max", seconds, round_)
         stalled = run(

@@ -5,9 +5,10 @@ so on small plans and batches NumPy's FFT can win):
 
 1. the default OpenCL device (:func:`rtsar.lens.cl_devices.default_device`: the fastest that
    builds the lens), none → the NumPy lens, with a warning naming what to install;
-2. the run's own plan timed on that device and on NumPy's FFT at the run's batch sizes, the
-   largest (what a run falling behind uses) and 16 or fewer (what a live run keeping up
-   uses): the backend with the smaller mean time per pulse over these sizes runs the lens.
+2. the run's own plan timed on that device and on NumPy's FFT at its configuration's
+   ``micro_batch`` (what a run falling behind uses) and at 16 or fewer (what a live run keeping
+   up uses): the backend with the smaller mean time per pulse over these sizes runs the lens.
+   One configuration, one choice (so two runs of it give the same lines bit for bit).
 
 The timings are kept in the cache folder (:mod:`rtsar.lens.cache`) per plan shape, device and
 survey, so a run pays them once (about 0.2 s).  The choice and its figures are the lens's
@@ -33,6 +34,7 @@ __all__ = ["SMALL_BATCH", "batch_sizes", "choose", "plan_rates"]
 SMALL_BATCH = 16
 _CACHE = "lens-choice.json"
 _SECONDS = 0.05  # per backend and batch size
+_memo: dict = {}
 
 
 def batch_sizes(batch: int | None) -> tuple[int, ...]:
@@ -57,13 +59,18 @@ def _key(plan: LensPlan, precision: str, sizes, device_label: str, survey_key: s
 
 def plan_rates(cl_lens, np_lens, sizes, key: str | None = None) -> dict:
     """``{"opencl": {b: pulses/s}, "numpy": {b: pulses/s}}`` for the two lenses (cached by key)."""
+    if key in _memo:  # one choice per plan in a process, even where nothing can be cached
+        return _memo[key]
     cache = read_json(_CACHE) if key else {}
     hit = cache.get(key) if key else None
     if isinstance(hit, dict) and set(hit) == {"opencl", "numpy"}:
         try:
-            return {k: {int(b): float(v) for b, v in d.items()} for k, d in hit.items()}
+            rates = {k: {int(b): float(v) for b, v in d.items()} for k, d in hit.items()}
         except (TypeError, ValueError, AttributeError):
             pass
+        else:
+            _memo[key] = rates
+            return rates
     rates = {"opencl": {}, "numpy": {}}
     for b in sizes:  # interleaved, so a neighbour's burst of load hits both
         for name, lens in (("opencl", cl_lens), ("numpy", np_lens)):
@@ -74,6 +81,7 @@ def plan_rates(cl_lens, np_lens, sizes, key: str | None = None) -> dict:
             cache = {}
         cache[key] = {k: {str(b): round(v, 1) for b, v in d.items()} for k, d in rates.items()}
         write_json(_CACHE, cache)
+        _memo[key] = rates
     return rates
 
 

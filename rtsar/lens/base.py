@@ -49,7 +49,7 @@ def make_lens(
     ``backend="auto"``: :func:`rtsar.lens.auto.choose`: the OpenCL lens on a device asked for
     (``device`` or RTSAR_OPENCL_DEVICE; its error raised if it cannot build), else on the
     default device where it is faster than the NumPy plan at the run's batch sizes (``batch``:
-    the run's largest), else the NumPy lens, with a RuntimeWarning and the reason in
+    the configured micro-batch), else the NumPy lens, with a RuntimeWarning and the reason in
     ``fallback_reason`` where OpenCL cannot run at all.  Every lens says what runs
     and why in its ``choice`` line; the backend in use is its ``backend`` attribute.
     """

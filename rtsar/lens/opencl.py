@@ -26,7 +26,7 @@ from . import cl_loader
 from .cl_launch import gil_free_enqueue
 from .plan import LensPlan
 
-__all__ = ["KERNELS", "AOLens", "supports_double"]
+__all__ = ["KERNELS", "AOLens", "LensJob", "supports_double"]
 
 KERNELS = ("lanes", "group")
 _MAX_LANES = 8
@@ -44,6 +44,22 @@ def supports_double(device: cl.Device) -> bool:
     except (cl.LogicError, cl.RuntimeError, AttributeError):  # pragma: no cover - driver quirks
         pass
     return "cl_khr_fp64" in device.extensions.split()
+
+
+class LensJob:
+    """A batch in flight on the device (:meth:`AOLens.submit`): ``wait()`` returns its lines."""
+
+    __slots__ = ("_event", "_out", "_keep")
+
+    def __init__(self, event, out: np.ndarray, keep):
+        self._event, self._out, self._keep = event, out, keep  # keep: inputs the device reads
+
+    def wait(self) -> np.ndarray:
+        """The lines [pulses, bins], once the device has written them (the GIL released)."""
+        if self._event is not None:
+            self._event.wait()
+            self._event = self._keep = None
+        return self._out
 
 
 class AOLens:
@@ -258,6 +274,16 @@ class AOLens:
         ValueError
             Wrong shape or dtype of ``shots`` or ``out``.
         """
+        return self.submit(shots, out).wait()
+
+    def submit(self, shots: np.ndarray, out: np.ndarray | None = None) -> LensJob:
+        """Enqueue the compression of a batch and return at once; ``.wait()`` gives the lines.
+
+        The device works while the caller does something else (the pipeline's CCD correlates
+        the previous batch meanwhile).  Jobs complete in the order they were submitted (one
+        in-order queue); ``shots`` must not be changed before ``wait()`` returns.  Same
+        arguments and errors as :meth:`compress`.
+        """
         x = self._check(shots)
         pulses, bins = x.shape[0], self.plan.bin_count
         if out is None:
@@ -272,7 +298,7 @@ class AOLens:
                 f"out must be a C-contiguous {self.precision} array of shape {(pulses, bins)}"
             )
         if pulses == 0:
-            return out
+            return LensJob(None, out, x)
         if pulses >= 2**31:
             raise ValueError("too many pulses in one batch")
         groups = -(-pulses // self.lanes)
@@ -302,8 +328,9 @@ class AOLens:
                 cl.enqueue_nd_range_kernel(
                     self.queue, kernel, (groups * self.group_size,), (self.group_size,)
                 )
-            # blocking: x stays referenced until the kernel is done; the GIL is released
-            cl.enqueue_copy(self.queue, out, self._lines_buf, is_blocking=True)
-        return out
+            # In-order queue: this copy follows the kernel, and a later kernel (which reuses
+            # the lines buffer) follows this copy.
+            done = cl.enqueue_copy(self.queue, out, self._lines_buf, is_blocking=False)
+        return LensJob(done, out, (x, shots_buf))
 
     __call__ = compress

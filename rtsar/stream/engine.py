@@ -58,13 +58,12 @@ class StreamProcessor:
         corrections=None,
         physical=None,
         azimuth: bool = True,
-        max_batch: int | None = None,
     ):
         self.config = config
         check_memory(config)
         self.plan = make_plan(config)
-        batch = max_batch or config.processor.micro_batch  # the largest lens batch of the run
-        self.lens = make_lens(self.plan, lens_backend, device, config.processor.precision, batch)
+        p = config.processor  # --lens auto decides by the configured batch: one choice a config
+        self.lens = make_lens(self.plan, lens_backend, device, p.precision, p.micro_batch)
         self.dtype = self.lens.dtype
         self.corrections = corrections
         self.ao_cell = None
@@ -109,6 +108,15 @@ class StreamProcessor:
         if chain and chain.line_stages:
             lines = chain.lines(lines, aux)
         return lines
+
+    def range_submit(self, shots: np.ndarray, aux: dict, zero: bool = False):
+        """:meth:`range_stage` with the AO lens working in the background where it can (an
+        OpenCL lens, no correction, no AO cell): returns a callable that gives the lines."""
+        plain = not (zero or self.corrections or self.ao_cell is not None)
+        if plain and hasattr(self.lens, "submit"):
+            return self.lens.submit(shots).wait
+        lines = self.range_stage(shots, aux, zero)
+        return lambda: lines
 
     def flush_range(self) -> np.ndarray:
         """At the end of a stream: the range lines the line corrections still hold."""

@@ -292,3 +292,20 @@ class Ingest:
         close_run(len(seq))
         self._forget_old()
         return out
+
+
+def regroup(blocks: list[PulseBlock], most: int):
+    """Consecutive pulse blocks regrouped into blocks of at most ``most`` pulses."""
+    pending, size = [], 0
+    for b in blocks:
+        start = 0
+        while start < len(b):
+            take = min(len(b) - start, most - size)
+            pending.append(b.slice(start, start + take))
+            size += take
+            start += take
+            if size == most:
+                yield concat_blocks(pending)
+                pending, size = [], 0
+    if pending:
+        yield concat_blocks(pending)

@@ -3,8 +3,9 @@
 Each stage is a thread; stages are joined by bounded queues whose capacity is counted in
 pulses (or lines), so memory is bounded whatever the source does.  The heavy work releases the
 GIL (OpenCL waits in pyopencl, numba ``nogil`` kernels, SciPy's FFT), so threads overlap.
-``stages="fused"`` runs lens and CCD in one thread instead (one queue hop less; the benchmark
-measures both).
+``stages="fused"`` runs lens and CCD in one thread instead (one queue hop less);
+``"overlapped"`` too, the lens working on the next batch while the CCD correlates this one (the
+benchmark measures all three).
 
 Back-pressure: a live source (simulator, serial instrument) never waits: when the first queue
 is full its shots are dropped and counted, and ingest zero-fills their slots so azimuth timing
@@ -14,19 +15,12 @@ Every stage takes *all* the work waiting for it, up to a cap (adaptive micro-bat
 pipeline keeps up, batches are small and latency is low; when it falls behind, batches grow and
 the per-launch overheads are amortised.
 
-Corrections (a :class:`rtsar.focus.chain.CorrectionChain`: chirp linearization, the reference-
-region method, phase-to-retro, PGA) run in the lens thread, in pulse order: "raw" stages before
-the AO lens (they see the auxiliary channels), "lines" stages between the lens and the CCD.  A
-line stage may hold pulses back (PGA holds a block): the pulses' arrival times and flags wait
-with them, so latency and flags stay exact; the held pulses come out at the end of the stream.
-Their counters join the pipeline's.
-
-3D imaging (``height``: an rtsar.topo.stream.HeightStripStage or
-rtsar.topo.sam3d_strips.SamHeightStripStage): the auxiliary receivers the stage reads
-(``height.channels``) go through their own AO lens and CCD in step with the main channel
-(rtsar.stream.height); the stage turns the line blocks into height strips (unwrapped with
-overlap, so heights stay continuous across strips), published beside the image strips (sink
-method ``height``).
+Corrections (rtsar.focus.chain.CorrectionChain) run in the lens thread, in pulse order: "raw"
+stages before the AO lens (they see the auxiliary channels), "lines" stages between lens and
+CCD.  A line stage may hold pulses back (PGA holds a block): their arrival times and flags wait
+with them (rtsar.stream.hold), so latency and flags stay exact.  3D (``height``): the auxiliary
+receivers go through their own lens and CCD in step (rtsar.stream.height); the height strips
+are published beside the image strips (sink method ``height``).
 
 Latency of an image line: from the arrival of the last pulse that contributes to it (pulse
 j + N - 1 for line j, Psaltis & Wagner 1981: the row leaves the CCD after N shifts) to the
@@ -43,24 +37,22 @@ from __future__ import annotations
 
 import threading
 import time
-import uuid
 from collections import deque
-from dataclasses import dataclass
 
 from ..params import Config
 from ..sources.base import Source
 from .engine import Lines, StreamProcessor
 from .height import HeightBatch, HeightChannel
 from .hold import HeldPulses
-from .ingest import Ingest, PulseBlock, concat_blocks
+from .ingest import Ingest, PulseBlock, concat_blocks, regroup
 from .memory import check_memory
 from .queue import BoundedQueue
+from .settings import PipelineSettings
 from .stats import PipelineStats
-from .strips import LineBlock, StreamInfo, StripAssembler, StripSink
+from .strips import LineBlock, StreamInfo, StripAssembler, StripSink, new_stream_id
 from .swath import SwathWorkers
 from .timing import LineTiming
 
-STAGE_LAYOUTS = ("split", "fused")
 OWN_COUNTERS = (
     "dropped_pulses",
     "pulses_processed",
@@ -68,31 +60,6 @@ OWN_COUNTERS = (
     "flagged_lines",
     "strips_published",
 )
-
-
-@dataclass
-class PipelineSettings:
-    """How the pipeline runs (the processing itself is the Config)."""
-
-    lens_backend: str = "auto"
-    device: str | None = None
-    stages: str = "split"  # "split": lens and CCD in their own threads; "fused": one thread
-    strip_lines: int = 16  # lines per published strip
-    queue_pulses: int = 0  # capacity of each queue (0: 8 apertures of pulses)
-    max_batch: int = 0  # most pulses per lens launch / CCD push (0: config micro_batch)
-    max_gap_pulses: int = 0  # longest zero-filled gap; beyond it a restart (0: one aperture)
-    deadline: bool = False  # the run has a deadline: once the source ends, nobody is waited on
-    swath_workers: int = 0  # > 0: lens + CCD in that many processes, a range slice each (swath)
-    swath_spawn: bool = True  # start them here (False: they connect from elsewhere)
-    swath_bind: str = "127.0.0.1"  # HOST or tcp://HOST:PORT: where the coordinator listens
-
-    def __post_init__(self):
-        if self.stages not in STAGE_LAYOUTS:
-            raise ValueError(f"stages must be one of {STAGE_LAYOUTS}, got {self.stages!r}")
-        if self.strip_lines < 1:
-            raise ValueError("strip_lines must be >= 1")
-        if self.swath_workers and self.stages == "fused":
-            raise ValueError("--swath-workers runs lens and CCD in the workers: not with fused")
 
 
 class Pipeline:
@@ -136,8 +103,8 @@ class Pipeline:
         check_memory(config, capacity, 0 if height is None else len(height.channels))
         azimuth = not s.swath_workers  # with swath workers, they correlate: no CCD here
         self.engine = StreamProcessor(
-            config, s.lens_backend, s.device, start_along_track_m, corrections, physical, azimuth,
-            max_batch=s.max_batch or None)  # fmt: skip
+            config, s.lens_backend, s.device, start_along_track_m, corrections, physical, azimuth
+        )
         self.height = (
             None
             if height is None
@@ -219,7 +186,7 @@ class Pipeline:
                 else:
                     blocks = [b for batch in batches for b in self.ingest(batch)]
                 busy += time.perf_counter() - t
-                for block in _groups(blocks, self.max_batch):
+                for block in regroup(blocks, self.max_batch):
                     t = time.perf_counter()
                     if self.swath is not None:
                         self._to_workers(block)
@@ -234,11 +201,49 @@ class Pipeline:
                 self.swath.end()
             if self._holding:
                 self._forward(self._held.release(self.engine.flush_range()))
-            if self.settings.stages == "fused":
+            if self.settings.stages != "split":
                 self._put_image(self._ccd_flush())
         finally:
             self.stats.busy_s[key] = busy
-            (self.q_image if self.settings.stages == "fused" else self.q_lines).close()
+            (self.q_image if self.settings.stages != "split" else self.q_lines).close()
+
+    def _overlapped_stage(self) -> None:
+        """Lens and CCD in one thread, overlapped: the lens works on batch k + 1 (enqueued, not
+        waited for) while the CCD correlates batch k; only while shots are waiting (when none
+        is, the batch in flight is finished at once: latency first)."""
+        busy, pending = 0.0, None  # pending: (lines callable, block)
+        try:
+            while True:
+                batches = self.q_shots.get_batch(self.max_batch, 0 if pending else None)
+                t = time.perf_counter()
+                if batches == []:  # nothing waiting: finish the batch in flight
+                    self._finish(pending)
+                    pending = None
+                else:
+                    blocks = self.ingest.flush() if batches is None else [
+                        b for batch in batches for b in self.ingest(batch)]  # fmt: skip
+                    for block in regroup(blocks, self.max_batch):
+                        zero = bool(block.flagged.all())
+                        job = self.engine.range_submit(block.samples, block.aux, zero)
+                        self._finish(pending)  # the CCD on the previous batch meanwhile
+                        pending = (job, block)
+                    if batches is None:
+                        self._finish(pending)
+                        self._put_image(self._ccd_flush())
+                busy += time.perf_counter() - t
+                self.stats.busy_s["lens+ccd"] = busy
+                if batches is None:
+                    break
+        finally:
+            self.stats.busy_s["lens+ccd"] = busy
+            self.q_image.close()
+            self.engine.correlator.close()
+
+    def _finish(self, pending) -> None:
+        if pending is not None:
+            job, b = pending
+            lines = PulseBlock(b.first_pulse, job(), b.arrival_s, b.flagged)
+            self._put_image(self._ccd_step([lines]))
 
     def _range(self, block: PulseBlock) -> PulseBlock | None:
         """Range half of the engine on one block; the pulses it releases, with their metadata."""
@@ -256,7 +261,7 @@ class Pipeline:
         """Hand a block of range-compressed pulses to the CCD (its thread, or here if fused)."""
         if block is None or not len(block):
             return
-        if self.settings.stages == "fused":
+        if self.settings.stages != "split":
             self._put_image(self._ccd_step([block]))
         else:
             self.q_lines.put(block)
@@ -427,7 +432,10 @@ class Pipeline:
 
     def start(self) -> None:
         self.stats.started_s = time.perf_counter()
-        stages = [self._source_stage, self._lens_stage, self._strip_stage]
+        # overlapped: with no line stage holding pulses and no height channel (else fused)
+        overlap = self.settings.stages == "overlapped" and not self._holding and not self.height
+        middle = self._overlapped_stage if overlap else self._lens_stage
+        stages = [self._source_stage, middle, self._strip_stage]
         if self.settings.stages == "split":
             stages.insert(2, self._ccd_stage if self.swath is None else self._swath_stage)
         for target in stages:
@@ -476,25 +484,3 @@ class Pipeline:
     def run(self) -> PipelineStats:
         self.start()
         return self.join()
-
-
-def _groups(blocks: list[PulseBlock], most: int):
-    """Consecutive pulse blocks regrouped into blocks of at most ``most`` pulses."""
-    pending, size = [], 0
-    for b in blocks:
-        start = 0
-        while start < len(b):
-            take = min(len(b) - start, most - size)
-            pending.append(b.slice(start, start + take))
-            size += take
-            start += take
-            if size == most:
-                yield concat_blocks(pending)
-                pending, size = [], 0
-    if pending:
-        yield concat_blocks(pending)
-
-
-def new_stream_id() -> str:
-    """A random hex id for a run (a new id tells subscribers the publisher restarted)."""
-    return uuid.uuid4().hex[:16]

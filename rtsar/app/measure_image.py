@@ -3,7 +3,8 @@
 Method (also in ``rtsar measure --help``):
 
 * **Points.** Without ``--at``, point targets are the bright, isolated local maxima of |image|
-  (rtsar.analysis.detect: within ``--threshold-db`` of the brightest pixel, 20 dB above the
+  (rtsar.analysis.detect: within ``--threshold-db`` of the brightest pixel, ``--contrast-db``
+  (20) above the
   90th percentile of the ±8 resolution cells around them off their own cuts, ±4 cells apart),
   brightest first.  With
   ``--at X,R`` the brightest pixel within 2 resolution cells of (along track X, slant range R).
@@ -118,6 +119,7 @@ def measure_image(
     at: list[tuple[float, float]] | None = None,
     threshold_db: float = -30.0,
     max_points: int = 20,
+    contrast_db: float = 20.0,
 ) -> dict:
     """The report of ``rtsar measure`` (what ``--json`` writes): ``points`` (POINT_KEYS each),
     ``theory`` and, with a scene, ``truth`` (one entry per point) and ``height``."""
@@ -154,7 +156,7 @@ def measure_image(
                 )
     else:
         cell_px = (cfg.azimuth_resolution_m(centre_r) / abs(d_az), rho_r / abs(d_rg))
-        found = find_point_targets(image, cell_px, threshold_db, max_points=max_points)
+        found = find_point_targets(image, cell_px, threshold_db, contrast_db, max_points=max_points)
         positions = [(float(az[i]), float(rg[j])) for i, j in found]
     points, theories, truth = [], [], []
     for x, r in positions:
@@ -206,7 +208,8 @@ def measure_image(
             "null-to-null mainlobe rectangle, over the mainlobe's",
             "found": "given positions (--at)"
             if at
-            else f"isolated local maxima within {threshold_db:g} dB of the brightest pixel",
+            else f"isolated local maxima within {threshold_db:g} dB of the brightest pixel, "
+            f"{contrast_db:g} dB above their surroundings",
         },
         "points": points,
         "theory": theories,

@@ -12,7 +12,7 @@ def cmd_measure(args) -> int:
         return die(f"--max-points must be >= 1, got {args.max_points}")
     at = [measure_image.parse_at(a) for a in args.at or []]
     report = measure_image.measure_image(
-        args.image, args.scene, at, args.threshold_db, args.max_points
+        args.image, args.scene, at, args.threshold_db, args.max_points, args.contrast_db
     )
     for line in measure_image.text_lines(report):
         print(line)
@@ -42,8 +42,8 @@ def add_parsers(sub) -> None:
         "crossings); PSLR: the highest sidelobe outside it, anywhere in the cut; ISLR: the "
         "energy within +-10 IRWs on both axes outside the null-to-null rectangle over the "
         "energy inside it (-7.0 dB for an unweighted sinc in both axes; each 1-D cut alone: "
-        "-9.7 dB).  Found points: isolated local maxima, 20 dB above the 90th percentile of "
-        "the +-8 cells around them (off their own cuts), within --threshold-db of the "
+        "-9.7 dB).  Found points: isolated local maxima, --contrast-db above the 90th percentile "
+        "of the +-8 cells around them (off their own cuts), within --threshold-db of the "
         "brightest pixel.  Exit status 1 when nothing was measured.",
     )
     s.add_argument("image", help="image file from process, run -o or subscribe -o (.h5)")
@@ -63,6 +63,13 @@ def add_parsers(sub) -> None:
         type=float,
         default=-30.0,
         help="found points: within this many dB of the brightest pixel (default -30)",
+    )
+    s.add_argument(
+        "--contrast-db",
+        type=float,
+        default=20.0,
+        help="found points: this many dB above the 90th percentile of the power around them, "
+        "off their own cuts (default 20; lower it for points beside bright clutter)",
     )
     s.add_argument(
         "--max-points", type=int, default=20, help="found points: the brightest N (default 20)"

@@ -295,3 +295,24 @@ def test_server_feeds_several_browsers_survives_a_restart_and_a_stalled_one_wait
         assert last_first_run[0]["newest"] == 300 * 16 // 1 - 1  # 1 line a row at 256 lines
         assert np.allclose(last_first_run[2], 20 * np.log10(5.0), atol=1e-5)
         assert rows[-1][2].shape[1] == 64 and rows[-1][0]["newest"] == 47
+
+
+def test_the_readme_defaults_16_browsers_and_8192_lines_in_1024_rows():
+    from rtsar.app.webview import server
+
+    frames = LiveFrames()
+    assert (frames.lines, frames.lines_per_row, frames.rows) == (8192, 8, 1024)
+    assert server.MAX_BROWSERS == 16
+
+    async def one_too_many():
+        view = ViewServer(f"tcp://127.0.0.1:{free_port()}", port=0, max_browsers=1)
+        url = await view.start()
+        async with aiohttp.ClientSession() as session:
+            first = await session.ws_connect(url + "ws")
+            with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
+                await session.ws_connect(url + "ws")
+            await first.close()
+        await view.stop()
+        return refused.value.status
+
+    assert asyncio.run(one_too_many()) == 503

@@ -68,6 +68,7 @@ class ViewServer:
         self.max_browsers = int(max_browsers)
         self.browsers: dict[web.WebSocketResponse, Browser] = {}
         self.updates_sent = 0
+        self._slots = 0  # browsers connected or shaking hands
         self._sub = StripSubscriber(endpoint, curve_server_key, curve_client_key, hwm_messages=64)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -140,10 +141,15 @@ class ViewServer:
         return web.json_response(self.frames.snapshot_status())
 
     async def _socket(self, request: web.Request) -> web.StreamResponse:
-        if len(self.browsers) >= self.max_browsers:
+        if self._slots >= self.max_browsers:
             raise web.HTTPServiceUnavailable(text=f"at most {self.max_browsers} browsers at once")
+        self._slots += 1  # taken before the handshake's await: a burst cannot overshoot
         ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=1 << 16)
-        await ws.prepare(request)
+        try:
+            await ws.prepare(request)
+        except BaseException:
+            self._slots -= 1
+            raise
         browser = self.browsers[ws] = Browser(request.transport)
         self.frames.set_browsers(len(self.browsers))
         self._wake()
@@ -171,6 +177,7 @@ class ViewServer:
         finally:
             reader.cancel()
             self.browsers.pop(ws, None)
+            self._slots -= 1
             self.frames.set_browsers(len(self.browsers))
             await ws.close()
         return ws

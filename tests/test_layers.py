@@ -59,6 +59,7 @@ LAZY_ALLOWED = {
     ("rtsar.ccd", "rtsar.ccd.physical"): "the physical CCD's numba kernels, physical mode only",
     ("rtsar.app.cli.formats", "rtsar.sinks.exports.sicd"): "sarpy loads in ~1 s; --sicd only",
     ("rtsar.app.cli.streaming", "rtsar.sinks.exports.sicd"): "sarpy loads in ~1 s; --sicd only",
+    ("rtsar.app.cli.view", "rtsar.app.webview.server"): "aiohttp loads in ~0.2 s; --http only",
     ("rtsar.app.entry", "rtsar.app.cli"): "a Ctrl-C during the command's imports is one line",
 }
 MAX_LINES = 500

@@ -30,6 +30,7 @@ RULES = [
     (r"^rtsar run .*--serial", "help", "needs an instrument (tests/test_serial.py runs it)"),
     (r"^rtsar (view|subscribe)\b", "help", "needs a live publisher (tests/test_publish.py)"),
     (r"^rtsar (simulate|process|quicklook) ", "run", "quick on the README's scenes"),
+    (r"^rtsar measure ", "run", "quick on the SAL demo's image (~2 s)"),
     (r"^rtsar (bench|tradeoff|table1|demo|replay|batch)\b", "help", "a minute or more"),
     (r"^rtsar (spot-simulate|spotlight|projective)\b", "help", "run by tests/test_spot*.py"),
     (r"^rtsar (export|swath-worker)\b", "help", "run by their own tests"),

@@ -69,21 +69,24 @@ def acceptance_targets(cfg: Config) -> list[tuple[str, float, float]]:
     ]
 
 
-def _range_weights(cfg: Config) -> np.ndarray:
+def range_weights(cfg: Config) -> np.ndarray:
+    """The range window over the pulse (pulsed) or the shot (FMCW): the range IRW's taper."""
     wf = cfg.waveform
     n = wf.pulse_samples if wf.kind == "pulsed" else wf.samples_per_shot
     return window(cfg.processor.range_window, n)
 
 
-def azimuth_weights(cfg: Config, slant_range_m: float, antenna: bool) -> np.ndarray:
+def azimuth_weights(
+    cfg: Config, slant_range_m: float, antenna: bool, antenna_length_m: float | None = None
+) -> np.ndarray:
+    """The azimuth window over the aperture, times the two-way antenna pattern (Crouch eq. 4.9)
+    when ``antenna`` (``antenna_length_m``: the antenna_pattern effect's D, default the
+    geometry's)."""
     w = window(cfg.processor.azimuth_window, cfg.processor.aperture_pulses)
     if antenna:
         g = cfg.geometry
-        w = (
-            w
-            * np.sinc(g.antenna_length_m / g.wavelength_m * aperture_offsets_m(cfg) / slant_range_m)
-            ** 2
-        )
+        d_over_lambda = (antenna_length_m or g.antenna_length_m) / g.wavelength_m
+        w = w * np.sinc(d_over_lambda * aperture_offsets_m(cfg) / slant_range_m) ** 2
     return w
 
 
@@ -121,7 +124,7 @@ def run_point_targets(
     if noise_snr_db is not None:
         effects.append(("noise", {"snr_db": noise_snr_db}))
     rho_r = cfg.waveform.range_resolution_m
-    rw = _range_weights(cfg)
+    rw = range_weights(cfg)
     step = cfg.geometry.along_track_step_m
     results = []
     for label, x, r in acceptance_targets(cfg):

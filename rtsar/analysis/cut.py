@@ -133,6 +133,28 @@ def _first_nulls(p: np.ndarray, start_left: int, start_right: int):
     return null_left, null_right
 
 
+def mainlobe(p: np.ndarray, i_peak: int, peak_power: float):
+    """``(irw_samples, null_left, null_right)`` of a finely sampled power response ``p``.
+
+    IRW from the half-power crossings (linear interpolation between samples, ``inf`` when one
+    is missing); the nulls are the first minima searched outward from those crossings
+    (module docstring), ``None`` on a side where the power falls to the end of the cut.
+    """
+    last = p.size - 1
+    u_left, j_left, u_right, j_right = _half_power_crossings(p, i_peak, 0.5 * peak_power)
+    irw_samples = math.inf if u_left is None or u_right is None else u_right - u_left
+    null_left, null_right = _first_nulls(
+        p,
+        j_left if j_left is not None else 0,
+        j_right if j_right is not None else last,
+    )
+    if j_left is None:
+        null_left = None
+    if j_right is None:
+        null_right = None
+    return irw_samples, null_left, null_right
+
+
 def lobe_metrics(
     p: np.ndarray,
     i_peak: int,
@@ -148,25 +170,7 @@ def lobe_metrics(
     maximum at grid sample ``i``.
     """
     last = p.size - 1
-
-    # IRW from the half-power crossings (linear interpolation between samples).
-    half = 0.5 * peak_power
-    u_left, j_left, u_right, j_right = _half_power_crossings(p, i_peak, half)
-    if u_left is None or u_right is None:
-        irw_samples = math.inf
-    else:
-        irw_samples = u_right - u_left
-
-    # Mainlobe between the first nulls, searched outward from the half-power crossings.
-    null_left, null_right = _first_nulls(
-        p,
-        j_left if j_left is not None else 0,
-        j_right if j_right is not None else last,
-    )
-    if j_left is None:
-        null_left = None
-    if j_right is None:
-        null_right = None
+    irw_samples, null_left, null_right = mainlobe(p, i_peak, peak_power)
     lo = null_left if null_left is not None else 0
     hi = null_right if null_right is not None else last
 

@@ -75,7 +75,7 @@ def analyse_point_target(
     near_azimuth_m: float | None = None,
     near_range_m: float | None = None,
     search_radius_m: tuple[float, float] | float | None = None,
-    chip: int = 64,
+    chip: int | tuple[int, int] = 64,
     upsample_factor: int = 16,
     *,
     islr_extent: float = 10.0,
@@ -102,8 +102,8 @@ def analyse_point_target(
     search_radius_m : tuple of float, float or None, optional
         ``(azimuth_radius_m, range_radius_m)`` (or one radius for both) of the search window
         around the ``near_*`` positions; ``None`` means ``chip`` pixels along each axis.
-    chip : int, optional
-        Chip half-size in pixels (default 64).
+    chip : int or (int, int), optional
+        Chip half-size in pixels (default 64), or (azimuth, range) half-sizes.
     upsample_factor : int, optional
         Upsampling factor for the 2-D peak search and the cuts (default 16).
     islr_extent : float, optional
@@ -128,12 +128,14 @@ def analyse_point_target(
     n_az, n_rg = img.shape
     az_origin, az_spacing = _uniform_axis(azimuth_m, n_az, "azimuth_m")
     rg_origin, rg_spacing = _uniform_axis(range_m, n_rg, "range_m")
-    if isinstance(chip, bool) or not isinstance(chip, (int, np.integer)) or chip < 1:
-        raise ValueError(f"chip must be an integer >= 1, got {chip!r}")
+    chip_az, chip_rg = (chip, chip) if np.ndim(chip) == 0 else tuple(chip)
+    for c in (chip_az, chip_rg):
+        if isinstance(c, bool) or not isinstance(c, (int, np.integer)) or c < 1:
+            raise ValueError(f"chip must be an integer >= 1 (or two), got {chip!r}")
     factor = check_factor(upsample_factor)
 
     if search_radius_m is None:
-        radius_az, radius_rg = chip * abs(az_spacing), chip * abs(rg_spacing)
+        radius_az, radius_rg = chip_az * abs(az_spacing), chip_rg * abs(rg_spacing)
     elif np.ndim(search_radius_m) == 0:
         radius_az = radius_rg = finite_number(search_radius_m, "search_radius_m")
     else:
@@ -154,8 +156,8 @@ def analyse_point_target(
     ia, ir = np.unravel_index(flat, magnitude.shape)
     ia, ir = int(ia) + win_az.start, int(ir) + win_rg.start
 
-    a0, a1 = max(ia - chip, 0), min(ia + chip, n_az - 1) + 1
-    r0, r1 = max(ir - chip, 0), min(ir + chip, n_rg - 1) + 1
+    a0, a1 = max(ia - chip_az, 0), min(ia + chip_az, n_az - 1) + 1
+    r0, r1 = max(ir - chip_rg, 0), min(ir + chip_rg, n_rg - 1) + 1
     chip_img = img[a0:a1, r0:r1].astype(np.complex128)
     na, nr = chip_img.shape
     spectrum_2d = _fft.fft2(chip_img)

@@ -6,6 +6,7 @@ Axes in metres (or the unit that suits the span).
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -49,20 +50,94 @@ def to_db(image: np.ndarray, dynamic_range_db: float) -> np.ndarray:
     return np.maximum(db, -dynamic_range_db)
 
 
-def save_quicklook(
-    path,
+@dataclass(frozen=True)
+class ImageAxes:
+    """How an image[row, column] is drawn: extent (pixel edges), unit, labels, orientation.
+
+    A strip-map image: slant range across, along track down, in the unit that suits the span.
+    A spotlight image (image[x, y], rtsar spotlight): cross-range x across, down-range y up.
+    The amplitude and the height map of one file are drawn on the same axes.
+    """
+
+    extent: tuple[float, float, float, float]
+    unit: str
+    scale: float
+    xlabel: str
+    ylabel: str
+    transpose: bool  # draw image.T (spotlight: rows are x, drawn across)
+    origin: str
+
+    def shown(self, values: np.ndarray) -> np.ndarray:
+        return values.T if self.transpose else values
+
+
+def _unit(span_m: float) -> tuple[str, float]:
+    for u, s in (("km", 1e3), ("m", 1.0), ("mm", 1e-3), ("µm", 1e-6)):
+        if span_m >= 5 * s:
+            return u, s
+    return "m", 1.0
+
+
+def image_axes(row_m, column_m, spotlight: bool = False) -> ImageAxes:
+    """The axes of an image whose rows sit at ``row_m`` and columns at ``column_m``."""
+    row_m = np.asarray(row_m, np.float64)
+    column_m = np.asarray(column_m, np.float64)
+    dr = (column_m[-1] - column_m[0]) / max(len(column_m) - 1, 1)
+    da = (row_m[-1] - row_m[0]) / max(len(row_m) - 1, 1)
+    if spotlight:  # x (rows) across, y (columns) up
+        unit, scale = _unit(max(float(np.ptp(row_m)), float(np.ptp(column_m)), 1e-30))
+        extent = (
+            (row_m[0] - da / 2) / scale,
+            (row_m[-1] + da / 2) / scale,
+            (column_m[0] - dr / 2) / scale,
+            (column_m[-1] + dr / 2) / scale,
+        )
+        return ImageAxes(
+            extent, unit, scale, f"cross-range x [{unit}]", f"down-range y [{unit}]", True, "lower"
+        )
+    unit, scale = _unit(max(float(np.ptp(column_m)), 1e-30))
+    # Pixel edges, half a step beyond the first and last pixel centres.
+    extent = (
+        (column_m[0] - dr / 2) / scale,
+        (column_m[-1] + dr / 2) / scale,
+        (row_m[-1] + da / 2) / scale,
+        (row_m[0] - da / 2) / scale,
+    )
+    return ImageAxes(
+        extent, unit, scale, f"slant range [{unit}]", f"along track [{unit}]", False, "upper"
+    )
+
+
+def spotlight_words(channel: str, look: str, method: str = "") -> str:
+    """How a spotlight image was formed, for its title: the channel and, for a bistatic channel,
+    whether its own geometry was used (the corrected image) or the monostatic one (not)."""
+    how = f"{method}, " if method else ""
+    if channel == "main":
+        return f"spotlight {how}monostatic channel"
+    if look == "monostatic":
+        return f"spotlight {how}channel {channel} processed as if monostatic (uncorrected)"
+    return f"spotlight {how}channel {channel} in its bistatic geometry (corrected)"
+
+
+def _figure_height(axes: ImageAxes, shape, true_aspect: bool) -> float:
+    e = axes.extent
+    if true_aspect:
+        ratio = abs(e[2] - e[3]) / max(abs(e[1] - e[0]), 1e-30)
+        return min(12.0, max(3.0, 7.0 * ratio + 1.0))
+    rows, cols = shape[::-1] if axes.transpose else shape
+    return min(12.0, max(3.0, 8.0 * rows / max(cols, 1)))
+
+
+def quicklook_figure(
     image,
     azimuth_m,
     range_m,
     dynamic_range_db: float = 50.0,
     title: str = "",
     true_aspect: bool = False,
-) -> None:
-    """Write a PNG: range across, azimuth (along track) down, grey scale in dB.
-
-    ``true_aspect``: one metre is as long on both axes, so a focused point looks round (the
-    default fills the figure; the axes' metres say how much one axis is stretched).
-    """
+    spotlight: bool = False,
+):
+    """The figure of :func:`save_quicklook` (the caller closes it)."""
     plt = file_pyplot()
 
     if dynamic_range_db <= 0:
@@ -71,41 +146,47 @@ def save_quicklook(
     if image.ndim != 2 or image.shape[0] == 0 or image.shape[1] == 0:
         raise ValueError(f"image must be a non-empty 2-D array, got shape {image.shape}")
     db = to_db(image, dynamic_range_db)
-    span = max(float(np.ptp(range_m)), 1e-30)
-    unit, scale = ("m", 1.0)
-    for u, s in (("km", 1e3), ("m", 1.0), ("mm", 1e-3), ("µm", 1e-6)):
-        if span >= 5 * s:
-            unit, scale = u, s
-            break
-    # Pixel edges, half a step beyond the first and last pixel centres.
-    dr = (range_m[-1] - range_m[0]) / max(len(range_m) - 1, 1)
-    da = (azimuth_m[-1] - azimuth_m[0]) / max(len(azimuth_m) - 1, 1)
-    extent = [
-        (range_m[0] - dr / 2) / scale,
-        (range_m[-1] + dr / 2) / scale,
-        (azimuth_m[-1] + da / 2) / scale,
-        (azimuth_m[0] - da / 2) / scale,
-    ]
-    if true_aspect:
-        ratio = abs(extent[2] - extent[3]) / max(abs(extent[1] - extent[0]), 1e-30)
-        height = min(12.0, max(3.0, 7.0 * ratio + 1.0))
-    else:
-        height = min(12.0, max(3.0, 8.0 * image.shape[0] / max(image.shape[1], 1)))
-    fig, ax = plt.subplots(figsize=(8, height), dpi=100)
+    axes = image_axes(azimuth_m, range_m, spotlight)
+    fig, ax = plt.subplots(figsize=(8, _figure_height(axes, image.shape, true_aspect)), dpi=100)
     im = ax.imshow(
-        db,
+        axes.shown(db),
         cmap="gray",
         vmin=-dynamic_range_db,
         vmax=0,
-        extent=extent,
+        extent=axes.extent,
+        origin=axes.origin,
         aspect="equal" if true_aspect else "auto",
         interpolation="nearest",
     )
-    ax.set_xlabel(f"slant range [{unit}]")
-    ax.set_ylabel(f"along track [{unit}]")
+    ax.set_xlabel(axes.xlabel)
+    ax.set_ylabel(axes.ylabel)
     ax.set_title(title)
     fig.colorbar(im, ax=ax, label="dB re peak")
     fig.tight_layout()
+    return fig
+
+
+def save_quicklook(
+    path,
+    image,
+    azimuth_m,
+    range_m,
+    dynamic_range_db: float = 50.0,
+    title: str = "",
+    true_aspect: bool = False,
+    spotlight: bool = False,
+) -> None:
+    """Write a PNG: range across, azimuth (along track) down, grey scale in dB.
+
+    ``true_aspect``: one metre is as long on both axes, so a focused point looks round (the
+    default fills the figure; the axes' metres say how much one axis is stretched).
+    ``spotlight``: an image[x, y] of rtsar spotlight, drawn cross-range x across, down-range y
+    up (image_axes).
+    """
+    plt = file_pyplot()
+    fig = quicklook_figure(
+        image, azimuth_m, range_m, dynamic_range_db, title, true_aspect, spotlight
+    )
     save_figure(fig, path)
     plt.close(fig)
 
@@ -124,8 +205,7 @@ def height_colour_limits_mm(height_m, valid, percentile: float = 0.5) -> tuple[f
     return lo, hi
 
 
-def save_height_quicklook(
-    path,
+def height_figure(
     height_m,
     valid,
     azimuth_m,
@@ -133,12 +213,9 @@ def save_height_quicklook(
     title: str = "",
     limits_mm: tuple[float, float] | None = None,
     cmap: str = "viridis",
-) -> None:
-    """Write a PNG: slant range across, along track down (mm from the first pixel), height colour.
-
-    ``valid`` False → grey.  ``limits_mm``: colour range (default height_colour_limits_mm).
-    Non-finite heights on valid pixels are refused (ValueError), never drawn silently.
-    """
+    true_aspect: bool = True,
+):
+    """The figure of :func:`save_height_quicklook` (the caller closes it)."""
     plt = file_pyplot()
 
     h = np.asarray(height_m, np.float64)
@@ -152,28 +229,47 @@ def save_height_quicklook(
     if not np.isfinite(h[v]).all():
         raise ValueError("height map holds non-finite values on valid pixels")
     lo, hi = limits_mm or height_colour_limits_mm(h, v)
-    az = (np.asarray(azimuth_m, np.float64) - azimuth_m[0]) * 1e3
-    rg = (np.asarray(range_m, np.float64) - range_m[0]) * 1e3
-    da = az[1] - az[0] if len(az) > 1 else 1.0
-    dr = rg[1] - rg[0] if len(rg) > 1 else 1.0
-    extent = [rg[0] - dr / 2, rg[-1] + dr / 2, az[-1] + da / 2, az[0] - da / 2]
+    axes = image_axes(azimuth_m, range_m)  # the amplitude image's axes (quicklook_figure)
     colours = plt.get_cmap(cmap).with_extremes(bad=MASKED_GREY)
     shown = np.ma.array(h * 1e3, mask=~v)
-    fig_h = min(10.0, max(3.0, 7.0 * h.shape[0] * abs(da) / max(h.shape[1] * abs(dr), 1e-9)))
-    fig, ax = plt.subplots(figsize=(7, fig_h), dpi=100)
+    fig_h = _figure_height(axes, h.shape, true_aspect)
+    fig, ax = plt.subplots(figsize=(7, min(10.0, fig_h)), dpi=100)
     im = ax.imshow(
         shown,
         cmap=colours,
         vmin=lo,
         vmax=hi,
-        extent=extent,
-        aspect="equal",
+        extent=axes.extent,
+        origin=axes.origin,
+        aspect="equal" if true_aspect else "auto",
         interpolation="nearest",
     )
-    ax.set_xlabel(f"slant range from {range_m[0]:.4f} m [mm]")
-    ax.set_ylabel("along track [mm]")
+    ax.set_xlabel(axes.xlabel)
+    ax.set_ylabel(axes.ylabel)
     ax.set_title(title)
     fig.colorbar(im, ax=ax, label="height [mm]")
     fig.tight_layout()
+    return fig
+
+
+def save_height_quicklook(
+    path,
+    height_m,
+    valid,
+    azimuth_m,
+    range_m,
+    title: str = "",
+    limits_mm: tuple[float, float] | None = None,
+    cmap: str = "viridis",
+    true_aspect: bool = True,
+) -> None:
+    """Write a PNG of a height map on the amplitude image's axes (slant range across, along
+    track down, in the unit of the span; height colour, mm).
+
+    ``valid`` False → grey.  ``limits_mm``: colour range (default height_colour_limits_mm).
+    Non-finite heights on valid pixels are refused (ValueError), never drawn silently.
+    """
+    plt = file_pyplot()
+    fig = height_figure(height_m, valid, azimuth_m, range_m, title, limits_mm, cmap, true_aspect)
     save_figure(fig, path)
     plt.close(fig)

@@ -185,6 +185,7 @@ def write_spot_image(path, image, plan: PolarFormatPlan, rotation_rad: float, **
         "geometry": plan.geometry.to_dict(),
         "frame_angle_rad": plan.alpha_rad,
         "channel": plan.channel,
+        "look": plan.look,
         "rotation_rad": rotation_rad,
         "settings": plan.settings.__dict__,
     }

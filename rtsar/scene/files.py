@@ -20,9 +20,17 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from .model import MAX_TARGETS, Scene, scan_extent, scene_from_dict, scene_settings
+from .model import MAX_TARGETS, Scene, Targets, scan_extent, scene_from_dict, scene_settings
 from .picture import picture_levels, picture_targets, text_rows
-from .relief import default_spacing_m, penny_relief, ridge, slanted_plane, sphere_cap, surface_scene
+from .relief import (
+    SurfaceScene,
+    default_spacing_m,
+    penny_relief,
+    ridge,
+    slanted_plane,
+    sphere_cap,
+    surface_scene,
+)
 from .surfaces import combine_targets
 
 if sys.version_info >= (3, 11):
@@ -54,6 +62,11 @@ def scene_from_table(d: dict, name: str = "scene") -> Scene:
         return _with_pictures(d, name)
     if "surface" not in d:
         return scene_from_dict(d, name)
+    return surface_from_table(d, name).scene
+
+
+def surface_from_table(d: dict, name: str = "scene") -> SurfaceScene:
+    """The SurfaceScene of a parsed scene file with a ``[surface]`` (its truth: ``.truth``)."""
     table = d["surface"]
     if not isinstance(table, dict):
         raise ValueError("'surface' must be a table: write [surface]")
@@ -95,7 +108,7 @@ def scene_from_table(d: dict, name: str = "scene") -> Scene:
         seed=seed,
         effects=effects,
         name=d.get("name", name),
-    ).scene
+    )
 
 
 def _with_pictures(d: dict, name: str) -> Scene:
@@ -155,6 +168,21 @@ def built_in_scenes() -> list[str]:
 def load_scene(path: str | Path) -> Scene:
     """Read a TOML scene file, or a built-in scene by name (``demo``, ``insal-ridge``); errors
     name the file and the offending key."""
+    return _read(path, scene_from_table)
+
+
+def load_surface_scene(path: str | Path) -> SurfaceScene | None:
+    """The ``[surface]`` of a scene file with its truth (None for a scene without one)."""
+    return _read(path, lambda d, name: surface_from_table(d, name) if "surface" in d else None)
+
+
+def load_point_targets(path: str | Path) -> Targets:
+    """The scene file's ``[[targets]]`` alone (no pictures, no surface): its point targets."""
+    keep = ("preset", "seed", "waveform", "geometry", "processor", "targets", "name")
+    return _read(path, lambda d, name: scene_from_dict({k: d[k] for k in keep if k in d}).targets)
+
+
+def _read(path: str | Path, make):
     path = Path(path)
     if (
         not path.exists()
@@ -172,6 +200,6 @@ def load_scene(path: str | Path) -> Scene:
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{path}: not valid TOML: {exc}") from None
     try:
-        return scene_from_table(d, name=path.stem)
+        return make(d, path.stem)
     except (ValueError, TypeError) as exc:
         raise ValueError(f"{path}: {exc}") from None

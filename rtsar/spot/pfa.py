@@ -104,6 +104,7 @@ class PolarFormatPlan:
         if look not in ("exact", "monostatic"):
             raise ValueError(f"look must be 'exact' or 'monostatic', got {look!r}")
         self.config, self.geometry, self.channel = config, geometry, channel
+        self.look = look
         self.settings = s = settings or PfaSettings()
         wf = config.waveform
         lam = config.geometry.wavelength_m

@@ -1,7 +1,7 @@
 """The ``rtsar`` command.  ``rtsar COMMAND --help`` explains each command.
 
 One module per command group: ``files`` (presets, simulate, process, quicklook), ``streaming``
-(run, replay, subscribe, view, keygen), ``measure`` (bench, tradeoff, table1), ``batch``,
+(run, replay, demo, subscribe, keygen), ``view``, ``measure`` (bench, tradeoff, table1), ``batch``,
 ``swath`` (swath-worker); ``options`` declares the options they share.
 """
 
@@ -14,13 +14,14 @@ import warnings
 from ... import __version__
 from ...sinks.publish import DEFAULT_ENDPOINT
 from .. import signals
-from . import batch, files, formats, measure, spot, streaming, swath
+from . import batch, files, formats, measure, spot, streaming, swath, view
 from .options import check_outputs_spare_inputs, die
 
 EPILOG = f"""examples:
   rtsar run                                  live demo: the built-in scene streamed at its PRF,
                                              strips published on {DEFAULT_ENDPOINT}
   rtsar view --png live.png                  snapshot of the live strips (or a window)
+  rtsar view --http 8080                     the live strips on a page: http://127.0.0.1:8080/
   rtsar subscribe -o live.h5                 record the published strips into an image file
   rtsar replay rec.h5 --rate max             a recording through the live pipeline
   rtsar presets                              the instrument presets and their theoretical figures
@@ -49,6 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     files.add_parsers(sub)
     streaming.add_parsers(sub)
+    view.add_parsers(sub)
     measure.add_parsers(sub)
     formats.add_parsers(sub)
     batch.add_parsers(sub)

@@ -19,7 +19,7 @@ from ...sinks.record import processing_attrs
 from ...stream.engine import StreamProcessor
 from .. import signals
 from ..progress import Progress
-from ..quicklook import save_height_quicklook, save_quicklook
+from ..quicklook import save_height_quicklook, save_quicklook, spotlight_words
 from .inputs import open_input
 from .options import (
     add_process_options,
@@ -234,14 +234,19 @@ def _write_heights(img: ImageWriter, strips) -> None:
 
 def cmd_quicklook(args) -> int:
     image, az, rg, attrs = read_image(args.image)
+    spot = json.loads(attrs["spotlight"]) if "spotlight" in attrs else None
+    title = Path(args.image).name
+    if spot is not None:  # say which channel and how it was focused (before/after pairs)
+        title += f": {spotlight_words(spot.get('channel', 'main'), spot.get('look', 'exact'))}"
     save_quicklook(
         args.output,
         image,
         az,
         rg,
         dynamic_range_db=args.dynamic_range_db,
-        title=Path(args.image).name,
+        title=title,
         true_aspect=args.true_aspect,
+        spotlight=spot is not None,
     )
     print(f"wrote {args.output}")
     if args.height:
@@ -249,7 +254,15 @@ def cmd_quicklook(args) -> int:
         if heights is None:
             return die(f"{args.image} holds no heights (made without --height insal)")
         h, valid = heights
-        save_height_quicklook(args.height, h, valid, az, rg, f"{Path(args.image).name}: height")
+        save_height_quicklook(
+            args.height,
+            h,
+            valid,
+            az,
+            rg,
+            f"{Path(args.image).name}: height",
+            true_aspect=args.true_aspect,
+        )
         print(f"wrote {args.height}: {valid.mean():.0%} of the pixels valid")
     return 0
 

@@ -17,7 +17,7 @@ from ...spot.projective import reconstruct_line, reconstruct_points
 from ...spot.scene import load_spot_scene
 from ...spot.simulate import BISTATIC_CHANNEL
 from .. import spotlight as run
-from ..quicklook import file_pyplot, save_figure, save_quicklook
+from ..quicklook import file_pyplot, save_figure, save_quicklook, spotlight_words
 from .options import die
 
 
@@ -216,8 +216,9 @@ def cmd_spotlight(args) -> int:
             image,
             plan.x_m,
             plan.y_m,
-            title=f"spotlight ({args.method})",
+            title=spotlight_words(args.channel, args.look, args.method),
             true_aspect=True,
+            spotlight=True,
         )
     print(
         f"spotlight image {image.shape} in {dt:.2f} s"
@@ -291,15 +292,47 @@ def cmd_projective(args) -> int:
             f"  ambiguous: range {1e3 * y_amb:+.3f} mm holds {na} and {nb} peaks", file=sys.stderr
         )
     if args.png:
-        plt = file_pyplot()
-        fig = plt.figure(figsize=(6, 5))
-        ax = fig.add_subplot(projection="3d")
-        p = 1e3 * rec.points_m
-        ax.scatter(p[:, 0], p[:, 1], p[:, 2], c=p[:, 2], cmap="viridis", s=12)
-        ax.set_xlabel("cross-range x (mm)")
-        ax.set_ylabel("range y (mm)")
-        ax.set_zlabel("out of plane z (mm)")
-        ax.set_title(f"projective SAL: {rec.summary()}", fontsize=9)
+        fig = projective_figure(rec.points_m, f"projective SAL: {rec.summary()}")
         save_figure(fig, args.png, dpi=110)
-        plt.close(fig)
+        file_pyplot().close(fig)
     return 0
+
+
+def projective_figure(points_m: np.ndarray, title: str):
+    """3-D points (mm) coloured by z, with a colour bar.  Each axis spans at least a tenth of
+    the widest one about its points' centre, and no axis takes an offset: a flat set of points
+    (z within 1e-16 mm of 0) shows flat, not as its rounding errors magnified."""
+    from matplotlib.ticker import ScalarFormatter
+
+    plt = file_pyplot()
+    fig = plt.figure(figsize=(7, 5.5))
+    ax = fig.add_subplot(projection="3d")
+    p = 1e3 * np.asarray(points_m, np.float64).reshape(-1, 3)
+    spans = np.ptp(p, axis=0) if len(p) else np.zeros(3)
+    least = 0.1 * max(float(spans.max()), 1e-3)  # 1 µm when every point is one
+    limits = []
+    for axis in range(3):
+        centre = float(np.mean(p[:, axis])) if len(p) else 0.0
+        half = 0.55 * max(float(spans[axis]), least)
+        limits.append((centre - half, centre + half))
+    art = ax.scatter(
+        p[:, 0],
+        p[:, 1],
+        p[:, 2],
+        c=p[:, 2],
+        cmap="viridis",
+        s=14,
+        vmin=limits[2][0],
+        vmax=limits[2][1],
+    )
+    ax.set_xlim(*limits[0])
+    ax.set_ylim(*limits[1])
+    ax.set_zlim(*limits[2])
+    for a in (ax.xaxis, ax.yaxis, ax.zaxis):
+        a.set_major_formatter(ScalarFormatter(useOffset=False))
+    ax.set_xlabel("cross-range x (mm)", labelpad=8)
+    ax.set_ylabel("down-range y (mm)", labelpad=8)
+    ax.set_zlabel("out of plane z (mm)", labelpad=10)
+    ax.set_title(title, fontsize=9)
+    fig.colorbar(art, ax=ax, label="out of plane z (mm)", shrink=0.65, pad=0.12)
+    return fig

@@ -1,4 +1,5 @@
-"""Streaming commands: ``run``, ``replay``, ``subscribe``, ``view``, ``keygen``."""
+"""Streaming commands: ``run``, ``replay``, ``demo``, ``subscribe``, ``keygen`` (``view``: its own
+module)."""
 
 from __future__ import annotations
 
@@ -31,7 +32,6 @@ from ..live import (
     zmq_channel_fix,
 )
 from ..subscribe import subscribe
-from ..view import view
 from .files import simulate_to
 from .inputs import open_input
 from .options import (
@@ -245,25 +245,6 @@ def cmd_subscribe(args) -> int:
     return status
 
 
-def cmd_view(args) -> int:
-    if args.lines < 1:
-        return die(f"--lines must be >= 1, got {args.lines}")
-    if args.timeout is not None and args.timeout <= 0:
-        return die(f"--timeout must be > 0 seconds, got {args.timeout}")
-    if not args.dynamic_range_db > 0:
-        return die(f"--dynamic-range-db must be > 0, got {args.dynamic_range_db}")
-    return view(
-        args.endpoint,
-        args.png,
-        args.lines,
-        args.dynamic_range_db,
-        args.curve_server_key,
-        args.timeout,
-        curve_client_key=args.curve_client_key,
-        true_aspect=args.true_aspect,
-    )
-
-
 def cmd_keygen(args) -> int:
     folder = Path(args.directory)
     public, secret = folder / f"{args.name}.key", folder / f"{args.name}.key_secret"
@@ -434,37 +415,6 @@ def add_parsers(sub) -> None:
         'pip install "rtsar[formats]"; default: none)',
     )
     s.set_defaults(func=cmd_subscribe)
-
-    s = sub.add_parser(
-        "view",
-        help="live waterfall of published strips (or a PNG snapshot)",
-        description="Show the newest image lines as a scrolling waterfall (dB re peak). "
-        "Needs a display; --png FILE waits for --lines lines and writes a snapshot instead. "
-        "A viewer that cannot keep up skips strips; it never slows the processor.",
-    )
-    add_subscriber_options(s)
-    s.add_argument("--png", metavar="FILE", help="write a snapshot PNG and exit")
-    s.add_argument(
-        "--lines",
-        type=int,
-        default=8192,
-        help="lines shown: the waterfall's length (default 8192: 5 s, 1280 m of the demo)",
-    )
-    s.add_argument("--dynamic-range-db", type=float, default=50.0, help="dB shown (default 50)")
-    s.add_argument(
-        "--timeout",
-        type=float,
-        default=30.0,
-        help="--png: give up after this many seconds of silence (default 30)",
-    )
-    s.add_argument(
-        "--true-aspect",
-        action="store_true",
-        help="--png: "
-        "one metre as long on both axes, so a focused point looks like a point (default: "
-        "the image fills the figure; the axes' metres give the stretch)",
-    )
-    s.set_defaults(func=cmd_view)
 
     s = sub.add_parser(
         "keygen",

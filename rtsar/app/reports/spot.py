@@ -197,7 +197,7 @@ def _figures(folder: Path, bench, bistatic_images, progressive, projective) -> N
             aspect="equal",
         )
         ax.set_xlabel("cross-range x (mm)")
-        ax.set_ylabel("range y (mm)")
+        ax.set_ylabel("down-range y (mm)")
         ax.set_title(title, fontsize=9)
 
     plan, img = bench["plan"], bench["image"]
@@ -220,7 +220,7 @@ def _figures(folder: Path, bench, bistatic_images, progressive, projective) -> N
         aspect="equal",
     )
     axes[1].set_xlabel("cross-range x (µm)")
-    axes[1].set_ylabel("range y (µm)")
+    axes[1].set_ylabel("down-range y (µm)")
     axes[1].set_title("centre point: ρx < 10 µm, ρy 44 µm", fontsize=9)
     fig.tight_layout()
     fig.savefig(folder / "spot_points.png", dpi=100)
@@ -254,8 +254,8 @@ def _figures(folder: Path, bench, bistatic_images, progressive, projective) -> N
     ax.scatter(p[:, 0], p[:, 1], p[:, 2], c=p[:, 2], cmap="viridis", s=14, label="reconstructed")
     line = 1e3 * np.stack([p0, p1])
     ax.plot(line[:, 0], line[:, 1], line[:, 2], "r-", lw=1, label="true stick")
-    ax.set_xlabel("x (mm)")
-    ax.set_ylabel("range y (mm)")
+    ax.set_xlabel("cross-range x (mm)")
+    ax.set_ylabel("down-range y (mm)")
     ax.set_zlabel("z (mm)")
     ax.legend(fontsize=8)
     ax.set_title("projective SAL: a stick from two images a quarter turn apart", fontsize=9)

@@ -75,13 +75,6 @@ def plot(rows: list[dict], scenes: list[TradeoffScene], path: Path) -> None:
                     linewidths=1.2,
                     zorder=3,
                 )
-                ax.annotate(
-                    f"{r['value']}",
-                    (r[xkey], r["image_error"]),
-                    fontsize=7,
-                    xytext=(4, 3),
-                    textcoords="offset points",
-                )
             xs = [r[xkey] for r in sel]
             if max(xs) > 3 * min(xs):  # a log axis only where the values span a range
                 ax.set_xscale("log")
@@ -96,6 +89,59 @@ def plot(rows: list[dict], scenes: list[TradeoffScene], path: Path) -> None:
             if any(r["knob"] == k for r in sel)
         ]
         row_axes[1].legend(handles=handles, fontsize=7, loc="best")
-    fig.tight_layout()
+    fig.tight_layout()  # before the labels: they are placed on the final layout
+    for row_axes, scene in zip(axes, scenes, strict=True):
+        sel = [r for r in rows if r["scene"] == scene.key]
+        for ax, xkey in zip(row_axes, ("us_per_pulse", "latency_p50_ms"), strict=True):
+            place_labels(ax, [(r[xkey], r["image_error"], str(r["value"])) for r in sel])
     save_figure(fig, path, dpi=110)
     plt.close(fig)
+
+
+# Offsets (points) tried for a label, nearest first: beside its point, then rings further out.
+_DIRECTIONS = [(1, 0.4), (1, -1), (-1, 0.4), (-1, -1), (0, 1.2), (0, -1.6), (1, 1.4), (-1, 1.4)]
+_OFFSETS = [(r * dx, r * dy) for r in (5, 12, 20, 30, 42) for dx, dy in _DIRECTIONS]
+
+
+def place_labels(ax, points, fontsize: float = 7) -> list:
+    """Label ``points`` [(x, y, text)] so that no label covers another label or a marker.
+
+    Each label takes the first offset of ``_OFFSETS`` where its box meets no box placed
+    before (the markers' boxes are placed first); one that finds none takes the last
+    tried.  A label moved beyond its neighbourhood gets a thin leader line.  Call it on the
+    final layout (after tight_layout): overlaps are judged in display units.
+    """
+    from matplotlib.text import Text  # matplotlib loads only when a plot is drawn
+    from matplotlib.transforms import Bbox
+
+    fig = ax.figure
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    taken = []
+    for x, y, _ in points:  # markers: a box of about their size
+        px, py = ax.transData.transform((x, y))
+        taken.append(Bbox.from_extents(px - 4, py - 4, px + 4, py + 4))
+    labels = []
+    for i, (x, y, text) in enumerate(points):
+        own = taken[i]
+        for dx, dy in _OFFSETS:
+            far = abs(dx) > 12 or abs(dy) > 12
+            label = ax.annotate(
+                text,
+                (x, y),
+                xytext=(dx, dy),
+                textcoords="offset points",
+                fontsize=fontsize,
+                ha="left" if dx > 0 else "right" if dx < 0 else "center",
+                va="bottom" if dy >= 0 else "top",
+                arrowprops={"arrowstyle": "-", "lw": 0.4, "color": "0.5"} if far else None,
+                zorder=4,
+            )
+            box = Text.get_window_extent(label, renderer).expanded(1.05, 1.1)  # text, not leader
+            if not any(box.overlaps(t) for t in taken if t is not own):
+                break
+            if (dx, dy) != _OFFSETS[-1]:
+                label.remove()
+        taken.append(box)
+        labels.append(label)
+    return labels

@@ -1,0 +1,206 @@
+"""``rtsar measure``: analytic sincs of known IRW, PSLR and ISLR; found points and given
+positions; offsets from a scene's targets in cells; heights against a scene's surface."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy import integrate
+
+from rtsar.analysis.cut import analyse_cut
+from rtsar.analysis.islr2d import theoretical_islr_2d_db
+from rtsar.app.cli import main
+from rtsar.app.measure_image import POINT_KEYS
+from rtsar.presets import preset
+from rtsar.sinks.image_file import ImageWriter, write_image
+
+SINC_HALF_POWER = 0.885893  # x where sinc(x)^2 = 1/2, times 2
+
+
+def sinc_fractions(extent_irw: float) -> tuple[float, float]:
+    """(mainlobe, within ±extent IRWs) fractions of the energy of sinc², by quadrature."""
+
+    def f(x):
+        return np.sinc(x) ** 2
+
+    main_part = 2 * integrate.quad(f, 0, 1, limit=200)[0]
+    edge = extent_irw * SINC_HALF_POWER
+    inner = 2 * integrate.quad(f, 0, edge, limit=2000)[0]
+    return main_part, inner  # sinc² integrates to 1
+
+
+def test_one_cut_of_a_sinc_has_the_textbook_irw_pslr_and_islr():
+    rho = 1.0
+    x = np.arange(-40, 41) * 0.8 + 0.31  # 1.25 samples per null-to-null half-width, off-grid
+    m, t = sinc_fractions(10.0)
+    cut = analyse_cut(np.sinc(x / rho), 0.8, float(x[0]))
+    assert cut.irw_m == pytest.approx(SINC_HALF_POWER * rho, rel=2e-3)
+    assert cut.pslr_db == pytest.approx(-13.26, abs=0.02)
+    assert cut.islr_db == pytest.approx(10 * math.log10((t - m) / m), abs=0.1)  # -9.7 dB
+
+
+def sinc_image(points, rho_a: float, rho_r: float, az, rg) -> np.ndarray:
+    """Σ sinc((x - x_k)/ρA) sinc((r - r_k)/ρR) a_k, written out (no rtsar code)."""
+    img = np.zeros((len(az), len(rg)), np.complex128)
+    for x0, r0, a in points:
+        img += a * np.outer(np.sinc((az - x0) / rho_a), np.sinc((rg - r0) / rho_r))
+    return img.astype(np.complex64)
+
+
+@pytest.fixture
+def tiny_sinc_image(tmp_path):
+    """An image file with the tiny preset's configuration (rect windows) holding two analytic
+    separable sincs of its theoretical resolutions, off the pixel grid."""
+    cfg = preset("tiny")
+    rho_r = cfg.waveform.range_resolution_m
+    rho_a = cfg.azimuth_resolution_m(2000.0)
+    az = np.arange(-160, 161) * 0.8 * rho_a / 1.0
+    rg = 1900.0 + np.arange(0, 400) * 0.75 * rho_r
+    pts = [(0.3 * rho_a, 2000.0 + 0.2 * rho_r, 1.0), (60.0 * rho_a, 1950.0, 0.5j)]
+    path = tmp_path / "sinc.h5"
+    write_image(path, sinc_image(pts, rho_a, rho_r, az, rg), az, rg, cfg)
+    return path, pts, rho_a, rho_r
+
+
+def test_measure_reports_the_sincs_against_theory(tiny_sinc_image, tmp_path, capsys):
+    path, pts, rho_a, rho_r = tiny_sinc_image
+    out = tmp_path / "m.json"
+    assert main(["measure", str(path), "--json", str(out)]) == 0
+    report = json.loads(out.read_text())
+    points = report["points"]
+    assert len(points) == 2 and all(tuple(p) == POINT_KEYS for p in points)
+    m, t = sinc_fractions(10.0)
+    islr_2d = 10 * math.log10((t * t - m * m) / (m * m))  # -7.0 dB
+    for p, th, (x0, r0, a) in zip(points, report["theory"], pts, strict=True):
+        assert p["along_track_m"] == pytest.approx(x0, abs=1e-3 * rho_a)
+        assert p["range_m"] == pytest.approx(r0, abs=1e-3 * rho_r)
+        assert p["peak"] == pytest.approx(abs(a), rel=3e-3)
+        assert p["irw_range_m"] == pytest.approx(SINC_HALF_POWER * rho_r, rel=3e-3)
+        assert p["pslr_azimuth_db"] == pytest.approx(-13.26, abs=0.05)
+        assert p["pslr_range_db"] == pytest.approx(-13.26, abs=0.05)
+        assert p["islr_db"] == pytest.approx(islr_2d, abs=0.15)
+        # the processor's theory (rect windows) is the same sinc
+        assert th["irw_range_m"] == pytest.approx(SINC_HALF_POWER * rho_r, rel=3e-3)
+        assert th["pslr_range_db"] == pytest.approx(-13.26, abs=0.05)
+        assert th["islr_db"] == pytest.approx(islr_2d, abs=0.1)
+    assert points[0]["irw_azimuth_m"] == pytest.approx(SINC_HALF_POWER * rho_a, rel=3e-3)
+    assert report["theory"][0]["irw_azimuth_m"] == pytest.approx(SINC_HALF_POWER * rho_a, rel=3e-3)
+    text = capsys.readouterr().out
+    assert "2 point(s)" in text and "ISLR 2-D" in text
+
+
+def test_measure_at_given_positions_and_truth_in_cells(tiny_sinc_image, tmp_path, capsys):
+    path, pts, rho_a, rho_r = tiny_sinc_image
+    scene = tmp_path / "s.toml"
+    scene.write_text(
+        'preset = "tiny"\n[[targets]]\nalong_track_m = 0.0\nslant_range_m = 2000.0\n'
+        "[[targets]]\nalong_track_m = 500.0\nslant_range_m = 2050.0\n"
+    )
+    out = tmp_path / "m.json"
+    args = ["measure", str(path), "--scene", str(scene), "--json", str(out)]
+    assert main(args + ["--at", f"{pts[0][0] + 0.5 * rho_a},{pts[0][1]}", "--at", "60,1950"]) == 0
+    report = json.loads(out.read_text())
+    assert len(report["points"]) == 2 and report["height"] is None
+    first, second = report["truth"]
+    assert first["offset_azimuth_cells"] == pytest.approx(0.3, abs=2e-3)
+    assert first["offset_range_cells"] == pytest.approx(0.2, abs=2e-3)
+    assert second is None  # no scene target within 3 cells of the second point
+    assert "offset +0.300 azimuth, +0.200 range cells" in capsys.readouterr().out
+
+
+def test_found_points_are_the_isolated_peaks_not_the_speckle(tmp_path, rng):
+    cfg = preset("tiny")
+    rho_r, rho_a = cfg.waveform.range_resolution_m, cfg.azimuth_resolution_m(2000.0)
+    az = np.arange(-200, 201) * 0.8 * rho_a
+    rg = 1900.0 + np.arange(400) * 0.75 * rho_r
+    # speckle of a diffuse area over the middle of the image, 25 dB under the points: white
+    # complex noise there, band-limited to the sincs' band (|f| < 1/2ρ: 0.4 and 0.375 cycles
+    # per pixel)
+    noise = np.zeros((len(az), len(rg)), np.complex128)
+    noise[100:300, 100:300] = rng.standard_normal((200, 200)) + 1j * rng.standard_normal((200, 200))
+    f_az = np.abs(np.fft.fftfreq(len(az)))[:, None] <= 0.4
+    f_rg = np.abs(np.fft.fftfreq(len(rg)))[None, :] <= 0.375
+    speckle = np.fft.ifft2(np.fft.fft2(noise) * (f_az & f_rg))
+    speckle *= 10 ** (-25 / 20) / np.sqrt(np.mean(np.abs(speckle[120:280, 120:280]) ** 2))
+    pts = [(az[30] + 0.2 * rho_a, rg[350], 1.0), (az[370], rg[40] + 0.4 * rho_r, 0.8)]
+    floor = 10 ** (-45 / 20) * (
+        rng.standard_normal(noise.shape) + 1j * rng.standard_normal(noise.shape)
+    )
+    img = sinc_image(pts, rho_a, rho_r, az, rg) + (speckle + floor).astype(np.complex64)
+    path = tmp_path / "speckle.h5"
+    write_image(path, img, az, rg, cfg)
+    out = tmp_path / "m.json"
+    assert main(["measure", str(path), "--json", str(out)]) == 0
+    found = json.loads(out.read_text())["points"]
+    assert len(found) == 2
+    for p, (x0, r0, _) in zip(found, pts, strict=True):
+        assert abs(p["along_track_m"] - x0) < 0.01 * rho_a
+        assert abs(p["range_m"] - r0) < 0.01 * rho_r
+
+
+def test_height_rmse_and_valid_fraction_against_the_scene_surface(tmp_path):
+    from rtsar.scene.files import load_surface_scene
+
+    scene = tmp_path / "ridge.toml"
+    scene.write_text(
+        'preset = "zhao-insal"\nseed = 2\n[geometry]\nplatform_height_m = 1.3856406460551016\n'
+        '[processor]\naperture_pulses = 48\nrange_bins = 48\n[surface]\nshape = "ridge"\n'
+        "lines = 16\n"
+    )
+    surface = load_surface_scene(scene)
+    cfg = surface.config
+    from rtsar.lens import range_axis_m
+
+    rg = range_axis_m(cfg)
+    az = (np.arange(16) - 7.5) * cfg.geometry.along_track_step_m
+    truth = surface.truth(az, rg)
+    error = np.where(np.arange(len(rg)) % 2 == 0, 2e-6, -2e-6)[None, :]  # RMSE 2 µm exactly
+    valid = truth.scored.copy()
+    valid[:4] = False  # a quarter of the lines without heights
+    path = tmp_path / "h.h5"
+    w = ImageWriter(path, cfg, rg, heights=True)
+    w.write(np.ones((16, len(rg)), np.complex64), az)
+    w.write_heights(0, (truth.height_m + error).astype(np.float32), valid)
+    w.close()
+    out = tmp_path / "m.json"
+    assert main(["measure", str(path), "--scene", str(scene), "--json", str(out)]) == 0
+    report = json.loads(out.read_text())
+    assert report["points"] == []  # a flat image: no point target
+    h = report["height"]
+    assert h["rmse_m"] == pytest.approx(2e-6, rel=1e-3)
+    expect = valid.sum() / truth.scored.sum()
+    assert h["valid_fraction"] == pytest.approx(expect) and 0.6 < expect < 0.8
+
+
+def test_theory_of_a_taylor_weighting_is_lower_sidelobes():
+    from rtsar.windows import window
+
+    rect = theoretical_islr_2d_db(np.ones(256), np.ones(256))
+    taylor = theoretical_islr_2d_db(window("taylor", 256), window("taylor", 256))
+    assert rect == pytest.approx(-7.0, abs=0.05) and taylor < rect - 15
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--at", "abc"], "--at takes X,R"),
+        (["--at", "1e9,2000"], "outside the image"),
+        (["--max-points", "0"], "--max-points"),
+        (["--scene", "nope.toml"], "scene file not found"),
+    ],
+)
+def test_bad_requests_are_one_line(tiny_sinc_image, capsys, extra, message):
+    path = tiny_sinc_image[0]
+    assert main(["measure", str(path)] + extra) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+
+
+def test_a_spotlight_image_is_refused_in_one_line(tmp_path, capsys):
+    cfg = preset("crouch-spotlight")
+    path = tmp_path / "spot.h5"
+    x = np.arange(8) * 1e-5
+    write_image(path, np.ones((8, 8), np.complex64), x, x, cfg, spotlight="{}")
+    assert main(["measure", str(path)]) == 2
+    assert "spotlight image" in capsys.readouterr().err

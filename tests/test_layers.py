@@ -61,6 +61,7 @@ LAZY_ALLOWED = {
     ("rtsar.app.cli.streaming", "rtsar.sinks.exports.sicd"): "sarpy loads in ~1 s; --sicd only",
     ("rtsar.app.cli.view", "rtsar.app.webview.server"): "aiohttp loads in ~0.2 s; --http only",
     ("rtsar.app.entry", "rtsar.app.cli"): "a Ctrl-C during the command's imports is one line",
+    ("rtsar.app.cli", "rtsar.app.cli.options"): "rtsar --help and --version load no command",
 }
 MAX_LINES = 500
 

@@ -24,12 +24,11 @@ import zmq
 import zmq.auth
 
 from ..stream.strips import StreamInfo, Strip, StripSink
+from .endpoint import DEFAULT_ENDPOINT, is_local_endpoint
 from .wire import height_header, stats_header, strip_header
 
-DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
 STALL_TIMEOUT_S = 2.0  # the longest a lossless send waits for a subscriber that reads nothing
 DELIVERIES = ("drop", "lossless")
-_LOOPBACK = {"127.0.0.1", "localhost", "::1", "[::1]"}
 
 
 def _warn(message: str) -> None:
@@ -59,17 +58,6 @@ def authenticator(context: zmq.Context, clients: str | Path):
     auth.start()
     auth.configure_curve(domain="*", location=str(folder))
     return auth
-
-
-def is_local_endpoint(endpoint: str) -> bool:
-    """True for ipc://, inproc:// and tcp:// on a loopback address."""
-    scheme = endpoint.split("://", 1)[0]
-    if scheme in ("ipc", "inproc"):
-        return True
-    if scheme != "tcp":
-        return False
-    host = endpoint.split("://", 1)[1].rsplit(":", 1)[0]
-    return host in _LOOPBACK or host.startswith("127.")
 
 
 class ZmqPublisher(StripSink):

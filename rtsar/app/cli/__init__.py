@@ -1,21 +1,23 @@
 """The ``rtsar`` command.  ``rtsar COMMAND --help`` explains each command.
 
 One module per command group: ``files`` (presets, simulate, process, quicklook), ``streaming``
-(run, replay, demo, subscribe, keygen), ``view``, ``measure`` (bench, tradeoff, table1), ``batch``,
-``swath`` (swath-worker); ``options`` declares the options they share.
+(run, replay, demo, subscribe, keygen), ``view``, ``measure`` (devices, measure, bench,
+tradeoff, table1), ``formats``, ``batch``, ``swath`` (swath-worker), ``spot``; ``options``
+declares the options they share; ``commands`` names them all.  A call imports only the module
+of its command (``rtsar --help`` and ``--version`` none), so the command line starts at once.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 import warnings
 
 from ... import __version__
-from ...sinks.publish import DEFAULT_ENDPOINT
+from ...sinks.endpoint import DEFAULT_ENDPOINT
 from .. import signals
-from . import batch, files, formats, measure, spot, streaming, swath, view
-from .options import check_outputs_spare_inputs, die
+from .commands import COMMANDS, HELP, MODULE
 
 EPILOG = f"""examples:
   rtsar run                                  live demo: the built-in scene streamed at its PRF,
@@ -37,7 +39,30 @@ EPILOG = f"""examples:
 """
 
 
-def build_parser() -> argparse.ArgumentParser:
+class _Declare:
+    """The subparsers of a parser as a command module's ``add_parsers`` sees them: the commands
+    wanted are declared (their help line from ``commands``), the others swallowed unbuilt."""
+
+    def __init__(self, sub, wanted):
+        self.sub, self.wanted = sub, wanted
+
+    def add_parser(self, name: str, **kw):
+        if name not in self.wanted:
+            return _Unbuilt()
+        return self.sub.add_parser(name, help=HELP[name], **kw)
+
+
+class _Unbuilt:
+    """A parser (or group) declared for a command this call does not run: every call is a no-op."""
+
+    def __getattr__(self, attr):
+        return lambda *args, **kw: self
+
+
+def build_parser(command: str | None = "*") -> argparse.ArgumentParser:
+    """The ``rtsar`` parser: every command fully declared (``"*"``, the default), only
+    ``command`` (the others listed by name and help line), or none (``None``: --help and
+    --version need no command module)."""
     p = argparse.ArgumentParser(
         prog="rtsar",
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -48,15 +73,25 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--version", action="version", version=f"rtsar {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
-    files.add_parsers(sub)
-    streaming.add_parsers(sub)
-    view.add_parsers(sub)
-    measure.add_parsers(sub)
-    formats.add_parsers(sub)
-    batch.add_parsers(sub)
-    swath.add_parsers(sub)
-    spot.add_parsers(sub)
+    declared = set()
+    for name, module, line in COMMANDS:
+        if command != "*" and name != command:
+            sub.add_parser(name, help=line, add_help=False)  # listed, never parsed
+            continue
+        if module in declared:
+            continue
+        declared.add(module)
+        group = importlib.import_module(f"{__name__}.{module}")
+        group.add_parsers(_Declare(sub, MODULE if command == "*" else (name,)))
     return p
+
+
+def _command_of(argv: list[str]) -> str | None:
+    """The command a command line names: its first word that is not an option."""
+    for word in argv:
+        if not word.startswith("-"):
+            return word if word in MODULE else None
+    return None
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
@@ -65,13 +100,16 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(_command_of(argv))
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
         return 0
     signals.install()
     warnings.showwarning = _show_warning
+    from .options import check_outputs_spare_inputs, die
+
     try:
         check_outputs_spare_inputs(args)
         return args.func(args)

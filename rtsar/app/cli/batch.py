@@ -256,7 +256,6 @@ def _batch(args, options: dict, out_dir: Path) -> int:
 def add_parsers(sub) -> None:
     s = sub.add_parser(
         "batch",
-        help="focus many recordings with `process` on Dask (local processes or a cluster)",
         description="Run `rtsar process` on every recording named (files, or folders) as "
         "Dask tasks: a LocalCluster of --workers processes by default, or the cluster at "
         "--scheduler tcp://HOST:PORT (its workers need rtsar installed and the files at the "

@@ -270,7 +270,6 @@ def cmd_quicklook(args) -> int:
 def add_parsers(sub) -> None:
     s = sub.add_parser(
         "presets",
-        help="list instrument presets and their theoretical figures",
         description="The instrument presets of the papers with their swath (slant-range window), "
         "resolutions, CCD size, samples per shot, PRF and range curvature.",
     )
@@ -279,7 +278,6 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "simulate",
-        help="simulate the raw shots of a scene into a recording",
         description="Simulate a TOML scene (format: README 'Scene files') shot by "
         "shot with the exact range history; writes an HDF5 recording.",
     )
@@ -293,7 +291,6 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "process",
-        help="focus a recording through the streaming engine",
         description="Run a recording through the streaming engine as fast as "
         "possible; writes image[azimuth, range] with axes in metres.",
     )
@@ -308,7 +305,6 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "quicklook",
-        help="PNG of an image file (dB, axes in metres)",
         description="Write a PNG of an image file: |image| in dB relative to its peak, slant "
         "range across, along track down, axes in metres.",
     )

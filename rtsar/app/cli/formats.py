@@ -73,7 +73,6 @@ def cmd_export(args) -> int:
 def add_parsers(sub) -> None:
     s = sub.add_parser(
         "export",
-        help="a recording as CPHD or SigMF, an image as SICD",
         description="Write a recording (rtsar .h5, or a CPHD / SigMF file rtsar reads) as "
         "CPHD 1.0.1 (NGA phase history: FX domain, per-pulse positions, the scene reference "
         "point on the centre line; a spotlight recording on its arc, the SRP at the scene "

@@ -28,7 +28,6 @@ def cmd_measure(args) -> int:
 def add_parsers(sub) -> None:
     s = sub.add_parser(
         "devices",
-        help="every OpenCL device: does it build the lens, is it right, how fast; the default",
         description="Lists every OpenCL device the loader sees (pyopencl's PoCL, the system's "
         "drivers, drivers installed with pip such as Intel's CPU runtime, GPUs).  Each is "
         "probed in a process of its own: the lens kernel of --preset built, 8 pulses compared "
@@ -42,7 +41,6 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "measure",
-        help="an image's point targets: position, IRW, PSLR, ISLR against theory (and truth)",
         description="Measure the image you made: finds its point targets (or measures at "
         "--at X,R) and reports, per point, along-track and range position, peak |x|, IRW "
         "(-3 dB width) in azimuth and range, PSLR per axis and the 2-D ISLR, beside the theory "
@@ -92,7 +90,6 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "bench",
-        help="throughput of the lens and correlators, and the live pipeline, in one run",
         description="Not a test: measures pulses/s of the AO lens (OpenCL vs the same plan on "
         "NumPy's and SciPy's FFT, and one bare FFT of the batch) and of the correlators, and "
         "the live pipeline end to end (real-time factor, drops, latency; threads and two "
@@ -104,7 +101,6 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "tradeoff",
-        help="what accuracy costs in time: every processor knob, quality against cost",
         description="Varies each processor knob alone from the preset's defaults (precision, "
         "correlator mode and block, micro-batch, aperture, windows, lens, mask per range bin, "
         "range migration, physical CCD) and each correction on scenes whose targets stress it; "
@@ -118,7 +114,6 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "table1",
-        help="Psaltis & Wagner's Table 1 regenerated from the physical-mode emulation",
         description="Builds Table 1 of Psaltis & Wagner (1981) from the physical CCD/AO-cell "
         "emulation: range resolution and cells (halved with the carrier in range), azimuth "
         "resolution L/N (N halved with the carrier in azimuth), and the dynamic range measured "

@@ -24,7 +24,6 @@ from .options import die
 def add_parsers(sub) -> None:
     s = sub.add_parser(
         "spot-simulate",
-        help="simulate a spotlight collection (Crouch ch. 9) into a recording",
         description="Simulate a spotlight scene shot by shot: the Tx/Rx station on an arc about "
         "the scene centre (crouch-spotlight: 4.6 m, 50 µm steps, the crouch-sal chirp), exact "
         "path lengths (Crouch eqs. 9.1-9.2), and the fixed bistatic receiver as channel "
@@ -41,7 +40,6 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "spotlight",
-        help="form a spotlight image: polar format (chirp-z) or backprojection; live/progressive",
         description="Form the spotlight image of a recording from `rtsar spot-simulate` (or, "
         "with --live, of a scene simulated as the shots arrive) by the polar format algorithm "
         "with chirp-z spectral zoom (range per shot, then azimuth) or by backprojection.  "
@@ -127,7 +125,6 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "projective",
-        help="projective SAL: two spotlight images a quarter turn apart → 3-D points (ch. 8)",
         description="Combine two spotlight images of one object, the second taken after the "
         "rotation stage turned it (about the beam axis, a quarter turn: Crouch Fig. 32), into "
         "3-D points: each image gives one cross-range coordinate, both give range.  Scatterers "

@@ -281,7 +281,6 @@ def add_wait_subscribers(s) -> None:
 def add_parsers(sub) -> None:
     s = sub.add_parser(
         "run",
-        help="live processing: the demo scene (default), a scene, or a serial instrument",
         description="Stream shots live through the pipeline (ingest checks, AO lens, shifting "
         "CCD) and publish image strips over ZeroMQ. Without arguments: the built-in demo scene "
         "(the letters SAR, an airfield and corner reflectors, 10 s of flight at 1600 pulses/s; "
@@ -346,7 +345,6 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "replay",
-        help="replay a recording through the pipeline at real rate, a factor, or max",
         description="Replay a recording (from `rtsar simulate`) on an absolute schedule "
         "(start + n/PRF: no drift) and publish strips like `rtsar run`. Lossless by default: "
         "the replay waits for the slowest subscriber. Use --wait-subscribers 1 when a "
@@ -368,7 +366,6 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "demo",
-        help="the 3D demo: InSAL heights of Zhao's ridge, published live (about 15 s)",
         description="Simulate the built-in scene insal-ridge once (a few seconds; the recording "
         f"is cached in {DEMO_CACHE}), then replay it at --rate times its PRF through the "
         "pipeline with height strips (--height insal), publishing image and height strips "
@@ -393,7 +390,6 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "subscribe",
-        help="record published strips into an image file",
         description="Receive strips from a publisher and write them, as they come, into an "
         "image file (same layout as `rtsar process`). Stops at the stream's end message, on "
         "Ctrl-C or after --timeout seconds of silence. Missed strips are zero lines, counted "
@@ -418,7 +414,6 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "keygen",
-        help="make a CURVE key pair for encrypted publication",
         description="Write a ZeroMQ CURVE key pair: NAME.key (public: give it to subscribers, "
         "--curve-server-key) and NAME.key_secret (owner-only, mode 0600: run/replay "
         "--curve-key).  A subscriber's own pair lets a publisher admit only known clients "

@@ -37,7 +37,6 @@ def cmd_swath_worker(args) -> int:
 def add_parsers(sub) -> None:
     s = sub.add_parser(
         "swath-worker",
-        help="one range slice of a live pipeline split across processes or hosts",
         description="Connect to a coordinator (`rtsar run/replay --swath-workers K "
         "--swath-bind tcp://HOST:PORT`), take its configuration and range columns, run the AO "
         "lens and the shifting CCD of those columns on every pulse block it sends, and send "

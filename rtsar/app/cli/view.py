@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 import warnings
 
-from ...sinks.publish import is_local_endpoint
+from ...sinks.endpoint import is_local_endpoint
 from ..view import view
 from .options import add_subscriber_options, die
 
@@ -76,7 +76,6 @@ def cmd_view(args) -> int:
 def add_parsers(sub) -> None:
     s = sub.add_parser(
         "view",
-        help="live waterfall of published strips: a window, a PNG snapshot, or a browser page",
         description="Show the newest image lines as a scrolling waterfall (dB re peak). "
         "A window needs a display; --png FILE waits for --lines lines and writes a snapshot; "
         "--http [HOST:]PORT serves a page (the waterfall with a colour bar and axes in metres, "

@@ -1,0 +1,20 @@
+"""Where strips are published: the default endpoint, and which endpoints stay on this host.
+
+Kept apart from the publisher (ZeroMQ) so the command line can name them without loading it.
+"""
+
+from __future__ import annotations
+
+DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
+_LOOPBACK = {"127.0.0.1", "localhost", "::1", "[::1]"}
+
+
+def is_local_endpoint(endpoint: str) -> bool:
+    """True for ipc://, inproc:// and tcp:// on a loopback address."""
+    scheme = endpoint.split("://", 1)[0]
+    if scheme in ("ipc", "inproc"):
+        return True
+    if scheme != "tcp":
+        return False
+    host = endpoint.split("://", 1)[1].rsplit(":", 1)[0]
+    return host in _LOOPBACK or host.startswith("127.")

@@ -14,7 +14,6 @@ import numpy as np
 from ..lens.plan import next_pow2
 from ..params import Config, Processor
 from .base import Correlator, aperture_offsets_m, correlate_reference, design_mask
-from .direct import DirectCorrelator
 from .fft import FFTCorrelator
 from .migration import (
     FFTMigrationCorrelator,
@@ -22,16 +21,11 @@ from .migration import (
     MigrationMask,
     design_migration_mask,
 )
-from .nonuniform import NonUniformCorrelator
-from .partitioned import PartitionedCorrelator
 
 __all__ = [
     "CORRELATORS",
     "Correlator",
-    "DirectCorrelator",
     "FFTCorrelator",
-    "NonUniformCorrelator",
-    "PartitionedCorrelator",
     "aperture_offsets_m",
     "correlate_reference",
     "design_mask",
@@ -78,12 +72,20 @@ def make_correlator(
             for m in mask.tap_masks()
         ]
         return MigrationCorrelator(mask, taps)
+    # The numba correlators are imported when asked for: numba takes ~0.4 s to load, and the
+    # FFT correlator (SciPy's FFT) does without it.
     if kind == "direct":
+        from .direct import DirectCorrelator
+
         return DirectCorrelator(mask, precision)
     if kind == "fft":
         return FFTCorrelator(mask, fft_length, precision)
     if kind == "nonuniform":
+        from .nonuniform import NonUniformCorrelator
+
         return NonUniformCorrelator(mask, partition_lines, tail_block_lines, precision)
+    from .partitioned import PartitionedCorrelator
+
     return PartitionedCorrelator(mask, partition_lines, precision)
 
 

@@ -160,7 +160,7 @@ def test_an_export_that_dies_leaves_the_old_file_and_no_partial_one(
         src = tmp_path / "img.h5"
         assert main(["process", str(pulsed), "-o", str(src), "--lens", "numpy"]) == 0
         dest, args = tmp_path / "old.nitf", ["--sicd"]
-        monkeypatch.setattr(sicd.SICDWriter, "write_chip", _boom)
+        monkeypatch.setattr(sicd.sksicd.NitfWriter, "write_image", _boom)
     else:
         src = pulsed
         dest = tmp_path / ("old.cphd" if kind == "cphd" else "old.sigmf-data")

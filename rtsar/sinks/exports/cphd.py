@@ -423,6 +423,7 @@ def build_xml(rec, chans, scene: dict, dwell, mode: str, frame, core_name: str, 
         ("rtsar:scene", json.dumps(rec.scene or {})),
         ("rtsar:start_along_track_m", repr(float(rec.start_along_track_m))),
         ("rtsar:origin_lat_lon_deg", f"{frame.lat_deg!r},{frame.lon_deg!r}"),
+        ("rtsar:heading_deg", repr(float(frame.heading_deg))),
         (SPOT_CHANNELS_PARAMETER, json.dumps(channels)),
     ):
         etree.SubElement(info, f"{{{CPHD_NS}}}Parameter", name=name).text = value

@@ -22,7 +22,7 @@ from ...params import C_M_PER_S, config_from_dict
 from ...spot.geometry import geometry_from_dict
 from .cphd_geometry import SPOT_CHANNELS_PARAMETER, channel_config, derived_config, spot_to_local_m
 from .foreign import ForeignRecording, check_telemetry
-from .geometry import LocalFrame
+from .geometry import EAST_HEADING_DEG, LocalFrame
 from .phase_history import fx_mapping, fx_to_shots
 from .requirements import require_formats
 
@@ -154,7 +154,8 @@ def open_cphd(path: str | Path) -> ForeignRecording:
             raise ValueError("SC0/SCSS differ from the configuration's frequency sampling")
         if derived is None:
             lat, lon = (float(v) for v in params.get("rtsar:origin_lat_lon_deg", "0,0").split(","))
-            local = LocalFrame(lat, lon).from_ecf(pvp["TxPos"])
+            heading = float(params.get("rtsar:heading_deg", EAST_HEADING_DEG))
+            local = LocalFrame(lat, lon, heading).from_ecf(pvp["TxPos"])
         else:
             local = derived[2]
         aux, along = {}, local[:, 0]

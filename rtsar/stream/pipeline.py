@@ -36,7 +36,8 @@ publication of the strip holding it.
 (rtsar.stream.swath); the lens thread sends them the pulses, the CCD thread merges their lines.
 
 The threads and their wiring only; the pieces: rtsar.stream.queue, ingest (sequence checks),
-engine (lens, CCD), hold (held pulses), timing (of lines), height, strips, swath and stats.
+engine (lens, CCD), hold (held pulses), timing (of lines), height, strips, swath, stats and
+settings.
 """
 
 from __future__ import annotations
@@ -45,22 +46,22 @@ import threading
 import time
 import uuid
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import replace
 
 from ..params import Config
 from ..sources.base import Source
 from .engine import Lines, StreamProcessor
 from .height import HeightBatch, HeightChannel
 from .hold import HeldPulses
-from .ingest import Ingest, PulseBlock, concat_blocks
+from .ingest import Ingest, PulseBlock, concat_blocks, regroup_blocks
 from .memory import check_memory
 from .queue import BoundedQueue
+from .settings import PipelineSettings
 from .stats import PipelineStats
 from .strips import LineBlock, StreamInfo, StripAssembler, StripSink
 from .swath import SwathWorkers
 from .timing import LineTiming
 
-STAGE_LAYOUTS = ("split", "fused")
 OWN_COUNTERS = (
     "dropped_pulses",
     "pulses_processed",
@@ -68,31 +69,6 @@ OWN_COUNTERS = (
     "flagged_lines",
     "strips_published",
 )
-
-
-@dataclass
-class PipelineSettings:
-    """How the pipeline runs (the processing itself is the Config)."""
-
-    lens_backend: str = "auto"
-    device: str | None = None
-    stages: str = "split"  # "split": lens and CCD in their own threads; "fused": one thread
-    strip_lines: int = 16  # lines per published strip
-    queue_pulses: int = 0  # capacity of each queue (0: 8 apertures of pulses)
-    max_batch: int = 0  # most pulses per lens launch / CCD push (0: config micro_batch)
-    max_gap_pulses: int = 0  # longest zero-filled gap; beyond it a restart (0: one aperture)
-    deadline: bool = False  # the run has a deadline: once the source ends, nobody is waited on
-    swath_workers: int = 0  # > 0: lens + CCD in that many processes, a range slice each (swath)
-    swath_spawn: bool = True  # start them here (False: they connect from elsewhere)
-    swath_bind: str = "127.0.0.1"  # HOST or tcp://HOST:PORT: where the coordinator listens
-
-    def __post_init__(self):
-        if self.stages not in STAGE_LAYOUTS:
-            raise ValueError(f"stages must be one of {STAGE_LAYOUTS}, got {self.stages!r}")
-        if self.strip_lines < 1:
-            raise ValueError("strip_lines must be >= 1")
-        if self.swath_workers and self.stages == "fused":
-            raise ValueError("--swath-workers runs lens and CCD in the workers: not with fused")
 
 
 class Pipeline:
@@ -150,7 +126,14 @@ class Pipeline:
         self.q_lines = BoundedQueue(capacity, "compressed")
         self.q_image = BoundedQueue(capacity, "image lines")
         max_gap = s.max_gap_pulses or n
-        self.ingest = Ingest(config.waveform.samples_per_shot, n, max_gap, self.engine.dtype)
+        self.ingest = Ingest(
+            config.waveform.samples_per_shot,
+            n,
+            max_gap,
+            self.engine.dtype,
+            origin_seq=getattr(source, "seq_origin", None),
+        )
+        self._anchored = False  # an anchored source's start is moved once (_anchor)
         block = config.processor.fft_length or 2 * n
         self.timing = LineTiming(n, 4 * (n + block + capacity + self.max_batch))
         self.stats = PipelineStats()
@@ -218,8 +201,10 @@ class Pipeline:
                     blocks = self.ingest.flush()
                 else:
                     blocks = [b for batch in batches for b in self.ingest(batch)]
+                    if not self._anchored and self.ingest.counters["pulses_received"]:
+                        self._anchor()
                 busy += time.perf_counter() - t
-                for block in _groups(blocks, self.max_batch):
+                for block in regroup_blocks(blocks, self.max_batch):
                     t = time.perf_counter()
                     if self.swath is not None:
                         self._to_workers(block)
@@ -239,6 +224,23 @@ class Pipeline:
         finally:
             self.stats.busy_s[key] = busy
             (self.q_image if self.settings.stages == "fused" else self.q_lines).close()
+
+    def _anchor(self) -> None:
+        """The first shot arrived: a source that numbers from the scan's pulse 0 puts stream
+        pulse 0 at pulse ``ingest.start_pulses`` of the scan (rtsar.stream.ingest), so pulse 0's
+        position moves by that many steps, everywhere it is held, before any line is formed."""
+        self._anchored = True
+        shift_m = self.ingest.start_pulses * self.config.geometry.along_track_step_m
+        if not shift_m:
+            return
+        start = self.info.start_along_track_m + shift_m
+        self.info = replace(self.info, start_along_track_m=start)
+        self.strips.info = self.info
+        engines = [self.engine, *(self.height.engines.values() if self.height else ())]
+        for engine in engines:
+            engine.start_along_track_m = start
+        if self.corrections:
+            self.corrections.move_start(shift_m)
 
     def _range(self, block: PulseBlock) -> PulseBlock | None:
         """Range half of the engine on one block; the pulses it releases, with their metadata."""
@@ -476,23 +478,6 @@ class Pipeline:
     def run(self) -> PipelineStats:
         self.start()
         return self.join()
-
-
-def _groups(blocks: list[PulseBlock], most: int):
-    """Consecutive pulse blocks regrouped into blocks of at most ``most`` pulses."""
-    pending, size = [], 0
-    for b in blocks:
-        start = 0
-        while start < len(b):
-            take = min(len(b) - start, most - size)
-            pending.append(b.slice(start, start + take))
-            size += take
-            start += take
-            if size == most:
-                yield concat_blocks(pending)
-                pending, size = [], 0
-    if pending:
-        yield concat_blocks(pending)
 
 
 def new_stream_id() -> str:

@@ -19,7 +19,8 @@ from ...physical import CARRIERS, paper_ccd
 from ...scene.correction_context import correction_context, insal_geometry, modulation_geometry
 from ...sinks.publish import DEFAULT_ENDPOINT, DELIVERIES, STALL_TIMEOUT_S
 from ...stream.engine import brightest_point
-from ...stream.pipeline import STAGE_LAYOUTS, PipelineSettings
+from ...stream.pipeline import PipelineSettings
+from ...stream.settings import STAGE_LAYOUTS
 from ...topo.sam3d_strips import SamHeightStripStage
 from ...topo.stream import HeightStripStage
 

@@ -108,6 +108,7 @@ def cmd_run(args) -> int:
                 cfg.waveform.sample_rate_hz,
                 cfg.geometry.prf_hz,
                 idle_timeout_s=args.duration,
+                batch_shots=cfg.processor.micro_batch,
             )
             fix = zmq_channel_fix(described)
         else:

@@ -1,0 +1,32 @@
+"""How a streaming pipeline runs (rtsar.stream.pipeline); the processing itself is the Config."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+STAGE_LAYOUTS = ("split", "fused")
+
+
+@dataclass
+class PipelineSettings:
+    """How the pipeline runs (the processing itself is the Config)."""
+
+    lens_backend: str = "auto"
+    device: str | None = None
+    stages: str = "split"  # "split": lens and CCD in their own threads; "fused": one thread
+    strip_lines: int = 16  # lines per published strip
+    queue_pulses: int = 0  # capacity of each queue (0: 8 apertures of pulses)
+    max_batch: int = 0  # most pulses per lens launch / CCD push (0: config micro_batch)
+    max_gap_pulses: int = 0  # longest zero-filled gap; beyond it a restart (0: one aperture)
+    deadline: bool = False  # the run has a deadline: once the source ends, nobody is waited on
+    swath_workers: int = 0  # > 0: lens + CCD in that many processes, a range slice each (swath)
+    swath_spawn: bool = True  # start them here (False: they connect from elsewhere)
+    swath_bind: str = "127.0.0.1"  # HOST or tcp://HOST:PORT: where the coordinator listens
+
+    def __post_init__(self):
+        if self.stages not in STAGE_LAYOUTS:
+            raise ValueError(f"stages must be one of {STAGE_LAYOUTS}, got {self.stages!r}")
+        if self.strip_lines < 1:
+            raise ValueError("strip_lines must be >= 1")
+        if self.swath_workers and self.stages == "fused":
+            raise ValueError("--swath-workers runs lens and CCD in the workers: not with fused")

@@ -5,6 +5,7 @@ process/replay/SICD say in one line what a spotlight file is; a strip-map CPHD e
 auxiliary channels it leaves out, and a missing channel in a CPHD points to the .h5/SigMF."""
 
 import json
+import tarfile
 
 import numpy as np
 import pytest
@@ -115,12 +116,18 @@ def test_spotlight_cphd_holds_the_arc_and_a_generic_processor_focuses_both_chann
 
 def test_rtsar_reads_its_spotlight_cphd_and_sigmf_back_into_the_same_image(spot):
     d = spot
+    # A SigMF archive (an uncompressed tar, SigMF's layout NAME/NAME.sigmf-*) holding the
+    # recording and its bistatic channel's recording.
+    with tarfile.open(d / "arch.sigmf", "w") as tar:
+        for name in ("sig", "sig.bistatic"):
+            for suffix in (".sigmf-meta", ".sigmf-data"):
+                tar.add(d / (name + suffix), arcname=f"sig/{name}{suffix}")
     for channel in ("main", "bistatic"):
         ref = d / f"ref-{channel}.h5"
         common = ["--channel", channel, "--extent-mm", "1.5", "1.5"]
         assert main(["spotlight", str(d / "spot.h5"), "-o", str(ref), *common]) == 0
         want = read_image(ref)[0]
-        for src in ("spot.cphd", "sig.sigmf-meta", "sig"):
+        for src in ("spot.cphd", "sig.sigmf-meta", "sig", "arch.sigmf"):
             out = d / f"back-{channel}.h5"
             assert main(["spotlight", str(d / src), "-o", str(out), *common]) == 0
             got = read_image(out)[0]

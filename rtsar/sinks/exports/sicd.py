@@ -31,6 +31,7 @@ from ... import __version__
 from ...params import C_M_PER_S, config_from_dict
 from ...sources.formats.geometry import LocalFrame, platform_height_m
 from ...sources.formats.requirements import require_formats
+from ...sources.formats.timebase import UNKNOWN_EPOCH, parse_utc
 from ...windows import window as taper
 from ..image_file import read_image
 from ..io import replace_when_complete
@@ -43,8 +44,6 @@ try:
     from sarpy.io.complex.sicd_elements.SICD import SICDType
 except ImportError:  # the optional extra "formats"
     SICDType = None
-
-EPOCH = datetime.datetime(2000, 1, 1)  # rtsar's times are relative: an arbitrary epoch
 
 
 def sicd_structure(
@@ -124,7 +123,7 @@ def sicd_structure(
             "Col": _direction(u_col, d_az, azimuth_resolution(cfg, r_scp), 0.0),
         },
         "Timeline": {
-            "CollectStart": np.datetime64(collection_start or EPOCH, "us"),
+            "CollectStart": np.datetime64(collection_start or UNKNOWN_EPOCH, "us"),
             "CollectDuration": t_end,
             "IPP": [
                 {
@@ -267,8 +266,10 @@ def write_sicd(image_path: str | Path, path: str | Path, frame: LocalFrame | Non
         raise ValueError(f"{image_path}: an image of {image.shape} has no grid to describe")
     text = attrs["config"]
     cfg = config_from_dict(json.loads(text.decode() if isinstance(text, bytes) else str(text)))
+    kept = attrs.get("collection_start_utc")
+    start = None if kept is None else parse_utc(kept, f"{image_path}: collection_start_utc")
     sicd = sicd_structure(
-        image.shape, azimuth_m, range_m, cfg, frame or LocalFrame(), Path(path).stem
+        image.shape, azimuth_m, range_m, cfg, frame or LocalFrame(), Path(path).stem, start
     )
     # The XML is sarpy's (its SICD model derives the dependent fields); NGA's sarkit writes the
     # NITF.  (sarpy's own writer copies the structure first, and its copy loses a CHIRP

@@ -25,6 +25,7 @@ from .foreign import ForeignRecording, check_telemetry
 from .geometry import EAST_HEADING_DEG, LocalFrame
 from .phase_history import fx_mapping, fx_to_shots
 from .requirements import require_formats
+from .timebase import parse_utc
 
 try:
     import sarkit.cphd as skcphd
@@ -124,6 +125,13 @@ def open_cphd(path: str | Path) -> ForeignRecording:
         root = tree.getroot()
         if root.findtext("./{*}Global/{*}DomainType") != "FX":
             raise ValueError("only FX-domain CPHD is read (this one is TOA domain)")
+        fmt = root.findtext("./{*}Data/{*}SignalArrayFormat")
+        if fmt != "CF8":  # CI2/CI4 hold integers scaled per vector (AmpSF): not read here
+            raise ValueError(
+                f"SignalArrayFormat {fmt}: rtsar reads CF8 (complex float) signal arrays only"
+            )
+        if root.find("./{*}Data/{*}SignalCompressionID") is not None:
+            raise ValueError("a compressed signal array (SignalCompressionID): not read")
         channels = root.findall("./{*}Data/{*}Channel")
         params = _parameters(tree)
         scene = json.loads(params.get("rtsar:scene", "{}") or "{}")
@@ -138,6 +146,7 @@ def open_cphd(path: str | Path) -> ForeignRecording:
         derived = None
         if "rtsar:config" in params:  # written by rtsar: its own configuration
             cfg = config_from_dict(json.loads(params["rtsar:config"]))
+            check_tx_rcv(root, cfg)
         else:  # made elsewhere: a configuration from the collection's geometry
             derived = derived_config(pvp, int(channels[0].findtext("./{*}NumSamples")))
             cfg = derived[0]
@@ -173,6 +182,7 @@ def open_cphd(path: str | Path) -> ForeignRecording:
         if derived is None:
             start = float(params.get("rtsar:start_along_track_m", start))
         position = local if cfg.geometry.platform_height_m > 0 else None
+        collection_start = _collection_start(root, params)
     except (ValueError, KeyError, TypeError) as exc:
         f.close()
         raise ValueError(f"{path}: {exc}") from None
@@ -188,7 +198,45 @@ def open_cphd(path: str | Path) -> ForeignRecording:
         aux,
         position if spot is None else None,
         f.close,
+        collection_start,
     )
+
+
+def _collection_start(root, params: dict):
+    """Global/Timeline/CollectionStart as naive UTC; None where rtsar wrote it without knowing
+    it (``rtsar:collection_start_utc`` "unknown")."""
+    if params.get("rtsar:collection_start_utc") == "unknown":
+        return None
+    return parse_utc(root.findtext("./{*}Global/{*}Timeline/{*}CollectionStart"), "CollectionStart")
+
+
+TX_RCV_TOLERANCE = 1e-9  # relative: the XML holds 17 significant digits
+
+
+def check_tx_rcv(root, cfg) -> None:
+    """The chirp and receiver TxRcv declares (rtsar.sinks.exports.cphd.tx_rcv) against the
+    file's own rtsar:config: a file edited or damaged since is refused, naming the field."""
+    tx, rcv = root.find("./{*}TxRcv/{*}TxWFParameters"), root.find("./{*}TxRcv/{*}RcvParameters")
+    if tx is None or rcv is None:
+        return  # written before TxRcv was: nothing declared to check
+    wf = cfg.waveform
+    fmcw = wf.kind == "fmcw"
+    length = wf.chirp_duration_s if fmcw else wf.pulse_duration_s
+    for node, name, want in (
+        (tx, "PulseLength", length),
+        (tx, "RFBandwidth", wf.bandwidth_hz),
+        (tx, "FreqCenter", cfg.geometry.carrier_hz),
+        (tx, "LFMRate", wf.chirp_rate_hz_per_s),
+        (rcv, "WindowLength", length if fmcw else wf.receive_window_s),
+        (rcv, "SampleRate", wf.sample_rate_hz),
+    ):
+        text = node.findtext(f"./{{*}}{name}")
+        value = float(text) if text is not None else float("nan")
+        if not abs(value - want) <= TX_RCV_TOLERANCE * abs(want):
+            raise ValueError(
+                f"TxRcv {name} {text} contradicts its rtsar:config ({want!r}): the file was "
+                "changed after rtsar wrote it"
+            )
 
 
 def _spot_channels(reader, channels, params: dict, spot, cfg, local, vectors: int):

@@ -3,6 +3,7 @@ the same attributes and methods, so ``process`` and ``replay`` take it unchanged
 
 from __future__ import annotations
 
+import datetime
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,6 +31,7 @@ class ForeignRecording:
     channels: dict = field(default_factory=dict)
     position_m: np.ndarray | None = None
     closer: object = None
+    collection_start: datetime.datetime | None = None  # UTC of time_s = 0 (None: unknown)
 
     def batches(self, size: int) -> Iterator[np.ndarray]:
         for i in range(0, self.pulses, size):

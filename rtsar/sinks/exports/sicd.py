@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import datetime
 import json
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -189,12 +190,24 @@ def sicd_structure(
     }
     sicd = SICDType.from_dict(d)
     sicd.derive()
+    corners = sicd.GeoData.ImageCorners
+    placed = [*(c["Lat"] for c in d["RadarCollection"]["Area"]["Corner"]), *scp, *arp0, *vel]
+    if (
+        corners is None
+        or not np.isfinite([*corners.get_array(dtype=np.float64).ravel(), *placed]).all()
+    ):
+        raise ValueError(
+            "the image's geometry (its axes and configuration) places no finite point on the "
+            "Earth: nothing SICD can describe"
+        )
     return sicd
 
 
 def _direction(u, ss, res: Resolution, kctr) -> dict:
     """A Grid direction (Row or Col) of sample spacing ``ss`` and resolution ``res``."""
     bw = res.bandwidth_cycles_per_m
+    if not (0 < bw < np.inf and 0 < ss < np.inf):
+        raise ValueError(f"an impulse-response bandwidth of {bw:g} cycles/m: no SICD grid")
     return {
         "UVectECF": {"X": u[0], "Y": u[1], "Z": u[2]},
         "SS": ss,
@@ -264,13 +277,34 @@ def write_sicd(image_path: str | Path, path: str | Path, frame: LocalFrame | Non
         )
     if image.shape[0] < 2 or image.shape[1] < 2:
         raise ValueError(f"{image_path}: an image of {image.shape} has no grid to describe")
-    text = attrs["config"]
-    cfg = config_from_dict(json.loads(text.decode() if isinstance(text, bytes) else str(text)))
+    for name, axis in (("azimuth_m", azimuth_m), ("range_m", range_m)):
+        steps = np.diff(axis)
+        if np.ptp(steps) > 1e-6 * abs(steps[0]):
+            raise ValueError(
+                f"{image_path}: {name} is not evenly spaced (a live image's line jumps?): "
+                "SICD's grid is uniform"
+            )
+    text = attrs.get("config")
+    if text is None:
+        raise ValueError(f"{image_path}: no config attribute: the image's processing is unknown")
+    try:
+        cfg = config_from_dict(json.loads(text.decode() if isinstance(text, bytes) else str(text)))
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{image_path}: its config attribute does not parse ({exc})") from None
     kept = attrs.get("collection_start_utc")
     start = None if kept is None else parse_utc(kept, f"{image_path}: collection_start_utc")
-    sicd = sicd_structure(
-        image.shape, azimuth_m, range_m, cfg, frame or LocalFrame(), Path(path).stem, start
-    )
+    # sarpy logs what it finds odd (a degenerate geometry) on stderr; the error here says it.
+    sarpy_log = logging.getLogger("sarpy")
+    level = sarpy_log.level
+    sarpy_log.setLevel(logging.CRITICAL)
+    try:
+        sicd = sicd_structure(
+            image.shape, azimuth_m, range_m, cfg, frame or LocalFrame(), Path(path).stem, start
+        )
+    except ValueError as exc:
+        raise ValueError(f"{image_path}: {exc}") from None
+    finally:
+        sarpy_log.setLevel(level)
     # The XML is sarpy's (its SICD model derives the dependent fields); NGA's sarkit writes the
     # NITF.  (sarpy's own writer copies the structure first, and its copy loses a CHIRP
     # waveform's RcvFMRate = 0 and with it RcvDemodType.)

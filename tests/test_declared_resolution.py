@@ -131,3 +131,69 @@ def test_sicd_is_valid_for_sarpy_and_sarkit_with_the_receivers_demodulation(tmp_
     # (Read with NGA's reader: sarpy 2.1's XML reader drops RcvDemodType and RcvFMRate of any
     # SICD, and its writer a CHIRP one's.)
     assert etree.QName(xml.getroot()).namespace.startswith("urn:SICD:")
+
+
+SPOT_SCENE = """
+preset = "crouch-spotlight"
+[waveform]
+sample_rate_hz = {rate}
+[geometry]
+along_track_step_m = {step}
+[processor]
+aperture_pulses = 2
+range_bins = 64
+[spotlight]
+sweep_deg = 2.0
+[[targets]]
+x_m = 0.0
+"""
+
+
+@pytest.mark.parametrize("window", ["rect", "taylor"])
+def test_spotlight_images_declare_the_resolution_they_measure(tmp_path, window):
+    """The progressive images' header (resolution_m, range_resolution_m) against the -3 dB
+    widths of a point target in the final image, 10 %."""
+    from rtsar.app.spotlight import image_header
+    from rtsar.spot.pfa import PfaSettings, PolarFormatPlan, polar_format
+    from rtsar.spot.scene import load_spot_scene
+    from rtsar.spot.simulate import SpotlightSimulator
+
+    path = tmp_path / "spot.toml"
+    path.write_text(SPOT_SCENE.format(rate=64 / 0.3, step=4.6 * 1.55e-6 / (2 * 3.2e-3)))
+    scene = load_spot_scene(path)
+    settings = PfaSettings(extent_m=(1.6e-3, 1.6e-3), range_window=window, azimuth_window=window)
+    plan = PolarFormatPlan(scene.config, scene.geometry, settings=settings)
+    image = polar_format(SpotlightSimulator(scene).block()[0], plan)
+    header = image_header(plan, 0, scene.geometry.pulses, scene.geometry.sweep_rad, True)
+    rep = analyse_point_target(image, plan.x_m, plan.y_m, 0.0, 0.0, chip=24)
+    assert rep.azimuth.irw_m == pytest.approx(header["resolution_m"], rel=IRW_TOLERANCE)
+    assert rep.range.irw_m == pytest.approx(header["range_resolution_m"], rel=IRW_TOLERANCE)
+
+
+@pytest.mark.parametrize("name", ["tiny", "crouch-sal"])
+def test_cphd_band_declares_the_range_resolution_its_image_measures(tmp_path, name, capsys):
+    """A CPHD declares its band (FxBW): c/(2·FxBW) times the range window's factor is the range
+    -3 dB width of the image `process` focuses from the file, 10 %."""
+    from rtsar.app.cli import main
+    from rtsar.app.cli.files import simulate_to
+    from rtsar.sinks.image_file import read_image
+
+    sarkit_cphd = pytest.importorskip("sarkit.cphd")
+    cfg = preset(name).with_processor(range_bins=32, range_window="hann")
+    g = cfg.geometry
+    r0 = cfg.processor.range_centre_m or g.slant_range_m
+    pulses = cfg.processor.aperture_pulses + 96
+    d = {**cfg.to_dict(), "pulses": pulses, "start_along_track_m": 0.0}
+    d["targets"] = [
+        {"along_track_m": 0.5 * (pulses - 1) * g.along_track_step_m, "slant_range_m": r0}
+    ]
+    rec, cphd, img = tmp_path / "r.h5", tmp_path / "r.cphd", tmp_path / "i.h5"
+    simulate_to(scene_from_dict(d), rec)
+    assert main(["export", str(rec), "--cphd", str(cphd)]) == 0
+    assert main(["process", str(cphd), "-o", str(img), "--lens", "numpy"]) == 0
+    with open(cphd, "rb") as f, sarkit_cphd.Reader(f) as r:
+        fx_bw = sarkit_cphd.XmlHelper(r.metadata.xmltree).load("{*}Channel/{*}Parameters/{*}FxBW")
+    declared = impulse_response_width("hann") * 299_792_458.0 / (2 * fx_bw)
+    image, az, rg, _ = read_image(img)
+    rep = analyse_point_target(image, az, rg, az[len(az) // 2], r0, chip=16)
+    assert rep.range.irw_m == pytest.approx(declared, rel=IRW_TOLERANCE)

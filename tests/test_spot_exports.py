@@ -159,6 +159,16 @@ def test_process_and_replay_of_a_spotlight_recording_say_what_it_is(spot, capsys
     assert "`rtsar spotlight " in err and "does not parse" not in err, err
 
 
+def test_a_spotlight_cphd_without_its_scene_is_refused_in_one_line(spot, tmp_path, capsys):
+    """Its arc cannot be imaged as a strip map: the file says it is a spotlight collection."""
+    raw = (spot / "spot.cphd").read_bytes()
+    (tmp_path / "x.cphd").write_bytes(raw.replace(b'name="rtsar:scene"', b'name="xtsar:scene"'))
+    capsys.readouterr()
+    assert main(["process", str(tmp_path / "x.cphd"), "-o", str(tmp_path / "x.h5")]) == 2
+    err = _error_line(capsys)
+    assert "RadarMode SPOTLIGHT" in err and err.count("x.cphd") == 1, err
+
+
 def test_sicd_export_of_a_spotlight_image_is_refused_in_one_line(spot, capsys):
     d = spot
     img = d / "img.h5"

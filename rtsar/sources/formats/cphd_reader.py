@@ -21,7 +21,7 @@ import numpy as np
 from ...params import C_M_PER_S, config_from_dict
 from ...spot.geometry import geometry_from_dict
 from .cphd_geometry import SPOT_CHANNELS_PARAMETER, channel_config, derived_config, spot_to_local_m
-from .foreign import ForeignRecording, check_telemetry
+from .foreign import ForeignRecording, telemetry_problem
 from .geometry import EAST_HEADING_DEG, LocalFrame
 from .phase_history import fx_mapping, fx_to_shots
 from .requirements import require_formats
@@ -136,6 +136,12 @@ def open_cphd(path: str | Path) -> ForeignRecording:
         params = _parameters(tree)
         scene = json.loads(params.get("rtsar:scene", "{}") or "{}")
         spot = spot_geometry_of(scene, path) if "rtsar:config" in params else None
+        mode = root.findtext("./{*}CollectionID/{*}RadarMode/{*}ModeType")
+        if mode == "SPOTLIGHT" and spot is None and "rtsar:config" in params:
+            raise ValueError(
+                "a spotlight collection (RadarMode SPOTLIGHT) written by rtsar whose rtsar:scene "
+                "has no spotlight geometry: it is not imaged without it"
+            )
         if len(channels) != 1 and spot is None:
             raise ValueError(f"{len(channels)} channels: rtsar reads one-channel CPHD")
         ref_id = root.findtext("./{*}Channel/{*}RefChId")
@@ -177,7 +183,9 @@ def open_cphd(path: str | Path) -> ForeignRecording:
             else np.arange(vectors, dtype=np.int64)
         )
         time_s = np.asarray(pvp["TxTime"], np.float64)
-        check_telemetry(path, cfg, index, along)
+        problem = telemetry_problem(cfg, index, along)
+        if problem:
+            raise ValueError(problem)
         start = float(along[0])  # the derived frame: x = 0 abeam of the middle vector's SRP
         if derived is None:
             start = float(params.get("rtsar:start_along_track_m", start))

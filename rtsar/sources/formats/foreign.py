@@ -57,13 +57,6 @@ class ForeignRecording:
         self.close()
 
 
-def check_telemetry(path, cfg: Config, pulse_index, along_track_m) -> None:
-    """ValueError ``PATH: …`` where :func:`telemetry_problem` finds one."""
-    problem = telemetry_problem(cfg, pulse_index, along_track_m)
-    if problem:
-        raise ValueError(f"{path}: {problem}")
-
-
 def telemetry_problem(cfg: Config, pulse_index, along_track_m) -> str | None:
     """What is wrong with a recording's pulse numbers and positions, None if nothing: the
     numbers increase, the positions follow the configured step (the image's azimuth axis

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ...params import config_from_dict
-from .foreign import ForeignRecording, check_telemetry
+from .foreign import ForeignRecording, telemetry_problem
 from .requirements import require_formats
 from .sigmf_store import ARCHIVE, COMPRESSED_ARCHIVES, DATA, META, Archive, SideBySide
 from .timebase import parse_utc, shifted
@@ -245,7 +245,9 @@ def open_sigmf(path: str | Path, config=None) -> ForeignRecording:
         along = _column(per_shot, "rtsar:along_track_m", ())
         if along is None:
             along = start + cfg.geometry.along_track_step_m * np.arange(pulses)
-        check_telemetry(meta, cfg, index, along)
+        problem = telemetry_problem(cfg, index, along)
+        if problem:
+            raise ValueError(problem)
         position = _column(per_shot, "rtsar:position_m", (3,))
         scene = json.loads(json.dumps(g.get("rtsar:scene") or {}))
         if not isinstance(scene, dict):

@@ -217,7 +217,7 @@ def open_sigmf(path: str | Path, config=None) -> ForeignRecording:
     if main is not None:
         raise ValueError(
             f"{meta} holds the auxiliary channel {g['rtsar:channel']!r} of a SigMF "
-            f"export, not a recording: give its recording, {main}.sigmf-meta"
+            f"export, not a recording: give its recording, {store.describe(main.name, META)}"
         )
     try:
         ours = "rtsar:config" in g

@@ -328,7 +328,9 @@ def add_parsers(sub) -> None:
         "complex64 vector items of one shot each, or a flat stream cut by packet_len tags "
         "(pass tags on); processed with --preset or --scene like --serial (README 'GNU Radio'); "
         "the main channel only: a --correct or --height stage reading an auxiliary channel is "
-        "refused before start",
+        "refused before start.  Shots are numbered by the tag header's item offsets (a late "
+        "subscriber keeps their positions); a message over 1 MiB + 256 shots, a bad header or "
+        "an absurd packet_len is counted and dropped, never fatal",
     )
     src.add_argument(
         "--preset",

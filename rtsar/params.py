@@ -40,11 +40,15 @@ def _positive(obj, *names):
             )
 
 
-def _shot_size(wf) -> None:
-    if wf.samples_per_shot > MAX_SAMPLES_PER_SHOT:
+def _shot_size(wf, duration_s: float) -> None:
+    """The shot (``duration_s`` × sample_rate_hz samples) within MAX_SAMPLES_PER_SHOT, checked
+    in floating point before any property rounds it to an int (1e308 × 1e308 is inf, which no
+    int holds: a configuration file must not end in OverflowError)."""
+    samples = wf.sample_rate_hz * duration_s
+    if not samples <= MAX_SAMPLES_PER_SHOT:
         raise ValueError(
-            f"{type(wf).__name__}: {wf.samples_per_shot} samples per shot (sample_rate_hz × "
-            f"duration) exceed the limit of {MAX_SAMPLES_PER_SHOT}"
+            f"{type(wf).__name__}: {samples:g} samples per shot (sample_rate_hz × duration) "
+            f"exceed the limit of {MAX_SAMPLES_PER_SHOT}"
         )
 
 
@@ -64,6 +68,7 @@ class PulsedChirp:
 
     def __post_init__(self):
         _positive(self, "bandwidth_hz", "pulse_duration_s", "sample_rate_hz", "receive_window_s")
+        _shot_size(self, max(self.receive_window_s, self.pulse_duration_s))
         if self.sample_rate_hz < self.bandwidth_hz:
             raise ValueError(
                 f"sample_rate_hz {self.sample_rate_hz:g} < bandwidth_hz {self.bandwidth_hz:g}: "
@@ -71,7 +76,6 @@ class PulsedChirp:
             )
         if self.pulse_samples >= self.samples_per_shot:
             raise ValueError("pulse_duration_s must be shorter than receive_window_s")
-        _shot_size(self)
 
     @property
     def chirp_rate_hz_per_s(self) -> float:
@@ -108,11 +112,11 @@ class FMCWChirp:
 
     def __post_init__(self):
         _positive(self, "bandwidth_hz", "chirp_duration_s", "sample_rate_hz", "reference_range_m")
+        _shot_size(self, self.chirp_duration_s)
         if self.samples_per_shot < 8:
             raise ValueError(
                 "FMCW shot must hold at least 8 samples (sample_rate_hz * chirp_duration_s)"
             )
-        _shot_size(self)
 
     @property
     def chirp_rate_hz_per_s(self) -> float:

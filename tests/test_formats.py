@@ -1,6 +1,7 @@
 """Standard formats (issue 16): CPHD 1.0.1 and SigMF round trips, the FX phase reference, SICD
 of an image, and the one-line error without the optional packages."""
 
+import datetime
 import json
 import re
 
@@ -23,6 +24,7 @@ from rtsar.sinks.io import open_recording  # noqa: E402
 from rtsar.sources.formats.cphd_reader import open_cphd  # noqa: E402
 from rtsar.sources.formats.phase_history import fx_mapping, fx_to_shots, shots_to_fx  # noqa: E402
 from rtsar.sources.formats.sigmf_reader import open_sigmf  # noqa: E402
+from rtsar.sources.formats.timebase import parse_utc  # noqa: E402
 
 PULSED = """
 preset = "tiny"
@@ -70,8 +72,13 @@ def test_cphd_round_trip_consistent_and_same_image(pulsed, tmp_path):
     with open(out, "rb") as f, sarkit_cphd.Reader(f) as sk:
         np.testing.assert_array_equal(reader[:, :], sk.read_signal("rtsar-main"))
         pvp = sk.read_pvps("rtsar-main")
-    srp = pvp["SRPPos"]
-    assert np.ptp(srp, axis=0).max() == 0  # one SRP, on the centre line at the scene centre
+    # The SRP follows the track (a strip map): abeam of the platform at every vector, on the
+    # centre line (the processor's range centre), so each vector's SRP range is R_c.
+    srp, tx, vel = pvp["SRPPos"], pvp["TxPos"], pvp["TxVel"]
+    along = np.sum((srp - tx) * vel, axis=-1) / np.linalg.norm(vel, axis=-1)
+    assert np.abs(along).max() < 1e-6
+    np.testing.assert_allclose(np.linalg.norm(srp - tx, axis=-1), 2000.0, rtol=1e-12)
+    assert np.linalg.norm(srp[-1] - srp[0]) == pytest.approx(119 * 0.5, rel=1e-9)
     with open_recording(pulsed) as rec:
         with open_cphd(out) as back:
             assert back.pulses == rec.pulses and back.start_along_track_m == rec.start_along_track_m
@@ -125,9 +132,19 @@ def test_sigmf_round_trip_bit_identical_with_channels(tmp_path):
     meta = json.loads((tmp_path / "out.sigmf-meta").read_text())
     handle = sigmf.sigmffile.fromfile(str(tmp_path / "out.sigmf-meta"))
     handle.validate()  # the SigMF schema
-    assert meta["global"]["rtsar:prf_hz"] > 0 and len(meta["captures"]) == 1
+    assert meta["global"]["rtsar:prf_hz"] > 0
     assert {"rtsar:pulse_index", "rtsar:time_s"} <= set(meta["annotations"][0])
     with open_recording(rec_path) as rec, open_sigmf(tmp_path / "out.sigmf-meta") as back:
+        # One capture per receive window (shot), each dated: the collection start + its time.
+        captures = handle.get_captures()
+        s = rec.config.waveform.samples_per_shot
+        assert [c["core:sample_start"] for c in captures] == [p * s for p in range(rec.pulses)]
+        dated = [parse_utc(c["core:datetime"]) for c in captures]
+        assert [(d - dated[0]).total_seconds() for d in dated] == pytest.approx(
+            rec.time_s - rec.time_s[0], abs=1e-6
+        )
+        assert dated[0] == rec.collection_start + datetime.timedelta(seconds=rec.time_s[0])
+        assert back.collection_start == rec.collection_start
         assert back.config == rec.config
         np.testing.assert_array_equal(back.shots[...], rec.shots[...])
         np.testing.assert_array_equal(back.pulse_index, rec.pulse_index)
@@ -160,7 +177,7 @@ def test_an_export_that_dies_leaves_the_old_file_and_no_partial_one(
         src = tmp_path / "img.h5"
         assert main(["process", str(pulsed), "-o", str(src), "--lens", "numpy"]) == 0
         dest, args = tmp_path / "old.nitf", ["--sicd"]
-        monkeypatch.setattr(sicd.SICDWriter, "write_chip", _boom)
+        monkeypatch.setattr(sicd.sksicd.NitfWriter, "write_image", _boom)
     else:
         src = pulsed
         dest = tmp_path / ("old.cphd" if kind == "cphd" else "old.sigmf-data")
@@ -234,9 +251,9 @@ def test_cphd_from_elsewhere_is_focused_from_its_own_geometry(pulsed, tmp_path):
     img = tmp_path / "other.h5"
     assert main(["process", str(other), "-o", str(img), "--lens", "numpy"]) == 0
     image, az, rg, _ = read_image(img)
-    with open_recording(pulsed) as rec:  # x = 0 lies abeam of the SRP: the image's middle
+    with open_recording(pulsed) as rec:  # x = 0 lies abeam of the middle vector's SRP
         d = rec.config.geometry.along_track_step_m
-        x_c = rec.start_along_track_m + 0.5 * (rec.pulses - 1) * d
+        x_c = rec.start_along_track_m + (rec.pulses // 2) * d
     for x0, r0 in ((0.0, 2000.0), (6.0, 2031.3)):
         rep = analyse_point_target(image, az, rg, x0 - x_c, r0, (4.0, 10.0), chip=16)
         assert abs(rep.azimuth_m - (x0 - x_c)) < 0.1 * (az[1] - az[0])

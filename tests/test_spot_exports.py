@@ -5,6 +5,7 @@ process/replay/SICD say in one line what a spotlight file is; a strip-map CPHD e
 auxiliary channels it leaves out, and a missing channel in a CPHD points to the .h5/SigMF."""
 
 import json
+import tarfile
 
 import numpy as np
 import pytest
@@ -115,12 +116,18 @@ def test_spotlight_cphd_holds_the_arc_and_a_generic_processor_focuses_both_chann
 
 def test_rtsar_reads_its_spotlight_cphd_and_sigmf_back_into_the_same_image(spot):
     d = spot
+    # A SigMF archive (an uncompressed tar, SigMF's layout NAME/NAME.sigmf-*) holding the
+    # recording and its bistatic channel's recording.
+    with tarfile.open(d / "arch.sigmf", "w") as tar:
+        for name in ("sig", "sig.bistatic"):
+            for suffix in (".sigmf-meta", ".sigmf-data"):
+                tar.add(d / (name + suffix), arcname=f"sig/{name}{suffix}")
     for channel in ("main", "bistatic"):
         ref = d / f"ref-{channel}.h5"
         common = ["--channel", channel, "--extent-mm", "1.5", "1.5"]
         assert main(["spotlight", str(d / "spot.h5"), "-o", str(ref), *common]) == 0
         want = read_image(ref)[0]
-        for src in ("spot.cphd", "sig.sigmf-meta", "sig"):
+        for src in ("spot.cphd", "sig.sigmf-meta", "sig", "arch.sigmf"):
             out = d / f"back-{channel}.h5"
             assert main(["spotlight", str(d / src), "-o", str(out), *common]) == 0
             got = read_image(out)[0]
@@ -150,6 +157,16 @@ def test_process_and_replay_of_a_spotlight_recording_say_what_it_is(spot, capsys
     err = _error_line(capsys)
     assert "is a spotlight recording" in err, err
     assert "`rtsar spotlight " in err and "does not parse" not in err, err
+
+
+def test_a_spotlight_cphd_without_its_scene_is_refused_in_one_line(spot, tmp_path, capsys):
+    """Its arc cannot be imaged as a strip map: the file says it is a spotlight collection."""
+    raw = (spot / "spot.cphd").read_bytes()
+    (tmp_path / "x.cphd").write_bytes(raw.replace(b'name="rtsar:scene"', b'name="xtsar:scene"'))
+    capsys.readouterr()
+    assert main(["process", str(tmp_path / "x.cphd"), "-o", str(tmp_path / "x.h5")]) == 2
+    err = _error_line(capsys)
+    assert "RadarMode SPOTLIGHT" in err and err.count("x.cphd") == 1, err
 
 
 def test_sicd_export_of_a_spotlight_image_is_refused_in_one_line(spot, capsys):

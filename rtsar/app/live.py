@@ -32,6 +32,7 @@ _NORMAL = {
     "height_strips_published",
     "frames_ok",
     "bytes_fed",
+    "messages",  # GNU Radio messages received (rtsar.sources.zmq_in)
 }
 _NORMAL_SUFFIXES = (
     ".pulses_in",
@@ -51,6 +52,7 @@ _LABELS = {
     "stray_pulses": "stray",
     "nonfinite_pulses": "NaN/Inf",
     "wrong_length_pulses": "bad length",
+    "pulses_before_start": "sent before the first received",
     "discontinuities": "restarts",
     "header_crc_errors": "header CRC errors",
     "payload_crc_errors": "payload CRC errors",

@@ -3,8 +3,10 @@
 Progressive images go out on their own ZeroMQ topic ``spot`` (the strip-map topics are
 untouched): frame 0 b"spot", frame 1 a JSON header, frame 2 the image complex64 little-endian
 [x, y].  Header: seq, shots (in the image so far), pulses (planned), sweep_rad (look-angle span
-so far), resolution_m (0.886·λ/(2Δθ_so_far), eq. 9.5), final (the last, equal to the batch
-image), shape, x0_m, dx_m, y0_m, dy_m, frame_angle_rad, channel, look.
+so far), resolution_m (the cross-range -3 dB width: w·λ/(2Δθ_so_far), eq. 9.5, with w the
+azimuth window's factor, 0.886 unweighted, rtsar.windows.impulse_response_width),
+range_resolution_m (w·c/(2B), the range window's), final (the last, equal to the batch image),
+shape, x0_m, dx_m, y0_m, dy_m, frame_angle_rad, channel, look.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from ..spot.geometry import cross_range_resolution_m, geometry_from_dict
 from ..spot.pfa import PfaSettings, PolarFormatPlan, ProgressivePolarFormat, polar_format
 from ..spot.scene import SpotScene
 from ..spot.simulate import BISTATIC_CHANNEL, SpotlightSimulator
+from ..windows import impulse_response_width
 
 TOPIC = "spot"
 SPOT_KEY = "spotlight"  # the recording's scene attribute holds {"spotlight": SpotScene.to_dict()}
@@ -116,14 +119,26 @@ def live_blocks(scene: SpotScene, channel: str, size: int) -> Iterator[np.ndarra
         yield main if channel == "main" else aux[channel]
 
 
+def declared_resolution_m(plan: PolarFormatPlan, sweep_rad: float) -> tuple[float, float]:
+    """(cross-range, range) -3 dB widths of an image over ``sweep_rad``: λ/(2Δθ) (Crouch
+    eq. 9.5) and c/(2B), each times its window's factor (rect 0.886)."""
+    s, cfg = plan.settings, plan.config
+    lam = cfg.geometry.wavelength_m
+    return (
+        impulse_response_width(s.azimuth_window) * cross_range_resolution_m(lam, sweep_rad),
+        impulse_response_width(s.range_window) * cfg.waveform.range_resolution_m,
+    )
+
+
 def image_header(plan: PolarFormatPlan, seq: int, shots: int, sweep: float, final: bool) -> dict:
-    lam = plan.config.geometry.wavelength_m
+    cross, along = declared_resolution_m(plan, sweep) if sweep > 0 else (None, None)
     return {
         "seq": seq,
         "shots": shots,
         "pulses": len(plan.psi),
         "sweep_rad": sweep,
-        "resolution_m": 0.886 * cross_range_resolution_m(lam, sweep) if sweep > 0 else None,
+        "resolution_m": cross,
+        "range_resolution_m": along,
         "final": final,
         "shape": [len(plan.x_m), len(plan.y_m)],
         "x0_m": float(plan.x_m[0]),
@@ -221,12 +236,13 @@ def timed(fn, *a, **k):
 
 
 def describe(plan: PolarFormatPlan) -> str:
-    g = plan.geometry
-    lam = plan.config.geometry.wavelength_m
+    g, s = plan.geometry, plan.settings
+    rho_x, rho_y = declared_resolution_m(plan, g.sweep_rad)
+    w_x, w_y = (impulse_response_width(w) for w in (s.azimuth_window, s.range_window))
     return (
         f"{g.pulses} shots over {math.degrees(g.sweep_rad):.3f}°, channel {plan.channel}: "
-        f"ρx = 0.886·λ/2Δθ = {1e6 * 0.886 * cross_range_resolution_m(lam, g.sweep_rad):.2f} µm, "
-        f"ρy = 0.886·c/2B = {1e6 * 0.886 * plan.config.waveform.range_resolution_m:.2f} µm; "
+        f"ρx = {w_x:.3f}·λ/2Δθ = {1e6 * rho_x:.2f} µm, "
+        f"ρy = {w_y:.3f}·c/2B = {1e6 * rho_y:.2f} µm; "
         f"image {len(plan.x_m)} x {len(plan.y_m)} px of {1e6 * plan.dx:.2f} x "
         f"{1e6 * plan.dy:.2f} µm"
     )

@@ -294,6 +294,14 @@ class CorrectionChain:
             carry = np.concatenate(parts) if parts else np.zeros((0, bins), np.complex64)
         return carry
 
+    def move_start(self, shift_m: float) -> None:
+        """Pulse 0 lies ``shift_m`` further along track than the chain was told (a live stream
+        anchored by its first shot, rtsar.stream.pipeline): stages that place pulses (pra)
+        follow."""
+        for _, stage in self.named:
+            if hasattr(stage, "start_along_track_m"):
+                stage.start_along_track_m += shift_m
+
     def counters(self) -> dict:
         """Every stage's counters, prefixed with its name (``pga.pulses_in``, …)."""
         return {f"{n}.{k}": int(v) for n, s in self.named for k, v in s.counter_values().items()}

@@ -58,10 +58,48 @@ def write_image(
 def read_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
     """(image, azimuth_m, range_m, attributes).  Of a file still being written (SWMR), the
     lines both the image and its azimuth axis hold: the writer grows them one after the
-    other, and a reader may come between."""
+    other, and a reader may come between.
+
+    What the file holds is checked first (ValueError ``PATH: …`` in one line): ``image`` a
+    complex 2-D dataset without NaN/Inf (rtsar zeroes such pulses, so a non-finite pixel is
+    damage), the axes 1-D, finite and strictly increasing, ``range_m`` one entry per column and
+    ``azimuth_m`` at least as many as the lines."""
     with open_checked(path, IMAGE_FORMAT) as f:
-        rows = min(f["image"].shape[0], f["azimuth_m"].shape[0])
-        return (f["image"][:rows], f["azimuth_m"][:rows], f["range_m"][...], dict(f.attrs))
+        try:
+            image = _dataset(f, "image", 2, np.complexfloating, "complex")
+            azimuth = _dataset(f, "azimuth_m", 1, np.floating, "float")
+            range_ = _dataset(f, "range_m", 1, np.floating, "float")
+            rows = min(image.shape[0], azimuth.shape[0])
+            if rows == 0 or image.shape[1] == 0:
+                raise ValueError(f"an image of {rows} lines x {image.shape[1]} columns: nothing")
+            if range_.shape[0] != image.shape[1]:
+                raise ValueError(
+                    f"range_m has {range_.shape[0]} entries for the image's {image.shape[1]} "
+                    "columns"
+                )
+            out = image[:rows], azimuth[:rows], range_[...], dict(f.attrs)
+        except (KeyError, TypeError, OSError) as exc:  # h5py on a damaged file
+            raise ValueError(f"{path}: {exc}") from None
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from None
+    for name, values in zip(("image", "azimuth_m", "range_m"), out[:3], strict=True):
+        bad = values.size - int(np.count_nonzero(np.isfinite(values)))
+        if bad:
+            raise ValueError(f"{path}: {name} holds {bad} NaN/Inf value(s) of {values.size}")
+    for name, axis in (("azimuth_m", out[1]), ("range_m", out[2])):
+        if axis.size > 1 and not np.all(np.diff(axis) > 0):
+            raise ValueError(f"{path}: {name} does not increase from entry to entry")
+    return out
+
+
+def _dataset(f, name: str, ndim: int, kind, said: str):
+    """Dataset ``name``, checked: present, ``ndim``-D, of the ``kind`` of numbers."""
+    ds = f.get(name)
+    if ds is None or not hasattr(ds, "dtype"):
+        raise ValueError(f"no {name} dataset: not a whole rtsar image")
+    if ds.ndim != ndim or not np.issubdtype(ds.dtype, kind):
+        raise ValueError(f"{name} must be {ndim}-D {said}, got {ds.shape} {ds.dtype}")
+    return ds
 
 
 def read_heights(path: str | Path) -> tuple[np.ndarray, np.ndarray] | None:

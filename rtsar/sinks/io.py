@@ -17,6 +17,7 @@ Complex values are HDF5 compounds of two floats named r and i (h5py's convention
 
 from __future__ import annotations
 
+import datetime
 import glob
 import json
 import os
@@ -34,6 +35,7 @@ from .. import __version__
 from ..params import Config, config_from_dict
 from ..scene.model import Scene, recorded_scene
 from ..sources.formats.foreign import telemetry_problem
+from ..sources.formats.timebase import format_utc, parse_utc, utc_now
 from .h5_output import H5Output, WriteFailed, is_write_error, reason
 
 RECORDING_FORMAT = "rtsar-recording"
@@ -162,15 +164,23 @@ class RecordingWriter:
 
     The auxiliary channels are fixed by the first ``write``: every later write must carry the
     same names and lengths (ValueError otherwise), so no channel is ever silently dropped.
+    ``collection_start`` (naive UTC; default: now) is the time of ``time_s`` = 0, kept as
+    ``collection_start_utc`` (rtsar.sources.formats.timebase).
     """
 
     def __init__(
-        self, path: str | Path, config: Config, scene: dict | None = None, chunk_pulses: int = 64
+        self,
+        path: str | Path,
+        config: Config,
+        scene: dict | None = None,
+        chunk_pulses: int = 64,
+        collection_start=None,
     ):
         self.path = Path(path)
         self._out = H5Output(self.path)  # a failed write: WriteFailed, never a crash
         with self._out.writing():
             self._create(config, scene, chunk_pulses)
+            self._f.attrs["collection_start_utc"] = format_utc(collection_start or utc_now())
 
     def _create(self, config: Config, scene: dict | None, chunk_pulses: int) -> None:
         self._f = self._out.file
@@ -305,6 +315,7 @@ class Recording:
     pulse_index: np.ndarray | None = None  # int64[pulse]
     time_s: np.ndarray | None = None  # float64[pulse]
     channels: dict = field(default_factory=dict)  # auxiliary channel name → dataset
+    collection_start: datetime.datetime | None = None  # UTC of time_s = 0 (None: not kept)
 
     @property
     def position_m(self) -> np.ndarray | None:
@@ -429,12 +440,23 @@ def open_recording(path: str | Path) -> Recording:
         problem = telemetry_problem(cfg, meta["pulse_index"], meta["along_track_m"])
         if problem:
             raise ValueError(problem)
+        kept = f.attrs.get("collection_start_utc")
+        collection_start = None if kept is None else parse_utc(kept)
     except (ValueError, KeyError, TypeError, OSError) as exc:
         f.close()
         raise ValueError(f"{path}: {exc}") from None
     start = float(meta["along_track_m"][0]) if pulses else 0.0
     return Recording(
-        Path(path), cfg, scene, pulses, start, f, meta["pulse_index"], meta["time_s"], channels
+        Path(path),
+        cfg,
+        scene,
+        pulses,
+        start,
+        f,
+        meta["pulse_index"],
+        meta["time_s"],
+        channels,
+        collection_start,
     )
 
 

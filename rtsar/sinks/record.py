@@ -22,12 +22,20 @@ from pathlib import Path
 import numpy as np
 
 from ..params import config_from_dict
+from ..sources.formats.timebase import format_utc
 from ..stream.strips import StreamInfo, Strip, StripSink
 from .image_file import ImageWriter
 from .name_claim import NameClaim
 from .wire import height_header, strip_header
 
 MAX_FILL_BYTES = 64 << 20  # the most zeros written for one gap of missing lines
+
+
+def collection_attrs(rec) -> dict:
+    """The image attribute that carries a recording's collection start (none where unknown):
+    the SICD's Timeline/CollectStart (rtsar.sources.formats.timebase)."""
+    start = getattr(rec, "collection_start", None)
+    return {} if start is None else {"collection_start_utc": format_utc(start)}
 
 
 def processing_attrs(

@@ -101,7 +101,10 @@ def read_pmt(buf: bytes, pos: int, depth: int = 0) -> tuple[object, int]:
             pair, pos = read_pmt(buf, pos, depth + 1)
             if not (isinstance(pair, tuple) and len(pair) == 2):
                 raise PmtError("PMT dict entry is not a pair")
-            out[pair[0]] = pair[1]
+            try:
+                out[pair[0]] = pair[1]
+            except TypeError:  # a key that is a dict (or holds one): no Python dict takes it
+                raise PmtError("PMT dict key is a dict") from None
     if kind == 0x0A:
         subtype, npad = take(">BB")
         pos += npad

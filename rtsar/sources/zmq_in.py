@@ -4,33 +4,69 @@ Two layouts, told apart by the message length:
 
 * one pulse per vector item (the sink's ``vlen`` = samples per shot): every S·8 bytes is a shot;
 * a flat complex stream sliced by ``packet_len`` tags (the sink's "pass tags" on): a shot starts
-  at each ``packet_len`` tag and holds its value's samples (another length than the configured
-  S: counted in ``wrong_length``, dropped).
+  at each ``packet_len`` tag and holds its value's samples.
 
 With pass tags, each message begins with GNU Radio's tag header (rtsar.sources.gr_tags): its
 item offset numbers the shots (vector items: the item's offset; a flat stream: the packets'
 starts, one shot per packet period, the smallest spacing of starts seen, so guard samples
 between packets are no gap: seq = the previous packet's + round(Δoffset / period), the first
-packet's offset // S), so a message lost on the way becomes a gap
-that ingest zero-fills, as for serial frames; ``rx_time`` tags give the instrument clock
-(later shots: rx_time + items / rate).
-Without tags the shots are numbered as they come and timed by arrival.  A message that does not
-parse is counted (``bad_messages``), never raised.  The socket connects to ``endpoint`` (GNU
-Radio's sink binds); a multipart message (a sink with a topic key) uses its last part.
+packet's offset // S), so a message lost on the way becomes a gap that ingest zero-fills, as for
+serial frames; ``rx_time`` tags give the instrument clock (later shots: rx_time + items / rate).
+The numbers count from the flowgraph's item 0 (``seq_origin``): a subscriber that joins late
+keeps every shot's position along track, and ingest counts the shots it missed
+(rtsar.stream.ingest, ``pulses_before_start``).  Without tags the shots are numbered as they
+come and timed by arrival.
+
+No message can end the run, and what one costs is bounded, whatever arrives:
+
+* the socket refuses a message over ``max_message_bytes`` (default: a tag-header allowance of
+  MAX_HEADER_BYTES plus MESSAGE_SHOTS shots; ZeroMQ then drops that connection and connects
+  again, counted in ``link_drops``);
+* a flat stream's unfinished shot holds at most S samples: a packet of another length is
+  counted (``wrong_length``) and its samples skipped, never held; a ``packet_len`` beyond
+  MAX_PACKET_SAMPLES (rtsar.params.MAX_SAMPLES_PER_SHOT) or below 1 is refused
+  (``bad_packet_len``) and its samples skipped the same way;
+* one message's shots leave in batches of at most ``batch_shots``.
+
+Every message that cannot be used is counted by kind (COUNTERS) and dropped.  The socket
+connects to ``endpoint`` (GNU Radio's sink binds); a multipart message (a sink with a topic key)
+uses its last part.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Iterator
 
 import numpy as np
 import zmq
 
+from ..params import MAX_SAMPLES_PER_SHOT
 from .base import ShotBatch, Source
 from .gr_tags import PmtError, parse_tag_header, rx_time_s
 
-COUNTERS = ("messages", "bad_messages", "wrong_length", "partial_samples")
+COUNTERS = (
+    "messages",  # messages received
+    "bad_messages",  # a tag header that does not parse, or a body that is not whole items
+    "bad_offsets",  # an item offset whose shot number passes 2^63 - 1 (int64): dropped
+    "bad_tags",  # a packet_len or rx_time tag whose value is not of its kind: ignored
+    "wrong_length",  # messages (vector items) or packets of another length than a shot
+    "bad_packet_len",  # packet_len < 1 or > MAX_PACKET_SAMPLES: refused, its samples skipped
+    "partial_samples",  # samples of packets cut short, or outside any packet
+    "link_drops",  # the connection dropped (a message over the size limit, a restart)
+    "decoder_errors",  # a message the decoder failed on (a bug: never expected)
+)
+MAX_SEQ = (1 << 63) - 1  # shot numbers travel as int64
+MAX_PACKET_SAMPLES = MAX_SAMPLES_PER_SHOT
+MAX_HEADER_BYTES = 1 << 20  # tag headers: GNU Radio's carry a few tags of tens of bytes
+MESSAGE_SHOTS = 256  # shots one message may carry (GNU Radio sends a work call's buffer)
+BATCH_SHOTS = 64
+
+
+def default_max_message_bytes(samples_per_shot: int) -> int:
+    """The receive-size limit for shots of ``samples_per_shot`` (module docstring)."""
+    return MAX_HEADER_BYTES + MESSAGE_SHOTS * int(samples_per_shot) * 8
 
 
 class ZmqSource(Source):
@@ -38,10 +74,13 @@ class ZmqSource(Source):
 
     ``item_rate_hz``: samples per second of a flat stream (the shot's sample rate), used with
     ``shot_rate_hz`` (the PRF, for vector items) to time shots after an ``rx_time`` tag.
-    Iteration ends on ``close()`` or after ``idle_timeout_s`` without a message.
+    ``max_message_bytes`` (None: :func:`default_max_message_bytes`) and ``batch_shots`` bound
+    what one message costs.  Iteration ends on ``close()`` or after ``idle_timeout_s`` without a
+    message.
     """
 
     live = True
+    seq_origin = 0  # tagged shots are numbered from the flowgraph's item 0
 
     def __init__(
         self,
@@ -52,6 +91,8 @@ class ZmqSource(Source):
         idle_timeout_s: float | None = None,
         poll_s: float = 0.05,
         context: zmq.Context | None = None,
+        max_message_bytes: int | None = None,
+        batch_shots: int = BATCH_SHOTS,
     ):
         super().__init__()
         self.endpoint = endpoint
@@ -59,14 +100,14 @@ class ZmqSource(Source):
         self.item_rate_hz, self.shot_rate_hz = float(item_rate_hz), float(shot_rate_hz)
         self.idle_timeout_s = idle_timeout_s
         self.poll_s = poll_s
+        self.max_message_bytes = int(max_message_bytes or default_max_message_bytes(self.samples))
+        self.batch_shots = max(1, int(batch_shots))
         self.description = f"GNU Radio ZMQ stream {endpoint}"
         self.counters = {name: 0 for name in COUNTERS}
         self._ctx = context or zmq.Context.instance()
         self._next_seq = 0  # untagged streams: shots numbered as they come
-        self._pending = np.zeros(0, np.complex64)  # flat stream: samples of an unfinished shot
-        self._pending_offset = 0
-        self._pending_len: int | None = None
-        self._pending_seq = 0
+        # Flat stream: the packet being cut (its samples held only when it is a shot's length).
+        self._packet: dict | None = None  # {"start", "length", "seq", "have", "parts"}
         self._last_start: tuple[int, int] | None = None  # (item offset, seq) of the last packet
         self._period: int | None = None  # items from one packet start to the next
         self._flat = False  # a packet_len tag was seen: a flat stream sliced by tags
@@ -88,7 +129,8 @@ class ZmqSource(Source):
         return t + (offset - at) / rate
 
     def decode(self, payload: bytes) -> list[tuple[int, float, np.ndarray]]:
-        """(seq, instrument time, samples) of the shots one message completes."""
+        """(seq, instrument time, samples) of the shots one message completes; a message that
+        cannot be used is counted (COUNTERS) and gives none."""
         self.counters["messages"] += 1
         offset, tags, start = None, [], 0
         if len(payload) >= 2 and payload[:2] == b"\xf0\x5f":
@@ -97,26 +139,36 @@ class ZmqSource(Source):
             except PmtError:
                 self.counters["bad_messages"] += 1
                 return []
-        body = payload[start:]
+            if offset > MAX_SEQ:
+                self.counters["bad_offsets"] += 1
+                return []
+        body = memoryview(payload)[start:]
         if len(body) % 8:
             self.counters["bad_messages"] += 1
             return []
         items = np.frombuffer(body, "<c8")
-        packet = [t for t in tags if t.key == "packet_len" and isinstance(t.value, int)]
-        self._flat = self._flat or bool(packet)
+        packet = [t for t in tags if t.key == "packet_len"]
+        good = [t for t in packet if isinstance(t.value, int) and not isinstance(t.value, bool)]
+        self.counters["bad_tags"] += len(packet) - len(good)
+        self._flat = self._flat or bool(good)
         for t in tags:
-            if t.key == "rx_time" and rx_time_s(t.value) is not None:
-                self._clock = (t.offset, rx_time_s(t.value), self._flat)
+            if t.key == "rx_time":
+                seconds = rx_time_s(t.value)
+                if seconds is None or not math.isfinite(seconds):
+                    self.counters["bad_tags"] += 1
+                else:
+                    self._clock = (t.offset, seconds, self._flat)
+        packet = good
         if self._flat:
             return self._slice(offset or 0, items, packet)
         if len(items) % self.samples:
             self.counters["wrong_length"] += 1
             return []
         shots = items.reshape(-1, self.samples)
-        if offset is None:
-            first = self._next_seq
-        else:
-            first = offset  # vector items: the offset counts shots
+        first = self._next_seq if offset is None else offset  # vector items: offset counts shots
+        if first + len(shots) - 1 > MAX_SEQ:
+            self.counters["bad_offsets"] += 1
+            return []
         self._next_seq = first + len(shots)
         return [(first + i, self._time(first + i, False), s) for i, s in enumerate(shots)]
 
@@ -133,62 +185,126 @@ class ZmqSource(Source):
         self._last_start = (offset, seq)
         return seq
 
+    def _start_packet(self, offset: int, length: int) -> None:
+        """A packet_len tag at ``offset``: the packet before it, unfinished, is cut short."""
+        self._cut()
+        if not 1 <= length <= MAX_PACKET_SAMPLES:
+            self.counters["bad_packet_len"] += 1
+        elif length != self.samples:
+            self.counters["wrong_length"] += 1
+        seq = self._packet_seq(offset)
+        keep = length == self.samples and seq <= MAX_SEQ
+        if length == self.samples and not keep:
+            self.counters["bad_offsets"] += 1
+        self._packet = {"start": offset, "length": length, "seq": seq, "have": 0}
+        self._packet["parts"] = [] if keep else None  # None: counted, its samples skipped
+
+    def _cut(self) -> None:
+        """The current packet ends unfinished: a shot's samples received so far are partial."""
+        p = self._packet
+        if p is not None and p["parts"] is not None:
+            self.counters["partial_samples"] += p["have"]
+        self._packet = None
+
     def _slice(self, offset: int, items: np.ndarray, packet) -> list:
         """Flat stream: cut the items at the packet_len tags into shots (module docstring)."""
         out = []
-        if self._pending_len is not None and offset != self._pending_offset + len(self._pending):
-            # Items went missing (a lost message): the unfinished shot cannot be completed.
-            self.counters["partial_samples"] += len(self._pending)
-            self._pending, self._pending_len = np.zeros(0, np.complex64), None
-        starts = {t.offset: t.value for t in packet if offset <= t.offset < offset + len(items)}
-        bounds = sorted({offset, *starts, offset + len(items)})
+        p = self._packet
+        if p is not None and offset != p["start"] + p["have"]:
+            self._cut()  # items went missing (a lost message): the packet cannot be completed
+        end = offset + len(items)
+        starts = {t.offset: t.value for t in packet if offset <= t.offset < end}
+        bounds = sorted({offset, *starts, end})
         for a, b in zip(bounds[:-1], bounds[1:], strict=True):
-            seg = items[a - offset : b - offset]
-            if a in starts:  # a packet begins: one still unfinished is cut short
-                self.counters["partial_samples"] += len(self._pending)
-                self._pending, self._pending_offset, self._pending_len = seg, a, starts[a]
-                self._pending_seq = self._packet_seq(a)
-            elif self._pending_len is None:  # samples outside any packet
-                self.counters["partial_samples"] += len(seg)
+            if a in starts:
+                self._start_packet(a, starts[a])
+            p = self._packet
+            if p is None:  # samples outside any packet
+                self.counters["partial_samples"] += b - a
                 continue
-            else:
-                self._pending = np.concatenate([self._pending, seg])
-            if self._pending_len is not None and len(self._pending) >= self._pending_len:
-                n = self._pending_len
-                if n == self.samples:
-                    t = self._time(self._pending_offset, True)
-                    out.append((self._pending_seq, t, self._pending[:n]))
-                else:
-                    self.counters["wrong_length"] += 1
-                self.counters["partial_samples"] += len(self._pending) - n
-                self._pending, self._pending_len = np.zeros(0, np.complex64), None
+            take = min(b - a, max(p["length"] - p["have"], 0))
+            if p["parts"] is not None:
+                p["parts"].append(items[a - offset : a - offset + take])
+            p["have"] += take
+            if take < b - a:  # the packet is whole and items follow it outside any packet
+                self.counters["partial_samples"] += b - a - take
+            if p["have"] >= p["length"]:
+                if p["parts"] is not None:
+                    samples = np.concatenate(p["parts"])
+                    out.append((p["seq"], self._time(p["start"], True), samples))
+                self._packet = None
         return out
+
+    def _safe_decode(self, payload: bytes) -> list:
+        """:meth:`decode`, and a failure of its own counted, not raised (a stream that one
+        message could end would be a denial of service; the fuzz test keeps this at 0)."""
+        try:
+            return self.decode(payload)
+        except Exception:  # noqa: BLE001 - counted, the run goes on
+            self.counters["decoder_errors"] += 1
+            self._packet = None
+            return []
+
+    def batches(self, shots: list) -> Iterator[ShotBatch]:
+        """The decoded shots in ShotBatches of at most ``batch_shots``."""
+        arrival = time.perf_counter()
+        for i in range(0, len(shots), self.batch_shots):
+            part = shots[i : i + self.batch_shots]
+            yield ShotBatch(
+                np.array([s[0] for s in part], np.int64),
+                np.array([s[1] for s in part], np.float64),
+                np.full(len(part), arrival),
+                np.stack([s[2] for s in part]).astype(np.complex64),
+            )
 
     def __iter__(self) -> Iterator[ShotBatch]:
         sock = self._ctx.socket(zmq.SUB)
         sock.setsockopt(zmq.SUBSCRIBE, b"")
         sock.setsockopt(zmq.LINGER, 0)
+        sock.setsockopt(zmq.MAXMSGSIZE, self.max_message_bytes)
+        monitor = sock.get_monitor_socket(zmq.EVENT_DISCONNECTED)
+        poller = zmq.Poller()
+        poller.register(sock, zmq.POLLIN)
+        poller.register(monitor, zmq.POLLIN)
         sock.connect(self.endpoint)
         last = time.monotonic()
         try:
             while not self._stop:
-                if not sock.poll(int(self.poll_s * 1000)):
+                ready = dict(poller.poll(int(self.poll_s * 1000)))
+                if monitor in ready and self._link_dropped(monitor):
+                    # ZeroMQ does not reconnect after a protocol error (a message over the
+                    # limit): connect again here (after any drop: no harm where it would).
+                    try:
+                        sock.disconnect(self.endpoint)
+                    except zmq.ZMQError:  # the endpoint's session is already gone
+                        pass
+                    sock.connect(self.endpoint)
+                if sock not in ready:
                     if self.idle_timeout_s and time.monotonic() - last > self.idle_timeout_s:
                         self.stop_reason = "idle"
                         return
                     continue
                 shots = []
-                while sock.poll(0) and len(shots) < 1024:
-                    shots += self.decode(sock.recv_multipart()[-1])
+                while sock.poll(0) and len(shots) < self.batch_shots:
+                    shots += self._safe_decode(sock.recv_multipart()[-1])
                 last = time.monotonic()
-                if shots:
-                    arrival = np.full(len(shots), time.perf_counter())
-                    yield ShotBatch(
-                        np.array([s[0] for s in shots], np.int64),
-                        np.array([s[1] for s in shots], np.float64),
-                        arrival,
-                        np.stack([s[2] for s in shots]).astype(np.complex64),
-                    )
+                yield from self.batches(shots)
             self.stop_reason = "closed"
         finally:
+            sock.disable_monitor()
+            monitor.close()
             sock.close()
+
+    def _link_dropped(self, monitor) -> int:
+        """Count the disconnections the monitor reports; how many there were."""
+        drops = 0
+        while monitor.poll(0):
+            monitor.recv_multipart()
+            drops += 1
+            self.counters["link_drops"] += 1
+            self._cut()
+            self._say(
+                f"the connection to {self.endpoint} dropped (a message over the "
+                f"{self.max_message_bytes:,}-byte limit, or the flowgraph stopped); reconnecting"
+            )
+        return drops

@@ -20,6 +20,13 @@ belongs:
   taken as a discontinuity, so no shot is lost;
 * NaN/Inf samples or the wrong number of samples: the pulse is zeroed and flagged.
 
+A source whose numbers count from the instrument's pulse 0 (``origin_seq``: a GNU Radio stream,
+whose item offsets count from the flowgraph's start) anchors the stream: its first shot, number
+s0, is pulse s0 - origin_seq of the scan, not pulse 0.  ``start_pulses`` says so (the stream's
+owner moves pulse 0's position by that many steps, rtsar.stream.pipeline), and the pulses sent
+before the first one received are counted in ``pulses_before_start``: a subscriber that joins a
+running flowgraph keeps every position along track and says what it missed.
+
 Every shot received is accounted for: ``pulses_received`` = ``pulses_accepted`` + ``duplicates``
 + ``late_pulses`` + ``stray_pulses`` (+ 1 while a candidate is held).
 
@@ -53,6 +60,7 @@ COUNTERS = (
     "stray_pulses",  # shots whose number fitted neither the run nor a restart, dropped
     "nonfinite_pulses",  # shots holding NaN/Inf, zeroed
     "wrong_length_pulses",  # shots with the wrong sample count (or a missing channel), zeroed
+    "pulses_before_start",  # an anchored stream: pulses of the scan before the first received
 )
 
 
@@ -68,6 +76,10 @@ class PulseBlock:
 
     def __len__(self) -> int:
         return len(self.samples)
+
+    def with_samples(self, samples: np.ndarray, aux: dict | None = None) -> PulseBlock:
+        """The same pulses carrying other samples (the lens's lines; ``[:, :0]``: metadata)."""
+        return PulseBlock(self.first_pulse, samples, self.arrival_s, self.flagged, aux or {})
 
     def slice(self, start: int, stop: int) -> PulseBlock:
         sl = slice(start, stop)
@@ -96,6 +108,23 @@ def concat_blocks(blocks: list[PulseBlock]) -> PulseBlock:
     )
 
 
+def regroup_blocks(blocks: list[PulseBlock], most: int):
+    """Consecutive pulse blocks regrouped into blocks of at most ``most`` pulses."""
+    pending, size = [], 0
+    for b in blocks:
+        start = 0
+        while start < len(b):
+            take = min(len(b) - start, most - size)
+            pending.append(b.slice(start, start + take))
+            size += take
+            start += take
+            if size == most:
+                yield concat_blocks(pending)
+                pending, size = [], 0
+    if pending:
+        yield concat_blocks(pending)
+
+
 @dataclass
 class _Candidate:
     """A shot whose number would restart the count, held until the next shot confirms it."""
@@ -112,8 +141,9 @@ class Ingest:
 
     ``max_gap_pulses``: the longest run of missing numbers that is zero-filled (one aperture is
     the usual choice); ``memory_pulses``: how far back duplicates and late shots are recognised
-    (default 4 × the larger of the aperture and the gap bound).  Call :meth:`flush` at the end
-    of a stream.
+    (default 4 × the larger of the aperture and the gap bound); ``origin_seq``: the number of
+    the scan's pulse 0, for a source that numbers from it (module docstring; None: the first
+    shot is pulse 0).  Call :meth:`flush` at the end of a stream.
     """
 
     def __init__(
@@ -123,6 +153,7 @@ class Ingest:
         max_gap_pulses: int,
         dtype=np.complex64,
         memory_pulses: int | None = None,
+        origin_seq: int | None = None,
     ):
         self.samples_per_shot = int(samples_per_shot)
         self.dtype = np.dtype(dtype)  # the processor's sample type (complex128 stays double)
@@ -141,6 +172,8 @@ class Ingest:
         self._filled: set[int] = set()  # recently zero-filled sequence numbers (late detection)
         self._recent_low = 0  # sequence numbers below this are forgotten
         self._candidate: _Candidate | None = None
+        self.origin_seq = origin_seq
+        self.start_pulses = 0  # the scan's pulse number of stream pulse 0 (module docstring)
 
     def _zeros(self, count: int, arrival: float) -> PulseBlock:
         block = PulseBlock(
@@ -201,6 +234,9 @@ class Ingest:
         arrival = np.asarray(batch.arrival_s, np.float64)
         if self._next_seq is None:
             self._next_seq = self._run_start = self._recent_low = int(seq[0])
+            if self.origin_seq is not None:
+                self.start_pulses = int(seq[0]) - int(self.origin_seq)
+                c["pulses_before_start"] += max(self.start_pulses, 0)
         # Fast path: the batch continues the stream exactly (the normal case).
         contiguous = n == 1 or np.all(np.diff(seq) == 1)
         if self._candidate is None and seq[0] == self._next_seq and contiguous:
@@ -292,20 +328,3 @@ class Ingest:
         close_run(len(seq))
         self._forget_old()
         return out
-
-
-def regroup(blocks: list[PulseBlock], most: int):
-    """Consecutive pulse blocks regrouped into blocks of at most ``most`` pulses."""
-    pending, size = [], 0
-    for b in blocks:
-        start = 0
-        while start < len(b):
-            take = min(len(b) - start, most - size)
-            pending.append(b.slice(start, start + take))
-            size += take
-            start += take
-            if size == most:
-                yield concat_blocks(pending)
-                pending, size = [], 0
-    if pending:
-        yield concat_blocks(pending)

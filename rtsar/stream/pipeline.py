@@ -1,50 +1,39 @@
 """The streaming pipeline: source → ingest → AO lens → shifting CCD → strips → publishers.
 
-Each stage is a thread; stages are joined by bounded queues whose capacity is counted in
-pulses (or lines), so memory is bounded whatever the source does.  The heavy work releases the
-GIL (OpenCL waits in pyopencl, numba ``nogil`` kernels, SciPy's FFT), so threads overlap.
-``stages="fused"`` runs lens and CCD in one thread instead (one queue hop less);
-``"overlapped"`` too, the lens working on the next batch while the CCD correlates this one (the
-benchmark measures all three).
+Each stage is a thread, joined to the next by a bounded queue (capacity in pulses or lines:
+memory bounded whatever the source does); the heavy work releases the GIL, so threads overlap.
+``stages``: "split" (lens and CCD threads), "fused" (one thread: one queue hop less),
+"overlapped" (one thread, the lens computing batch k + 1 while the CCD correlates batch k).
+A live source never waits: when the first queue is full its shots are dropped and counted, and
+ingest zero-fills their slots so azimuth timing holds; a replay waits; downstream stages wait
+for each other.  Every stage takes all the work waiting, up to a cap (adaptive micro-batching:
+small batches and low latency while keeping up, larger ones when behind).
 
-Back-pressure: a live source (simulator, serial instrument) never waits: when the first queue
-is full its shots are dropped and counted, and ingest zero-fills their slots so azimuth timing
-holds.  A replay waits.  Downstream stages always wait for each other (nothing is lost inside).
-
-Every stage takes *all* the work waiting for it, up to a cap (adaptive micro-batching): when the
-pipeline keeps up, batches are small and latency is low; when it falls behind, batches grow and
-the per-launch overheads are amortised.
-
-Corrections (rtsar.focus.chain.CorrectionChain) run in the lens thread, in pulse order: "raw"
-stages before the AO lens (they see the auxiliary channels), "lines" stages between lens and
-CCD.  A line stage may hold pulses back (PGA holds a block): their arrival times and flags wait
-with them (rtsar.stream.hold), so latency and flags stay exact.  3D (``height``): the auxiliary
-receivers go through their own lens and CCD in step (rtsar.stream.height); the height strips
-are published beside the image strips (sink method ``height``).
+Corrections (rtsar.focus.chain) run in the lens thread in pulse order: "raw" stages before the
+lens, "lines" stages between lens and CCD; a line stage may hold pulses (PGA holds a block),
+their arrival times and flags waiting with them (rtsar.stream.hold).  3D (``height``): the
+auxiliary receivers through their own lens and CCD in step (rtsar.stream.height), height strips
+published beside the image strips.  ``swath_workers`` = K: lens and CCD in K processes, a range
+slice each (rtsar.stream.swath).
 
 Latency of an image line: from the arrival of the last pulse that contributes to it (pulse
 j + N - 1 for line j, Psaltis & Wagner 1981: the row leaves the CCD after N shifts) to the
-publication of the strip holding it.
-
-``swath_workers`` = K: lens and CCD run in K processes, a range slice each
-(rtsar.stream.swath); the lens thread sends them the pulses, the CCD thread merges their lines.
-
-The threads and their wiring only; the pieces: rtsar.stream.queue, ingest (sequence checks),
-engine (lens, CCD), hold (held pulses), timing (of lines), height, strips, swath and stats.
+publication of the strip holding it.  The pieces: rtsar.stream.queue, ingest, engine, hold,
+timing, height, strips, swath, stats and settings.
 """
-
 from __future__ import annotations
 
 import threading
 import time
 from collections import deque
+from dataclasses import replace
 
 from ..params import Config
 from ..sources.base import Source
 from .engine import Lines, StreamProcessor
 from .height import HeightBatch, HeightChannel
 from .hold import HeldPulses
-from .ingest import Ingest, PulseBlock, concat_blocks, regroup
+from .ingest import Ingest, PulseBlock, concat_blocks, regroup_blocks
 from .memory import check_memory
 from .queue import BoundedQueue
 from .settings import PipelineSettings
@@ -117,7 +106,14 @@ class Pipeline:
         self.q_lines = BoundedQueue(capacity, "compressed")
         self.q_image = BoundedQueue(capacity, "image lines")
         max_gap = s.max_gap_pulses or n
-        self.ingest = Ingest(config.waveform.samples_per_shot, n, max_gap, self.engine.dtype)
+        self.ingest = Ingest(
+            config.waveform.samples_per_shot,
+            n,
+            max_gap,
+            self.engine.dtype,
+            origin_seq=getattr(source, "seq_origin", None),
+        )
+        self._anchored = False  # an anchored source's start is moved once (_anchor)
         block = config.processor.fft_length or 2 * n
         self.timing = LineTiming(n, 4 * (n + block + capacity + self.max_batch))
         self.stats = PipelineStats()
@@ -181,12 +177,9 @@ class Pipeline:
             while True:
                 batches = self.q_shots.get_batch(self.max_batch)
                 t = time.perf_counter()
-                if batches is None:  # the source ended: a held restart candidate goes in
-                    blocks = self.ingest.flush()
-                else:
-                    blocks = [b for batch in batches for b in self.ingest(batch)]
+                blocks = self._ingest(batches)
                 busy += time.perf_counter() - t
-                for block in regroup(blocks, self.max_batch):
+                for block in regroup_blocks(blocks, self.max_batch):
                     t = time.perf_counter()
                     if self.swath is not None:
                         self._to_workers(block)
@@ -211,7 +204,7 @@ class Pipeline:
         """Lens and CCD in one thread, overlapped: the lens works on batch k + 1 (enqueued, not
         waited for) while the CCD correlates batch k; only while shots are waiting (when none
         is, the batch in flight is finished at once: latency first)."""
-        busy, pending = 0.0, None  # pending: (lines callable, block)
+        busy, pending = 0.0, None
         try:
             while True:
                 batches = self.q_shots.get_batch(self.max_batch, 0 if pending else None)
@@ -220,9 +213,7 @@ class Pipeline:
                     self._finish(pending)
                     pending = None
                 else:
-                    blocks = self.ingest.flush() if batches is None else [
-                        b for batch in batches for b in self.ingest(batch)]  # fmt: skip
-                    for block in regroup(blocks, self.max_batch):
+                    for block in regroup_blocks(self._ingest(batches), self.max_batch):
                         zero = bool(block.flagged.all())
                         job = self.engine.range_submit(block.samples, block.aux, zero)
                         self._finish(pending)  # the CCD on the previous batch meanwhile
@@ -240,10 +231,35 @@ class Pipeline:
             self.engine.correlator.close()
 
     def _finish(self, pending) -> None:
-        if pending is not None:
+        if pending is not None:  # (lines callable, pulse block)
             job, b = pending
-            lines = PulseBlock(b.first_pulse, job(), b.arrival_s, b.flagged)
-            self._put_image(self._ccd_step([lines]))
+            self._put_image(self._ccd_step([b.with_samples(job())]))
+
+    def _ingest(self, batches: list | None) -> list[PulseBlock]:
+        """Ingest checks on the batches taken (None: the source ended); the first shot anchors."""
+        if batches is None:
+            return self.ingest.flush()
+        blocks = [b for batch in batches for b in self.ingest(batch)]
+        if not self._anchored and self.ingest.counters["pulses_received"]:
+            self._anchor()
+        return blocks
+
+    def _anchor(self) -> None:
+        """The first shot arrived: a source that numbers from the scan's pulse 0 puts stream
+        pulse 0 at pulse ``ingest.start_pulses`` of the scan (rtsar.stream.ingest), so pulse 0's
+        position moves by that many steps, everywhere it is held, before any line is formed."""
+        self._anchored = True
+        shift_m = self.ingest.start_pulses * self.config.geometry.along_track_step_m
+        if not shift_m:
+            return
+        start = self.info.start_along_track_m + shift_m
+        self.info = replace(self.info, start_along_track_m=start)
+        self.strips.info = self.info
+        engines = [self.engine, *(self.height.engines.values() if self.height else ())]
+        for engine in engines:
+            engine.start_along_track_m = start
+        if self.corrections:
+            self.corrections.move_start(shift_m)
 
     def _range(self, block: PulseBlock) -> PulseBlock | None:
         """Range half of the engine on one block; the pulses it releases, with their metadata."""
@@ -251,11 +267,9 @@ class Pipeline:
         lines = self.engine.range_stage(block.samples, block.aux, zero)
         aux = {} if self.height is None else self.height.compress(block)
         if self._holding:  # a line stage may hold pulses: their metadata waits with them
-            self._held.hold(
-                PulseBlock(block.first_pulse, block.samples[:, :0], block.arrival_s, block.flagged)
-            )
+            self._held.hold(block.with_samples(block.samples[:, :0]))
             return self._held.release(lines)
-        return PulseBlock(block.first_pulse, lines, block.arrival_s, block.flagged, aux)
+        return block.with_samples(lines, aux)
 
     def _forward(self, block: PulseBlock | None) -> None:
         """Hand a block of range-compressed pulses to the CCD (its thread, or here if fused)."""
@@ -267,7 +281,7 @@ class Pipeline:
             self.q_lines.put(block)
 
     def _to_workers(self, block: PulseBlock) -> None:
-        meta = PulseBlock(block.first_pulse, block.samples[:, :0], block.arrival_s, block.flagged)
+        meta = block.with_samples(block.samples[:, :0])
         self._sent.append(meta)  # before the send: its lines cannot come back before it
         self.swath.send(block.first_pulse, block.samples, bool(block.flagged.all()))
 

@@ -15,7 +15,7 @@ from ...presets import PRESETS, preset
 from ...scene import Simulator, load_scene
 from ...sinks.image_file import ImageWriter, read_heights, read_image
 from ...sinks.io import RecordingWriter, replace_when_complete
-from ...sinks.record import processing_attrs
+from ...sinks.record import collection_attrs, processing_attrs
 from ...stream.engine import StreamProcessor
 from .. import signals
 from ..progress import Progress
@@ -177,7 +177,12 @@ def cmd_process(args) -> int:
             signals.deferred(),
             replace_when_complete(args.output) as tmp,
             ImageWriter(
-                tmp, cfg, eng.range_m, heights=bool(receivers), source=str(args.recording)
+                tmp,
+                cfg,
+                eng.range_m,
+                heights=bool(receivers),
+                source=str(args.recording),
+                **collection_attrs(rec),
             ) as img,
         ):
             for shots, aux in rec.batches_with_aux(cfg.processor.micro_batch, channels):

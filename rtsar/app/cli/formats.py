@@ -3,25 +3,34 @@ formats").  The writers are rtsar.sinks.exports; they need the optional extra ``
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 
 from ...sinks.exports.cphd import write_cphd
 from ...sinks.exports.sigmf_export import write_sigmf
 from ...sinks.io import check_writable
-from ...sources.formats.geometry import LocalFrame
+from ...sources.formats.geometry import DEFAULT_HEADING_DEG, LocalFrame
 from .inputs import open_input
 from .options import die
 
 
 def _frame(text: str) -> LocalFrame:
     try:
-        lat, lon = (float(v) for v in text.split(","))
+        values = [float(v) for v in text.split(",")]
+        if len(values) not in (2, 3):
+            raise ValueError
     except ValueError:
-        raise ValueError(f"--origin must be LAT,LON in degrees, got {text!r}") from None
+        raise ValueError(
+            f"--origin must be LAT,LON or LAT,LON,HEADING in degrees, got {text!r}"
+        ) from None
+    lat, lon = values[:2]
+    heading = values[2] if len(values) == 3 else DEFAULT_HEADING_DEG
     if not (-90 <= lat <= 90 and -180 <= lon <= 360):
         raise ValueError(f"--origin {text!r} is not a latitude,longitude in degrees")
-    return LocalFrame(lat, lon)
+    if not (math.isfinite(heading) and 0 <= heading < 360):
+        raise ValueError(f"--origin {text!r}: the heading must be in [0, 360) degrees")
+    return LocalFrame(lat, lon, heading)
 
 
 def cmd_export(args) -> int:
@@ -93,8 +102,10 @@ def add_parsers(sub) -> None:
     s.add_argument(
         "--origin",
         default="0,0",
-        metavar="LAT,LON",
-        help="where rtsar's local frame (x east along track, y north, z up) sits on the WGS-84 "
-        "ellipsoid, in degrees (default 0,0)",
+        metavar="LAT,LON[,HEADING]",
+        help="where rtsar's local frame (x along track, y to its right towards the scene, z up) "
+        "sits on the WGS-84 ellipsoid: its origin's latitude and longitude, and the track's "
+        "heading clockwise from north, in degrees (default 0,0,80: east by north; a heading "
+        "of 90, due east, puts SICD's SCPCOA angles on their 0/360 wrap)",
     )
     s.set_defaults(func=cmd_export)

@@ -26,8 +26,10 @@ from ...topo.stream import HeightStripStage
 
 
 def die(msg: str) -> int:
-    """Report a usage or input error in one line; exit status 2."""
-    print(f"rtsar: error: {msg}", file=sys.stderr)
+    """Report a usage or input error in one line (a message that spans lines, as some
+    libraries' do, is joined); exit status 2."""
+    one_line = " ".join(str(msg).split())
+    print(f"rtsar: error: {one_line}", file=sys.stderr)
     return 2
 
 

@@ -44,7 +44,8 @@ def add_parsers(sub) -> None:
         "with --live, of a scene simulated as the shots arrive) by the polar format algorithm "
         "with chirp-z spectral zoom (range per shot, then azimuth) or by backprojection.  "
         "With --every K the shots are streamed: every K shots an image of the aperture so far "
-        "is formed (resolution 0.886·λ/2Δθ_so_far) and published on the ZeroMQ topic 'spot'; "
+        "is formed (resolution w·λ/2Δθ_so_far, w the window's factor: 0.886 unweighted) and "
+        "published on the ZeroMQ topic 'spot'; "
         "the last one equals the batch image.",
     )
     s.add_argument(

@@ -108,6 +108,7 @@ def cmd_run(args) -> int:
                 cfg.waveform.sample_rate_hz,
                 cfg.geometry.prf_hz,
                 idle_timeout_s=args.duration,
+                batch_shots=cfg.processor.micro_batch,
             )
             fix = zmq_channel_fix(described)
         else:
@@ -307,7 +308,9 @@ def add_parsers(sub) -> None:
         "complex64 vector items of one shot each, or a flat stream cut by packet_len tags "
         "(pass tags on); processed with --preset or --scene like --serial (README 'GNU Radio'); "
         "the main channel only: a --correct or --height stage reading an auxiliary channel is "
-        "refused before start",
+        "refused before start.  Shots are numbered by the tag header's item offsets (a late "
+        "subscriber keeps their positions); a message over 1 MiB + 256 shots, a bad header or "
+        "an absurd packet_len is counted and dropped, never fatal",
     )
     src.add_argument(
         "--preset",

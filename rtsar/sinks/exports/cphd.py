@@ -9,7 +9,12 @@ SRPPos).  Per-vector parameters: every one CPHD 1.0.1 requires (TxTime, TxPos, T
 RcvPos, RcvVel, SRPPos, aFDOP, aFRR1, aFRR2, FX1, FX2, TOA1, TOA2, TDTropoSRP, SC0, SCSS) from
 the recording's telemetry (``position_m`` where recorded, else the configuration's straight
 track; stop-and-hop as in rtsar's signal model: RcvPos = TxPos), plus the added PVP
-``rtsar_pulse_index``.  ReferenceGeometry is computed by sarkit from the PVPs.  The recording's
+``rtsar_pulse_index``.  ReferenceGeometry is computed by sarkit from the PVPs; TxRcv holds the
+chirp (pulse length, bandwidth, rate) and the receiver (window, sample rate, LO sweep), each
+channel naming both; Global/Timeline/CollectionStart is the recording's collection start
+(rtsar.sources.formats.timebase; UNKNOWN_EPOCH where the recording kept none, and ProductInfo
+``rtsar:collection_start_utc`` then says "unknown").  The geometry of the collection is
+rtsar.sinks.exports.cphd_collection's.  The recording's
 configuration and scene travel in ProductInfo parameters ``rtsar:config`` / ``rtsar:scene`` so
 that rtsar reads the file back into the very same shots (rtsar.sources.formats.cphd_reader).
 A strip-map recording's auxiliary channels (interferometric receivers, reference
@@ -30,35 +35,28 @@ from __future__ import annotations
 
 import datetime
 import json
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ... import __version__
 from ...params import C_M_PER_S
-from ...sources.formats.cphd_geometry import (
-    SPOT_CHANNELS_PARAMETER,
-    channel_config,
-    spot_station_local,
-    spot_to_local_m,
-)
+from ...sources.formats.cphd_geometry import SPOT_CHANNELS_PARAMETER
 from ...sources.formats.cphd_reader import spot_geometry_of, srp_delay_s
-from ...sources.formats.geometry import LocalFrame, platform_height_m, platform_positions_m
-from ...sources.formats.phase_history import FxMapping, fx_mapping, shots_to_fx
+from ...sources.formats.geometry import LocalFrame
+from ...sources.formats.phase_history import shots_to_fx
 from ...sources.formats.requirements import require_formats
-from ...spot.pfa import PolarFormatPlan
+from ...sources.formats.timebase import UNKNOWN_EPOCH, format_utc
 from ..io import replace_when_complete
+from .cphd_collection import ExportChannel, spot_collection, strip_collection
 
 try:
     import lxml.etree as etree
     import sarkit.cphd as skcphd
-    import sarkit.wgs84 as skwgs84
 except ImportError:  # the optional extra "formats": the CLI says how to install it
     skcphd = None
 
 CPHD_NS = "http://api.nsgreg.nga.mil/schema/cphd/1.0.1"
-CHANNEL = "rtsar-main"
 # (name, words of 8 bytes, format): the PVP layout, in the order CPHD 1.0.1 lists them.
 PVP_LAYOUT = [
     ("TxTime", 1, "F8"),
@@ -80,155 +78,7 @@ PVP_LAYOUT = [
     ("SCSS", 1, "F8"),
 ]
 ADDED_PVP = ("rtsar_pulse_index", 1, "I8")
-
-
-def collection_geometry(rec, frame: LocalFrame) -> dict:
-    """Per-pulse platform positions and velocities (local frame) of a recording, and the scene
-    reference point (SRP): on the swath's centre line (slant range R_c at closest approach),
-    abeam of the middle of the image."""
-    cfg = rec.config
-    geo = cfg.geometry
-    r_c = cfg.processor.range_centre_m or geo.slant_range_m
-    along = rec.start_along_track_m + geo.along_track_step_m * np.arange(rec.pulses)
-    h = platform_height_m(r_c, geo.platform_height_m)
-    pos = platform_positions_m(along, h, rec.position_m)
-    if rec.pulses > 1:
-        vel = np.gradient(pos, np.asarray(rec.time_s, np.float64), axis=0)
-    else:
-        vel = np.array([[geo.speed_mps, 0.0, 0.0]])
-    if np.any(pos[:, 2] >= r_c):
-        raise ValueError("the platform is higher than the centre range: no ground to image")
-    n = cfg.processor.aperture_pulses
-    x_first = rec.start_along_track_m + 0.5 * (n - 1) * geo.along_track_step_m
-    x_last = rec.start_along_track_m + (rec.pulses - 1 - 0.5 * (n - 1)) * geo.along_track_step_m
-    x_c = 0.5 * (x_first + x_last)
-    y_c = float(np.sqrt(r_c**2 - h**2))
-    srp = np.array([x_c, y_c, 0.0])
-    return {
-        "pos": pos,
-        "vel": vel,
-        "srp": srp,
-        "height_m": h,
-        "range_centre_m": r_c,
-        "x_first": x_first,
-        "x_last": x_last,
-    }
-
-
-@dataclass(frozen=True, eq=False)
-class ExportChannel:
-    """One CPHD channel: its rtsar channel, shots, FX mapping and per-vector geometry (local)."""
-
-    identifier: str
-    name: str  # "main" or the recording's auxiliary channel
-    shots: object  # [pulse, sample] array-like that slices into blocks
-    mapping: FxMapping
-    tx_m: np.ndarray  # [pulse, 3]
-    tx_vel: np.ndarray
-    rcv_m: np.ndarray
-    rcv_vel: np.ndarray
-    srp_m: np.ndarray  # [3]
-    reference_range_m: float | None  # the channel's LO delay as a one-way range (FMCW)
-
-    def dtau_s(self, frame: LocalFrame) -> np.ndarray:
-        """Each vector's SRP delay minus τ_c, from the ECF positions the PVPs will hold."""
-        pv = {
-            "TxPos": frame.to_ecf(self.tx_m),
-            "RcvPos": frame.to_ecf(self.rcv_m),
-            "SRPPos": frame.to_ecf(self.srp_m)[None, :],
-        }
-        return srp_delay_s(pv, self.mapping.srp_range_m)
-
-
-def _strip_collection(rec, frame: LocalFrame):
-    """(channels, SceneCoordinates, Dwell, mode, left out) of a strip-map recording."""
-    g = collection_geometry(rec, frame)
-    m = fx_mapping(rec.config)
-    ch = ExportChannel(
-        CHANNEL,
-        "main",
-        rec.shots,
-        m,
-        g["pos"],
-        g["vel"],
-        g["pos"],
-        g["vel"],
-        g["srp"],
-        getattr(rec.config.waveform, "reference_range_m", None),  # pulsed: no LO
-    )
-    scene, dwell = _strip_scene(rec, m, g, frame)
-    return [ch], scene, dwell, "STRIPMAP", sorted(rec.channels)
-
-
-def _spot_collection(rec, geometry, frame: LocalFrame):
-    """(channels, SceneCoordinates, Dwell, mode, left out) of a spotlight recording: the main
-    channel on the arc and, when recorded, the bistatic receiver as its own channel."""
-    cfg = rec.config
-    if rec.pulses != geometry.pulses:
-        raise ValueError(
-            f"{rec.path}: {rec.pulses} shots recorded, the spotlight geometry plans "
-            f"{geometry.pulses}"
-        )
-    time_s = np.asarray(rec.time_s, np.float64)
-    pos, vel = spot_station_local(geometry, time_s)
-    srp = np.zeros(3)
-    wf = cfg.waveform
-    main_ref = geometry.lo_range_m(wf, "main")
-    chans = [
-        ExportChannel(
-            CHANNEL, "main", rec.shots, fx_mapping(cfg), pos, vel, pos, vel, srp, main_ref
-        )
-    ]
-    left_out = []
-    for name in sorted(rec.channels):
-        if name != "bistatic" or not geometry.bistatic:
-            left_out.append(name)
-            continue
-        lo = geometry.lo_range_m(wf, name)
-        rcv = np.broadcast_to(spot_to_local_m(geometry.receiver_m()), pos.shape)
-        chans.append(
-            ExportChannel(
-                f"rtsar-{name}",
-                name,
-                rec.channels[name],
-                fx_mapping(channel_config(cfg, lo)),
-                pos,
-                vel,
-                np.array(rcv),
-                np.zeros_like(vel),
-                srp,
-                lo,
-            )
-        )
-    # The image area: a square about the SRP enclosing the default PFA image (rtsar.spot.pfa).
-    plan = PolarFormatPlan(cfg, geometry)
-    half = float(np.hypot(np.abs(plan.x_m).max(), np.abs(plan.y_m).max()))
-    corners = np.array([[-half, half, 0.0], [half, half, 0.0], [half, -half, 0.0]])
-    corners = np.vstack([corners, [[-half, -half, 0.0]]])  # clockwise seen from above
-    scene = {
-        "EarthModel": "WGS_84",
-        "IARP": {
-            "ECF": frame.to_ecf(srp),
-            "LLH": skwgs84.cartesian_to_geodetic(frame.to_ecf(srp)),
-        },
-        # The collection plane: IAX = spotlight x (cross-range, east), IAY = spotlight y
-        # (down-range), so image coordinates are the spotlight frame's.
-        "ReferenceSurface": {
-            "Planar": {
-                "uIAX": frame.vectors_to_ecf(spot_to_local_m([1.0, 0.0, 0.0])),
-                "uIAY": frame.vectors_to_ecf(spot_to_local_m([0.0, 1.0, 0.0])),
-            }
-        },
-        "ImageArea": {"X1Y1": [-half, -half], "X2Y2": [half, half]},
-        "ImageAreaCornerPoints": skwgs84.cartesian_to_geodetic(
-            frame.to_ecf(spot_to_local_m(corners))
-        )[:, :2],
-    }
-    # Every image point is seen over the whole collection: one COD time (mid-collection, +
-    # the SRP's one-way delay as for the strip map) and one dwell, the collection's length.
-    t_cod = 0.5 * (time_s[0] + time_s[-1]) + geometry.range_m / C_M_PER_S
-    dwell = (np.array([[t_cod]]), np.array([[float(time_s[-1] - time_s[0])]]))
-    return chans, scene, dwell, "SPOTLIGHT", left_out
+TX_WAVEFORM, RECEIVER = "rtsar-chirp", "rtsar-receiver"  # TxRcv identifiers
 
 
 def _pvps(rec, ch: ExportChannel, frame: LocalFrame, dtype, dtau: np.ndarray) -> np.ndarray:
@@ -257,59 +107,41 @@ def _pvps(rec, ch: ExportChannel, frame: LocalFrame, dtype, dtau: np.ndarray) ->
     return pv
 
 
-def _strip_scene(rec, m, g: dict, frame: LocalFrame):
-    """SceneCoordinates and (COD, dwell) polynomials of a strip-map recording."""
-    geo, proc = rec.config.geometry, rec.config.processor
-    tx = np.asarray(rec.time_s, np.float64)
-    # Scene: a plane at the image's centre; IAX along track, IAY north (away from the platform:
-    # IAX × IAY is up), so a scene point at cross-track y has IAY = -(y - y_c).
-    n = proc.aperture_pulses
-    step = geo.along_track_step_m
-    x_first = rec.start_along_track_m + 0.5 * (n - 1) * step  # first and last image line
-    x_last = rec.start_along_track_m + (rec.pulses - 1 - 0.5 * (n - 1)) * step
-    h = g["height_m"]
-    ground = np.sqrt(
-        np.maximum(
-            np.array([m.srp_range_m + 0.5 * C_M_PER_S * t for t in (m.toa1_s, m.toa2_s)]) ** 2
-            - h**2,
-            0.0,
-        )
-    )
-    y_c = float(np.sqrt(m.srp_range_m**2 - h**2))
-    x_c = 0.5 * (x_first + x_last)
-    iarp = frame.to_ecf([x_c, y_c, 0.0])
-    lines, bins = max(rec.pulses - n + 1, 1), proc.range_bins  # rtsar's image: lines × bins
-    spacing = float(ground[1] - ground[0]) / max(bins - 1, 1)
-    corners_local = [  # clockwise seen from above (east, south, up is a mirror image)
-        [x_first, ground[1], 0.0],
-        [x_first, ground[0], 0.0],
-        [x_last, ground[0], 0.0],
-        [x_last, ground[1], 0.0],
-    ]
-    corners_llh = skwgs84.cartesian_to_geodetic(frame.to_ecf(np.array(corners_local)))
-    scene = {
-        "EarthModel": "WGS_84",
-        "IARP": {"ECF": iarp, "LLH": skwgs84.cartesian_to_geodetic(iarp)},
-        "ReferenceSurface": {
-            "Planar": {"uIAX": frame.axes[0], "uIAY": -frame.axes[1]},
-        },
-        "ImageArea": {
-            "X1Y1": [x_first - x_c, y_c - ground[1]],
-            "X2Y2": [x_last - x_c, y_c - ground[0]],
-        },
-        "ImageAreaCornerPoints": corners_llh[:, :2],
-        "ImageGrid": {
-            "Identifier": "rtsar-image",
-            "IARPLocation": [0.5 * (lines - 1), (ground[1] - y_c) / spacing],
-            "IAXExtent": {"LineSpacing": step, "FirstLine": 0, "NumLines": lines},
-            "IAYExtent": {"SampleSpacing": spacing, "FirstSample": 0, "NumSamples": bins},
-        },
+def tx_rcv(cfg) -> dict:
+    """CPHD TxRcv: the transmitted chirp and the receiver.  Pulsed: a pulse of Tp, the AO
+    window's length, a fixed LO at the carrier (no LFMRate: CPHD's is a stretch receiver's,
+    never 0); FMCW: the sweep of T, a dechirp
+    receiver whose LO sweeps at the chirp rate over the same T.  The receiver's band is its
+    complex sample rate (IFFilterBW: rtsar models no narrower filter).  Polarisation is not
+    modelled: UNSPECIFIED."""
+    wf, f0 = cfg.waveform, cfg.geometry.carrier_hz
+    fmcw = wf.kind == "fmcw"
+    length = wf.chirp_duration_s if fmcw else wf.pulse_duration_s
+    return {
+        "NumTxWFs": 1,
+        "TxWFParameters": [
+            {
+                "Identifier": TX_WAVEFORM,
+                "PulseLength": length,
+                "RFBandwidth": wf.bandwidth_hz,
+                "FreqCenter": f0,
+                "LFMRate": wf.chirp_rate_hz_per_s,
+                "Polarization": "UNSPECIFIED",
+            }
+        ],
+        "NumRcvs": 1,
+        "RcvParameters": [
+            {
+                "Identifier": RECEIVER,
+                "WindowLength": length if fmcw else wf.receive_window_s,
+                "SampleRate": wf.sample_rate_hz,
+                "IFFilterBW": wf.sample_rate_hz,
+                "FreqCenter": f0,
+                **({"LFMRate": wf.chirp_rate_hz_per_s} if fmcw else {}),
+                "Polarization": "UNSPECIFIED",
+            }
+        ],
     }
-    # Centre of aperture of an image point at IAX: when the platform is abeam of it (+ the
-    # SRP's one-way delay, the reference time of sarkit's t_ref); the dwell spans the aperture.
-    speed = geo.speed_mps
-    t_abeam = float(tx[0]) + (x_c - rec.start_along_track_m) / speed + m.srp_range_m / C_M_PER_S
-    return scene, (np.array([[t_abeam], [1.0 / speed]]), np.array([[(n - 1) / geo.prf_hz]]))
 
 
 def build_xml(rec, chans, scene: dict, dwell, mode: str, frame, core_name: str, dtaus):
@@ -318,7 +150,7 @@ def build_xml(rec, chans, scene: dict, dwell, mode: str, frame, core_name: str, 
     root = etree.Element(f"{{{CPHD_NS}}}CPHD", nsmap={None: CPHD_NS})
     ew = skcphd.ElementWrapper(root)
     tx = np.asarray(rec.time_s, np.float64)
-    start = datetime.datetime(2000, 1, 1)  # rtsar's times are relative: an arbitrary epoch
+    start = getattr(rec, "collection_start", None)  # (None: not kept; UNKNOWN_EPOCH written)
     ew["CollectionID"] = {
         "CollectorName": "rtsar",
         "CoreName": core_name,
@@ -338,7 +170,7 @@ def build_xml(rec, chans, scene: dict, dwell, mode: str, frame, core_name: str, 
         "DomainType": "FX",
         "SGN": -1,
         "Timeline": {
-            "CollectionStart": start,
+            "CollectionStart": start or UNKNOWN_EPOCH,
             "TxTime1": float(tx[0]),
             "TxTime2": float(tx[-1]),
         },
@@ -369,19 +201,20 @@ def build_xml(rec, chans, scene: dict, dwell, mode: str, frame, core_name: str, 
         "RefChId": chans[0].identifier,
         "FXFixedCPHD": len({(c.mapping.fx1_hz, c.mapping.fx2_hz) for c in chans}) == 1,
         "TOAFixedCPHD": rec.pulses == 1,
-        "SRPFixedCPHD": True,
+        "SRPFixedCPHD": all(c.srp_fixed for c in chans),
         "Parameters": [
             {
                 "Identifier": c.identifier,
                 "RefVectorIndex": rec.pulses // 2,
                 "FXFixed": True,
                 "TOAFixed": rec.pulses == 1,
-                "SRPFixed": True,
+                "SRPFixed": c.srp_fixed,
                 "Polarization": {"TxPol": "UNSPECIFIED", "RcvPol": "UNSPECIFIED"},
                 "FxC": c.mapping.fxc_hz,
                 "FxBW": c.mapping.fx2_hz - c.mapping.fx1_hz,
                 "TOASaved": float(b.max() - a.min()),
                 "DwellTimes": {"CODId": "cod", "DwellId": "dwell"},
+                "TxRcv": {"TxWFId": [TX_WAVEFORM], "RcvId": [RECEIVER]},
             }
             for c, (a, b) in zip(chans, spans, strict=True)
         ],
@@ -409,6 +242,7 @@ def build_xml(rec, chans, scene: dict, dwell, mode: str, frame, core_name: str, 
         "NumDwellTimes": 1,
         "DwellTime": [{"Identifier": "dwell", "DwellTimePoly": dwell[1]}],
     }
+    ew["TxRcv"] = tx_rcv(cfg)
     info = etree.SubElement(root, f"{{{CPHD_NS}}}ProductInfo")
     creation = etree.SubElement(info, f"{{{CPHD_NS}}}CreationInfo")
     etree.SubElement(creation, f"{{{CPHD_NS}}}Application").text = f"rtsar {__version__}"
@@ -423,6 +257,8 @@ def build_xml(rec, chans, scene: dict, dwell, mode: str, frame, core_name: str, 
         ("rtsar:scene", json.dumps(rec.scene or {})),
         ("rtsar:start_along_track_m", repr(float(rec.start_along_track_m))),
         ("rtsar:origin_lat_lon_deg", f"{frame.lat_deg!r},{frame.lon_deg!r}"),
+        ("rtsar:heading_deg", repr(float(frame.heading_deg))),
+        ("rtsar:collection_start_utc", "unknown" if start is None else format_utc(start)),
         (SPOT_CHANNELS_PARAMETER, json.dumps(channels)),
     ):
         etree.SubElement(info, f"{{{CPHD_NS}}}Parameter", name=name).text = value
@@ -438,9 +274,9 @@ def write_cphd(rec, path: str | Path, frame: LocalFrame | None = None) -> dict:
         raise ValueError(f"{rec.path}: no shots to export")
     spot = spot_geometry_of(rec.scene, rec.path)
     if spot is not None:
-        chans, scene, dwell, mode, left_out = _spot_collection(rec, spot, frame)
+        chans, scene, dwell, mode, left_out = spot_collection(rec, spot, frame)
     else:
-        chans, scene, dwell, mode, left_out = _strip_collection(rec, frame)
+        chans, scene, dwell, mode, left_out = strip_collection(rec, frame)
     dtaus = [c.dtau_s(frame) for c in chans]
     tree = build_xml(rec, chans, scene, dwell, mode, frame, Path(path).stem, dtaus)
     dtype = skcphd.get_pvp_dtype(tree)
@@ -449,11 +285,8 @@ def write_cphd(rec, path: str | Path, frame: LocalFrame | None = None) -> dict:
         if not np.array_equal(srp_delay_s(p, c.mapping.srp_range_m), d):
             raise RuntimeError("CPHD export: the stored PVPs do not reproduce the SRP delays")
     root = tree.getroot()
-    root.append(skcphd.compute_reference_geometry(tree, pvps[0]))
-    # ReferenceGeometry's place in the schema's sequence: before SupportArray/…/ProductInfo.
-    info = root.find(f"{{{CPHD_NS}}}ProductInfo")
-    root.remove(info)
-    root.append(info)
+    # ReferenceGeometry's place in the schema's sequence: after Dwell, before TxRcv/ProductInfo.
+    root.find(f"{{{CPHD_NS}}}Dwell").addnext(skcphd.compute_reference_geometry(tree, pvps[0]))
     meta = skcphd.Metadata(xmltree=tree)
     # Written beside ``path`` and renamed when complete: a run that dies leaves no partial CPHD.
     with replace_when_complete(path) as tmp, open(tmp, "wb") as f, skcphd.Writer(f, meta) as w:

@@ -1,14 +1,21 @@
-"""Export an rtsar image as SICD (NGA.STND.0024, Sensor Independent Complex Data) in NITF, with
-sarpy's SICD model and writer (it derives the dependent fields: SCPCOA, GeoData corners, …).
+"""Export an rtsar image as SICD (NGA.STND.0024, Sensor Independent Complex Data) in NITF:
+the metadata from sarpy's SICD model (it derives the dependent fields: SCPCOA, GeoData corners,
+…), the file from sarkit's NITF writer (NGA's reference implementation).
 
 The mapping: SICD rows are slant range, columns along track (Grid/Type RGZERO, ImagePlane
 SLANT), so the pixel array is ``image.T`` (complex64, RE32F_IM32F); Row/SS the range bin
-spacing, Col/SS the line spacing, impulse-response bandwidths 2B/c (range) and 2L/(λR)
-(azimuth, Crouch eq. 4.8) with the configuration's windows named; the scene centre pixel is the
-SCP.  Geometry: rtsar's straight track in its local frame placed on WGS-84 as in
+spacing, Col/SS the line spacing; the impulse responses are the processor's
+(rtsar.sinks.exports.resolution): bandwidths 2B/c (range) and 2Nd/(λR) (azimuth: the CCD's
+aperture of N pulses, Crouch eq. 4.8), widened by the configuration's windows, which are
+named and tabulated (WgtFunct); the scene centre pixel is the SCP, the whole image is valid
+data (ImageData/ValidData) and its footprint on the ground the collection area
+(RadarCollection/Area).  Geometry: rtsar's straight track in its local frame placed on WGS-84 as in
 rtsar.sources.formats.geometry (ARPPoly linear in time; a slant-plane image gets the default
 platform height), Timeline with one IPP set at the PRF, ImageFormation (range-Doppler RMA, INCA:
-closest approach at the column's along-track position), RadarCollection (carrier, chirp).
+closest approach at the column's along-track position), RadarCollection (carrier, chirp, and
+the receiver: a pulsed radar's is CHIRP demodulation (RcvFMRate 0), an FMCW dechirp STRETCH
+(RcvFMRate the chirp rate); window length and sample rate).  Timeline/CollectStart is the
+image's ``collection_start_utc`` (the recording's), else an arbitrary epoch, 2000-01-01.
 Polarisation is UNKNOWN (rtsar does not model it).
 """
 
@@ -16,6 +23,7 @@ from __future__ import annotations
 
 import datetime
 import json
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -24,23 +32,32 @@ from ... import __version__
 from ...params import C_M_PER_S, config_from_dict
 from ...sources.formats.geometry import LocalFrame, platform_height_m
 from ...sources.formats.requirements import require_formats
+from ...sources.formats.timebase import UNKNOWN_EPOCH, parse_utc
 from ...windows import window as taper
 from ..image_file import read_image
 from ..io import replace_when_complete
+from .resolution import Resolution, azimuth_resolution, range_resolution
 
 try:
-    from sarpy.io.complex.sicd import SICDWriter
-    from sarpy.io.complex.sicd_elements.SICD import SICDType, get_default_version_string
+    import lxml.etree as etree
+    import sarkit.sicd as sksicd
+    from sarpy.geometry.geocoords import ecf_to_geodetic
+    from sarpy.io.complex.sicd_elements.SICD import SICDType
 except ImportError:  # the optional extra "formats"
     SICDType = None
 
-EPOCH = datetime.datetime(2000, 1, 1)  # rtsar's times are relative: an arbitrary epoch
-SINC_3DB_WIDTH = 0.8858929  # -3 dB width of |sinc|² in units of 1 / bandwidth
-WINDOW_BROADENING = {"rect": 1.0, "hann": 1.62, "hamming": 1.47, "taylor": 1.19}
 
-
-def sicd_structure(image_shape, azimuth_m, range_m, cfg, frame: LocalFrame, core_name: str):
-    """The SICD metadata (sarpy SICDType, derived) of an image [azimuth, range]."""
+def sicd_structure(
+    image_shape,
+    azimuth_m,
+    range_m,
+    cfg,
+    frame: LocalFrame,
+    core_name: str,
+    collection_start: datetime.datetime | None = None,
+):
+    """The SICD metadata (sarpy SICDType, derived) of an image [azimuth, range];
+    ``collection_start`` (UTC) is the time of the recording's pulse 0 (None: unknown)."""
     geo, wf, proc = cfg.geometry, cfg.waveform, cfg.processor
     naz, nrg = image_shape
     speed = geo.speed_mps
@@ -64,9 +81,6 @@ def sicd_structure(image_shape, azimuth_m, range_m, cfg, frame: LocalFrame, core
     u_row = (scp - arp_scp) / np.linalg.norm(scp - arp_scp)
     u_col = frame.axes[0] - np.dot(frame.axes[0], u_row) * u_row
     u_col /= np.linalg.norm(u_col)
-    bw_rg = 2.0 * wf.bandwidth_hz / C_M_PER_S
-    bw_az = 2.0 * geo.illuminated_length_m / (geo.wavelength_m * r_scp)
-    bw_az = min(bw_az, 1.0 / geo.along_track_step_m)
     f0 = geo.carrier_hz
     duration_pulse = getattr(wf, "pulse_duration_s", None) or wf.chirp_duration_s
     t_end = float(duration)
@@ -93,6 +107,10 @@ def sicd_structure(image_shape, azimuth_m, range_m, cfg, frame: LocalFrame, core
             "FirstCol": 0,
             "FullImage": {"NumRows": nrg, "NumCols": naz},
             "SCPPixel": {"Row": scp_row, "Col": scp_col},
+            "ValidData": [  # every pixel: clockwise from the first row's first column
+                {"Row": r, "Col": c, "index": i + 1}
+                for i, (r, c) in enumerate(((0, 0), (0, naz - 1), (nrg - 1, naz - 1), (nrg - 1, 0)))
+            ],
         },
         "GeoData": {
             "EarthModel": "WGS_84",
@@ -102,11 +120,11 @@ def sicd_structure(image_shape, azimuth_m, range_m, cfg, frame: LocalFrame, core
             "ImagePlane": "SLANT",
             "Type": "RGZERO",
             "TimeCOAPoly": {"Coefs": [[t_scp, 1.0 / speed]]},
-            "Row": _direction(u_row, d_rg, bw_rg, 2.0 * f0 / C_M_PER_S, proc.range_window),
-            "Col": _direction(u_col, d_az, bw_az, 0.0, proc.azimuth_window),
+            "Row": _direction(u_row, d_rg, range_resolution(cfg), 2.0 * f0 / C_M_PER_S),
+            "Col": _direction(u_col, d_az, azimuth_resolution(cfg, r_scp), 0.0),
         },
         "Timeline": {
-            "CollectStart": np.datetime64(EPOCH, "us"),
+            "CollectStart": np.datetime64(collection_start or UNKNOWN_EPOCH, "us"),
             "CollectDuration": t_end,
             "IPP": [
                 {
@@ -134,10 +152,11 @@ def sicd_structure(image_shape, azimuth_m, range_m, cfg, frame: LocalFrame, core
                     "TxRFBandwidth": wf.bandwidth_hz,
                     "TxFreqStart": f0 - wf.bandwidth_hz / 2,
                     "TxFMRate": wf.chirp_rate_hz_per_s,
-                    "RcvDemodType": "CHIRP" if wf.kind == "fmcw" else "STRETCH",
+                    **_receiver(wf, f0),
                     "index": 1,
                 }
             ],
+            "Area": {"Corner": _area_corners(frame, azimuth_m, range_m, h)},
             "TxPolarization": "UNKNOWN",
             "RcvChannels": [{"TxRcvPolarization": "UNKNOWN", "index": 1}],
         },
@@ -171,22 +190,79 @@ def sicd_structure(image_shape, azimuth_m, range_m, cfg, frame: LocalFrame, core
     }
     sicd = SICDType.from_dict(d)
     sicd.derive()
+    corners = sicd.GeoData.ImageCorners
+    placed = [*(c["Lat"] for c in d["RadarCollection"]["Area"]["Corner"]), *scp, *arp0, *vel]
+    if (
+        corners is None
+        or not np.isfinite([*corners.get_array(dtype=np.float64).ravel(), *placed]).all()
+    ):
+        raise ValueError(
+            "the image's geometry (its axes and configuration) places no finite point on the "
+            "Earth: nothing SICD can describe"
+        )
     return sicd
 
 
-def _direction(u, ss, bw, kctr, window) -> dict:
+def _direction(u, ss, res: Resolution, kctr) -> dict:
+    """A Grid direction (Row or Col) of sample spacing ``ss`` and resolution ``res``."""
+    bw = res.bandwidth_cycles_per_m
+    if not (0 < bw < np.inf and 0 < ss < np.inf):
+        raise ValueError(f"an impulse-response bandwidth of {bw:g} cycles/m: no SICD grid")
     return {
         "UVectECF": {"X": u[0], "Y": u[1], "Z": u[2]},
         "SS": ss,
-        "ImpRespWid": SINC_3DB_WIDTH * WINDOW_BROADENING.get(window, 1.0) / bw,
+        "ImpRespWid": res.irw_m,
         "Sgn": -1,
         "ImpRespBW": bw,
         "KCtr": kctr,
         "DeltaK1": -0.5 * bw,
         "DeltaK2": 0.5 * bw,
-        "WgtType": {"WindowName": "UNIFORM" if window == "rect" else window.upper()},
-        **({} if window == "rect" else {"WgtFunct": [float(v) for v in taper(window, 64)]}),
+        "WgtType": {"WindowName": "UNIFORM" if res.window == "rect" else res.window.upper()},
+        **({} if res.window == "rect" else {"WgtFunct": [float(v) for v in taper(res.window, 64)]}),
     }
+
+
+def _receiver(wf, f0: float) -> dict:
+    """RadarCollection/Waveform's receive fields.  A pulsed radar's receiver demodulates with a
+    fixed LO and compresses by matched filter: CHIRP, RcvFMRate 0, the AO window's length, its
+    band the complex sample rate about the carrier.  An FMCW dechirp mixes with the chirp itself
+    (delayed to the reference range): STRETCH, RcvFMRate the chirp rate, a window of one sweep.
+    A dechirp's RcvFreqStart is left out: rtsar's beat samples span the transmitted sweep, where
+    the ideal LO (the sweep delayed by τ_ref) runs from TxFreqStart - K·τ_ref, below the bound
+    SICD sets for a window no longer than the pulse; the CPHD's SC0 gives those frequencies."""
+    fs = wf.sample_rate_hz
+    if wf.kind == "fmcw":
+        return {
+            "RcvDemodType": "STRETCH",
+            "RcvFMRate": wf.chirp_rate_hz_per_s,
+            "RcvWindowLength": wf.chirp_duration_s,
+            "ADCSampleRate": fs,
+            "RcvIFBandwidth": fs,
+        }
+    return {
+        "RcvDemodType": "CHIRP",  # (sarpy then writes RcvFMRate 0)
+        "RcvWindowLength": wf.receive_window_s,
+        "ADCSampleRate": fs,
+        "RcvIFBandwidth": fs,
+        "RcvFreqStart": f0 - 0.5 * fs,
+    }
+
+
+def _area_corners(frame: LocalFrame, azimuth_m, range_m, height_m: float) -> list[dict]:
+    """RadarCollection/Area/Corner: the image's footprint on the ground plane (first and last
+    line, nearest and farthest range), clockwise seen from above as SICD asks."""
+    x = (float(azimuth_m[0]), float(azimuth_m[-1]))
+    y = [float(np.sqrt(r * r - height_m**2)) for r in (range_m[0], range_m[-1])]
+    local = np.array([[x[0], y[0], 0.0], [x[1], y[0], 0.0], [x[1], y[1], 0.0], [x[0], y[1], 0.0]])
+    east, north = local[:, 0], -local[:, 1]  # the frame: x east, y south
+    twice_area = np.sum(east * np.roll(north, -1) - np.roll(east, -1) * north)
+    if twice_area > 0:  # counter-clockwise: the other way round
+        local = local[::-1]
+    llh = ecf_to_geodetic(frame.to_ecf(local))
+    return [
+        {"Lat": float(p[0]), "Lon": float(p[1]), "HAE": float(p[2]), "index": i + 1}
+        for i, p in enumerate(llh)
+    ]
 
 
 def write_sicd(image_path: str | Path, path: str | Path, frame: LocalFrame | None = None) -> dict:
@@ -201,19 +277,51 @@ def write_sicd(image_path: str | Path, path: str | Path, frame: LocalFrame | Non
         )
     if image.shape[0] < 2 or image.shape[1] < 2:
         raise ValueError(f"{image_path}: an image of {image.shape} has no grid to describe")
-    text = attrs["config"]
-    cfg = config_from_dict(json.loads(text.decode() if isinstance(text, bytes) else str(text)))
-    sicd = sicd_structure(
-        image.shape, azimuth_m, range_m, cfg, frame or LocalFrame(), Path(path).stem
+    for name, axis in (("azimuth_m", azimuth_m), ("range_m", range_m)):
+        steps = np.diff(axis)
+        if np.ptp(steps) > 1e-6 * abs(steps[0]):
+            raise ValueError(
+                f"{image_path}: {name} is not evenly spaced (a live image's line jumps?): "
+                "SICD's grid is uniform"
+            )
+    text = attrs.get("config")
+    if text is None:
+        raise ValueError(f"{image_path}: no config attribute: the image's processing is unknown")
+    try:
+        cfg = config_from_dict(json.loads(text.decode() if isinstance(text, bytes) else str(text)))
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{image_path}: its config attribute does not parse ({exc})") from None
+    kept = attrs.get("collection_start_utc")
+    start = None if kept is None else parse_utc(kept, f"{image_path}: collection_start_utc")
+    # sarpy logs what it finds odd (a degenerate geometry) on stderr; the error here says it.
+    sarpy_log = logging.getLogger("sarpy")
+    level = sarpy_log.level
+    sarpy_log.setLevel(logging.CRITICAL)
+    try:
+        sicd = sicd_structure(
+            image.shape, azimuth_m, range_m, cfg, frame or LocalFrame(), Path(path).stem, start
+        )
+    except ValueError as exc:
+        raise ValueError(f"{image_path}: {exc}") from None
+    finally:
+        sarpy_log.setLevel(level)
+    # The XML is sarpy's (its SICD model derives the dependent fields); NGA's sarkit writes the
+    # NITF.  (sarpy's own writer copies the structure first, and its copy loses a CHIRP
+    # waveform's RcvFMRate = 0 and with it RcvDemodType.)
+    xml = etree.ElementTree(etree.fromstring(sicd.to_xml_bytes(tag="SICD")))
+    security = sksicd.NitfSecurityFields(clas="U")
+    meta = sksicd.NitfMetadata(
+        xmltree=xml,
+        file_header_part=sksicd.NitfFileHeaderPart(ostaid="rtsar", security=security),
+        im_subheader_part=sksicd.NitfImSubheaderPart(isorce="rtsar", security=security),
+        de_subheader_part=sksicd.NitfDeSubheaderPart(security=security),
     )
     # Written beside ``path`` and renamed when complete: a run that dies leaves no partial file.
     with (
         replace_when_complete(path) as tmp,
         open(tmp, "wb") as f,
-        SICDWriter(f, sicd, check_existence=False) as w,
+        sksicd.NitfWriter(f, meta) as w,
     ):
-        w.write_chip(np.ascontiguousarray(image.T.astype(np.complex64)), start_indices=(0, 0))
-    # The version the file declares (sarpy's writer writes its default, urn:SICD:1.3.0 with
-    # sarpy 1.3); version_required() is only the oldest that could hold this content.
-    version = get_default_version_string()
+        w.write_image(np.ascontiguousarray(image.T, np.complex64))
+    version = etree.QName(xml.getroot()).namespace.rsplit(":", 1)[-1]
     return {"version": version, "rows": image.shape[1], "cols": image.shape[0]}

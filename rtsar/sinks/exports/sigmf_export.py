@@ -1,9 +1,12 @@
 """Export a recording as SigMF (Signal Metadata Format 1.x, sigmf.org), with the sigmf package.
 
 ``OUT.sigmf-data`` holds the main channel's shots one after the other, ``cf32_le`` (bit for bit
-the recording's complex64).  ``OUT.sigmf-meta`` has one capture (sample 0; the carrier as
-``core:frequency``, at most 1 THz by SigMF's schema, and as ``rtsar:carrier_hz``) and one
-annotation per shot (``core:sample_start`` = p·S, ``core:sample_count`` = S) under the
+the recording's complex64).  ``OUT.sigmf-meta`` has one capture per shot, its receive window
+(``core:sample_start`` = p·S; ``core:datetime`` = the recording's collection start + the shot's
+time, where the recording kept one, rtsar.sources.formats.timebase; the carrier as
+``core:frequency``, at most 1 THz by SigMF's schema, and as the global ``rtsar:carrier_hz``),
+so generic tools see each gated window as a stream of its own, and one annotation per shot
+(``core:sample_start`` = p·S, ``core:sample_count`` = S) under the
 ``rtsar`` extension namespace: ``rtsar:pulse_index``, ``rtsar:time_s``,
 ``rtsar:along_track_m`` and, where recorded, ``rtsar:position_m``.  The global object carries
 ``rtsar:prf_hz``, ``rtsar:chirp`` (kind, bandwidth, duration, rate),
@@ -31,6 +34,7 @@ from ... import __version__
 from ...sources.formats.cphd_reader import spot_geometry_of
 from ...sources.formats.requirements import require_formats
 from ...sources.formats.sigmf_reader import RTSAR_EXTENSION, sigmf_base
+from ...sources.formats.timebase import format_utc, shifted
 from ..io import replace_when_complete
 
 try:
@@ -58,6 +62,24 @@ def _files(base: Path) -> tuple[Path, Path]:
     return base.with_name(base.name + ".sigmf-data"), base.with_name(base.name + ".sigmf-meta")
 
 
+def _captures(rec, width: int) -> list[dict]:
+    """One capture per shot of ``width`` samples: its first sample, carrier and UTC time."""
+    carrier = rec.config.geometry.carrier_hz
+    # SigMF's schema bounds core:frequency to 1 THz: an optical carrier (lidar) is given only
+    # as rtsar:carrier_hz.
+    freq = {"core:frequency": carrier} if carrier <= SIGMF_MAX_FREQUENCY_HZ else {}
+    start = getattr(rec, "collection_start", None)
+    time_s = np.asarray(rec.time_s, np.float64)
+    return [
+        {
+            "core:sample_start": p * width,
+            **freq,
+            **({} if start is None else {"core:datetime": format_utc(shifted(start, time_s[p]))}),
+        }
+        for p in range(rec.pulses)
+    ]
+
+
 def _write_channel(files, shots, sample_rate_hz, global_extra, annotations, rec) -> None:
     """Write one SigMF pair to ``files`` = (data, metadata) paths (the temporary ones)."""
     data, meta_path = files
@@ -74,20 +96,15 @@ def _write_channel(files, shots, sample_rate_hz, global_extra, annotations, rec)
             "core:recorder": f"rtsar {__version__}",
             "core:description": f"rtsar recording {rec.path.name}",
             "core:extensions": [RTSAR_EXTENSION],
+            "rtsar:carrier_hz": rec.config.geometry.carrier_hz,
             **global_extra,
         },
         skip_checksum=True,
     )
-    carrier = rec.config.geometry.carrier_hz
-    # SigMF's schema bounds core:frequency to 1 THz: an optical carrier (lidar) is given only
-    # as rtsar:carrier_hz.
-    capture = {"rtsar:carrier_hz": carrier}
-    if carrier <= SIGMF_MAX_FREQUENCY_HZ:
-        capture["core:frequency"] = carrier
-    meta.add_capture(0, metadata=capture)
-    # The annotations (one per shot, in sample order) set at once: the sigmf package's
-    # add_annotation re-sorts the whole list on every call (154 s for 60 000 shots).
+    # Captures and annotations (one per shot each, in sample order) set at once: the sigmf
+    # package's add_annotation re-sorts the whole list on every call (154 s for 60 000 shots).
     full = dict(meta.ordered_metadata())
+    full[SigMFFile.CAPTURE_KEY] = _captures(rec, int(shots.shape[1]))
     full[SigMFFile.ANNOTATION_KEY] = [
         {**md, "core:sample_start": int(start), "core:sample_count": int(length)}
         for start, length, md in sorted(annotations, key=lambda a: a[0])

@@ -21,10 +21,11 @@ import numpy as np
 from ...params import C_M_PER_S, config_from_dict
 from ...spot.geometry import geometry_from_dict
 from .cphd_geometry import SPOT_CHANNELS_PARAMETER, channel_config, derived_config, spot_to_local_m
-from .foreign import ForeignRecording, check_telemetry
-from .geometry import LocalFrame
+from .foreign import ForeignRecording, telemetry_problem
+from .geometry import EAST_HEADING_DEG, LocalFrame
 from .phase_history import fx_mapping, fx_to_shots
 from .requirements import require_formats
+from .timebase import parse_utc
 
 try:
     import sarkit.cphd as skcphd
@@ -124,10 +125,23 @@ def open_cphd(path: str | Path) -> ForeignRecording:
         root = tree.getroot()
         if root.findtext("./{*}Global/{*}DomainType") != "FX":
             raise ValueError("only FX-domain CPHD is read (this one is TOA domain)")
+        fmt = root.findtext("./{*}Data/{*}SignalArrayFormat")
+        if fmt != "CF8":  # CI2/CI4 hold integers scaled per vector (AmpSF): not read here
+            raise ValueError(
+                f"SignalArrayFormat {fmt}: rtsar reads CF8 (complex float) signal arrays only"
+            )
+        if root.find("./{*}Data/{*}SignalCompressionID") is not None:
+            raise ValueError("a compressed signal array (SignalCompressionID): not read")
         channels = root.findall("./{*}Data/{*}Channel")
         params = _parameters(tree)
         scene = json.loads(params.get("rtsar:scene", "{}") or "{}")
         spot = spot_geometry_of(scene, path) if "rtsar:config" in params else None
+        mode = root.findtext("./{*}CollectionID/{*}RadarMode/{*}ModeType")
+        if mode == "SPOTLIGHT" and spot is None and "rtsar:config" in params:
+            raise ValueError(
+                "a spotlight collection (RadarMode SPOTLIGHT) written by rtsar whose rtsar:scene "
+                "has no spotlight geometry: it is not imaged without it"
+            )
         if len(channels) != 1 and spot is None:
             raise ValueError(f"{len(channels)} channels: rtsar reads one-channel CPHD")
         ref_id = root.findtext("./{*}Channel/{*}RefChId")
@@ -138,6 +152,7 @@ def open_cphd(path: str | Path) -> ForeignRecording:
         derived = None
         if "rtsar:config" in params:  # written by rtsar: its own configuration
             cfg = config_from_dict(json.loads(params["rtsar:config"]))
+            check_tx_rcv(root, cfg)
         else:  # made elsewhere: a configuration from the collection's geometry
             derived = derived_config(pvp, int(channels[0].findtext("./{*}NumSamples")))
             cfg = derived[0]
@@ -154,7 +169,8 @@ def open_cphd(path: str | Path) -> ForeignRecording:
             raise ValueError("SC0/SCSS differ from the configuration's frequency sampling")
         if derived is None:
             lat, lon = (float(v) for v in params.get("rtsar:origin_lat_lon_deg", "0,0").split(","))
-            local = LocalFrame(lat, lon).from_ecf(pvp["TxPos"])
+            heading = float(params.get("rtsar:heading_deg", EAST_HEADING_DEG))
+            local = LocalFrame(lat, lon, heading).from_ecf(pvp["TxPos"])
         else:
             local = derived[2]
         aux, along = {}, local[:, 0]
@@ -167,11 +183,14 @@ def open_cphd(path: str | Path) -> ForeignRecording:
             else np.arange(vectors, dtype=np.int64)
         )
         time_s = np.asarray(pvp["TxTime"], np.float64)
-        check_telemetry(path, cfg, index, along)
+        problem = telemetry_problem(cfg, index, along)
+        if problem:
+            raise ValueError(problem)
         start = float(along[0])  # the derived frame: x = 0 abeam of the middle vector's SRP
         if derived is None:
             start = float(params.get("rtsar:start_along_track_m", start))
         position = local if cfg.geometry.platform_height_m > 0 else None
+        collection_start = _collection_start(root, params)
     except (ValueError, KeyError, TypeError) as exc:
         f.close()
         raise ValueError(f"{path}: {exc}") from None
@@ -187,7 +206,45 @@ def open_cphd(path: str | Path) -> ForeignRecording:
         aux,
         position if spot is None else None,
         f.close,
+        collection_start,
     )
+
+
+def _collection_start(root, params: dict):
+    """Global/Timeline/CollectionStart as naive UTC; None where rtsar wrote it without knowing
+    it (``rtsar:collection_start_utc`` "unknown")."""
+    if params.get("rtsar:collection_start_utc") == "unknown":
+        return None
+    return parse_utc(root.findtext("./{*}Global/{*}Timeline/{*}CollectionStart"), "CollectionStart")
+
+
+TX_RCV_TOLERANCE = 1e-9  # relative: the XML holds 17 significant digits
+
+
+def check_tx_rcv(root, cfg) -> None:
+    """The chirp and receiver TxRcv declares (rtsar.sinks.exports.cphd.tx_rcv) against the
+    file's own rtsar:config: a file edited or damaged since is refused, naming the field."""
+    tx, rcv = root.find("./{*}TxRcv/{*}TxWFParameters"), root.find("./{*}TxRcv/{*}RcvParameters")
+    if tx is None or rcv is None:
+        return  # written before TxRcv was: nothing declared to check
+    wf = cfg.waveform
+    fmcw = wf.kind == "fmcw"
+    length = wf.chirp_duration_s if fmcw else wf.pulse_duration_s
+    for node, name, want in (
+        (tx, "PulseLength", length),
+        (tx, "RFBandwidth", wf.bandwidth_hz),
+        (tx, "FreqCenter", cfg.geometry.carrier_hz),
+        (tx, "LFMRate", wf.chirp_rate_hz_per_s),
+        (rcv, "WindowLength", length if fmcw else wf.receive_window_s),
+        (rcv, "SampleRate", wf.sample_rate_hz),
+    ):
+        text = node.findtext(f"./{{*}}{name}")
+        value = float(text) if text is not None else float("nan")
+        if not abs(value - want) <= TX_RCV_TOLERANCE * abs(want):
+            raise ValueError(
+                f"TxRcv {name} {text} contradicts its rtsar:config ({want!r}): the file was "
+                "changed after rtsar wrote it"
+            )
 
 
 def _spot_channels(reader, channels, params: dict, spot, cfg, local, vectors: int):

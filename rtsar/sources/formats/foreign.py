@@ -3,6 +3,7 @@ the same attributes and methods, so ``process`` and ``replay`` take it unchanged
 
 from __future__ import annotations
 
+import datetime
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,6 +31,7 @@ class ForeignRecording:
     channels: dict = field(default_factory=dict)
     position_m: np.ndarray | None = None
     closer: object = None
+    collection_start: datetime.datetime | None = None  # UTC of time_s = 0 (None: unknown)
 
     def batches(self, size: int) -> Iterator[np.ndarray]:
         for i in range(0, self.pulses, size):
@@ -53,13 +55,6 @@ class ForeignRecording:
 
     def __exit__(self, *exc):
         self.close()
-
-
-def check_telemetry(path, cfg: Config, pulse_index, along_track_m) -> None:
-    """ValueError ``PATH: …`` where :func:`telemetry_problem` finds one."""
-    problem = telemetry_problem(cfg, pulse_index, along_track_m)
-    if problem:
-        raise ValueError(f"{path}: {problem}")
 
 
 def telemetry_problem(cfg: Config, pulse_index, along_track_m) -> str | None:

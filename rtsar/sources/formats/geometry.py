@@ -2,10 +2,15 @@
 
 rtsar works in a local frame: x along track, y cross-track towards the scene, z up, the
 reference plane z = 0 (rtsar.scene.relief).  The exports place that frame on the WGS-84
-ellipsoid at a reference latitude/longitude (default 0°, 0°), x = east, y = south, z = up: the
-platform flies east and looks south, to its right (the usual side, and SICD's columns then run
-with time).  The placement is a mirror image (east, south, up is left-handed): it keeps every
-distance, so every range and every sample is unchanged.  A recording without a platform height (the
+ellipsoid at a reference latitude/longitude (default 0°, 0°) with the track heading
+``heading_deg`` clockwise from north (default 80°, east by north), y to its right (heading
++ 90°), z up: the platform looks to its right (the usual side, and SICD's columns then run with
+time).  The default heading is no cardinal direction on purpose: due east, the scene lies due
+south and the bearing of the platform seen from it is north, 0°/360°, the wrap of SICD's
+SCPCOA angles, where round-off decided on which side sarpy's and sarkit's checks computed it
+(files written before carry no heading and were east, 90°).  The placement is a mirror image
+(x, y, z is left-handed): it keeps every distance, so every range and every sample is
+unchanged.  A recording without a platform height (the
 slant-plane geometry of the papers) is placed at ``DEFAULT_HEIGHT_FRACTION`` of its centre range
 above the plane: every slant range, and so every sample, is unchanged.
 """
@@ -19,6 +24,8 @@ import numpy as np
 WGS84_A_M = 6378137.0
 WGS84_F = 1.0 / 298.257223563
 DEFAULT_HEIGHT_FRACTION = 0.5  # platform height / centre range where a recording has none
+DEFAULT_HEADING_DEG = 80.0  # the track's heading (module docstring)
+EAST_HEADING_DEG = 90.0  # the heading of files written before the heading was recorded
 
 
 def geodetic_to_ecf(lat_deg: float, lon_deg: float, height_m: float) -> np.ndarray:
@@ -37,11 +44,12 @@ def geodetic_to_ecf(lat_deg: float, lon_deg: float, height_m: float) -> np.ndarr
 
 @dataclass(frozen=True)
 class LocalFrame:
-    """The local frame's origin (ECF) and its axes x = east, y = south, z = up (ECF unit
-    vectors, rows of ``axes``)."""
+    """The local frame's origin (ECF) and its axes (ECF unit vectors, rows of ``axes``):
+    x along the heading, y to its right, z up."""
 
     lat_deg: float = 0.0
     lon_deg: float = 0.0
+    heading_deg: float = DEFAULT_HEADING_DEG
 
     @property
     def origin_ecf(self) -> np.ndarray:
@@ -50,10 +58,13 @@ class LocalFrame:
     @property
     def axes(self) -> np.ndarray:
         lat, lon = np.radians(self.lat_deg), np.radians(self.lon_deg)
-        east = [-np.sin(lon), np.cos(lon), 0.0]
-        south = [np.sin(lat) * np.cos(lon), np.sin(lat) * np.sin(lon), -np.cos(lat)]
+        east = np.array([-np.sin(lon), np.cos(lon), 0.0])
+        north = np.array([-np.sin(lat) * np.cos(lon), -np.sin(lat) * np.sin(lon), np.cos(lat)])
         up = [np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)]
-        return np.array([east, south, up])
+        h = np.radians(self.heading_deg)
+        along = np.sin(h) * east + np.cos(h) * north
+        right = np.cos(h) * east - np.sin(h) * north  # the heading + 90°
+        return np.array([along, right, up])
 
     def to_ecf(self, xyz_m: np.ndarray) -> np.ndarray:
         """Local points [..., 3] → ECF [..., 3]."""

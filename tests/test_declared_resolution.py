@@ -1,0 +1,199 @@
+"""What the exports declare is what the image measures (issue 28; STYLE habit 10).
+
+Each preset (pulsed and FMCW), with rectangular and tapered windows: two point targets 8
+resolution cells apart are simulated, focused, written as an rtsar image and exported as SICD;
+the SICD is read back with NGA's reader (sarkit) and, from its pixels alone, the -3 dB widths of
+the first target are measured against the declared Grid Row/Col ImpRespWid (10 %), and the
+targets' separation in pixels times the declared sample spacings against the true separation
+(1 %).  sarpy's recursive validity check and sarkit's consistency checks pass; the receiver's
+demodulation is the waveform's.
+"""
+
+import lxml.etree as etree
+import numpy as np
+import pytest
+
+sksicd = pytest.importorskip("sarkit.sicd")
+skver = pytest.importorskip("sarkit.verification")
+pytest.importorskip("sarpy")
+
+from rtsar.analysis.point_target import analyse_point_target  # noqa: E402
+from rtsar.presets import PRESETS, preset  # noqa: E402
+from rtsar.scene.model import scene_from_dict  # noqa: E402
+from rtsar.scene.simulator import Simulator  # noqa: E402
+from rtsar.sinks.exports.sicd import write_sicd  # noqa: E402
+from rtsar.sinks.image_file import write_image  # noqa: E402
+from rtsar.stream.engine import process_block  # noqa: E402
+from rtsar.windows import impulse_response_width  # noqa: E402
+
+IRW_TOLERANCE = 0.10  # measured -3 dB width against the declared ImpRespWid
+SPACING_TOLERANCE = 0.01  # separation measured with the declared SS against the true one
+WINDOWS = [("rect", "rect"), ("hann", "taylor")]
+
+
+def _theory(cfg):
+    """(azimuth, range) -3 dB widths from the papers' formulas, written out here: λR/(2Nd)
+    (Crouch eq. 4.8) and c/(2B) (Psaltis eq. 6), times the windows' broadening."""
+    g, p = cfg.geometry, cfg.processor
+    r = p.range_centre_m or g.slant_range_m
+    rho_a = g.wavelength_m * r / (2 * p.aperture_pulses * g.along_track_step_m)
+    return (
+        rho_a * impulse_response_width(p.azimuth_window),
+        cfg.waveform.range_resolution_m * impulse_response_width(p.range_window),
+    )
+
+
+def _exported(tmp_path, name, windows):
+    """(cfg, SICD xml, pixels [row = range, col = azimuth], targets) of a two-target image."""
+    rw, aw = windows
+    cfg = preset(name).with_processor(range_bins=32, range_window=rw, azimuth_window=aw)
+    g = cfg.geometry
+    irw_az, irw_rg = _theory(cfg)
+    r0 = cfg.processor.range_centre_m or g.slant_range_m
+    # 8 widths apart along track and 10 in range: each one's sidelobes at the other's peak are
+    # below 1e-3 of it, and move neither peak by more than a few thousandths of a cell.
+    targets = [(-4.0 * irw_az, r0 - 5.0 * irw_rg), (4.0 * irw_az, r0 + 5.0 * irw_rg)]
+    lines = int(14 * irw_az / g.along_track_step_m) + 64
+    pulses = cfg.processor.aperture_pulses + lines
+    start = -0.5 * (pulses - 1) * g.along_track_step_m
+    d = cfg.to_dict()
+    d.update(pulses=pulses, start_along_track_m=start)
+    d["targets"] = [{"along_track_m": x, "slant_range_m": r} for x, r in targets]
+    shots = Simulator(scene_from_dict(d)).block(pulses)
+    image, azimuth_m, range_m = process_block(cfg, shots, "numpy", start)
+    img, out = tmp_path / f"{name}.h5", tmp_path / f"{name}.nitf"
+    write_image(img, image, azimuth_m, range_m, cfg)
+    write_sicd(img, out)
+    with open(out, "rb") as f, sksicd.NitfReader(f) as r:
+        return cfg, r.metadata.xmltree, r.read_image(), targets, out
+
+
+@pytest.mark.parametrize("windows", WINDOWS, ids=["-".join(w) for w in WINDOWS])
+@pytest.mark.parametrize("name", sorted(PRESETS))
+def test_sicd_declares_the_resolution_and_spacing_its_pixels_measure(tmp_path, name, windows):
+    cfg, xml, pixels, targets, _ = _exported(tmp_path, name, windows)
+    x = sksicd.XmlHelper(xml)
+    row_ss, col_ss = x.load("{*}Grid/{*}Row/{*}SS"), x.load("{*}Grid/{*}Col/{*}SS")
+    declared = {d: x.load(f"{{*}}Grid/{{*}}{d}/{{*}}ImpRespWid") for d in ("Row", "Col")}
+    image = pixels.T  # [azimuth, range] again: the pixels' own grid, from the declared spacings
+    az = np.arange(image.shape[0]) * col_ss
+    rg = np.arange(image.shape[1]) * row_ss
+    found = []
+    for x0, _ in targets:  # each searched within two widths of where it lies along track
+        rep = analyse_point_target(
+            image,
+            az,
+            rg,
+            az[len(az) // 2] + x0,
+            None,
+            (2 * declared["Col"], 0.0),
+            chip=int(3 * declared["Col"] / col_ss),
+        )
+        found.append((rep.azimuth_m, rep.range_m, rep))
+    rep = found[0][2]
+    assert rep.azimuth.irw_m == pytest.approx(declared["Col"], rel=IRW_TOLERANCE)
+    assert rep.range.irw_m == pytest.approx(declared["Row"], rel=IRW_TOLERANCE)
+    # The declared figures are the processor's: λR/(2Nd) and c/(2B) with the windows.
+    irw_az, irw_rg = _theory(cfg)
+    assert declared["Col"] == pytest.approx(irw_az, rel=0.02)  # R at the SCP, not the centre
+    assert declared["Row"] == pytest.approx(irw_rg, rel=1e-9)
+    (xa, ra, _), (xb, rb, _) = found
+    (x0a, r0a), (x0b, r0b) = targets
+    assert xb - xa == pytest.approx(x0b - x0a, rel=SPACING_TOLERANCE)
+    assert rb - ra == pytest.approx(r0b - r0a, rel=SPACING_TOLERANCE)
+
+
+@pytest.mark.parametrize("name", ["tiny", "psaltis-jpl", "crouch-sal", "zhao-insal"])
+def test_sicd_is_valid_for_sarpy_and_sarkit_with_the_receivers_demodulation(tmp_path, name):
+    from sarpy.io.complex.converter import open_complex
+
+    cfg, xml, _, _, path = _exported(tmp_path, name, ("rect", "taylor"))
+    sicd = open_complex(str(path)).get_sicds_as_tuple()[0]
+    assert sicd.is_valid(recursive=True)  # RadarCollection.Area, ImageData.ValidData among them
+    assert sicd.RadarCollection.Area.Corner is not None
+    assert len(sicd.ImageData.ValidData) == 4 and len(sicd.GeoData.ValidData) == 4
+    with open(path, "rb") as f:
+        con = skver.SicdConsistency.from_file(f)
+        con.check()
+    errors = [
+        (name, d["details"])
+        for name, v in con.failures().items()
+        for d in v["details"]
+        if not d["passed"] and d["severity"] == "Error"
+    ]
+    assert con.passes() and not errors, errors
+    wf = xml.find("{*}RadarCollection/{*}Waveform/{*}WFParameters")
+    fmcw = cfg.waveform.kind == "fmcw"
+    # SICD: a pulsed radar's fixed-LO receiver is CHIRP (RcvFMRate 0), a dechirp STRETCH.
+    assert wf.findtext("{*}RcvDemodType") == ("STRETCH" if fmcw else "CHIRP")
+    rate = float(wf.findtext("{*}RcvFMRate"))
+    assert rate == (pytest.approx(cfg.waveform.chirp_rate_hz_per_s) if fmcw else 0.0)
+    # (Read with NGA's reader: sarpy 2.1's XML reader drops RcvDemodType and RcvFMRate of any
+    # SICD, and its writer a CHIRP one's.)
+    assert etree.QName(xml.getroot()).namespace.startswith("urn:SICD:")
+
+
+SPOT_SCENE = """
+preset = "crouch-spotlight"
+[waveform]
+sample_rate_hz = {rate}
+[geometry]
+along_track_step_m = {step}
+[processor]
+aperture_pulses = 2
+range_bins = 64
+[spotlight]
+sweep_deg = 2.0
+[[targets]]
+x_m = 0.0
+"""
+
+
+@pytest.mark.parametrize("window", ["rect", "taylor"])
+def test_spotlight_images_declare_the_resolution_they_measure(tmp_path, window):
+    """The progressive images' header (resolution_m, range_resolution_m) against the -3 dB
+    widths of a point target in the final image, 10 %."""
+    from rtsar.app.spotlight import image_header
+    from rtsar.spot.pfa import PfaSettings, PolarFormatPlan, polar_format
+    from rtsar.spot.scene import load_spot_scene
+    from rtsar.spot.simulate import SpotlightSimulator
+
+    path = tmp_path / "spot.toml"
+    path.write_text(SPOT_SCENE.format(rate=64 / 0.3, step=4.6 * 1.55e-6 / (2 * 3.2e-3)))
+    scene = load_spot_scene(path)
+    settings = PfaSettings(extent_m=(1.6e-3, 1.6e-3), range_window=window, azimuth_window=window)
+    plan = PolarFormatPlan(scene.config, scene.geometry, settings=settings)
+    image = polar_format(SpotlightSimulator(scene).block()[0], plan)
+    header = image_header(plan, 0, scene.geometry.pulses, scene.geometry.sweep_rad, True)
+    rep = analyse_point_target(image, plan.x_m, plan.y_m, 0.0, 0.0, chip=24)
+    assert rep.azimuth.irw_m == pytest.approx(header["resolution_m"], rel=IRW_TOLERANCE)
+    assert rep.range.irw_m == pytest.approx(header["range_resolution_m"], rel=IRW_TOLERANCE)
+
+
+@pytest.mark.parametrize("name", ["tiny", "crouch-sal"])
+def test_cphd_band_declares_the_range_resolution_its_image_measures(tmp_path, name, capsys):
+    """A CPHD declares its band (FxBW): c/(2·FxBW) times the range window's factor is the range
+    -3 dB width of the image `process` focuses from the file, 10 %."""
+    from rtsar.app.cli import main
+    from rtsar.app.cli.files import simulate_to
+    from rtsar.sinks.image_file import read_image
+
+    sarkit_cphd = pytest.importorskip("sarkit.cphd")
+    cfg = preset(name).with_processor(range_bins=32, range_window="hann")
+    g = cfg.geometry
+    r0 = cfg.processor.range_centre_m or g.slant_range_m
+    pulses = cfg.processor.aperture_pulses + 96
+    d = {**cfg.to_dict(), "pulses": pulses, "start_along_track_m": 0.0}
+    d["targets"] = [
+        {"along_track_m": 0.5 * (pulses - 1) * g.along_track_step_m, "slant_range_m": r0}
+    ]
+    rec, cphd, img = tmp_path / "r.h5", tmp_path / "r.cphd", tmp_path / "i.h5"
+    simulate_to(scene_from_dict(d), rec)
+    assert main(["export", str(rec), "--cphd", str(cphd)]) == 0
+    assert main(["process", str(cphd), "-o", str(img), "--lens", "numpy"]) == 0
+    with open(cphd, "rb") as f, sarkit_cphd.Reader(f) as r:
+        fx_bw = sarkit_cphd.XmlHelper(r.metadata.xmltree).load("{*}Channel/{*}Parameters/{*}FxBW")
+    declared = impulse_response_width("hann") * 299_792_458.0 / (2 * fx_bw)
+    image, az, rg, _ = read_image(img)
+    rep = analyse_point_target(image, az, rg, az[len(az) // 2], r0, chip=16)
+    assert rep.range.irw_m == pytest.approx(declared, rel=IRW_TOLERANCE)

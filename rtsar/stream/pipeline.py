@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import threading
 import time
-import uuid
 from collections import deque
 from dataclasses import dataclass
 
@@ -52,11 +51,11 @@ from ..sources.base import Source
 from .engine import Lines, StreamProcessor
 from .height import HeightBatch, HeightChannel
 from .hold import HeldPulses
-from .ingest import Ingest, PulseBlock, concat_blocks
+from .ingest import Ingest, PulseBlock, concat_blocks, regroup
 from .memory import check_memory
 from .queue import BoundedQueue
 from .stats import PipelineStats
-from .strips import LineBlock, StreamInfo, StripAssembler, StripSink
+from .strips import LineBlock, StreamInfo, StripAssembler, StripSink, new_stream_id
 from .swath import SwathWorkers
 from .timing import LineTiming
 
@@ -219,7 +218,7 @@ class Pipeline:
                 else:
                     blocks = [b for batch in batches for b in self.ingest(batch)]
                 busy += time.perf_counter() - t
-                for block in _groups(blocks, self.max_batch):
+                for block in regroup(blocks, self.max_batch):
                     t = time.perf_counter()
                     if self.swath is not None:
                         self._to_workers(block)
@@ -476,25 +475,3 @@ class Pipeline:
     def run(self) -> PipelineStats:
         self.start()
         return self.join()
-
-
-def _groups(blocks: list[PulseBlock], most: int):
-    """Consecutive pulse blocks regrouped into blocks of at most ``most`` pulses."""
-    pending, size = [], 0
-    for b in blocks:
-        start = 0
-        while start < len(b):
-            take = min(len(b) - start, most - size)
-            pending.append(b.slice(start, start + take))
-            size += take
-            start += take
-            if size == most:
-                yield concat_blocks(pending)
-                pending, size = [], 0
-    if pending:
-        yield concat_blocks(pending)
-
-
-def new_stream_id() -> str:
-    """A random hex id for a run (a new id tells subscribers the publisher restarted)."""
-    return uuid.uuid4().hex[:16]

@@ -7,6 +7,7 @@ the four methods of :class:`StripSink`.
 
 from __future__ import annotations
 
+import uuid
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -169,3 +170,8 @@ def flag_runs(first: int, flagged: np.ndarray) -> list[tuple[int, int]]:
     f = np.concatenate([[False], flagged, [False]]).astype(np.int8)
     edges = np.flatnonzero(np.diff(f))
     return [(first + int(a), int(b - a)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
+def new_stream_id() -> str:
+    """A random hex id for a run (a new id tells subscribers the publisher restarted)."""
+    return uuid.uuid4().hex[:16]

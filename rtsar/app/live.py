@@ -61,7 +61,7 @@ _LABELS = {
     "reconnects": "reconnected",
     "late_releases": "late releases",
     "subscriber_stalls": "stalled subscribers cut off",
-    "messages_missed_by_stalled": "messages missed by them",
+    "messages_missed_by_stalled": "messages they may have missed",
     "flagged_lines": "flagged lines",
 }
 

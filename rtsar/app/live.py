@@ -63,6 +63,7 @@ _LABELS = {
     "subscriber_stalls": "stalled subscribers cut off",
     "messages_missed_by_stalled": "messages they may have missed",
     "flagged_lines": "flagged lines",
+    "swath_refused_messages": "refused swath messages",
 }
 
 

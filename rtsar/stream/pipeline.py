@@ -116,6 +116,7 @@ class Pipeline:
         physical=None,
         height=None,
         stream_id: str | None = None,
+        notify=None,
     ):
         self.config = config
         self.corrections = corrections
@@ -180,8 +181,9 @@ class Pipeline:
             if corrections or physical is not None or height is not None:
                 raise ValueError("--swath-workers runs without --correct, --physical, --height")
             self.swath = SwathWorkers(
-                config, s.swath_workers, s.lens_backend, s.device, s.swath_spawn, s.swath_bind
-            )
+                config, s.swath_workers, s.lens_backend, s.device, s.swath_spawn, s.swath_bind,
+                notify=notify,
+            )  # fmt: skip
             self._sent = deque()  # metadata of the pulse blocks sent to the workers
 
     @property
@@ -386,6 +388,8 @@ class Pipeline:
             c.update(self.corrections.counters())
         for sink in self.sinks:
             c.update(sink.counters())
+        if self.swath is not None:  # results messages refused
+            c.update(self.swath.counters())
         c.update(self.own)
         return c
 

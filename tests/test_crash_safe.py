@@ -278,7 +278,8 @@ def test_temporaries_left_by_killed_runs_are_removed_and_live_ones_kept(tmp_path
     its PIDs mean nothing here)."""
     from rtsar.presets import preset as named_preset
     from rtsar.sinks.image_file import ImageWriter
-    from rtsar.sinks.io import _owner_of_pid, partial_prefix, replace_when_complete
+    from rtsar.sinks.io import replace_when_complete
+    from rtsar.sinks.partials import _owner_of_pid, partial_prefix
 
     gone = subprocess.Popen([sys.executable, "-c", "pass"])
     gone.wait(30)  # its pid names no running process now

@@ -17,10 +17,8 @@ Complex values are HDF5 compounds of two floats named r and i (h5py's convention
 
 from __future__ import annotations
 
-import glob
 import json
 import os
-import socket
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -35,6 +33,8 @@ from ..params import Config, config_from_dict
 from ..scene.model import Scene, recorded_scene
 from ..sources.formats.foreign import telemetry_problem
 from .h5_output import H5Output, WriteFailed, is_write_error, reason
+from .name_claim import NameClaim
+from .partials import partial_prefix
 
 RECORDING_FORMAT = "rtsar-recording"
 IMAGE_FORMAT = "rtsar-image"
@@ -55,55 +55,6 @@ def check_writable(path: str | Path) -> None:
         raise ValueError(f"cannot write {path}: permission denied")
 
 
-def partial_prefix(path: Path) -> str:
-    """Start of the hidden temporary name of an output of ``path`` written by this process:
-    ``.NAME.partial-OWNER-`` with OWNER = HOST@NS.PID, the host, the PID namespace and the
-    process (what tells :func:`remove_stale_partials` whose it is; no host name holds "@")."""
-    return f".{path.name}.partial-{_owner_of_pid(os.getpid())}-"
-
-
-def remove_stale_partials(path: str | Path) -> list[Path]:
-    """Delete the temporary files of ``path`` left by writers that are no longer running (a
-    SIGKILL, a power cut): those of this host and PID namespace whose process has ended;
-    returns them.  Another host's (a shared folder), another container's (another PID
-    namespace) and a running process's are kept: they may still become the file."""
-    path = Path(path)
-    start = f".{path.name}.partial-{_owner_of_pid(None)}"
-    removed = []
-    for stale in path.parent.glob(glob.escape(start) + "*"):
-        pid = stale.name[len(start) :].split("-", 1)[0]
-        if pid.isdigit() and not _running(int(pid)):
-            try:
-                stale.unlink()
-            except FileNotFoundError:  # another run removed it first
-                continue
-            except OSError:  # not ours to delete: left as it was
-                continue
-            removed.append(stale)
-    return removed
-
-
-def _owner_of_pid(pid: int | None) -> str:
-    """HOST@NS.PID (HOST@NS. for None): NS is this process's PID namespace (0 where unknown),
-    so that a process of another container with the same host name never reads our PIDs."""
-    host = socket.gethostname().replace("/", "_").replace("@", "_") or "host"
-    try:
-        ns = os.stat("/proc/self/ns/pid").st_ino
-    except OSError:
-        ns = 0
-    return f"{host}@{ns}." + ("" if pid is None else str(pid))
-
-
-def _running(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # another user's process
-        return True
-    return True
-
-
 @contextmanager
 def replace_when_complete(path: str | Path) -> Iterator[Path]:
     """Write to a temporary file beside ``path``, renamed to ``path`` only when the block ends
@@ -114,16 +65,19 @@ def replace_when_complete(path: str | Path) -> Iterator[Path]:
 
     The temporary file is created at once: an unwritable destination is reported before any
     work is done.  Temporaries of ``path`` that killed runs left are removed first
-    (:func:`remove_stale_partials`).
+    (rtsar.sinks.partials.remove_stale_partials).  The name is claimed for the whole write
+    (rtsar.sinks.name_claim): a name a live writer holds is refused (ValueError), and a live
+    writer starting meanwhile is refused it, so neither replaces the other's file.
     """
     path = Path(path)
-    remove_stale_partials(path)
+    claim = NameClaim(path)  # (removes the stale temporaries)
     try:
         # The suffix kept: writers that go by it (matplotlib's savefig) see the right kind.
         fd, name = tempfile.mkstemp(
             prefix=partial_prefix(path), suffix=path.suffix, dir=path.parent
         )
     except OSError as exc:
+        claim.release()
         raise ValueError(f"cannot write {path}: {exc.strerror or exc}") from None
     os.close(fd)
     tmp = Path(name)
@@ -143,6 +97,8 @@ def replace_when_complete(path: str | Path) -> Iterator[Path]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    finally:
+        claim.release()
 
 
 def write_text_when_complete(path: str | Path, text: str) -> None:

@@ -17,6 +17,7 @@ from ...lens import LENS_BACKENDS, range_axis_m
 from ...params import PRECISIONS, Processor
 from ...physical import CARRIERS, paper_ccd
 from ...scene.correction_context import correction_context, insal_geometry, modulation_geometry
+from ...sinks.name_claim import check_unclaimed
 from ...sinks.publish import DEFAULT_ENDPOINT, DELIVERIES, STALL_TIMEOUT_S
 from ...stream.engine import brightest_point
 from ...stream.pipeline import STAGE_LAYOUTS, PipelineSettings
@@ -51,10 +52,11 @@ NOT_HDF5_SUFFIXES = (
 
 def check_outputs_spare_inputs(args) -> None:
     """ValueError before any work when an output of the command names one of its inputs (or
-    another of its outputs): ``process rec.h5 -o rec.h5`` replaced the recording by its image.
-    A SigMF recording exported onto itself (``export rec.sigmf-meta --sigmf rec``) is the
-    exception: that export reads the recording whole first.  An HDF5 output named like
-    another kind of file (``process rec.h5 -o x.png``) is refused too."""
+    another of its outputs): ``process rec.h5 -o rec.h5`` replaced the recording by its image;
+    or a file another process writes live (rtsar.sinks.name_claim).  A SigMF recording
+    exported onto itself (``export rec.sigmf-meta --sigmf rec``) is the exception: that export
+    reads the recording whole first.  An HDF5 output named like another kind of file
+    (``process rec.h5 -o x.png``) is refused too."""
     command = getattr(args, "command", None)
     inputs = {}
     for name in INPUT_OPTIONS + COMMAND_INPUTS.get(command, ()):
@@ -86,6 +88,8 @@ def check_outputs_spare_inputs(args) -> None:
             "pictures come from `rtsar quicklook IMG.h5 -o PICTURE`, CPHD/SICD/SigMF from "
             "`rtsar export`"
         )
+    for path in outputs.values():  # a file another process writes live is never replaced
+        check_unclaimed(path)
 
 
 def _values(value) -> list[str]:

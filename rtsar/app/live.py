@@ -64,6 +64,7 @@ _LABELS = {
     "messages_missed_by_stalled": "messages they may have missed",
     "flagged_lines": "flagged lines",
     "swath_refused_messages": "refused swath messages",
+    "link_silences": "link silences",
 }
 
 
@@ -114,12 +115,24 @@ def problems(counters: dict) -> list[str]:
     for key, value in counters.items():
         if not value or key in _NORMAL or key.endswith(_NORMAL_SUFFIXES):
             continue
-        out.append(f"{_LABELS.get(key, key)} {value}")
+        if key == "link_silent_ms":
+            out.append(f"link silent {value / 1e3:.1f} s in all")
+        else:
+            out.append(f"{_LABELS.get(key, key)} {value}")
     return out
+
+
+def link_words(state: dict) -> str:
+    """A silence being told (rtsar.stream.link.LinkWatch.state) in words."""
+    since = state["since_pulse"]
+    return f"link silent for {state['silent_s']:.1f} s since " + (
+        "the start (no pulse yet)" if since is None else f"pulse {since}"
+    )
 
 
 def format_status(d: dict, total: int | None = None) -> str:
     c = d["counters"]
+
     done = c.get("pulses_processed", 0)
     progress = f"/{total}" if total else ""
     bad = problems(c)
@@ -129,6 +142,9 @@ def format_status(d: dict, total: int | None = None) -> str:
         if math.isfinite(median)
         else "latency: no strip yet"
     )
+    link = d.get("link")
+    if link:  # said first: the rates and counters below are stale while nothing comes
+        bad.insert(0, link_words(link).upper())
     return (
         f"t={d['elapsed_s']:6.1f} s  pulses {done}{progress}  {d['pulse_rate_hz']:8.0f} Hz  "
         f"lines {c.get('lines_out', 0)}  strips {c.get('strips_published', 0)}  {latency}  "
@@ -257,13 +273,15 @@ def run_stream(
     expected_rate_hz: float | None = None,
     height=None,
     channel_fix=None,
+    link_timeout_s: float | None = None,
 ) -> int:
     """Run until the source ends, Ctrl-C or a signal; print status lines and a summary.
 
     Exit status: 0 when the stream ended cleanly, 1 when the source failed (an instrument link
-    lost for good) or nothing could be written to ``output``, 128 + the signal number when
-    interrupted (130 for Ctrl-C).  ``expected_rate_hz``: the rate the source should deliver (a
-    simulation's PRF, a paced replay's): a stream processed slower is warned about.
+    lost for good, silent for ``link_timeout_s``) or nothing could be written to ``output``,
+    128 + the signal number when interrupted (130 for Ctrl-C).  ``expected_rate_hz``: the rate
+    the source should deliver (a simulation's PRF, a paced replay's): a stream processed slower
+    is warned about.
     ``channel_fix(missing)``: how to give the source the auxiliary channels a stage reads and it
     lacks (check_source_channels, before anything starts).
     """
@@ -337,6 +355,8 @@ def run_stream(
             corrections=corrections,
             physical=physical,
             height=height,
+            notify=say,
+            link_timeout_s=link_timeout_s,
         )
         n = config.processor
         print(
@@ -398,6 +418,13 @@ def run_stream(
     bad = problems(c)
     if bad:
         print("counted: " + ", ".join(bad), file=stream)
+    silent = pipe.link.state() if pipe.link is not None else None
+    if silent:  # the stream ended in a silence that had been told
+        why = getattr(source, "stop_reason", "")
+        print(
+            f"{link_words(silent)} when the stream ended" + (f" ({why})" if why else ""),
+            file=stream,
+        )
     status = 0
     if recorder is not None:
         if recorder.lines:
@@ -415,7 +442,8 @@ def run_stream(
                 file=err,
             )
             status = 1
-    if source.failure:
-        print(f"rtsar: the stream did not end cleanly: {source.failure}", file=err)
+    failure = source.failure or (pipe.link.failure if pipe.link is not None else None)
+    if failure:
+        print(f"rtsar: the stream did not end cleanly: {failure}", file=err)
         status = 1
     return signals.exit_status(interrupted) if interrupted is not None else status

@@ -52,6 +52,7 @@ from .engine import Lines, StreamProcessor
 from .height import HeightBatch, HeightChannel
 from .hold import HeldPulses
 from .ingest import Ingest, PulseBlock, concat_blocks, regroup
+from .link import LinkWatch
 from .memory import check_memory
 from .queue import BoundedQueue
 from .stats import PipelineStats
@@ -117,6 +118,7 @@ class Pipeline:
         height=None,
         stream_id: str | None = None,
         notify=None,
+        link_timeout_s: float | None = None,
     ):
         self.config = config
         self.corrections = corrections
@@ -126,6 +128,11 @@ class Pipeline:
                 "main receiver only and would bias the height phase between the receivers"
             )
         self.source = source
+        # A live source's silences are told (``notify``) and end the run at link_timeout_s.
+        self.link = None
+        if source.live:
+            prf = config.geometry.prf_hz
+            self.link = LinkWatch(prf, notify, link_timeout_s, on_timeout=source.close)
         self.sinks = list(sinks)
         for sink in self.sinks:  # a wrong object fails here, not in a stage thread mid-stream
             if not isinstance(sink, StripSink):
@@ -197,9 +204,13 @@ class Pipeline:
             for batch in self.source:
                 if self._stop.is_set():
                     break
+                if self.link is not None and len(batch):
+                    self.link.heard(int(batch.seq[0]), int(batch.seq[-1]))
                 if not self.q_shots.put(batch, block=not live):
                     self.own["dropped_pulses"] += len(batch)
         finally:
+            if self.link is not None:
+                self.link.ended()
             self.q_shots.close()
             if self.settings.deadline:
                 self._hurry_sinks()
@@ -388,8 +399,8 @@ class Pipeline:
             c.update(self.corrections.counters())
         for sink in self.sinks:
             c.update(sink.counters())
-        if self.swath is not None:  # results messages refused
-            c.update(self.swath.counters())
+        for part in (self.link, self.swath):  # a live source's silences, refused messages
+            c.update(part.counters() if part is not None else {})
         c.update(self.own)
         return c
 
@@ -403,6 +414,7 @@ class Pipeline:
         d["latency_recent_median_ms"] = self.stats.latency.recent_percentile(50) * 1e3
         d["latency_recent_p99_ms"] = self.stats.latency.recent_percentile(99) * 1e3
         d["final"] = final
+        d["link"] = None if self.link is None else self.link.state()  # a silence being told
         if self.height is not None:
             d["height"] = {k: float(v) for k, v in self.height.stage.stats.items()}
         for sink in self.sinks:
@@ -433,6 +445,8 @@ class Pipeline:
         stages = [self._source_stage, self._lens_stage, self._strip_stage]
         if self.settings.stages == "split":
             stages.insert(2, self._ccd_stage if self.swath is None else self._swath_stage)
+        if self.link is not None:  # the watch ends with the source (LinkWatch.ended)
+            threading.Thread(target=self.link.run, name="rtsar-link", daemon=True).start()
         for target in stages:
             ended = threading.Event()
             self._ended.append(ended)

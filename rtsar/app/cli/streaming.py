@@ -87,6 +87,8 @@ def warn_slow_first_line(scene, name) -> None:
 def cmd_run(args) -> int:
     if args.duration is not None and args.duration <= 0:
         return die(f"--duration must be > 0 seconds, got {args.duration}")
+    if args.link_timeout is not None and args.link_timeout <= 0:
+        return die(f"--link-timeout must be > 0 seconds, got {args.link_timeout}")
     if args.serial or args.zmq_in:
         # Pulse 0's along-track position: the scene's (the instrument scans the scene the file
         # describes, as the fake instrument does); a bare preset starts at 0 m.
@@ -138,6 +140,7 @@ def cmd_run(args) -> int:
             stall_timeout_s=args.stall_timeout,
             curve_clients=args.curve_clients,
             channel_fix=fix,
+            link_timeout_s=args.link_timeout,
         )
 
     if args.preset:
@@ -166,6 +169,7 @@ def cmd_run(args) -> int:
         stall_timeout_s=args.stall_timeout,
         curve_clients=args.curve_clients,
         channel_fix=scene_channel_fix,
+        link_timeout_s=args.link_timeout,
     )
 
 
@@ -350,8 +354,9 @@ def add_parsers(sub) -> None:
         "--duration",
         type=float,
         help="stop after this many seconds of the stream, i.e. pulses at the PRF (a busy "
-        "machine takes longer; serial: seconds of silence) (default: the whole scene, 10 s for "
-        "the demo; serial: never)",
+        "machine takes longer; --serial, --zmq-in: seconds without a byte or message, a clean "
+        "end: see --link-timeout for a failure) (default: the whole scene, 10 s for the demo; "
+        "serial: never)",
     )
     src.add_argument(
         "--reconnect",
@@ -359,6 +364,14 @@ def add_parsers(sub) -> None:
         default=None,
         help="with --serial: reopen a lost link, pausing 0.1 s doubling to 5 s (default: on for "
         "socket://, off for serial ports)",
+    )
+    src.add_argument(
+        "--link-timeout",
+        type=float,
+        metavar="S",
+        help="end the run, exit status 1, when the source has delivered no shot for S seconds "
+        "(a link gone quiet; default: never). Whatever this says, a silence of max(1 s, 10 pulse "
+        "periods) is told on the status line and in the log, and again when shots resume",
     )
     add_pipeline_options(s, "drop")
     s.set_defaults(func=cmd_run)

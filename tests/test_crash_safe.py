@@ -378,7 +378,7 @@ def test_a_reader_following_the_live_file_does_not_stop_its_final_attributes(tmp
     path = tmp_path / "img.h5"
     w = ImageWriter(path, cfg, np.arange(nr, dtype=float), crash_safe=True)
     w.write(np.ones((32, nr), np.complex64), np.arange(32) * 0.5)
-    w._flush()
+    w.flush()
     follow = (
         "import sys, h5py\n"
         "f = h5py.File(sys.argv[1], 'r', swmr=True)\n"
@@ -515,7 +515,7 @@ def test_strips_go_to_the_file_a_chunk_at_a_time_and_all_by_each_flush(tmp_path)
     w.write(*strip(4))
     assert w.lines == 80  # a chunk's worth went in one write
     w.write(*strip(5))
-    w._flush()  # what a flush_if_due does when due, or the owner when the stream is idle
+    w.flush()  # what a flush_if_due does when due, or the owner when the stream is idle
     assert w.lines == 96 and read_image(path)[0].shape[0] == 96
     w.write(*strip(6))
     w.close()

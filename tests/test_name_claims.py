@@ -66,6 +66,7 @@ def test_every_writer_refuses_a_name_being_written_live(tmp_path, held, capsys):
         ["export", str(rec), "--sigmf", str(names["sig"])],
         ["subscribe", "ipc://" + str(tmp_path / "none"), "-o", str(names["img"])],
         ["run", "--scene", str(scene), "-o", str(names["img"]), *ep],
+        ["run", "--scene", str(scene), "--record", str(names["raw"]), *ep],
         ["replay", str(rec), "--rate", "max", "-o", str(names["img"]), *ep],
     ]
     for argv in commands:

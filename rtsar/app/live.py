@@ -13,12 +13,11 @@ import time
 from ..focus.chain import correct_option
 from ..params import Config
 from ..scene.effects import REGISTRY as EFFECTS
-from ..sinks.io import check_writable
 from ..sinks.publish import STALL_TIMEOUT_S, ZmqPublisher
-from ..sinks.record import ImageFileSink
 from ..sources.channel_map import ChannelMap
 from ..stream.pipeline import Pipeline, PipelineSettings
 from . import signals
+from .live_outputs import LiveOutputs
 
 # Counters that describe normal work; every other counter that is not zero is shown, so nothing
 # that went wrong is hidden from the status line.
@@ -31,6 +30,7 @@ _NORMAL = {
     "height_strips_published",
     "frames_ok",
     "bytes_fed",
+    "record_written",
 }
 _NORMAL_SUFFIXES = (
     ".pulses_in",
@@ -63,8 +63,9 @@ _LABELS = {
     "subscriber_stalls": "stalled subscribers cut off",
     "messages_missed_by_stalled": "messages they may have missed",
     "flagged_lines": "flagged lines",
-    "swath_refused_messages": "refused swath messages",
     "link_silences": "link silences",
+    "record_dropped": "not recorded",
+    "swath_refused_messages": "refused swath messages",
 }
 
 
@@ -132,7 +133,6 @@ def link_words(state: dict) -> str:
 
 def format_status(d: dict, total: int | None = None) -> str:
     c = d["counters"]
-
     done = c.get("pulses_processed", 0)
     progress = f"/{total}" if total else ""
     bad = problems(c)
@@ -273,15 +273,19 @@ def run_stream(
     expected_rate_hz: float | None = None,
     height=None,
     channel_fix=None,
+    record: str | None = None,
+    scene: dict | None = None,
     link_timeout_s: float | None = None,
 ) -> int:
     """Run until the source ends, Ctrl-C or a signal; print status lines and a summary.
 
     Exit status: 0 when the stream ended cleanly, 1 when the source failed (an instrument link
-    lost for good, silent for ``link_timeout_s``) or nothing could be written to ``output``,
-    128 + the signal number when interrupted (130 for Ctrl-C).  ``expected_rate_hz``: the rate
-    the source should deliver (a simulation's PRF, a paced replay's): a stream processed slower
-    is warned about.
+    lost for good, silent for ``link_timeout_s``) or nothing could be written to ``output`` or
+    ``record``, 2 when the disk refused the recording, 128 + the signal number when
+    interrupted (130 for Ctrl-C).  ``record``: the raw shots' file (rtsar.sinks.raw_record;
+    ``scene``, the scene's dict, goes into it).  ``expected_rate_hz``: the rate the source
+    should deliver (a simulation's PRF, a paced replay's): a stream processed slower is warned
+    about.
     ``channel_fix(missing)``: how to give the source the auxiliary channels a stage reads and it
     lacks (check_source_channels, before anything starts).
     """
@@ -299,21 +303,23 @@ def run_stream(
 
     tty = hasattr(stream, "isatty") and stream.isatty()
     source.notify = say
-    if output:
-        check_writable(output)  # before anything starts, not at the stream's first strip
-    publisher = ZmqPublisher(
-        endpoint,
-        delivery,
-        curve_secret_key=curve_secret_key,
-        warn=lambda message: print(message, file=err),
-        stall_timeout_s=stall_timeout_s,
-        curve_clients=curve_clients,
+    # The files first: a name another process writes is refused before a socket is bound.
+    files = LiveOutputs(
+        config, source.description, output, record, start_along_track_m, scene, notify=say
     )
-    sinks: list = [publisher]
-    recorder = None
-    if output:
-        recorder = ImageFileSink(output, source.description)
-        sinks.append(recorder)
+    try:
+        publisher = ZmqPublisher(
+            endpoint,
+            delivery,
+            curve_secret_key=curve_secret_key,
+            warn=lambda message: print(message, file=err),
+            stall_timeout_s=stall_timeout_s,
+            curve_clients=curve_clients,
+        )
+    except BaseException:
+        files.release()
+        raise
+    sinks: list = [publisher, *files.sinks]
     last = [0.0]
 
     watch = None if expected_rate_hz is None else RateWatch(expected_rate_hz, say)
@@ -397,8 +403,7 @@ def run_stream(
         return signals.exit_status(exc)
     finally:
         publisher.close()
-        if recorder is not None:  # (a run that never started: its claim on the name goes)
-            recorder.recorder.release_claim()
+        files.release()  # (a run that never started: its claims on the names go)
     if tty:
         stream.write("\n")
     d = stats.as_dict()
@@ -425,25 +430,9 @@ def run_stream(
             f"{link_words(silent)} when the stream ended" + (f" ({why})" if why else ""),
             file=stream,
         )
-    status = 0
-    if recorder is not None:
-        if recorder.lines:
-            print(f"wrote {output}: {recorder.lines} lines", file=stream)
-        else:
-            print(
-                f"rtsar: no image written to {output}: no line was focused"
-                + (
-                    f" ({c['wrong_length']} frames of another shape than the configuration's "
-                    f"{config.waveform.samples_per_shot} samples per shot (and the channel map's "
-                    "channels): check --preset/--scene/--channel-map)"
-                    if c.get("wrong_length")
-                    else ""
-                ),
-                file=err,
-            )
-            status = 1
+    status = files.report(c, config, stream, err)
     failure = source.failure or (pipe.link.failure if pipe.link is not None else None)
     if failure:
         print(f"rtsar: the stream did not end cleanly: {failure}", file=err)
-        status = 1
+        status = max(status, 1)
     return signals.exit_status(interrupted) if interrupted is not None else status

@@ -137,6 +137,7 @@ class Pipeline:
         for sink in self.sinks:  # a wrong object fails here, not in a stage thread mid-stream
             if not isinstance(sink, StripSink):
                 raise TypeError(f"sinks must be StripSink objects, got {type(sink).__name__}")
+        self._pulse_sinks = [sink for sink in self.sinks if sink.wants_pulses]
         self.settings = s = settings or PipelineSettings()
         n = config.processor.aperture_pulses
         capacity = s.queue_pulses or 8 * n
@@ -230,6 +231,9 @@ class Pipeline:
                     blocks = self.ingest.flush()
                 else:
                     blocks = [b for batch in batches for b in self.ingest(batch)]
+                for block in blocks:  # the stream as ingest made it: to a raw recorder
+                    for sink in self._pulse_sinks:
+                        sink.pulses(block, self.info)
                 busy += time.perf_counter() - t
                 for block in regroup(blocks, self.max_batch):
                     t = time.perf_counter()

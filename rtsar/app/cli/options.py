@@ -36,7 +36,7 @@ def die(msg: str) -> int:
 # BASE.sigmf-meta and BASE.sigmf-data).
 INPUT_OPTIONS = ("scene", "recording", "image", "input", "images", "inputs")
 INPUT_OPTIONS += ("curve_key", "curve_server_key", "curve_client_key")
-OUTPUT_OPTIONS = ("output", "png", "json", "out", "cphd", "sicd", "sigmf")
+OUTPUT_OPTIONS = ("output", "png", "json", "out", "cphd", "sicd", "sigmf", "record")
 COMMAND_INPUTS = {"spotlight": ("live",), "projective": ("simulate",)}  # named like others
 COMMAND_OUTPUTS = {"quicklook": ("height",)}  # --height PNG (elsewhere --height is a method)
 # Commands whose -o writes an HDF5 file (a recording or an image), and the suffixes of what
@@ -80,14 +80,15 @@ def check_outputs_spare_inputs(args) -> None:
                         f"the output {path} is this command's input {inputs[key]}: writing it "
                         "would replace what it reads; choose another output name"
                     )
-    output = getattr(args, "output", None)
-    suffix = Path(output).suffix.lower() if output else ""
-    if command in HDF5_OUTPUT_COMMANDS and suffix in NOT_HDF5_SUFFIXES:
-        raise ValueError(
-            f"-o {output}: {command} writes an HDF5 file (.h5), not a {suffix} file; "
-            "pictures come from `rtsar quicklook IMG.h5 -o PICTURE`, CPHD/SICD/SigMF from "
-            "`rtsar export`"
-        )
+    named = (("-o", getattr(args, "output", None)), ("--record", getattr(args, "record", None)))
+    for option, value in named:
+        suffix = Path(value).suffix.lower() if value else ""
+        if command in HDF5_OUTPUT_COMMANDS and suffix in NOT_HDF5_SUFFIXES:
+            raise ValueError(
+                f"{option} {value}: {command} writes an HDF5 file (.h5), not a {suffix} file; "
+                "pictures come from `rtsar quicklook IMG.h5 -o PICTURE`, CPHD/SICD/SigMF from "
+                "`rtsar export`"
+            )
     for path in outputs.values():  # a file another process writes live is never replaced
         check_unclaimed(path)
 

@@ -47,6 +47,7 @@ from .options import (
     strip_lines,
     warn_outside_swath,
 )
+from .run_options import add_run_options
 
 
 def channel_map(args, scene) -> ChannelMap | None:
@@ -87,8 +88,6 @@ def warn_slow_first_line(scene, name) -> None:
 def cmd_run(args) -> int:
     if args.duration is not None and args.duration <= 0:
         return die(f"--duration must be > 0 seconds, got {args.duration}")
-    if args.link_timeout is not None and args.link_timeout <= 0:
-        return die(f"--link-timeout must be > 0 seconds, got {args.link_timeout}")
     if args.serial or args.zmq_in:
         # Pulse 0's along-track position: the scene's (the instrument scans the scene the file
         # describes, as the fake instrument does); a bare preset starts at 0 m.
@@ -140,6 +139,8 @@ def cmd_run(args) -> int:
             stall_timeout_s=args.stall_timeout,
             curve_clients=args.curve_clients,
             channel_fix=fix,
+            record=args.record,
+            scene=None if described is None else described.to_dict(),
             link_timeout_s=args.link_timeout,
         )
 
@@ -169,6 +170,8 @@ def cmd_run(args) -> int:
         stall_timeout_s=args.stall_timeout,
         curve_clients=args.curve_clients,
         channel_fix=scene_channel_fix,
+        record=args.record,
+        scene=scene.to_dict(),
         link_timeout_s=args.link_timeout,
     )
 
@@ -310,7 +313,8 @@ def add_parsers(sub) -> None:
         "(the letters SAR, an airfield and corner reflectors, 10 s of flight at 1600 pulses/s; "
         "about 15 s in all) simulated at its PRF, published on "
         f"{DEFAULT_ENDPOINT}. Watch it with `rtsar view` or record it with `rtsar subscribe -o "
-        "live.h5`; `-o demo.h5` keeps the image for `rtsar quicklook`.",
+        "live.h5`; `-o demo.h5` keeps the image for `rtsar quicklook`, `--record raw.h5` the "
+        "raw shots for `rtsar process`/`replay` later.",
     )
     src = s.add_argument_group("source")
     src.add_argument(
@@ -365,14 +369,7 @@ def add_parsers(sub) -> None:
         help="with --serial: reopen a lost link, pausing 0.1 s doubling to 5 s (default: on for "
         "socket://, off for serial ports)",
     )
-    src.add_argument(
-        "--link-timeout",
-        type=float,
-        metavar="S",
-        help="end the run, exit status 1, when the source has delivered no shot for S seconds "
-        "(a link gone quiet; default: never). Whatever this says, a silence of max(1 s, 10 pulse "
-        "periods) is told on the status line and in the log, and again when shots resume",
-    )
+    add_run_options(src, s)
     add_pipeline_options(s, "drop")
     s.set_defaults(func=cmd_run)
 

@@ -36,7 +36,7 @@ publication of the strip holding it.
 (rtsar.stream.swath); the lens thread sends them the pulses, the CCD thread merges their lines.
 
 The threads and their wiring only; the pieces: rtsar.stream.queue, ingest (sequence checks),
-engine (lens, CCD), hold (held pulses), timing (of lines), height, strips, swath and stats.
+engine, hold (held pulses), timing (of lines), height, strips, swath, link (silences), stats.
 """
 
 from __future__ import annotations
@@ -98,10 +98,10 @@ class PipelineSettings:
 class Pipeline:
     """Run ``source`` through the engine and hand strips to ``sinks`` (publishers, recorders).
 
-    A sink implements rtsar.stream.strips.StripSink (``strip``, ``height``, ``stats``, ``end``;
-    each receives the run's StreamInfo, never the pipeline).  ``run()`` blocks until the source
-    ends or ``stop()``; Ctrl-C in ``run()`` stops the source, drains the pipeline and flushes the
-    CCD, so every pulse that arrived is focused and published.
+    A sink implements rtsar.stream.strips.StripSink (``strip``, ``height``, ``stats``, ``end``,
+    and ``pulses`` for a raw recorder; each receives the run's StreamInfo, never the pipeline).
+    ``run()`` blocks until the source ends or ``stop()``; Ctrl-C in ``run()`` stops the source,
+    drains the pipeline and flushes the CCD, so every pulse that arrived is focused and published.
     """
 
     def __init__(

@@ -121,13 +121,18 @@ def test_no_input_is_overwritten_and_earlier_images_are_not_inputs(recordings, t
     assert batch_cli.find_recordings([str(mix)])[0] == [(mix / "r1.h5").resolve()]
 
 
-def _die_and_count(counter: str):
-    """A task whose worker dies: it notes the attempt in ``counter``, then ends the process."""
+def _die_and_count(counter: str, output: str):
+    """A task whose worker dies: it notes the attempt in ``counter``, starts writing ``output``
+    as process does (its temporary beside it), then ends the process."""
     import os
+
+    from rtsar.sinks.io import replace_when_complete
 
     with open(counter, "a") as f:
         f.write("x")
-    os._exit(3)
+    with replace_when_complete(output) as tmp:
+        tmp.write_bytes(bytes(1 << 20))
+        os._exit(3)
 
 
 def test_a_dead_workers_row_says_how_it_ended_and_a_raised_error_is_carried(tmp_path):
@@ -144,7 +149,7 @@ def test_a_dead_workers_row_says_how_it_ended_and_a_raised_error_is_carried(tmp_
 
     def task(options, recording, output):
         if recording.endswith("dies.h5"):
-            return _die_and_count(str(counter))
+            return _die_and_count(str(counter), output)
         raise MemoryError("disk or memory full: 28")
 
     with open(os.devnull, "w") as quiet:
@@ -154,6 +159,9 @@ def test_a_dead_workers_row_says_how_it_ended_and_a_raised_error_is_carried(tmp_
     assert "exited with status 3" in results[0].message
     assert results[1].message.startswith("MemoryError: disk or memory full: 28")
     assert counter.read_text() == "xx"
+    # Issue 29: the dead workers' temporaries (and name claims) stayed in the out-dir (40 MB
+    # in one run); the batch removes them once its cluster is closed.
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []
 
 
 def _signal_soon(marker=None, delay_s=0.0):

@@ -278,7 +278,8 @@ def test_temporaries_left_by_killed_runs_are_removed_and_live_ones_kept(tmp_path
     its PIDs mean nothing here)."""
     from rtsar.presets import preset as named_preset
     from rtsar.sinks.image_file import ImageWriter
-    from rtsar.sinks.io import _owner_of_pid, partial_prefix, replace_when_complete
+    from rtsar.sinks.io import replace_when_complete
+    from rtsar.sinks.partials import _owner_of_pid, partial_prefix
 
     gone = subprocess.Popen([sys.executable, "-c", "pass"])
     gone.wait(30)  # its pid names no running process now
@@ -377,7 +378,7 @@ def test_a_reader_following_the_live_file_does_not_stop_its_final_attributes(tmp
     path = tmp_path / "img.h5"
     w = ImageWriter(path, cfg, np.arange(nr, dtype=float), crash_safe=True)
     w.write(np.ones((32, nr), np.complex64), np.arange(32) * 0.5)
-    w._flush()
+    w.flush()
     follow = (
         "import sys, h5py\n"
         "f = h5py.File(sys.argv[1], 'r', swmr=True)\n"
@@ -514,7 +515,7 @@ def test_strips_go_to_the_file_a_chunk_at_a_time_and_all_by_each_flush(tmp_path)
     w.write(*strip(4))
     assert w.lines == 80  # a chunk's worth went in one write
     w.write(*strip(5))
-    w._flush()  # what a flush_if_due does when due, or the owner when the stream is idle
+    w.flush()  # what a flush_if_due does when due, or the owner when the stream is idle
     assert w.lines == 96 and read_image(path)[0].shape[0] == 96
     w.write(*strip(6))
     w.close()

@@ -177,3 +177,52 @@ def test_a_held_candidate_at_the_end_of_a_stream_is_kept():
     blocks += ing.flush()
     assert sum(len(b) for b in blocks) == 2 + 4 + 1 and ing.counters["discontinuities"] == 1
     assert accounted(ing)
+
+
+def timed(seq, t0_s):
+    """A batch whose instrument clock goes on from ``t0_s`` whatever the numbers say."""
+    seq = np.asarray(seq, np.int64)
+    t = t0_s + np.arange(len(seq)) * 1e-3
+    samples = (seq[:, None] + 1 + np.zeros((1, S))).astype(np.complex64)
+    return ShotBatch(seq, t, t + 10.0, samples)
+
+
+def test_a_counter_reset_within_the_remembered_shots_is_a_restart_not_duplicates():
+    """Issue 29: a counter reset to a number within the last 4N shots dropped the new shots as
+    duplicates, without a restart (a step back of 100 dropped 100 shots).  Their clock says they
+    are new shots: the first is a restart candidate, confirmed by the next, and every shot of
+    the new run is kept."""
+    n = 16
+    ing = Ingest(S, aperture_pulses=n, max_gap_pulses=n)  # remembers 4N = 64 shots
+    before = timed(range(0, 200), 0.0)
+    after = timed(range(100, 160), 0.2)  # a step back of 100, the clock going on
+    x, f = stream(ing, [before, after])
+    c = ing.counters
+    assert c["discontinuities"] == 1 and c["duplicates"] == 0 and c["stray_pulses"] == 0
+    assert len(x) == 200 + n + 60  # every shot, N zero pulses between the two runs
+    np.testing.assert_array_equal(x[-60:, 0].real, np.arange(101, 161))
+    assert accounted(ing)
+    # A step back of a single shot (a reset to the last number) too.
+    ing = Ingest(S, aperture_pulses=n, max_gap_pulses=n)
+    x, _ = stream(ing, [timed(range(0, 50), 0.0), timed(range(49, 60), 0.05)])
+    assert ing.counters["discontinuities"] == 1 and ing.counters["duplicates"] == 0
+    assert len(x) == 50 + n + 11 and accounted(ing)
+
+
+def test_repeated_shots_are_still_duplicates_and_a_clockless_stream_keeps_the_old_rule():
+    """A repeat carries its original's time (not newer): dropped as before, even a burst of
+    repeats that goes on counting; without a clock (NaN times) a step back reads as repeats."""
+    n = 16
+    ing = Ingest(S, aperture_pulses=n, max_gap_pulses=n)
+    first = batch(range(0, 100))
+    repeat = batch(range(90, 100))  # the last ten again, their own times
+    x, _ = stream(ing, [first, repeat, batch(range(100, 110))])
+    c = ing.counters
+    assert c["duplicates"] == 10 and c["discontinuities"] == 0 and len(x) == 110
+    ing = Ingest(S, aperture_pulses=n, max_gap_pulses=n)
+    clockless = [
+        ShotBatch(b.seq, np.full(len(b), np.nan), b.arrival_s, b.samples)
+        for b in (timed(range(0, 100), 0.0), timed(range(90, 100), 0.1))
+    ]
+    stream(ing, clockless)
+    assert ing.counters["duplicates"] == 10 and ing.counters["discontinuities"] == 0

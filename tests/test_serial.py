@@ -275,3 +275,46 @@ def test_serial_run_of_a_scene_keeps_its_along_track_positions(tmp_path):
     want, want_az, _, _ = read_image(ref_img)
     np.testing.assert_allclose(az, want_az)
     np.testing.assert_array_equal(got, want)
+
+
+def _false_header(samples: int, channels: int) -> bytes:
+    """A CRC-valid frame header with no payload behind it (what a bit pattern in the data can
+    be, one time in 2**32)."""
+    import struct
+    import zlib
+
+    header = struct.pack("<BBHIQQ", 1, 1, channels, samples, 7, 0)
+    return b"\x1a\xcf\xfc\x1d" + header + struct.pack("<I", zlib.crc32(header))
+
+
+@pytest.mark.parametrize("channel_map", [None, "main,rx1"])
+def test_a_false_header_claiming_64_channels_holds_no_true_frame(channel_map):
+    """Issue 29: the source's parser took frames of up to 64 channels, so a CRC-valid false
+    header claiming 64 held up to 63 true frames behind it (a 12 s stall at 5 Hz).  The
+    configured frame (its samples, exactly the channels the shot takes) is the only shape
+    accepted: the header is refused at once and the frames behind it come out in the same
+    call; the parser never holds more than one configured frame."""
+    from rtsar.sources.channel_map import ChannelMap
+    from rtsar.sources.frame import frame_bytes
+
+    cmap = None if channel_map is None else ChannelMap.parse(channel_map)
+    width = 1 if cmap is None else cmap.frame_channels
+    src = SerialSource("loop://", 16, idle_timeout_s=0.1, channel_map=cmap)
+    said = []
+    src.notify = said.append
+    shots = [encode_frame(k, k, np.full((width, 16), k, np.complex64)) for k in range(6)]
+    got = src.parser.feed(shots[0] + _false_header(16, 64) + b"".join(shots[1:]))
+    assert [f.sequence for f in got] == list(range(6))
+    assert src.parser.counters["wrong_length"] == 1
+    assert src.parser.buffered == 0
+    # Fed byte by byte, nothing beyond one configured frame is ever held.
+    held = 0
+    for byte in _false_header(16, 64) + b"".join(shots):
+        src.parser.feed(bytes([byte]))
+        held = max(held, src.parser.buffered)
+    assert held < frame_bytes(16, width)
+    # A frame with more channels than the shot takes is another shape too, said once.
+    src.port.write(encode_frame(9, 0, np.ones((width + 1, 16), np.complex64)) * 2)
+    list(src)
+    assert src.counters["wrong_length"] == 4
+    assert len(said) == 1 and f"{width + 1} channels x 16 samples refused" in said[0]

@@ -126,7 +126,7 @@ def test_workers_elsewhere_connect_to_the_bound_port(tiny):
 
 def _fake_worker(results_ep, shots_ep, behaviour):
     ctx = zmq.Context.instance()
-    pull, push = ctx.socket(zmq.PULL), ctx.socket(zmq.PUSH)
+    pull, push = ctx.socket(zmq.PAIR), ctx.socket(zmq.PUSH)
     pull.setsockopt(zmq.RCVHWM, 1)
     pull.connect(shots_ep)
     push.connect(results_ep)
@@ -200,7 +200,7 @@ def test_bind_problems_are_one_line_errors():
 def _echo_worker(results_ep, shots_ep, columns, stop):
     """A worker that answers every block with zero lines, blocking when its results back up."""
     ctx = zmq.Context.instance()
-    pull, push = ctx.socket(zmq.PULL), ctx.socket(zmq.PUSH)
+    pull, push = ctx.socket(zmq.PAIR), ctx.socket(zmq.PUSH)
     for s, opt in ((pull, zmq.RCVHWM), (push, zmq.SNDHWM)):
         s.setsockopt(opt, 1)
     pull.connect(shots_ep)
@@ -270,7 +270,7 @@ def test_a_consumer_waiting_downstream_is_not_a_stalled_worker(rng):
 def _coordinator_sockets():
     """A coordinator's two sockets, bound by hand: (ctx, push to the worker, pull, endpoints)."""
     ctx = zmq.Context.instance()
-    push, pull = ctx.socket(zmq.PUSH), ctx.socket(zmq.PULL)
+    push, pull = ctx.socket(zmq.PAIR), ctx.socket(zmq.PULL)
     for s in (push, pull):
         s.setsockopt(zmq.LINGER, 0)
     shots_ep = f"tcp://127.0.0.1:{push.bind_to_random_port('tcp://127.0.0.1')}"
@@ -293,6 +293,7 @@ def _serving(shots_ep, results_ep, timeout_s, index=0):
 def _setup(push, pull, cfg, columns=(0, 4)):
     setup = {"config": cfg.to_dict(), "lens_backend": "numpy", "device": None}
     push.send_multipart([b"setup", json.dumps({**setup, "columns": list(columns)}).encode()])
+    assert pull.poll(60_000) and pull.recv_multipart()[0] == b"hello"  # it has started
     assert pull.poll(60_000) and pull.recv_multipart()[0] == b"ready"
 
 
@@ -321,13 +322,14 @@ import numpy as np, zmq
 from rtsar.presets import preset
 cfg = preset("tiny").with_processor(correlator="direct")
 ctx = zmq.Context()
-push, pull = ctx.socket(zmq.PUSH), ctx.socket(zmq.PULL)
+push, pull = ctx.socket(zmq.PAIR), ctx.socket(zmq.PULL)
 push.setsockopt(zmq.SNDHWM, 8)
 pull.setsockopt(zmq.RCVHWM, 1)
 push.bind(sys.argv[1])
 pull.bind(sys.argv[2])
 setup = {"config": cfg.to_dict(), "lens_backend": "numpy", "device": None}
 push.send_multipart([b"setup", json.dumps({**setup, "columns": [0, 64]}).encode()])
+assert pull.recv_multipart()[0] == b"hello"
 assert pull.recv_multipart()[0] == b"ready"
 shot = np.ones((1, cfg.waveform.samples_per_shot), np.complex64).tobytes()
 sent, t0 = 0, time.time()
@@ -503,3 +505,75 @@ def test_a_pipeline_that_fails_stops_its_remote_workers_with_the_reason(tiny):
         t.join(10)
         assert not t.is_alive() and box["rc"] == 1
         assert "stopped the run (the disk went away)" in said[0]
+
+
+def test_a_malformed_or_foreign_results_message_is_refused_and_the_run_goes_on(tiny):
+    """Issue 29: one malformed message on the results port stopped the run ("'utf-8' codec
+    can't decode byte 0xff").  Every message is checked before it is obeyed: a bad one is
+    refused in one line, counted, and the image is the one-process image."""
+    cfg, shots = tiny
+    bind = f"tcp://127.0.0.1:{_free_port()}"
+    threads = _threads(bind, 2)
+    said = []
+    seq = np.arange(len(shots))
+    src = ReplaySource(shots, seq, seq / cfg.geometry.prf_hz, cfg.geometry.prf_hz, "max", 16)
+    sink = Collect()
+    settings = PipelineSettings(
+        lens_backend="numpy", swath_workers=2, swath_spawn=False, swath_bind=bind
+    )
+    pipe = Pipeline(cfg, src, [sink], settings, notify=said.append)
+    rogue = zmq.Context.instance().socket(zmq.PUSH)
+    rogue.connect(pipe.swath.results_endpoint)
+    head = json.dumps({"index": 0, "first_line": 0, "count": 1}).encode()
+    for frames in (
+        [b"\xff\xfe garbage"],  # no kind at all
+        [b"lines", b"\xff{", b"x"],  # a header that is not UTF-8 JSON
+        [b"lines", json.dumps({"index": 7, "first_line": 0, "count": 1}).encode(), b"x"],
+        [b"lines", head, b"short"],  # lines of worker 0, but not one line's bytes
+        [b"ready", json.dumps({"index": 1}).encode()],  # worker 1 is set up already
+        [b"done"],  # parts missing
+    ):
+        rogue.send_multipart(frames)
+    pipe.run()
+    rogue.close(0)
+    for t in threads:
+        t.join(5)
+    got = sink.image()
+    one = _run(cfg, shots)
+    assert np.abs(got - one).max() <= 1e-6 * np.abs(one).max()
+    assert pipe.counters()["swath_refused_messages"] == 6
+    assert len(said) == 5 and all("refused" in m and "goes on" in m for m in said)
+    assert "no more of these are told" in said[-1]
+
+
+def test_two_workers_with_one_index_the_second_is_refused_and_the_run_goes_on(tiny):
+    """Issue 29: two workers started with one --index shared its pulses (PUSH sends each
+    block to one of them), and the one without a setup failed the run ("cannot access local
+    variable 'shape'").  A worker's pulse socket takes one worker now: the second gets
+    nothing, its hello is refused in one line, and the image is the one-process image."""
+    cfg, shots = tiny
+    bind = f"tcp://127.0.0.1:{_free_port()}"
+    threads = _threads(bind, 2)
+    said = []
+    seq = np.arange(len(shots))
+    src = ReplaySource(shots, seq, seq / cfg.geometry.prf_hz, cfg.geometry.prf_hz, 8.0, 16)
+    sink = Collect()
+    settings = PipelineSettings(
+        lens_backend="numpy", swath_workers=2, swath_spawn=False, swath_bind=bind
+    )
+    pipe = Pipeline(cfg, src, [sink], settings, notify=said.append)
+    # A second worker 0 (its parent taken for gone: it stops waiting for a setup after 1 s).
+    twin_said = []
+    twin = threading.Thread(
+        target=serve, args=(*worker_endpoints(bind, 0), 0, twin_said.append, -1), daemon=True
+    )
+    twin.start()
+    pipe.run()
+    twin.join(10)
+    for t in threads:
+        t.join(5)
+    got = sink.image()
+    one = _run(cfg, shots)
+    assert np.abs(got - one).max() <= 1e-6 * np.abs(one).max()
+    assert pipe.counters()["swath_refused_messages"] == 1
+    assert len(said) == 1 and "a second 'hello' of worker 0" in said[0]

@@ -9,7 +9,9 @@ Failures are per file.  A file that ``process`` refuses (a malformed recording, 
 channel, an unwritable output) is reported with its one-line reason and not retried: the same
 input fails the same way.  A task whose worker died (killed, out of memory) is retried up to
 ``--retries`` times (on a LocalCluster; a ``--scheduler`` keeps its own allowed-failures), then
-reported as failed with how the worker ended, where the cluster's nannies said so.
+reported as failed with how the worker ended, where the cluster's nannies said so.  The
+temporary a dead or stopped worker left beside its output (rtsar.sinks.partials) is removed
+once the cluster is closed.
 
 A signal (Ctrl-C, SIGTERM, SIGHUP) at any moment of a batch is only noted (:class:`StopSignal`):
 the batch stops submitting, closes its cluster within :data:`CLOSE_TIMEOUT_S` and returns every
@@ -34,6 +36,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..sinks.partials import remove_stale_partials
 from . import signals
 from .cli import files
 from .progress import Progress
@@ -328,6 +331,8 @@ def run_batch(
                         _bounded(lambda: client.cancel(list(run.futures)), 5.0)
             finally:
                 _bounded(lambda: _close(client, cluster), CLOSE_TIMEOUT_S)
+    for output in outputs:  # a worker that died (or was stopped) left its temporary there
+        remove_stale_partials(output)
     return [
         r or _unfinished(recordings[i], outputs[i], started, i in submitted)
         for i, r in enumerate(results)

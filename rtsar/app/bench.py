@@ -25,6 +25,7 @@ from ..lens.plan import make_plan
 from ..presets import preset
 from ..sinks.io import check_writable, replace_when_complete
 from .bench_pipeline import bench_pipeline
+from .bench_record import bench_recording, recording_lines
 
 
 def bench_lens(
@@ -156,6 +157,12 @@ def add_arguments(parser) -> None:
         "swings, one run of each says little (default 1; R times the pipeline part's time)",
     )
     parser.add_argument("--device", help="OpenCL platform/device name substring")
+    parser.add_argument(
+        "--record-dir",
+        metavar="DIR",
+        help="where the raw recording row writes (a temporary folder in DIR, removed after; "
+        "default: the current folder, the disk `run --record` would write to)",
+    )
 
 
 def _num(value, width: int, fmt: str) -> str:
@@ -256,6 +263,12 @@ def run_bench(args) -> int:
                 repeats=args.repeats,
             )
         )
+    rec_name = getattr(args, "preset", None) or "psaltis-max"
+    recording = bench_recording(
+        preset(rec_name), getattr(args, "record_dir", None), seconds=max(2.0, 2 * seconds)
+    )
+    for line in recording_lines(rec_name, recording):
+        print(line, file=out, flush=True)
     if args.json:
         with replace_when_complete(args.json) as tmp, open(tmp, "w") as f:
             json.dump(
@@ -265,6 +278,7 @@ def run_bench(args) -> int:
                     "lens": lens_rows,
                     "correlator": corr_rows,
                     "pipeline": pipeline_rows,
+                    "recording": recording,
                 },
                 f,
                 indent=2,

@@ -14,12 +14,11 @@ from ..focus.chain import correct_option
 from ..lens.base import survey_devices_first
 from ..params import Config
 from ..scene.effects import REGISTRY as EFFECTS
-from ..sinks.io import check_writable
 from ..sinks.publish import STALL_TIMEOUT_S, ZmqPublisher
-from ..sinks.record import ImageFileSink
 from ..sources.channel_map import ChannelMap
 from ..stream.pipeline import Pipeline, PipelineSettings
 from . import signals
+from .live_outputs import LiveOutputs
 
 # Counters that describe normal work; every other counter that is not zero is shown, so nothing
 # that went wrong is hidden from the status line.
@@ -33,6 +32,7 @@ _NORMAL = {
     "frames_ok",
     "bytes_fed",
     "messages",  # GNU Radio messages received (rtsar.sources.zmq_in)
+    "record_written",
 }
 _NORMAL_SUFFIXES = (
     ".pulses_in",
@@ -64,8 +64,11 @@ _LABELS = {
     "reconnects": "reconnected",
     "late_releases": "late releases",
     "subscriber_stalls": "stalled subscribers cut off",
-    "messages_missed_by_stalled": "messages missed by them",
+    "messages_missed_by_stalled": "messages they may have missed",
     "flagged_lines": "flagged lines",
+    "link_silences": "link silences",
+    "record_dropped": "not recorded",
+    "swath_refused_messages": "refused swath messages",
 }
 
 
@@ -116,8 +119,19 @@ def problems(counters: dict) -> list[str]:
     for key, value in counters.items():
         if not value or key in _NORMAL or key.endswith(_NORMAL_SUFFIXES):
             continue
-        out.append(f"{_LABELS.get(key, key)} {value}")
+        if key == "link_silent_ms":
+            out.append(f"link silent {value / 1e3:.1f} s in all")
+        else:
+            out.append(f"{_LABELS.get(key, key)} {value}")
     return out
+
+
+def link_words(state: dict) -> str:
+    """A silence being told (rtsar.stream.link.LinkWatch.state) in words."""
+    since = state["since_pulse"]
+    return f"link silent for {state['silent_s']:.1f} s since " + (
+        "the start (no pulse yet)" if since is None else f"pulse {since}"
+    )
 
 
 def format_status(d: dict, total: int | None = None) -> str:
@@ -131,6 +145,9 @@ def format_status(d: dict, total: int | None = None) -> str:
         if math.isfinite(median)
         else "latency: no strip yet"
     )
+    link = d.get("link")
+    if link:  # said first: the rates and counters below are stale while nothing comes
+        bad.insert(0, link_words(link).upper())
     return (
         f"t={d['elapsed_s']:6.1f} s  pulses {done}{progress}  {d['pulse_rate_hz']:8.0f} Hz  "
         f"lines {c.get('lines_out', 0)}  strips {c.get('strips_published', 0)}  {latency}  "
@@ -259,13 +276,19 @@ def run_stream(
     expected_rate_hz: float | None = None,
     height=None,
     channel_fix=None,
+    record: str | None = None,
+    scene: dict | None = None,
+    link_timeout_s: float | None = None,
 ) -> int:
     """Run until the source ends, Ctrl-C or a signal; print status lines and a summary.
 
     Exit status: 0 when the stream ended cleanly, 1 when the source failed (an instrument link
-    lost for good) or nothing could be written to ``output``, 128 + the signal number when
-    interrupted (130 for Ctrl-C).  ``expected_rate_hz``: the rate the source should deliver (a
-    simulation's PRF, a paced replay's): a stream processed slower is warned about.
+    lost for good, silent for ``link_timeout_s``) or nothing could be written to ``output`` or
+    ``record``, 2 when the disk refused the recording, 128 + the signal number when
+    interrupted (130 for Ctrl-C).  ``record``: the raw shots' file (rtsar.sinks.raw_record;
+    ``scene``, the scene's dict, goes into it).  ``expected_rate_hz``: the rate the source
+    should deliver (a simulation's PRF, a paced replay's): a stream processed slower is warned
+    about.
     ``channel_fix(missing)``: how to give the source the auxiliary channels a stage reads and it
     lacks (check_source_channels, before anything starts).
     """
@@ -283,21 +306,23 @@ def run_stream(
 
     tty = hasattr(stream, "isatty") and stream.isatty()
     source.notify = say
-    if output:
-        check_writable(output)  # before anything starts, not at the stream's first strip
-    publisher = ZmqPublisher(
-        endpoint,
-        delivery,
-        curve_secret_key=curve_secret_key,
-        warn=lambda message: print(message, file=err),
-        stall_timeout_s=stall_timeout_s,
-        curve_clients=curve_clients,
+    # The files first: a name another process writes is refused before a socket is bound.
+    files = LiveOutputs(
+        config, source.description, output, record, start_along_track_m, scene, notify=say
     )
-    sinks: list = [publisher]
-    recorder = None
-    if output:
-        recorder = ImageFileSink(output, source.description)
-        sinks.append(recorder)
+    try:
+        publisher = ZmqPublisher(
+            endpoint,
+            delivery,
+            curve_secret_key=curve_secret_key,
+            warn=lambda message: print(message, file=err),
+            stall_timeout_s=stall_timeout_s,
+            curve_clients=curve_clients,
+        )
+    except BaseException:
+        files.release()
+        raise
+    sinks: list = [publisher, *files.sinks]
     last = [0.0]
 
     watch = None if expected_rate_hz is None else RateWatch(expected_rate_hz, say)
@@ -344,6 +369,8 @@ def run_stream(
             corrections=corrections,
             physical=physical,
             height=height,
+            notify=say,
+            link_timeout_s=link_timeout_s,
         )
         n = config.processor
         print(
@@ -386,8 +413,7 @@ def run_stream(
         return signals.exit_status(exc)
     finally:
         publisher.close()
-        if recorder is not None:  # (a run that never started: its claim on the name goes)
-            recorder.recorder.release_claim()
+        files.release()  # (a run that never started: its claims on the names go)
     if tty:
         stream.write("\n")
     d = stats.as_dict()
@@ -407,24 +433,16 @@ def run_stream(
     bad = problems(c)
     if bad:
         print("counted: " + ", ".join(bad), file=stream)
-    status = 0
-    if recorder is not None:
-        if recorder.lines:
-            print(f"wrote {output}: {recorder.lines} lines", file=stream)
-        else:
-            print(
-                f"rtsar: no image written to {output}: no line was focused"
-                + (
-                    f" ({c['wrong_length']} frames of another shape than the configuration's "
-                    f"{config.waveform.samples_per_shot} samples per shot (and the channel map's "
-                    "channels): check --preset/--scene/--channel-map)"
-                    if c.get("wrong_length")
-                    else ""
-                ),
-                file=err,
-            )
-            status = 1
-    if source.failure:
-        print(f"rtsar: the stream did not end cleanly: {source.failure}", file=err)
-        status = 1
+    silent = pipe.link.state() if pipe.link is not None else None
+    if silent:  # the stream ended in a silence that had been told
+        why = getattr(source, "stop_reason", "")
+        print(
+            f"{link_words(silent)} when the stream ended" + (f" ({why})" if why else ""),
+            file=stream,
+        )
+    status = files.report(c, config, stream, err)
+    failure = source.failure or (pipe.link.failure if pipe.link is not None else None)
+    if failure:
+        print(f"rtsar: the stream did not end cleanly: {failure}", file=err)
+        status = max(status, 1)
     return signals.exit_status(interrupted) if interrupted is not None else status

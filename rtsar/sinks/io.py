@@ -18,10 +18,8 @@ Complex values are HDF5 compounds of two floats named r and i (h5py's convention
 from __future__ import annotations
 
 import datetime
-import glob
 import json
 import os
-import socket
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -37,6 +35,8 @@ from ..scene.model import Scene, recorded_scene
 from ..sources.formats.foreign import telemetry_problem
 from ..sources.formats.timebase import format_utc, parse_utc, utc_now
 from .h5_output import H5Output, WriteFailed, is_write_error, reason
+from .name_claim import NameClaim
+from .partials import partial_prefix
 
 RECORDING_FORMAT = "rtsar-recording"
 IMAGE_FORMAT = "rtsar-image"
@@ -57,55 +57,6 @@ def check_writable(path: str | Path) -> None:
         raise ValueError(f"cannot write {path}: permission denied")
 
 
-def partial_prefix(path: Path) -> str:
-    """Start of the hidden temporary name of an output of ``path`` written by this process:
-    ``.NAME.partial-OWNER-`` with OWNER = HOST@NS.PID, the host, the PID namespace and the
-    process (what tells :func:`remove_stale_partials` whose it is; no host name holds "@")."""
-    return f".{path.name}.partial-{_owner_of_pid(os.getpid())}-"
-
-
-def remove_stale_partials(path: str | Path) -> list[Path]:
-    """Delete the temporary files of ``path`` left by writers that are no longer running (a
-    SIGKILL, a power cut): those of this host and PID namespace whose process has ended;
-    returns them.  Another host's (a shared folder), another container's (another PID
-    namespace) and a running process's are kept: they may still become the file."""
-    path = Path(path)
-    start = f".{path.name}.partial-{_owner_of_pid(None)}"
-    removed = []
-    for stale in path.parent.glob(glob.escape(start) + "*"):
-        pid = stale.name[len(start) :].split("-", 1)[0]
-        if pid.isdigit() and not _running(int(pid)):
-            try:
-                stale.unlink()
-            except FileNotFoundError:  # another run removed it first
-                continue
-            except OSError:  # not ours to delete: left as it was
-                continue
-            removed.append(stale)
-    return removed
-
-
-def _owner_of_pid(pid: int | None) -> str:
-    """HOST@NS.PID (HOST@NS. for None): NS is this process's PID namespace (0 where unknown),
-    so that a process of another container with the same host name never reads our PIDs."""
-    host = socket.gethostname().replace("/", "_").replace("@", "_") or "host"
-    try:
-        ns = os.stat("/proc/self/ns/pid").st_ino
-    except OSError:
-        ns = 0
-    return f"{host}@{ns}." + ("" if pid is None else str(pid))
-
-
-def _running(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # another user's process
-        return True
-    return True
-
-
 @contextmanager
 def replace_when_complete(path: str | Path) -> Iterator[Path]:
     """Write to a temporary file beside ``path``, renamed to ``path`` only when the block ends
@@ -116,16 +67,19 @@ def replace_when_complete(path: str | Path) -> Iterator[Path]:
 
     The temporary file is created at once: an unwritable destination is reported before any
     work is done.  Temporaries of ``path`` that killed runs left are removed first
-    (:func:`remove_stale_partials`).
+    (rtsar.sinks.partials.remove_stale_partials).  The name is claimed for the whole write
+    (rtsar.sinks.name_claim): a name a live writer holds is refused (ValueError), and a live
+    writer starting meanwhile is refused it, so neither replaces the other's file.
     """
     path = Path(path)
-    remove_stale_partials(path)
+    claim = NameClaim(path)  # (removes the stale temporaries)
     try:
         # The suffix kept: writers that go by it (matplotlib's savefig) see the right kind.
         fd, name = tempfile.mkstemp(
             prefix=partial_prefix(path), suffix=path.suffix, dir=path.parent
         )
     except OSError as exc:
+        claim.release()
         raise ValueError(f"cannot write {path}: {exc.strerror or exc}") from None
     os.close(fd)
     tmp = Path(name)
@@ -145,6 +99,8 @@ def replace_when_complete(path: str | Path) -> Iterator[Path]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    finally:
+        claim.release()
 
 
 def write_text_when_complete(path: str | Path, text: str) -> None:
@@ -157,6 +113,24 @@ def _umask() -> int:
     mask = os.umask(0o022)
     os.umask(mask)
     return mask
+
+
+def describe_channels(config: Config, widths: dict[str, int]) -> str:
+    """The ``channels`` attribute of a recording: JSON list of {name, samples_per_shot,
+    sample_rate_hz, dtype} of each auxiliary channel (``widths``: name → samples per shot)."""
+    wf = config.waveform
+    return json.dumps(
+        [
+            {
+                "name": name,
+                "samples_per_shot": int(width),
+                # every channel spans the shot's sweep: its rate scales with its length
+                "sample_rate_hz": wf.sample_rate_hz * width / wf.samples_per_shot,
+                "dtype": "complex64",
+            }
+            for name, width in sorted(widths.items())
+        ]
+    )
 
 
 class RecordingWriter:
@@ -221,24 +195,14 @@ class RecordingWriter:
         return sorted(self._channels or {})
 
     def _make_channels(self, aux: dict) -> None:
-        wf = self._config.waveform
-        self._channels, described = {}, []
+        self._channels = {}
         group = self._f.create_group("channels")
-        for name in sorted(aux):
-            width = np.asarray(aux[name]).shape[-1]
+        widths = {name: np.asarray(aux[name]).shape[-1] for name in sorted(aux)}
+        for name, width in widths.items():
             self._channels[name] = group.create_dataset(
                 name, (0, width), np.complex64, maxshape=(None, width), chunks=(self._chunk, width)
             )
-            described.append(
-                {
-                    "name": name,
-                    "samples_per_shot": int(width),
-                    # every channel spans the shot's sweep: its rate scales with its length
-                    "sample_rate_hz": wf.sample_rate_hz * width / wf.samples_per_shot,
-                    "dtype": "complex64",
-                }
-            )
-        self._f.attrs["channels"] = json.dumps(described)
+        self._f.attrs["channels"] = describe_channels(self._config, widths)
 
     def write(
         self, samples: np.ndarray, pulse_index, time_s, along_track_m, aux: dict | None = None
@@ -318,6 +282,11 @@ class Recording:
     collection_start: datetime.datetime | None = None  # UTC of time_s = 0 (None: not kept)
 
     @property
+    def attrs(self) -> dict:
+        """The file's attributes (a live recording's: complete, record_dropped, …)."""
+        return dict(self._file.attrs)
+
+    @property
     def position_m(self) -> np.ndarray | None:
         """Per-pulse platform position [pulse, (x, y, z)] in metres; None where not recorded."""
         return self._file["position_m"][...] if "position_m" in self._file else None
@@ -325,7 +294,8 @@ class Recording:
     @property
     def shots(self):
         """The shots dataset [pulse, sample] (read lazily, block by block)."""
-        return self._file["shots"]
+        shots = self._file["shots"]
+        return shots if shots.shape[0] == self.pulses else Rows(shots, self.pulses)
 
     def batches(self, size: int) -> Iterator[np.ndarray]:
         """Shots in blocks of ``size`` pulses (the last block may be shorter)."""
@@ -419,20 +389,18 @@ def open_recording(path: str | Path) -> Recording:
                 f"shots hold {samples} samples per shot; the configuration's waveform has "
                 f"{cfg.waveform.samples_per_shot}"
             )
-        meta = {
-            name: _dataset(f, name, 1, kind)[...]
-            for name, kind in (
-                ("pulse_index", "int"),
-                ("time_s", "float"),
-                ("along_track_m", "float"),
-            )
-        }
+        names = (("pulse_index", "int"), ("time_s", "float"), ("along_track_m", "float"))
+        meta = {name: _dataset(f, name, 1, kind) for name, kind in names}
+        cut_short = not f.attrs.get("complete", True)  # a live recording cut short, or growing
+        if cut_short:
+            pulses = _whole_rows(f, meta)
+        meta = {name: ds[:pulses] for name, ds in meta.items()}
         for name, values in meta.items():
             if len(values) != pulses:
                 raise ValueError(f"{name} has {len(values)} entries for {pulses} shots")
             if not np.isfinite(values).all():
                 raise ValueError(f"{name} holds non-finite values")
-        channels = _channels(f, pulses)
+        channels = _channels(f, pulses, cut_short)
         if "position_m" in f:
             pos = _dataset(f, "position_m", 2, "float")
             if pos.shape != (pulses, 3):
@@ -460,8 +428,23 @@ def open_recording(path: str | Path) -> Recording:
     )
 
 
-def _channels(f: h5py.File, pulses: int) -> dict:
-    """The auxiliary channel datasets of a version 2 recording, checked against ``channels``."""
+def _whole_rows(f: h5py.File, meta: dict) -> int:
+    """The rows of a live recording (rtsar.sinks.raw_record) written whole: its writer killed
+    (or still writing) may have grown some datasets further than others, and rows it had not
+    finished read as zeros; ``pulse_index``, written last and counting 0, 1, 2, … there,
+    says which rows are complete."""
+    group = f.get("channels")
+    datasets = [f["shots"], *meta.values()]
+    datasets += list(group.values()) if isinstance(group, h5py.Group) else []
+    rows = min(d.shape[0] for d in datasets)
+    index = meta["pulse_index"][:rows]
+    wrong = np.flatnonzero(index != index[0] + np.arange(rows)) if rows else []
+    return int(wrong[0]) if len(wrong) else rows
+
+
+def _channels(f: h5py.File, pulses: int, cut_short: bool = False) -> dict:
+    """The auxiliary channel datasets of a version 2 recording, checked against ``channels``
+    (``cut_short``: a live recording's, possibly longer than its whole rows)."""
     described = json.loads(f.attrs["channels"]) if "channels" in f.attrs else []
     if not isinstance(described, list) or not all(
         isinstance(c, dict) and isinstance(c.get("name"), str) for c in described
@@ -475,7 +458,33 @@ def _channels(f: h5py.File, pulses: int) -> dict:
     out = {}
     for name in names:
         ds = _dataset(group, name, 2, "complex")
-        if ds.shape[0] != pulses:
+        if ds.shape[0] != pulses and not (cut_short and ds.shape[0] > pulses):
             raise ValueError(f"channel {name!r} has {ds.shape[0]} shots for {pulses}")
-        out[name] = ds
+        out[name] = ds if ds.shape[0] == pulses else Rows(ds, pulses)
     return out
+
+
+class Rows:
+    """The first ``rows`` rows of a dataset, read like it (slices, ``[...]``): the datasets of a
+    live recording cut short that grew beyond its whole rows."""
+
+    def __init__(self, ds, rows: int):
+        self._ds = ds
+        self.shape = (int(rows), *ds.shape[1:])
+        self.dtype = ds.dtype
+        self.ndim = ds.ndim
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __getitem__(self, key):
+        first, rest = (key[0], key[1:]) if isinstance(key, tuple) else (key, ())
+        if first is Ellipsis:
+            first, rest = slice(None), ((Ellipsis,) if rest else ())
+        if isinstance(first, slice):
+            first = slice(*first.indices(len(self)))
+        elif not -len(self) <= int(first) < len(self):
+            raise IndexError(f"row {first} of {len(self)}")
+        else:
+            first = int(first) % len(self)
+        return self._ds[(first, *rest)]

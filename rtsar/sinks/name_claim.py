@@ -3,7 +3,7 @@
 A live image file takes its name with its first lines and grows under it; two live writers of
 one name would each rename their file over the other's, and one run's lines would end in no
 file.  The claim is an empty hidden file beside the output, named like the writer's temporaries
-(rtsar.sinks.io.partial_prefix), under an exclusive ``flock`` that the system drops when the
+(rtsar.sinks.partials.partial_prefix), under an exclusive ``flock`` that the system drops when the
 process dies, however it dies: a claim whose lock is held refuses the name to another writer,
 one left unlocked by a dead writer is removed by the next.
 """
@@ -15,19 +15,18 @@ import glob
 import os
 from pathlib import Path
 
-from .io import partial_prefix, remove_stale_partials
+from .partials import partial_prefix, remove_stale_partials
 
 
 class NameClaim:
     """This process's claim on ``path`` (module docstring): the empty file ``.NAME.partial-
     OWNER-writing``, locked until :meth:`release`.  ValueError when another running process
     holds a claim on the name.  Temporaries of the name that killed writers left are removed
-    first (rtsar.sinks.io.remove_stale_partials)."""
+    first (rtsar.sinks.partials.remove_stale_partials)."""
 
     def __init__(self, path: str | Path):
         path = Path(path)
         remove_stale_partials(path)
-        start = f".{path.name}.partial-"
         self.path = path.with_name(partial_prefix(path) + "writing")
         self._fd = None
         try:
@@ -44,20 +43,39 @@ class NameClaim:
             pass
         # Made first, then compared: of two writers starting together, at least one sees the
         # other (often both do, and both refuse; never do both go on).
-        for other in sorted(path.parent.glob(glob.escape(start) + "*-writing")):
-            if other != self.path and _held(other):
-                self.release()
-                host, _, pid = other.name[len(start) : -len("-writing")].rpartition(".")
-                raise ValueError(
-                    f"cannot write {path}: another rtsar process (pid {pid} on "
-                    f"{host.split('@')[0]}) is writing it now; give another name"
-                )
+        refusal = _refusal(path, mine=self.path)
+        if refusal:
+            self.release()
+            raise ValueError(refusal)
 
     def release(self) -> None:
         if self._fd is not None:
             self.path.unlink(missing_ok=True)
             os.close(self._fd)  # the lock goes with it
             self._fd = None
+
+
+def check_unclaimed(path: str | Path) -> None:
+    """ValueError, before any work, when another running rtsar process holds a claim on
+    ``path`` (it is writing it live): every writer of a file asks, so that none replaces a file
+    being written (rtsar.app.cli.options.check_outputs_spare_inputs)."""
+    refusal = _refusal(Path(path))
+    if refusal:
+        raise ValueError(refusal)
+
+
+def _refusal(path: Path, mine: Path | None = None) -> str | None:
+    """Why ``path`` may not be written: another running process's claim on it (``mine``: this
+    process's own mark, not counted); None when no other holds one."""
+    start = f".{path.name}.partial-"
+    for other in sorted(path.parent.glob(glob.escape(start) + "*-writing")):
+        if other != mine and _held(other):
+            host, _, pid = other.name[len(start) : -len("-writing")].rpartition(".")
+            return (
+                f"cannot write {path}: another rtsar process (pid {pid} on "
+                f"{host.split('@')[0]}) is writing it now; give another name"
+            )
+    return None
 
 
 def _held(mark: Path) -> bool:

@@ -171,6 +171,7 @@ class FrameParser:
             )
         self.max_payload_bytes = int(most)
         self.counters: dict[str, int] = dict.fromkeys(COUNTERS, 0)
+        self.refused_shape: tuple[int, int] | None = None  # (channels, samples): the last refused
         self._buf = bytearray()
 
     @property
@@ -223,6 +224,7 @@ class FrameParser:
                     or channels < self.min_channels
                 ):
                     c["wrong_length" if self.samples_per_shot else "bad_headers"] += 1
+                    self.refused_shape = (channels, count)
                     skipped += 1
                     pos = i + 1
                     continue

@@ -17,8 +17,12 @@ A lost link is never silent: it is counted (``link_drops``) and announced (``not
 ``reconnect`` (the default for ``socket://``) the source reopens the link with a growing pause
 (0.1 s doubling to 5 s, counted in ``reconnects``) and goes on; without it the source ends and
 ``failure`` says why, so the command can exit with an error.  The parser knows the configured
-shot (``samples_per_shot``, at most ``max_channels`` channels): a frame of another shape is
-rejected before its payload is buffered (``wrong_length``).
+frame: ``samples_per_shot`` samples in exactly the channels the shot takes (frame channel
+``channel`` + 1 without a channel map, the map's frame channels with one); a frame of another
+shape is rejected at its header, before its payload is buffered (``wrong_length``), so no
+header, true or false, makes the parser hold more than one frame of the configured stream.
+(It took up to 64 channels: a CRC-valid false header claiming 64 held 63 true frames behind
+it, a 12 s stall at 5 Hz.)  Each shape refused is said once (``notify``), with the fix.
 """
 
 from __future__ import annotations
@@ -38,7 +42,6 @@ from .frame import MAX_PAYLOAD_BYTES, Frame, FrameParser
 
 _READ_BYTES = 1 << 18  # most bytes taken in one read
 _BACKOFF_S = (0.1, 5.0)  # first and longest pause between reconnection attempts
-MAX_CHANNELS = 64  # most channels a frame of the configured stream may carry
 
 
 class SerialSource(Source):
@@ -48,8 +51,9 @@ class SerialSource(Source):
 
     A batch is yielded as soon as a read completes at least one frame (at most ``batch_frames``
     per batch); ``arrival_s`` is the perf_counter time at which that read returned.  Frames
-    without ``samples_per_shot`` samples or without the channel are refused by the parser at
-    their header and counted in ``counters["wrong_length"]``; the parser's counters
+    of another shape than the configured one (``samples_per_shot`` samples, the channels the
+    shot takes) are refused by the parser at their header and counted in
+    ``counters["wrong_length"]``; the parser's counters
     (``rtsar.sources.frame.COUNTERS``) are mirrored in ``counters``.
 
     Iteration ends when ``close()`` is called (within ``poll_s``), when the link goes away (the
@@ -70,7 +74,6 @@ class SerialSource(Source):
         poll_s: float = 0.05,
         max_payload_bytes: int = MAX_PAYLOAD_BYTES,
         reconnect: bool | None = None,
-        max_channels: int = MAX_CHANNELS,
         channel_map: ChannelMap | None = None,
     ):
         super().__init__()
@@ -91,10 +94,11 @@ class SerialSource(Source):
         self.channel = int(channel)
         self.channel_map = channel_map
         self.poll_s = float(poll_s)
-        needed = channel + 1 if channel_map is None else channel_map.frame_channels
+        self.frame_channels = channel + 1 if channel_map is None else channel_map.frame_channels
         self.parser = FrameParser(
-            max_payload_bytes, self.samples_per_shot, max(max_channels, needed), needed
+            max_payload_bytes, self.samples_per_shot, self.frame_channels, self.frame_channels
         )
+        self._shapes_told: set[tuple[int, int]] = set()
         self.counters = dict(self.parser.counters, link_drops=0, reconnects=0)
         self.description = f"serial instrument at {url}" + (
             f" (channels {channel_map.text})" if channel_map is not None else ""
@@ -132,7 +136,24 @@ class SerialSource(Source):
         ready, _, _ = select.select([self._fd], [], [], self.poll_s)
         return port.read(_READ_BYTES) if ready else b""
 
+    def _tell_refused_shape(self) -> None:
+        """The first time frames of a shape are refused (at most 3 shapes), say which and what
+        the configured frame is: an instrument sending more channels than the map names."""
+        shape = self.parser.refused_shape
+        if shape is None or shape in self._shapes_told or len(self._shapes_told) >= 3:
+            return
+        self._shapes_told.add(shape)
+        channels, samples = shape
+        self._say(
+            f"frames of {channels} channel{'s' * (channels != 1)} x {samples} samples refused "
+            f"(wrong_length): the configured frame is {self.frame_channels} channel"
+            f"{'s' * (self.frame_channels != 1)} x {self.samples_per_shot} samples "
+            "(--channel-map names every channel a frame carries; --preset/--scene the samples)"
+        )
+
     def _batches(self, frames: list[Frame], arrival_s: float) -> Iterator[ShotBatch]:
+        if self.parser.counters["wrong_length"] != self.counters.get("wrong_length", 0):
+            self._tell_refused_shape()
         self.counters.update(self.parser.counters)  # the parser refused other shapes
         for k in range(0, len(frames), self.batch_frames):
             part = frames[k : k + self.batch_frames]

@@ -8,8 +8,13 @@ belongs:
 * a gap (sequence jumps ahead by g ≤ ``max_gap_pulses``, by default one aperture N): g zero
   pulses are inserted, flagged (they cost no memory, and the AO lens skips them: a zero pulse
   compresses to a zero line), so zero-filling is bounded whatever number a frame carries;
-* a duplicate (a number of the current run seen within the last ``memory_pulses``) or a late
-  shot (its slot was already zero-filled): dropped and counted;
+* a duplicate (a number of the current run seen within the last ``memory_pulses``, on a shot
+  no newer than the newest shot accepted) or a late shot (its slot was already zero-filled):
+  dropped and counted;
+* a number already taken on a shot *newer* than the newest shot accepted, by the instrument's
+  clock (``ShotBatch.timestamp_s``): not a repeat but a new shot, so the counter was reset
+  (a step back of a few shots is such a reset too); without a clock (times NaN, or not
+  advancing) such shots read as duplicates;
 * any other jump, forward beyond the bound or backward (an instrument restart, a counter reset):
   the shot is held as a *candidate* until the next shot says what it was.  If the next shot
   continues from it (number + 1), it is a *discontinuity*: N zero pulses are inserted (they
@@ -66,13 +71,20 @@ COUNTERS = (
 
 @dataclass
 class PulseBlock:
-    """Consecutive pulses of the stream: pulse index first_pulse .. first_pulse + n - 1."""
+    """Consecutive pulses of the stream: pulse index first_pulse .. first_pulse + n - 1.
+
+    ``seq`` and ``time_s``: the instrument's pulse number and clock of each pulse (None where
+    the block was made without them); ``inserted``: the zero pulses ingest inserted (a gap's
+    fill, a restart's clearing), which carry no shot (seq 0, time NaN)."""
 
     first_pulse: int
     samples: np.ndarray  # complex64[n, samples_per_shot] (or [n, range_bins] after the lens)
     arrival_s: np.ndarray  # float64[n], perf_counter time the shot arrived (fill: next arrival)
     flagged: np.ndarray  # bool[n], zero-filled or zeroed pulses
     aux: dict = field(default_factory=dict)  # name → complex64[n, samples_per_shot]
+    seq: np.ndarray | None = None  # int64[n], the instrument's pulse numbers
+    time_s: np.ndarray | None = None  # float64[n], the instrument's clock
+    inserted: np.ndarray | None = None  # bool[n], zero pulses inserted by ingest
 
     def __len__(self) -> int:
         return len(self.samples)
@@ -89,6 +101,7 @@ class PulseBlock:
             self.arrival_s[sl],
             self.flagged[sl],
             {k: v[sl] for k, v in self.aux.items()},
+            *(None if a is None else a[sl] for a in (self.seq, self.time_s, self.inserted)),
         )
 
 
@@ -99,12 +112,20 @@ def concat_blocks(blocks: list[PulseBlock]) -> PulseBlock:
     for a, b in zip(blocks, blocks[1:], strict=False):
         if b.first_pulse != a.first_pulse + len(a):  # ingest guarantees this
             raise RuntimeError("pulse blocks are not consecutive")
+
+    def joined(name):  # a field of every block, or None if one lacks it
+        parts = [getattr(b, name) for b in blocks]
+        return None if any(p is None for p in parts) else np.concatenate(parts)
+
     return PulseBlock(
         blocks[0].first_pulse,
         np.concatenate([b.samples for b in blocks]),
         np.concatenate([b.arrival_s for b in blocks]),
         np.concatenate([b.flagged for b in blocks]),
         {k: np.concatenate([b.aux[k] for b in blocks]) for k in blocks[0].aux},
+        joined("seq"),
+        joined("time_s"),
+        joined("inserted"),
     )
 
 
@@ -134,6 +155,14 @@ class _Candidate:
     arrival_s: np.ndarray  # [1]
     flagged: np.ndarray  # [1]
     aux: dict
+    time_s: np.ndarray  # [1], the instrument's clock
+
+    def block(self, first_pulse: int) -> PulseBlock:
+        one = np.array([self.seq], np.int64)
+        return PulseBlock(
+            first_pulse, self.samples, self.arrival_s, self.flagged, self.aux, one, self.time_s,
+            np.zeros(1, bool),
+        )  # fmt: skip
 
 
 class Ingest:
@@ -174,6 +203,7 @@ class Ingest:
         self._candidate: _Candidate | None = None
         self.origin_seq = origin_seq
         self.start_pulses = 0  # the scan's pulse number of stream pulse 0 (module docstring)
+        self._newest_s: float | None = None  # the newest instrument time of an accepted shot
 
     def _zeros(self, count: int, arrival: float) -> PulseBlock:
         block = PulseBlock(
@@ -185,6 +215,9 @@ class Ingest:
                 k: np.broadcast_to(np.zeros((1, m), self.dtype), (count, m))
                 for k, m in (self.aux_lengths or {}).items()
             },
+            np.zeros(count, np.int64),
+            np.full(count, np.nan),
+            np.ones(count, bool),
         )
         self.next_pulse += count
         return block
@@ -232,6 +265,7 @@ class Ingest:
         aux = channels
         seq = np.asarray(batch.seq, np.int64)
         arrival = np.asarray(batch.arrival_s, np.float64)
+        times = np.asarray(batch.timestamp_s, np.float64)
         if self._next_seq is None:
             self._next_seq = self._run_start = self._recent_low = int(seq[0])
             if self.origin_seq is not None:
@@ -242,10 +276,25 @@ class Ingest:
         if self._candidate is None and seq[0] == self._next_seq and contiguous:
             c["pulses_accepted"] += n
             self._next_seq += n
-            block = PulseBlock(self.next_pulse, samples, arrival, flagged, aux)
+            self._newest(times)
+            block = PulseBlock(
+                self.next_pulse, samples, arrival, flagged, aux, seq, times, np.zeros(n, bool)
+            )
             self.next_pulse += n
             return [block]
-        return self._slow(seq, samples, arrival, flagged, aux)
+        return self._slow(seq, samples, arrival, flagged, aux, times)
+
+    def _is_newer(self, time_s: float) -> bool:
+        """A shot taken after the newest shot accepted (by the instrument's clock): under a
+        number already taken it is a new shot, not a repeat, so the counter was reset."""
+        return self._newest_s is not None and bool(time_s > self._newest_s)
+
+    def _newest(self, times: np.ndarray) -> None:
+        """The newest instrument time of an accepted shot (what tells a repeat from a new
+        shot under an old number: module docstring)."""
+        if len(times) and np.isfinite(times[-1]):
+            t = float(times[-1])
+            self._newest_s = t if self._newest_s is None else max(self._newest_s, t)
 
     def _restart(self, cand: _Candidate) -> list[PulseBlock]:
         """A confirmed restart: N zero pulses clear the CCD, then the held shot opens the run."""
@@ -255,9 +304,9 @@ class Ingest:
         c["pulses_accepted"] += 1
         self._filled.clear()
         out = [self._zeros(self.aperture_pulses, float(cand.arrival_s[0]))]
-        out.append(
-            PulseBlock(self.next_pulse, cand.samples, cand.arrival_s, cand.flagged, cand.aux)
-        )
+        out.append(cand.block(self.next_pulse))
+        self._newest_s = None  # a new run: its own clock (an instrument restart may reset it)
+        self._newest(cand.time_s)
         self.next_pulse += 1
         self._next_seq = cand.seq + 1
         self._run_start = self._recent_low = cand.seq
@@ -268,7 +317,7 @@ class Ingest:
         cand, self._candidate = self._candidate, None
         return self._restart(cand) if cand is not None else []
 
-    def _slow(self, seq, samples, arrival, flagged, aux) -> list[PulseBlock]:
+    def _slow(self, seq, samples, arrival, flagged, aux, times) -> list[PulseBlock]:
         """Shot by shot: gaps, duplicates, late shots, candidates for a restart."""
         c = self.counters
         out: list[PulseBlock] = []
@@ -285,8 +334,12 @@ class Ingest:
                         arrival[sl],
                         flagged[sl],
                         {k: a[sl] for k, a in aux.items()},
+                        seq[sl],
+                        times[sl],
+                        np.zeros(end - run_start, bool),
                     )
                 )
+                self._newest(times[sl])
                 self.next_pulse += end - run_start
                 c["pulses_accepted"] += end - run_start
                 run_start = None
@@ -314,16 +367,21 @@ class Ingest:
                 out.append(self._zeros(jump, arrival[i]))
                 self._next_seq = s + 1
                 run_start = i
-            elif jump < 0 and s >= known:
+            elif jump < 0 and s >= known and not self._is_newer(times[i]):
                 if s in self._filled:
                     c["late_pulses"] += 1
                     self._filled.discard(s)
                 else:
                     c["duplicates"] += 1
-            else:  # beyond the gap bound, or back before what is remembered: hold it
+            else:  # beyond the gap bound, back before what is remembered, or a reset: hold it
                 sl = slice(i, i + 1)
                 self._candidate = _Candidate(
-                    s, samples[sl], arrival[sl], flagged[sl], {k: a[sl] for k, a in aux.items()}
+                    s,
+                    samples[sl],
+                    arrival[sl],
+                    flagged[sl],
+                    {k: a[sl] for k, a in aux.items()},
+                    times[sl],
                 )
         close_run(len(seq))
         self._forget_old()

@@ -19,8 +19,9 @@ slice each (rtsar.stream.swath).
 Latency of an image line: from the arrival of the last pulse that contributes to it (pulse
 j + N - 1 for line j, Psaltis & Wagner 1981: the row leaves the CCD after N shifts) to the
 publication of the strip holding it.  The pieces: rtsar.stream.queue, ingest, engine, hold,
-timing, height, strips, swath, stats and settings.
+timing, height, strips, swath, link (silences), stats and settings.
 """
+
 from __future__ import annotations
 
 import threading
@@ -34,7 +35,9 @@ from .engine import Lines, StreamProcessor
 from .height import HeightBatch, HeightChannel
 from .hold import HeldPulses
 from .ingest import Ingest, PulseBlock, concat_blocks, regroup_blocks
+from .link import LinkWatch
 from .memory import check_memory
+from .overlap import overlapped_stage
 from .queue import BoundedQueue
 from .settings import PipelineSettings
 from .stats import PipelineStats
@@ -54,10 +57,10 @@ OWN_COUNTERS = (
 class Pipeline:
     """Run ``source`` through the engine and hand strips to ``sinks`` (publishers, recorders).
 
-    A sink implements rtsar.stream.strips.StripSink (``strip``, ``height``, ``stats``, ``end``;
-    each receives the run's StreamInfo, never the pipeline).  ``run()`` blocks until the source
-    ends or ``stop()``; Ctrl-C in ``run()`` stops the source, drains the pipeline and flushes the
-    CCD, so every pulse that arrived is focused and published.
+    A sink implements rtsar.stream.strips.StripSink (``strip``, ``height``, ``stats``, ``end``,
+    and ``pulses`` for a raw recorder; each receives the run's StreamInfo, never the pipeline).
+    ``run()`` blocks until the source ends or ``stop()``; Ctrl-C in ``run()`` stops the source,
+    drains the pipeline and flushes the CCD, so every pulse that arrived is focused and published.
     """
 
     def __init__(
@@ -73,6 +76,8 @@ class Pipeline:
         physical=None,
         height=None,
         stream_id: str | None = None,
+        notify=None,
+        link_timeout_s: float | None = None,
     ):
         self.config = config
         self.corrections = corrections
@@ -82,10 +87,16 @@ class Pipeline:
                 "main receiver only and would bias the height phase between the receivers"
             )
         self.source = source
+        # A live source's silences are told (``notify``) and end the run at link_timeout_s.
+        self.link = None
+        if source.live:
+            prf = config.geometry.prf_hz
+            self.link = LinkWatch(prf, notify, link_timeout_s, on_timeout=source.close)
         self.sinks = list(sinks)
         for sink in self.sinks:  # a wrong object fails here, not in a stage thread mid-stream
             if not isinstance(sink, StripSink):
                 raise TypeError(f"sinks must be StripSink objects, got {type(sink).__name__}")
+        self._pulse_sinks = [sink for sink in self.sinks if sink.wants_pulses]
         self.settings = s = settings or PipelineSettings()
         n = config.processor.aperture_pulses
         capacity = s.queue_pulses or 8 * n
@@ -144,8 +155,9 @@ class Pipeline:
             if corrections or physical is not None or height is not None:
                 raise ValueError("--swath-workers runs without --correct, --physical, --height")
             self.swath = SwathWorkers(
-                config, s.swath_workers, s.lens_backend, s.device, s.swath_spawn, s.swath_bind
-            )
+                config, s.swath_workers, s.lens_backend, s.device, s.swath_spawn, s.swath_bind,
+                notify=notify,
+            )  # fmt: skip
             self._sent = deque()  # metadata of the pulse blocks sent to the workers
 
     @property
@@ -159,9 +171,13 @@ class Pipeline:
             for batch in self.source:
                 if self._stop.is_set():
                     break
+                if self.link is not None and len(batch):
+                    self.link.heard(int(batch.seq[0]), int(batch.seq[-1]))
                 if not self.q_shots.put(batch, block=not live):
                     self.own["dropped_pulses"] += len(batch)
         finally:
+            if self.link is not None:
+                self.link.ended()
             self.q_shots.close()
             if self.settings.deadline:
                 self._hurry_sinks()
@@ -201,47 +217,19 @@ class Pipeline:
             (self.q_image if self.settings.stages != "split" else self.q_lines).close()
 
     def _overlapped_stage(self) -> None:
-        """Lens and CCD in one thread, overlapped: the lens works on batch k + 1 (enqueued, not
-        waited for) while the CCD correlates batch k; only while shots are waiting (when none
-        is, the batch in flight is finished at once: latency first)."""
-        busy, pending = 0.0, None
-        try:
-            while True:
-                batches = self.q_shots.get_batch(self.max_batch, 0 if pending else None)
-                t = time.perf_counter()
-                if batches == []:  # nothing waiting: finish the batch in flight
-                    self._finish(pending)
-                    pending = None
-                else:
-                    for block in regroup_blocks(self._ingest(batches), self.max_batch):
-                        zero = bool(block.flagged.all())
-                        job = self.engine.range_submit(block.samples, block.aux, zero)
-                        self._finish(pending)  # the CCD on the previous batch meanwhile
-                        pending = (job, block)
-                    if batches is None:
-                        self._finish(pending)
-                        self._put_image(self._ccd_flush())
-                busy += time.perf_counter() - t
-                self.stats.busy_s["lens+ccd"] = busy
-                if batches is None:
-                    break
-        finally:
-            self.stats.busy_s["lens+ccd"] = busy
-            self.q_image.close()
-            self.engine.correlator.close()
-
-    def _finish(self, pending) -> None:
-        if pending is not None:  # (lines callable, pulse block)
-            job, b = pending
-            self._put_image(self._ccd_step([b.with_samples(job())]))
+        overlapped_stage(self)
 
     def _ingest(self, batches: list | None) -> list[PulseBlock]:
         """Ingest checks on the batches taken (None: the source ended); the first shot anchors."""
         if batches is None:
-            return self.ingest.flush()
-        blocks = [b for batch in batches for b in self.ingest(batch)]
-        if not self._anchored and self.ingest.counters["pulses_received"]:
-            self._anchor()
+            blocks = self.ingest.flush()
+        else:
+            blocks = [b for batch in batches for b in self.ingest(batch)]
+            if not self._anchored and self.ingest.counters["pulses_received"]:
+                self._anchor()
+        for block in blocks:  # the stream as ingest made it: to a raw recorder
+            for sink in self._pulse_sinks:
+                sink.pulses(block, self.info)
         return blocks
 
     def _anchor(self) -> None:
@@ -406,6 +394,8 @@ class Pipeline:
             c.update(self.corrections.counters())
         for sink in self.sinks:
             c.update(sink.counters())
+        for part in (self.link, self.swath):  # a live source's silences, refused messages
+            c.update(part.counters() if part is not None else {})
         c.update(self.own)
         return c
 
@@ -419,6 +409,7 @@ class Pipeline:
         d["latency_recent_median_ms"] = self.stats.latency.recent_percentile(50) * 1e3
         d["latency_recent_p99_ms"] = self.stats.latency.recent_percentile(99) * 1e3
         d["final"] = final
+        d["link"] = None if self.link is None else self.link.state()  # a silence being told
         if self.height is not None:
             d["height"] = {k: float(v) for k, v in self.height.stage.stats.items()}
         for sink in self.sinks:
@@ -452,6 +443,8 @@ class Pipeline:
         stages = [self._source_stage, middle, self._strip_stage]
         if self.settings.stages == "split":
             stages.insert(2, self._ccd_stage if self.swath is None else self._swath_stage)
+        if self.link is not None:  # the watch ends with the source (LinkWatch.ended)
+            threading.Thread(target=self.link.run, name="rtsar-link", daemon=True).start()
         for target in stages:
             ended = threading.Event()
             self._ended.append(ended)

@@ -94,8 +94,16 @@ class StripSink:
     ``strip``: a strip of image lines; ``height``: a height strip (3D imaging,
     rtsar.topo.stream.HeightStrip, with its own sequence number); ``stats``: the periodic stats
     dictionary (README "Strip protocol"); ``end``: the final stats, once; ``counters``: the
-    sink's own counters, reported with the run's; ``hurry``: the run is being stopped.
+    sink's own counters, reported with the run's; ``hurry``: the run is being stopped.  A sink
+    with ``wants_pulses`` also receives the stream's pulses as ingest made them (``pulses``).
     """
+
+    wants_pulses = False
+
+    def pulses(self, block, info: StreamInfo) -> None:
+        """Consecutive pulses of the stream (rtsar.stream.ingest.PulseBlock: the shots with
+        every channel, the instrument's numbers and clock, the inserted and zeroed pulses), in
+        order, from the lens thread, before any processing: never waits (a recorder queues)."""
 
     def strip(self, strip: Strip, info: StreamInfo) -> None:
         pass

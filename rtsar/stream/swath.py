@@ -9,19 +9,25 @@ the lens is the cheap half (README "Throughput"), the CCD the expensive one.
 
 Transport (ZeroMQ, one context per process):
 
-* coordinator → worker k: a PUSH socket the coordinator binds, one per worker, so every worker
-  gets every pulse block.  Its high-water mark (``HWM_MESSAGES``) is the flow control: when a
-  worker falls behind, the coordinator's send blocks, the pipeline's shot queue fills and a live
-  source drops (counted) as it does in one process.
+* coordinator → worker k: a PAIR socket the coordinator binds, one per worker, so every worker
+  gets every pulse block.  A PAIR socket takes one peer: a second worker started with the same
+  ``--index`` is refused by it (with PUSH it took every other block, without a setup).  Its
+  high-water mark (``HWM_MESSAGES``) is the flow control: when a worker falls behind, the
+  coordinator's send blocks, the pipeline's shot queue fills and a live source drops (counted)
+  as it does in one process.
 * workers → coordinator: one PULL socket the coordinator binds; each worker PUSHes its lines.
+  Anything may connect to it: every message is checked before it is obeyed
+  (rtsar.stream.swath_messages); one that is malformed, of no worker of this run, or a second
+  worker's with an index taken, is refused in one line (``notify``), counted
+  (``swath_refused_messages``), and the run goes on.
 
 Messages are multipart: ``[b"setup", JSON]`` (configuration, columns, lens choice), ``[b"block",
 JSON {first_pulse, count, zero}, samples]``, ``[b"beat"]``, ``[b"end"]``, ``[b"stop", reason]``
-(the run ended without an end: the worker drops what it holds and exits); back: ``[b"ready",
-JSON]``, ``[b"lines", JSON {index, first_line, count}, lines]``, ``[b"done", JSON]``, ``[b"error",
-JSON]``.  The same worker loop (rtsar.stream.swath_worker.serve) runs in a local process
-(``rtsar run --swath-workers K`` spawns them) or on another host (``rtsar swath-worker
---connect``).
+(the run ended without an end: the worker drops what it holds and exits); back: ``[b"hello",
+JSON {index}]`` (a worker has started), ``[b"ready", JSON]``, ``[b"lines", JSON {index,
+first_line, count}, lines]``, ``[b"done", JSON]``, ``[b"error", JSON]``.  The same worker
+loop (rtsar.stream.swath_worker.serve) runs in a local process (``rtsar run --swath-workers K``
+spawns them) or on another host (``rtsar swath-worker --connect``).
 
 Liveness (ZeroMQ reconnects silently: a worker cannot see its coordinator die): from its setup
 on, a worker sent nothing for ``BEAT_S`` gets a ``beat`` (no pulses; sent without waiting, skipped
@@ -49,6 +55,7 @@ from ..lens import make_lens, make_plan
 from ..params import Config
 from ..samples import precision_dtype
 from .engine import Lines
+from .swath_messages import Refused, parse
 
 HWM_MESSAGES = 8  # pulse blocks in flight per worker before the coordinator waits
 SEND_SLICE_S = 0.2  # a waiting send looks for an abort this often
@@ -57,6 +64,7 @@ BEAT_S = 1.0  # the coordinator beats to a worker it has sent nothing for this l
 COORDINATOR_TIMEOUT_S = 30.0  # a worker that hears nothing for this long after its setup ends
 MIN_COORDINATOR_TIMEOUT_S = 3 * BEAT_S  # below it a loaded coordinator's beats may come too late
 STOP_LINGER_MS = 1000  # how long closing waits for a "stop" to leave
+MAX_REFUSALS_TOLD = 5  # refused results messages told one by one (all are counted)
 
 
 def split_columns(range_bins: int, workers: int) -> list[tuple[int, int]]:
@@ -176,8 +184,11 @@ class SwathWorkers:
         bind: str = "127.0.0.1",
         timeout_s: float = 10.0,
         beat_s: float = BEAT_S,
+        notify=None,
     ):
         check_splittable(config)
+        self.notify = notify  # one-line messages: a results message refused
+        self.refused = 0  # results messages refused (swath_messages)
         self.config = config
         self.columns = split_columns(config.processor.range_bins, workers)
         self.timeout_s = timeout_s
@@ -211,7 +222,7 @@ class SwathWorkers:
         self._results = self._ctx.socket(zmq.PULL)
         self.results_endpoint = _bind(self._results, host, base)
         for k in range(len(self.columns)):
-            s = self._ctx.socket(zmq.PUSH)
+            s = self._ctx.socket(zmq.PAIR)  # one worker per index (module docstring)
             s.setsockopt(zmq.SNDHWM, HWM_MESSAGES)
             s.setsockopt(zmq.LINGER, 0)
             self._pushes.append(s)
@@ -230,6 +241,9 @@ class SwathWorkers:
                 self._procs.append(proc)
         self._pending = [deque() for _ in self.columns]  # per worker: Lines not merged yet
         self._done = [False] * len(self.columns)
+        self._hello: set[int] = set()  # workers that said they started
+        self._ready: set[int] = set()  # workers set up
+        self._lines_in = [0] * len(self.columns)  # per worker: the line it sends next
         self._heard_at, self._ended_at = time.monotonic(), None
         self.lines_out = 0
         setup = {"config": config.to_dict(), "lens_backend": lens_backend, "device": device}
@@ -250,11 +264,8 @@ class SwathWorkers:
             with self._locks[k]:
                 s.send_multipart([b"setup", json.dumps({**setup, "columns": [b0, b1]}).encode()])
                 self._sent_at[k] = time.monotonic()
-        ready = 0
-        while ready < len(self.columns):
-            frames = self._recv(deadline, "to start")
-            if frames[0] == b"ready":
-                ready += 1
+        while len(self._ready) < len(self.columns):
+            self._take(self._recv(deadline, "to start"))
 
     def send(self, first_pulse: int, samples: np.ndarray, zero: bool) -> None:
         """One block of pulses to every worker (waits while a worker is HWM blocks behind)."""
@@ -320,6 +331,9 @@ class SwathWorkers:
     def finished(self) -> bool:
         return all(self._done)
 
+    def counters(self) -> dict:
+        return {"swath_refused_messages": self.refused}
+
     def receive(self, timeout_s: float = 0.1) -> Lines | None:
         """Merged lines that every worker has delivered (None: none new within ``timeout_s``)."""
         if self._results.poll(int(1000 * timeout_s)):
@@ -338,18 +352,46 @@ class SwathWorkers:
         return self._merge()
 
     def _take(self, frames: list[bytes]) -> None:
-        kind = frames[0]
-        if kind == b"lines":
-            head = _json(frames[1])
-            k, count = int(head["index"]), int(head["count"])
+        """Obey one results message, or refuse it (swath_messages) and go on."""
+        try:
+            self._obey(parse(frames, len(self.columns)))
+        except Refused as exc:
+            self.refused += 1
+            if self.notify is not None and self.refused <= MAX_REFUSALS_TOLD:
+                more = " (no more of these are told)" if self.refused == MAX_REFUSALS_TOLD else ""
+                self.notify(
+                    f"swath: refused {exc} on the results port {self.results_endpoint}; the "
+                    f"run goes on{more}"
+                )
+
+    def _obey(self, m) -> None:
+        k = m.index
+        if m.kind == "lines":
             b0, b1 = self.columns[k]
-            lines = np.frombuffer(frames[2], self.dtype).reshape(count, b1 - b0)
-            self._pending[k].append(Lines(int(head["first_line"]), lines))
-        elif kind == b"done":
-            self._done[int(_json(frames[1])["index"])] = True
-        elif kind == b"error":
-            err = _json(frames[1])
-            raise RuntimeError(f"swath worker {err['index']} failed: {err['message']}")
+            count, first = m.head["count"], m.head["first_line"]
+            if first != self._lines_in[k] or self._done[k]:
+                raise Refused(
+                    f"a 'lines' message of worker {k} from line {first} (its next is "
+                    f"{self._lines_in[k]}{', and it is done' if self._done[k] else ''})"
+                )
+            if len(m.payload) != count * (b1 - b0) * self.dtype.itemsize:
+                raise Refused(f"a 'lines' message of worker {k} whose lines are not {count}")
+            lines = np.frombuffer(m.payload, self.dtype).reshape(count, b1 - b0)
+            self._pending[k].append(Lines(first, lines))
+            self._lines_in[k] += count
+        elif m.kind in ("hello", "ready", "done"):
+            said = {"hello": self._hello, "ready": self._ready}.get(m.kind)
+            if (said is not None and k in said) or (m.kind == "done" and self._done[k]):
+                raise Refused(
+                    f"a second '{m.kind}' of worker {k}: two workers started with --index {k}? "
+                    "(its pulse socket takes one: the other gets nothing)"
+                )
+            if m.kind == "done":
+                self._done[k] = True
+            else:
+                said.add(k)
+        elif m.kind == "error":
+            raise RuntimeError(f"swath worker {k} failed: {m.head['message']}")
 
     def _merge(self) -> Lines | None:
         """The lines every worker has, columns side by side, in worker order."""
@@ -382,10 +424,7 @@ class SwathWorkers:
             if left <= 0:
                 raise RuntimeError(f"swath workers did not answer {what} in time")
             if self._results.poll(int(1000 * min(left, 0.5))):
-                frames = self._results.recv_multipart()
-                if frames[0] == b"error":
-                    self._take(frames)
-                return frames
+                return self._results.recv_multipart()
             self._check_alive()
 
     def _check_alive(self) -> None:

@@ -27,6 +27,7 @@ from .engine import Lines
 from .swath import COORDINATOR_TIMEOUT_S, HWM_MESSAGES, SwathEngine, _json
 
 LINK_BEAT_MS = 1000  # ZeroMQ heartbeat on the results connection (a host lost without a close)
+NO_SETUP_TOLD_S = 10.0  # a worker with no setup after this long says so (once)
 LINK_TIMEOUT_MS = 5000
 
 
@@ -44,7 +45,7 @@ class _Inbox:
     afterwards, in order."""
 
     def __init__(self, ctx, endpoint: str):
-        self.socket = s = ctx.socket(zmq.PULL)
+        self.socket = s = ctx.socket(zmq.PAIR)  # the coordinator's takes one worker per index
         s.setsockopt(zmq.RCVHWM, HWM_MESSAGES)
         s.connect(endpoint)
         self._early: deque = deque()
@@ -135,6 +136,10 @@ def serve(
     pull = _Inbox(ctx, shots_endpoint)
     results = _Results(ctx, results_endpoint, coordinator_timeout_s)
     results.waiting = pull.look_for_stop
+    # Queued until the connection is made: the coordinator learns a worker of this index has
+    # started (a second one is refused there, in one line).
+    results.socket.send_multipart([b"hello", json.dumps({"index": index}).encode()], zmq.NOBLOCK)
+    started = time.monotonic()
     engine = None
     limit = coordinator_timeout_s > 0
     heard_at = None  # when the last message was handled (None: no setup yet)
@@ -148,6 +153,14 @@ def serve(
                 orphan = parent_pid is not None and os.getppid() != parent_pid
                 silent = limit and heard_at is not None
                 silent = silent and time.monotonic() - heard_at >= coordinator_timeout_s
+                if engine is None and log and started is not None:
+                    if time.monotonic() - started >= NO_SETUP_TOLD_S:
+                        started = None  # said once
+                        log(
+                            f"swath worker {index}: no setup from {shots_endpoint} after "
+                            f"{NO_SETUP_TOLD_S:g} s: its coordinator has not started yet, or "
+                            f"another worker with --index {index} has its pulses (waiting on)"
+                        )
                 if not (orphan or silent):
                     continue
                 gone = True  # nobody to deliver to
@@ -172,6 +185,8 @@ def serve(
             elif kind == b"beat":
                 pass  # the coordinator is alive: heard_at is all a beat carries
             elif kind == b"block":
+                if engine is None:
+                    raise ValueError("a pulse block came before the setup")
                 head = _json(frames[1])
                 count = int(head["count"])
                 shots = None

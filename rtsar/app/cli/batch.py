@@ -17,6 +17,7 @@ import h5py
 
 from ...focus.chain import parse_spec
 from ...lens import range_axis_m
+from ...sinks.name_claim import check_unclaimed
 from ...sources.formats.sigmf_reader import auxiliary_of
 from .. import batch, signals
 from .files import process_setup
@@ -168,6 +169,16 @@ def refusal(options: dict, recording: Path) -> str | None:
     return None
 
 
+def unclaimed(output: Path) -> str | None:
+    """Why ``output`` may not be written: another rtsar process is writing it live (its name
+    claimed, rtsar.sinks.name_claim); None when it is free."""
+    try:
+        check_unclaimed(output)
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
 def _count(n: int, noun: str) -> str:
     return f"{n} {noun}{'' if n == 1 else 's'}"
 
@@ -202,7 +213,7 @@ def _batch(args, options: dict, out_dir: Path) -> int:
         for i, rec in enumerate(recordings):
             if stop:
                 break
-            why = refusal(options, rec)
+            why = refusal(options, rec) or unclaimed(outputs[i])
             if why:
                 refused[i] = why
         n = len(recordings)

@@ -3,6 +3,7 @@ SigMF recordings (the last two need the optional extra ``formats``), chosen by f
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from ...sinks.io import open_recording
@@ -20,4 +21,27 @@ def open_input(path: str | Path):
         return open_cphd(path)
     if sigmf_base(path) is not None:
         return open_sigmf(path)
-    return open_recording(path)
+    rec = open_recording(path)
+    note_live_recording(rec)
+    return rec
+
+
+def note_live_recording(rec) -> None:
+    """A recording made by ``run --record`` that lacks shots says so on stderr: cut short (its
+    writer killed: complete = False) or with shots its recorder could not write."""
+    attrs = rec.attrs
+    if not attrs.get("recorded_live"):
+        return
+    if not attrs.get("complete", True):
+        print(
+            f"note: {rec.path} is a live recording cut short (complete = False): its "
+            f"{rec.pulses} whole shots are read",
+            file=sys.stderr,
+        )
+    dropped = int(attrs.get("record_dropped", 0))
+    if dropped:
+        print(
+            f"note: {dropped} shots of {rec.path} were not recorded (record_dropped: pulse_flags "
+            "4): zero pulses stand in their place, the live image had them",
+            file=sys.stderr,
+        )

@@ -17,6 +17,7 @@ from ...lens import LENS_BACKENDS, range_axis_m
 from ...params import PRECISIONS, Processor
 from ...physical import CARRIERS, paper_ccd
 from ...scene.correction_context import correction_context, insal_geometry, modulation_geometry
+from ...sinks.name_claim import check_unclaimed
 from ...sinks.publish import DEFAULT_ENDPOINT, DELIVERIES, STALL_TIMEOUT_S
 from ...stream.engine import brightest_point
 from ...stream.pipeline import PipelineSettings
@@ -38,7 +39,7 @@ def die(msg: str) -> int:
 # BASE.sigmf-meta and BASE.sigmf-data).
 INPUT_OPTIONS = ("scene", "recording", "image", "input", "images", "inputs")
 INPUT_OPTIONS += ("curve_key", "curve_server_key", "curve_client_key")
-OUTPUT_OPTIONS = ("output", "png", "json", "out", "cphd", "sicd", "sigmf")
+OUTPUT_OPTIONS = ("output", "png", "json", "out", "cphd", "sicd", "sigmf", "record")
 COMMAND_INPUTS = {"spotlight": ("live",), "projective": ("simulate",)}  # named like others
 COMMAND_OUTPUTS = {"quicklook": ("height",)}  # --height PNG (elsewhere --height is a method)
 # Commands whose -o writes an HDF5 file (a recording or an image), and the suffixes of what
@@ -54,10 +55,11 @@ NOT_HDF5_SUFFIXES = (
 
 def check_outputs_spare_inputs(args) -> None:
     """ValueError before any work when an output of the command names one of its inputs (or
-    another of its outputs): ``process rec.h5 -o rec.h5`` replaced the recording by its image.
-    A SigMF recording exported onto itself (``export rec.sigmf-meta --sigmf rec``) is the
-    exception: that export reads the recording whole first.  An HDF5 output named like
-    another kind of file (``process rec.h5 -o x.png``) is refused too."""
+    another of its outputs): ``process rec.h5 -o rec.h5`` replaced the recording by its image;
+    or a file another process writes live (rtsar.sinks.name_claim).  A SigMF recording
+    exported onto itself (``export rec.sigmf-meta --sigmf rec``) is the exception: that export
+    reads the recording whole first.  An HDF5 output named like another kind of file
+    (``process rec.h5 -o x.png``) is refused too."""
     command = getattr(args, "command", None)
     inputs = {}
     for name in INPUT_OPTIONS + COMMAND_INPUTS.get(command, ()):
@@ -81,14 +83,17 @@ def check_outputs_spare_inputs(args) -> None:
                         f"the output {path} is this command's input {inputs[key]}: writing it "
                         "would replace what it reads; choose another output name"
                     )
-    output = getattr(args, "output", None)
-    suffix = Path(output).suffix.lower() if output else ""
-    if command in HDF5_OUTPUT_COMMANDS and suffix in NOT_HDF5_SUFFIXES:
-        raise ValueError(
-            f"-o {output}: {command} writes an HDF5 file (.h5), not a {suffix} file; "
-            "pictures come from `rtsar quicklook IMG.h5 -o PICTURE`, CPHD/SICD/SigMF from "
-            "`rtsar export`"
-        )
+    named = (("-o", getattr(args, "output", None)), ("--record", getattr(args, "record", None)))
+    for option, value in named:
+        suffix = Path(value).suffix.lower() if value else ""
+        if command in HDF5_OUTPUT_COMMANDS and suffix in NOT_HDF5_SUFFIXES:
+            raise ValueError(
+                f"{option} {value}: {command} writes an HDF5 file (.h5), not a {suffix} file; "
+                "pictures come from `rtsar quicklook IMG.h5 -o PICTURE`, CPHD/SICD/SigMF from "
+                "`rtsar export`"
+            )
+    for path in outputs.values():  # a file another process writes live is never replaced
+        check_unclaimed(path)
 
 
 def _values(value) -> list[str]:

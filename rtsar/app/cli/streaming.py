@@ -47,6 +47,7 @@ from .options import (
     strip_lines,
     warn_outside_swath,
 )
+from .run_options import add_run_options
 
 
 def channel_map(args, scene) -> ChannelMap | None:
@@ -139,6 +140,9 @@ def cmd_run(args) -> int:
             stall_timeout_s=args.stall_timeout,
             curve_clients=args.curve_clients,
             channel_fix=fix,
+            record=args.record,
+            scene=None if described is None else described.to_dict(),
+            link_timeout_s=args.link_timeout,
         )
 
     if args.preset:
@@ -167,6 +171,9 @@ def cmd_run(args) -> int:
         stall_timeout_s=args.stall_timeout,
         curve_clients=args.curve_clients,
         channel_fix=scene_channel_fix,
+        record=args.record,
+        scene=scene.to_dict(),
+        link_timeout_s=args.link_timeout,
     )
 
 
@@ -287,7 +294,8 @@ def add_parsers(sub) -> None:
         "(the letters SAR, an airfield and corner reflectors, 10 s of flight at 1600 pulses/s; "
         "about 15 s in all) simulated at its PRF, published on "
         f"{DEFAULT_ENDPOINT}. Watch it with `rtsar view` or record it with `rtsar subscribe -o "
-        "live.h5`; `-o demo.h5` keeps the image for `rtsar quicklook`.",
+        "live.h5`; `-o demo.h5` keeps the image for `rtsar quicklook`, `--record raw.h5` the "
+        "raw shots for `rtsar process`/`replay` later.",
     )
     src = s.add_argument_group("source")
     src.add_argument(
@@ -333,8 +341,9 @@ def add_parsers(sub) -> None:
         "--duration",
         type=float,
         help="stop after this many seconds of the stream, i.e. pulses at the PRF (a busy "
-        "machine takes longer; serial: seconds of silence) (default: the whole scene, 10 s for "
-        "the demo; serial: never)",
+        "machine takes longer; --serial, --zmq-in: seconds without a byte or message, a clean "
+        "end: see --link-timeout for a failure) (default: the whole scene, 10 s for the demo; "
+        "serial: never)",
     )
     src.add_argument(
         "--reconnect",
@@ -343,6 +352,7 @@ def add_parsers(sub) -> None:
         help="with --serial: reopen a lost link, pausing 0.1 s doubling to 5 s (default: on for "
         "socket://, off for serial ports)",
     )
+    add_run_options(src, s)
     add_pipeline_options(s, "drop")
     s.set_defaults(func=cmd_run)
 

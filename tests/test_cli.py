@@ -187,7 +187,7 @@ def test_an_output_never_replaces_the_commands_input(tmp_path, capsys, monkeypat
     assert {p: (tmp_path / p).read_bytes() for p in before} == before
     # A built-in scene's name is not a file: an output of that name replaces nothing.
     from rtsar.app.cli import build_parser
-    from rtsar.app.cli.options import check_outputs_spare_inputs
+    from rtsar.app.cli.outputs import check_outputs_spare_inputs
 
     check_outputs_spare_inputs(build_parser().parse_args(["simulate", "tiny", "-o", "tiny"]))
 
@@ -406,7 +406,8 @@ def test_a_missing_channel_names_the_options_that_ask_for_it():
     """From a cold read: the channel refusal named `--correct hcn+linearize`, a spelling that
     is itself refused; it names `--correct hcn --correct linearize`."""
     from rtsar.app.live import check_channels_delivered
-    from rtsar.focus.chain import CorrectionChain, correct_option
+    from rtsar.focus.chain import CorrectionChain
+    from rtsar.focus.spec import correct_option
     from rtsar.presets import preset as named
 
     assert correct_option("pga") == "--correct pga"

@@ -57,6 +57,15 @@ LAZY_ALLOWED = {
     ("rtsar.app.devices", "rtsar.lens.cl_vendors"): "imported with cl_devices, after pyopencl",
     ("rtsar.app.devices", "rtsar.lens.cl_probe"): "imported with cl_devices, after pyopencl",
     ("rtsar.ccd", "rtsar.ccd.physical"): "the physical CCD's numba kernels, physical mode only",
+    ("rtsar.scene", "rtsar.scene.simulator"): "numba loads in ~0.4 s: only when simulating",
+    ("rtsar.app.cli.files", "rtsar.scene"): "the simulator (numba) for simulate only",
+    ("rtsar.app.cli.options", "rtsar.focus.chain"): "the corrections load with --correct only",
+    ("rtsar.app.cli.options", "rtsar.scene.correction_context"): "with --correct, --height",
+    ("rtsar.app.cli.options", "rtsar.stream.engine"): "a first pass for a bare --correct pra",
+    ("rtsar.app.cli.options", "rtsar.topo.sam3d_strips"): "3D loads with --height only",
+    ("rtsar.app.cli.options", "rtsar.topo.stream"): "3D loads with --height only",
+    ("rtsar.app.cli.inputs", "rtsar.sources.formats.cphd_reader"): "sarkit: CPHD inputs only",
+    ("rtsar.app.cli.inputs", "rtsar.sources.formats.sigmf_reader"): "sigmf: SigMF inputs only",
     ("rtsar.ccd", "rtsar.ccd.direct"): "numba loads in ~0.4 s: only the correlators using it",
     ("rtsar.ccd", "rtsar.ccd.nonuniform"): "numba loads in ~0.4 s: only the correlators using it",
     ("rtsar.ccd", "rtsar.ccd.partitioned"): "numba loads in ~0.4 s: only the correlators using it",
@@ -65,6 +74,7 @@ LAZY_ALLOWED = {
     ("rtsar.app.cli.view", "rtsar.app.webview.server"): "aiohttp loads in ~0.2 s; --http only",
     ("rtsar.app.entry", "rtsar.app.cli"): "a Ctrl-C during the command's imports is one line",
     ("rtsar.app.cli", "rtsar.app.cli.options"): "rtsar --help and --version load no command",
+    ("rtsar.app.cli", "rtsar.app.cli.outputs"): "rtsar --help and --version load no command",
 }
 MAX_LINES = 500
 

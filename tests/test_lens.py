@@ -194,9 +194,10 @@ def test_program_cache_and_devices(monkeypatch, opencl):
 
 
 def test_no_platform_message(monkeypatch):
-    from rtsar.lens import cl_devices, cl_vendors
+    from rtsar.lens import cl_devices, cl_probe, cl_vendors
 
     monkeypatch.setattr(cl_loader.cl, "get_platforms", lambda: [])
+    monkeypatch.setattr(cl_probe, "_found", None)
     monkeypatch.setattr(cl_vendors, "find_pip_drivers", lambda: {})
     monkeypatch.setattr(cl_devices._platform, "machine", lambda: "x86_64")
     monkeypatch.setattr(cl_devices.sys, "platform", "linux")

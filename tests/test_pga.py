@@ -322,7 +322,8 @@ def test_block_must_cover_the_aperture():
 
 def test_the_anchor_is_switched_from_the_command_line_spec():
     """``--correct pga:doppler_anchor=0,doppler_gain=0.2`` (numbers arrive as floats)."""
-    from rtsar.focus.chain import make_stage, parse_spec
+    from rtsar.focus.chain import make_stage
+    from rtsar.focus.spec import parse_spec
 
     name, params = parse_spec("pga:doppler_anchor=0,doppler_gain=0.2")
     stage = make_stage(name, report.sal_config(), params)

@@ -10,7 +10,7 @@ import math
 import sys
 import time
 
-from ..focus.chain import correct_option
+from ..focus.spec import correct_option
 from ..lens.base import survey_devices_first
 from ..params import Config
 from ..scene.effects import REGISTRY as EFFECTS

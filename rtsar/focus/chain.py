@@ -37,9 +37,8 @@ from .linearize import ChirpLinearizer
 from .pga import PGASettings, PGAStage
 from .pra import PhaseToRetro
 from .reference_region import ReferenceGeometry, ReferenceRegionCorrector
+from .spec import ORDER, parse_spec
 from .stage import DOMAINS, CorrectionStage
-
-ORDER = ("hcn", "linearize", "reference_region", "pra", "pga")
 
 
 @dataclass(frozen=True)
@@ -57,29 +56,6 @@ class CorrectionContext:
     retro_m: tuple[float, float] | None = None
     ri_delay_s: float | None = None
     reference_geometry: ReferenceGeometry | None = None
-
-
-def parse_spec(text: str) -> tuple[str, dict]:
-    """``"name"`` or ``"name:key=value,key=value"`` (numbers as floats) → (name, params)."""
-    name, _, rest = text.partition(":")
-    name = name.strip().replace("-", "_")
-    if name == "hcn+linearize":
-        raise ValueError(
-            "hcn+linearize is the stage that --correct hcn --correct linearize make together: "
-            "give those two (hcn's keys as hcn:KEY=VALUE, the resampling's as linearize:…)"
-        )
-    if name not in ORDER:
-        raise ValueError(f"unknown correction {name!r}; choose from {', '.join(ORDER)}")
-    params = {}
-    for item in filter(None, (s.strip() for s in rest.split(","))):
-        key, eq, value = item.partition("=")
-        if not eq:
-            raise ValueError(f"correction {name}: expected key=value, got {item!r}")
-        try:
-            params[key.strip()] = float(value)
-        except ValueError:
-            params[key.strip()] = value.strip()
-    return name, params
 
 
 # The class each correction (but pga: PGASettings) is made of, and its constructor's arguments
@@ -189,12 +165,6 @@ def _build(name, config, params, context, hcn_params) -> CorrectionStage:
     if name == "pga":
         return PGAStage(config, PGASettings(**params))
     raise ValueError(f"unknown correction {name!r}")  # pragma: no cover - parse_spec checks
-
-
-def correct_option(stage_name: str) -> str:
-    """How a user asks for a stage: ``--correct NAME`` (the stage ``hcn+linearize`` is asked
-    for as ``--correct hcn --correct linearize``)."""
-    return " ".join(f"--correct {n}" for n in stage_name.split("+"))
 
 
 def _spec_text(name: str, params: dict) -> str:

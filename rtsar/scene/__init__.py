@@ -2,7 +2,6 @@
 
 from .files import load_scene
 from .model import DEMO_SCENE, Scene, Targets, point_scene, scene_from_dict
-from .simulator import Shot, Simulator
 
 __all__ = [
     "DEMO_SCENE",
@@ -14,3 +13,13 @@ __all__ = [
     "Shot",
     "Simulator",
 ]
+
+
+def __getattr__(name: str):
+    """``Simulator`` and ``Shot`` load on first use: the simulator's numba kernels take ~0.4 s to
+    import, and reading a scene or a recording needs none of them."""
+    if name in ("Shot", "Simulator"):
+        from . import simulator
+
+        return getattr(simulator, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,4 +1,5 @@
-"""Where strips are published: the default endpoint, and which endpoints stay on this host.
+"""Where and how strips are published: the default endpoint, which endpoints stay on this host,
+the delivery modes and the longest a lossless send waits.
 
 Kept apart from the publisher (ZeroMQ) so the command line can name them without loading it.
 """
@@ -6,6 +7,8 @@ Kept apart from the publisher (ZeroMQ) so the command line can name them without
 from __future__ import annotations
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
+STALL_TIMEOUT_S = 2.0  # the longest a lossless send waits for a subscriber that reads nothing
+DELIVERIES = ("drop", "lossless")
 _LOOPBACK = {"127.0.0.1", "localhost", "::1", "[::1]"}
 
 

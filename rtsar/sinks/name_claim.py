@@ -58,7 +58,7 @@ class NameClaim:
 def check_unclaimed(path: str | Path) -> None:
     """ValueError, before any work, when another running rtsar process holds a claim on
     ``path`` (it is writing it live): every writer of a file asks, so that none replaces a file
-    being written (rtsar.app.cli.options.check_outputs_spare_inputs)."""
+    being written (rtsar.app.cli.outputs.check_outputs_spare_inputs)."""
     refusal = _refusal(Path(path))
     if refusal:
         raise ValueError(refusal)

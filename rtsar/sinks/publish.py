@@ -33,11 +33,8 @@ import zmq
 import zmq.auth
 
 from ..stream.strips import StreamInfo, Strip, StripSink
-from .endpoint import DEFAULT_ENDPOINT, is_local_endpoint
+from .endpoint import DEFAULT_ENDPOINT, DELIVERIES, STALL_TIMEOUT_S, is_local_endpoint
 from .wire import height_header, stats_header, strip_header
-
-STALL_TIMEOUT_S = 2.0  # the longest a lossless send waits for a subscriber that reads nothing
-DELIVERIES = ("drop", "lossless")
 
 
 def _warn(message: str) -> None:

@@ -108,7 +108,8 @@ def main(argv=None) -> int:
         return 0
     signals.install()
     warnings.showwarning = _show_warning
-    from .options import check_outputs_spare_inputs, die
+    from .options import die
+    from .outputs import check_outputs_spare_inputs
 
     try:
         check_outputs_spare_inputs(args)

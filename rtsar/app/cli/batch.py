@@ -15,7 +15,7 @@ from pathlib import Path
 
 import h5py
 
-from ...focus.chain import parse_spec
+from ...focus.spec import parse_spec
 from ...lens import range_axis_m
 from ...sinks.name_claim import check_unclaimed
 from ...sources.formats.sigmf_reader import auxiliary_of

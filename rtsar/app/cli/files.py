@@ -12,7 +12,7 @@ import numpy as np
 
 from ...lens import range_axis_m
 from ...presets import PRESETS, preset
-from ...scene import Simulator, load_scene
+from ...scene import load_scene
 from ...sinks.image_file import ImageWriter, read_heights, read_image
 from ...sinks.io import RecordingWriter, replace_when_complete
 from ...sinks.record import collection_attrs, processing_attrs
@@ -90,6 +90,8 @@ def cmd_simulate(args) -> int:
 def simulate_to(scene, output) -> None:
     """Simulate every shot of ``scene`` (all its channels) into the recording ``output``,
     written under a temporary name until complete; progress on stderr, a summary line."""
+    from ...scene import Simulator  # numba's simulator kernels: for simulate only
+
     sim = Simulator(scene)
     prog = Progress(scene.pulses, "simulate")
     batch = scene.config.processor.micro_batch

@@ -7,8 +7,7 @@ import sys
 from pathlib import Path
 
 from ...sinks.io import open_recording
-from ...sources.formats.cphd_reader import open_cphd
-from ...sources.formats.sigmf_reader import open_sigmf, sigmf_base
+from ...sources.formats.sigmf_store import sigmf_base
 
 CPHD_SUFFIXES = (".cphd",)
 
@@ -17,9 +16,14 @@ def open_input(path: str | Path):
     """Open a recording by its name: ``*.cphd`` → CPHD, ``*.sigmf-meta``/``*.sigmf-data``/
     ``*.sigmf`` → SigMF, anything else → an rtsar recording (HDF5)."""
     path = Path(path)
+    # Each reader loads with its format only (sarkit and sigmf take a while to import).
     if path.suffix.lower() in CPHD_SUFFIXES:
+        from ...sources.formats.cphd_reader import open_cphd
+
         return open_cphd(path)
     if sigmf_base(path) is not None:
+        from ...sources.formats.sigmf_reader import open_sigmf
+
         return open_sigmf(path)
     rec = open_recording(path)
     note_live_recording(rec)

@@ -9,21 +9,15 @@ from __future__ import annotations
 import sys
 import warnings
 from dataclasses import replace
-from pathlib import Path
 
-from ...focus.chain import ORDER as CORRECTIONS
-from ...focus.chain import CorrectionChain, correct_option
+from ...focus.spec import ORDER as CORRECTIONS
+from ...focus.spec import correct_option
 from ...lens import LENS_BACKENDS, range_axis_m
 from ...params import PRECISIONS, Processor
 from ...physical import CARRIERS, paper_ccd
-from ...scene.correction_context import correction_context, insal_geometry, modulation_geometry
-from ...sinks.name_claim import check_unclaimed
-from ...sinks.publish import DEFAULT_ENDPOINT, DELIVERIES, STALL_TIMEOUT_S
-from ...stream.engine import brightest_point
+from ...sinks.endpoint import DEFAULT_ENDPOINT, DELIVERIES, STALL_TIMEOUT_S
 from ...stream.pipeline import PipelineSettings
 from ...stream.settings import STAGE_LAYOUTS
-from ...topo.sam3d_strips import SamHeightStripStage
-from ...topo.stream import HeightStripStage
 
 
 def die(msg: str) -> int:
@@ -32,94 +26,6 @@ def die(msg: str) -> int:
     one_line = " ".join(str(msg).split())
     print(f"rtsar: error: {one_line}", file=sys.stderr)
     return 2
-
-
-# ---- outputs that would replace an input ---------------------------------------------------------
-# Options naming files a command reads, and files it writes (``--sigmf BASE`` writes
-# BASE.sigmf-meta and BASE.sigmf-data).
-INPUT_OPTIONS = ("scene", "recording", "image", "input", "images", "inputs")
-INPUT_OPTIONS += ("curve_key", "curve_server_key", "curve_client_key")
-OUTPUT_OPTIONS = ("output", "png", "json", "out", "cphd", "sicd", "sigmf", "record")
-COMMAND_INPUTS = {"spotlight": ("live",), "projective": ("simulate",)}  # named like others
-COMMAND_OUTPUTS = {"quicklook": ("height",)}  # --height PNG (elsewhere --height is a method)
-# Commands whose -o writes an HDF5 file (a recording or an image), and the suffixes of what
-# such a file is not: `process rec.h5 -o x.png` wrote HDF5 under a picture's name.
-HDF5_OUTPUT_COMMANDS = (
-    "simulate", "process", "run", "replay", "subscribe", "demo", "spot-simulate", "spotlight"
-)  # fmt: skip
-NOT_HDF5_SUFFIXES = (
-    ".png", ".jpg", ".jpeg", ".gif", ".pdf", ".svg", ".tif", ".tiff", ".csv", ".json", ".txt",
-    ".md", ".toml", ".cphd", ".nitf", ".ntf", ".sigmf", ".sigmf-meta", ".sigmf-data",
-)  # fmt: skip
-
-
-def check_outputs_spare_inputs(args) -> None:
-    """ValueError before any work when an output of the command names one of its inputs (or
-    another of its outputs): ``process rec.h5 -o rec.h5`` replaced the recording by its image;
-    or a file another process writes live (rtsar.sinks.name_claim).  A SigMF recording
-    exported onto itself (``export rec.sigmf-meta --sigmf rec``) is the exception: that export
-    reads the recording whole first.  An HDF5 output named like another kind of file
-    (``process rec.h5 -o x.png``) is refused too."""
-    command = getattr(args, "command", None)
-    inputs = {}
-    for name in INPUT_OPTIONS + COMMAND_INPUTS.get(command, ()):
-        for value in _values(getattr(args, name, None)):
-            for path in _files_of(value, name):
-                if path.exists():  # a built-in scene's name is not a file the output replaces
-                    inputs[_identity(path)] = path
-    outputs = {}
-    for name in OUTPUT_OPTIONS + COMMAND_OUTPUTS.get(command, ()):
-        for value in _values(getattr(args, name, None)):
-            for path in _files_of(value, name):
-                key = _identity(path)
-                if key in outputs:
-                    raise ValueError(f"{path} is named as two outputs of this command")
-                outputs[key] = path
-                sigmf_in_place = name == "sigmf" and str(inputs.get(key, "")).endswith(
-                    (".sigmf-meta", ".sigmf-data")
-                )
-                if key in inputs and not sigmf_in_place:
-                    raise ValueError(
-                        f"the output {path} is this command's input {inputs[key]}: writing it "
-                        "would replace what it reads; choose another output name"
-                    )
-    named = (("-o", getattr(args, "output", None)), ("--record", getattr(args, "record", None)))
-    for option, value in named:
-        suffix = Path(value).suffix.lower() if value else ""
-        if command in HDF5_OUTPUT_COMMANDS and suffix in NOT_HDF5_SUFFIXES:
-            raise ValueError(
-                f"{option} {value}: {command} writes an HDF5 file (.h5), not a {suffix} file; "
-                "pictures come from `rtsar quicklook IMG.h5 -o PICTURE`, CPHD/SICD/SigMF from "
-                "`rtsar export`"
-            )
-    for path in outputs.values():  # a file another process writes live is never replaced
-        check_unclaimed(path)
-
-
-def _values(value) -> list[str]:
-    if value is None or isinstance(value, bool):
-        return []
-    return [str(v) for v in value] if isinstance(value, list | tuple) else [str(value)]
-
-
-def _files_of(value: str, option: str) -> list[Path]:
-    """The files an option's value names (SigMF: both files of a recording)."""
-    path = Path(value)
-    if option == "sigmf":
-        return [Path(value + ".sigmf-meta"), Path(value + ".sigmf-data")]
-    if path.suffix.lower() in (".sigmf-meta", ".sigmf-data"):
-        return [path.with_suffix(".sigmf-meta"), path.with_suffix(".sigmf-data")]
-    return [path]
-
-
-def _identity(path: Path):
-    """What tells two names of one file apart from two files: (device, inode) of an existing
-    file (hard links, symlinks, ./x and x), else its absolute path."""
-    try:
-        st = path.stat()
-    except OSError:
-        return str(path.resolve())
-    return st.st_dev, st.st_ino
 
 
 # ---- option groups ---------------------------------------------------------------------------
@@ -253,7 +159,13 @@ def height_stage(args, cfg, scene):
         raise ValueError("--height with --physical is not supported (the ideal CCD only)")
     rg, lines = range_axis_m(cfg), args.height_strip_lines
     if args.height == "sam":
+        from ...scene.correction_context import modulation_geometry
+        from ...topo.sam3d_strips import SamHeightStripStage
+
         return SamHeightStripStage(modulation_geometry(scene), rg, strip_lines=lines)
+    from ...scene.correction_context import insal_geometry
+    from ...topo.stream import HeightStripStage
+
     return HeightStripStage(insal_geometry(scene), rg, strip_lines=lines)
 
 
@@ -402,6 +314,10 @@ def correction_chain(args, cfg, scene=None, start_along_track_m=0.0, recording=N
     uncorrected pass over it)."""
     if not getattr(args, "correct", None):
         return None
+    from ...focus.chain import CorrectionChain
+    from ...scene.correction_context import correction_context
+    from ...stream.engine import brightest_point
+
     context = correction_context(scene, start_along_track_m)
     bare_pra = any(s.split(":")[0].strip() == "pra" and "=" not in s for s in args.correct)
     if bare_pra and context.retro_m is None and recording is not None:

@@ -28,7 +28,7 @@ import numpy as np
 from ...params import config_from_dict
 from .foreign import ForeignRecording, telemetry_problem
 from .requirements import require_formats
-from .sigmf_store import ARCHIVE, COMPRESSED_ARCHIVES, DATA, META, Archive, SideBySide
+from .sigmf_store import ARCHIVE, COMPRESSED_ARCHIVES, DATA, META, Archive, SideBySide, sigmf_base
 from .timebase import parse_utc, shifted
 
 try:
@@ -37,18 +37,8 @@ except ImportError:  # the optional extra "formats"
     sigmffile = None
 
 RTSAR_EXTENSION = {"name": "rtsar", "version": "1.0.0", "optional": True}
-SUFFIXES = (META, DATA, *COMPRESSED_ARCHIVES, ARCHIVE)
 DECLARED_TOLERANCE = 1e-9  # relative, between a declared figure and rtsar:config's
 SPOT_KEY = "spotlight"  # a spotlight recording's scene (rtsar.sources.formats.cphd_reader)
-
-
-def sigmf_base(path: Path) -> Path | None:
-    """The base name of a SigMF recording named by any of its files; None if not SigMF."""
-    path = Path(path)
-    for suffix in SUFFIXES:
-        if path.name.lower().endswith(suffix):
-            return path.with_name(path.name[: -len(suffix)])
-    return None
 
 
 def locate(path) -> tuple[object, str]:

@@ -18,6 +18,7 @@ import numpy as np
 ARCHIVE = ".sigmf"
 COMPRESSED_ARCHIVES = (".sigmf.gz", ".sigmf.xz", ".sigmf.zip")
 META, DATA = ".sigmf-meta", ".sigmf-data"
+SUFFIXES = (META, DATA, *COMPRESSED_ARCHIVES, ARCHIVE)  # the names a SigMF recording goes by
 MAX_META_BYTES = 1 << 30  # a metadata file larger than this is no SigMF rtsar reads
 
 
@@ -113,3 +114,12 @@ class Archive:
 def _base(member: str, suffix: str) -> str:
     """A member's recording name: ``dir/NAME.sigmf-meta`` → ``NAME``."""
     return member.rsplit("/", 1)[-1][: -len(suffix)]
+
+
+def sigmf_base(path: Path) -> Path | None:
+    """The base name of a SigMF recording named by any of its files; None if not SigMF."""
+    path = Path(path)
+    for suffix in SUFFIXES:
+        if path.name.lower().endswith(suffix):
+            return path.with_name(path.name[: -len(suffix)])
+    return None

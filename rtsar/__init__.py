@@ -8,4 +8,6 @@ lens: range compression), ``ccd`` (the shifting CCD with mask: azimuth correlati
 commands.
 """
 
-__version__ = "0.1.0"
+from .version import RELEASE
+
+__version__ = RELEASE  # the release number; `rtsar --version` adds the git commit

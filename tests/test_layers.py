@@ -29,6 +29,7 @@ FLOORS = [
         "rtsar.instrument",
         "rtsar.phase",
         "rtsar.samples",
+        "rtsar.version",
     },
     {"rtsar.lens"},
     {"rtsar.physical"},

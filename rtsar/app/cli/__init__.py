@@ -11,8 +11,8 @@ import argparse
 import sys
 import warnings
 
-from ... import __version__
 from ...sinks.publish import DEFAULT_ENDPOINT
+from ...version import version_text
 from .. import signals
 from . import batch, files, formats, measure, spot, streaming, swath
 from .options import check_outputs_spare_inputs, die
@@ -36,6 +36,17 @@ EPILOG = f"""examples:
 """
 
 
+class VersionAction(argparse.Action):
+    """``--version``: asks git only when given (rtsar.version), not on every command."""
+
+    def __init__(self, option_strings, dest, help=None):
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(version_text())
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="rtsar",
@@ -45,7 +56,11 @@ def build_parser() -> argparse.ArgumentParser:
         "processor: an OpenCL 'AO lens' compresses each pulse in range, a shifting-"
         "CCD correlator with a chirp mask compresses in azimuth.",
     )
-    p.add_argument("--version", action="version", version=f"rtsar {__version__}")
+    p.add_argument(
+        "--version",
+        action=VersionAction,
+        help="the release and the git commit this rtsar was installed from, then exit",
+    )
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     files.add_parsers(sub)
     streaming.add_parsers(sub)

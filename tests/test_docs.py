@@ -222,3 +222,25 @@ def test_code_points_to_pages_that_exist():
             if " ".join(section.split()) not in headings:
                 problems.append(f"{path.relative_to(ROOT)}: README has no section {section!r}")
     assert not problems, "\n".join(problems)
+
+
+def test_every_option_named_in_the_prose_exists():
+    """Inline commands (`rtsar process REC.h5 --correct pga`) are not run, but each option
+    they name must be one of that command's options: a renamed option fails here."""
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    options = {name: set(p._option_string_actions) for name, p in sub.choices.items()}
+    unknown, checked = [], 0
+    for page in pages():
+        text = page.read_text(encoding="utf-8").replace("\n", " ")
+        for span in re.findall(r"`(rtsar [^`]+)`", text):
+            words = span.split()
+            if len(words) < 2 or words[1] not in options:
+                continue
+            for word in words[2:]:
+                m = re.match(r"\[?(--?[a-zA-Z][\w-]*)", word)
+                if m:
+                    checked += 1
+                    if m.group(1) not in options[words[1]]:
+                        unknown.append(f"{page_name(page)}: `{span}`: {m.group(1)}")
+    assert checked > 100 and not unknown, "\n".join(unknown)

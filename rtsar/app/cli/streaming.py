@@ -350,8 +350,8 @@ def add_parsers(sub) -> None:
         "--duration",
         type=float,
         help="stop after this many seconds of the stream, i.e. pulses at the PRF (a busy "
-        "machine takes longer; serial: seconds of silence) (default: the whole scene, 10 s for "
-        "the demo; serial: never)",
+        "machine takes longer; --serial and --zmq-in: seconds without data, counted from the "
+        "start too) (default: the whole scene, 10 s for the demo; --serial, --zmq-in: never)",
     )
     src.add_argument(
         "--reconnect",

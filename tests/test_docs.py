@@ -21,6 +21,7 @@ import sys
 import time
 from pathlib import Path
 
+import docs_shim
 import pytest
 from docs_blocks import (
     PAGES_DIR,
@@ -244,3 +245,39 @@ def test_every_option_named_in_the_prose_exists():
                     if m.group(1) not in options[words[1]]:
                         unknown.append(f"{page_name(page)}: `{span}`: {m.group(1)}")
     assert checked > 100 and not unknown, "\n".join(unknown)
+
+
+def test_small_runs_append_to_the_commands_named_and_only_those():
+    config = {"small": [[["rtsar", "run"], ["--duration", "1"]]], "python": "/py"}
+    config["small"].append([["python", "tools/sim_cost.py"], ["--pulses", "400"]])
+    run = docs_shim.rewrite("rtsar", ["run", "-o", "demo.h5"], config)
+    assert run[-4:] == ["-o", "demo.h5", "--duration", "1"]
+    assert docs_shim.rewrite("rtsar", ["quicklook", "a.h5"], config)[-2:] == ["quicklook", "a.h5"]
+    tool = docs_shim.rewrite("python", ["tools/sim_cost.py", "--scene", "demo"], config)
+    assert tool == ["/py", "tools/sim_cost.py", "--scene", "demo", "--pulses", "400"]
+    assert docs_shim.rewrite("python", ["tools/other.py"], config) == ["/py", "tools/other.py"]
+
+
+def test_the_default_endpoint_becomes_the_pages_own_port():
+    mine = "tcp://127.0.0.1:41234"
+    assert docs_shim.with_endpoint(["run", "-o", "a.h5"], mine)[-2:] == ["--endpoint", mine]
+    given = ["replay", "r.h5", "--endpoint", "tcp://127.0.0.1:9"]
+    assert docs_shim.with_endpoint(given, mine) == given
+    assert docs_shim.with_endpoint(["subscribe", "-o", "l.h5"], mine) == [
+        "subscribe",
+        mine,
+        "-o",
+        "l.h5",
+    ]
+    assert docs_shim.with_endpoint(["view", "tcp://h:1", "--png", "v.png"], mine)[1] == "tcp://h:1"
+    live = docs_shim.with_endpoint(["spotlight", "--live", "--publish", "-o", "x.h5"], mine)
+    assert f"--publish={mine}" in live and "--publish" not in live
+    assert docs_shim.with_endpoint(["simulate", "s.toml"], mine) == ["simulate", "s.toml"]
+
+
+def test_a_pages_ports_are_replaced_alike_in_every_block(tmp_path):
+    run = PageRun(README, tmp_path / "page")
+    a = run.remap_ports("python tools/fake_instrument.py --listen 127.0.0.1:7000 &")
+    b = run.remap_ports("rtsar run --serial socket://127.0.0.1:7000 --zmq-in tcp://127.0.0.1:5600")
+    port = a.split("127.0.0.1:")[1].split()[0]
+    assert port != "7000" and f"socket://127.0.0.1:{port} " in b and "5600" not in b

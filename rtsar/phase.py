@@ -2,7 +2,7 @@
 
 Convention (used everywhere in rtsar): a wrapped phase lies in [-π, π).  Large phases (the
 optical carrier 2π f0 τ reaches 1e9 rad) are formed in float64 and reduced modulo 2π before any
-exponential or cast to single precision (README "Conventions").
+exponential or cast to single precision (docs/pages/reference/conventions.md).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The instruments of the source papers as configurations (README "Presets")."""
+"""The instruments of the source papers as configurations (docs/pages/reference/conventions.md)."""
 
 from __future__ import annotations
 

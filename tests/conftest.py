@@ -1,4 +1,5 @@
 import os
+import sys
 
 import numpy as np
 import pytest
@@ -72,7 +73,20 @@ def cl_device(request):
 
 
 def pytest_terminal_summary(terminalreporter):
-    """Which OpenCL device ran the lens in this test run, and every device's probe result."""
+    """Which OpenCL device ran the lens in this test run, and every device's probe result;
+    the documentation blocks run and skipped (with the reason) by tests/test_docs.py."""
+    docs = sys.modules.get("test_docs")
+    if docs is not None and docs.OUTCOMES:
+        ran = [o for o in docs.OUTCOMES if o[1] == "ran"]
+        seconds = sum(float(o[2].split()[0]) for o in ran)
+        terminalreporter.write_sep("-", "documentation blocks")
+        terminalreporter.write_line(
+            f"{len(ran)} ran as written ({seconds:.0f} s), "
+            f"{sum(o[1] == 'skipped' for o in docs.OUTCOMES)} skipped, "
+            f"{sum(o[1] == 'FAILED' for o in docs.OUTCOMES)} failed"
+        )
+        for where, outcome, why in docs.OUTCOMES:
+            terminalreporter.write_line(f"  {outcome} {where}: {why}")
     try:
         from rtsar.lens import cl_devices
 

@@ -170,3 +170,15 @@ def test_unknown_surface_key_is_one_line_listing_the_accepted_keys():
     # The accepted keys still work.
     scene = scene_from_table(_surface_table(shape="coin", relief_m=1e-4))
     assert len(scene.targets) > 0
+
+
+def test_a_surface_without_platform_height_says_which_key_to_set():
+    """Issue 31: the README's [surface] snippet on a preset without a platform height failed
+    with "(see zhao_config)", an internal function no user can act on."""
+    table = _surface_table(shape="ridge", height_m=2.5e-3)
+    del table["geometry"]
+    with pytest.raises(ValueError) as err:
+        scene_from_table(table)
+    msg = str(err.value)
+    assert "\n" not in msg and "platform_height_m" in msg and "[geometry]" in msg
+    assert "zhao_config" not in msg

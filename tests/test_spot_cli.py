@@ -138,3 +138,21 @@ def test_bistatic_channel_from_a_recording(tmp_path):
     ref = polar_format(SpotlightSimulator(s).block()[1]["bistatic"], plan)
     assert spot["channel"] == "bistatic" and np.max(np.abs(image - ref)) < 1e-5
     assert spot["frame_angle_rad"] == pytest.approx(math.radians(4.0), abs=1e-3)  # the bisector
+
+
+def test_a_bistatic_channel_that_was_never_recorded_says_what_to_simulate(
+    scene_file, tmp_path, capsys
+):
+    """Issue 31: `spotlight REC --channel bistatic` on a recording without a bistatic receiver
+    said "this spotlight geometry has no bistatic receiver"; it names the recording and the
+    scene keys that make one, in one line, exit status 2, before any imaging."""
+    rec = tmp_path / "mono.h5"
+    assert main(["spot-simulate", str(scene_file), "-o", str(rec)]) == 0
+    capsys.readouterr()
+    out = tmp_path / "bi.h5"
+    argv = ["spotlight", str(rec), "--channel", "bistatic", "--look", "monostatic", "-o", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(rec) in err
+    assert "bistatic_range_m" in err and "bistatic_angle_deg" in err
+    assert not out.exists()

@@ -2,6 +2,9 @@
 tag_headers.cc, pmt_serialize.cc) are cut into shots with their numbers and times."""
 
 import struct
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -231,3 +234,19 @@ def test_a_late_subscriber_keeps_the_positions_and_counts_what_it_missed(tmp_pat
     assert np.abs(got - want[late:]).max() <= 1e-5 * np.abs(want).max()
     counters = json.loads(attrs["counters"])
     assert counters["pulses_before_start"] == late and counters.get("gap_pulses", 0) == 0
+
+
+def test_the_flowgraph_without_gnu_radio_says_what_to_install(tmp_path):
+    """Issue 31: tools/gnuradio_flowgraph.py under a Python without GNU Radio was a traceback
+    (ModuleNotFoundError); it is one line naming what to install, exit status 2."""
+    if subprocess.run([sys.executable, "-c", "import gnuradio"]).returncode == 0:
+        pytest.skip("this interpreter has GNU Radio")
+    script = Path(__file__).resolve().parents[1] / "tools" / "gnuradio_flowgraph.py"
+    done = subprocess.run(
+        [sys.executable, str(script), str(tmp_path / "rec.sigmf-meta")],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 2 and done.stdout == ""
+    assert "Traceback" not in done.stderr and done.stderr.count("\n") == 1
+    assert "apt-get install gnuradio" in done.stderr

@@ -5,9 +5,13 @@ Run it with a Python that has GNU Radio (Debian: ``apt install gnuradio``, then 
 ``rtsar export REC.h5 --sigmf OUT`` (the shots as ``cf32_le``, ``rtsar:samples_per_shot`` and
 ``rtsar:prf_hz`` in the metadata):
 
-    rtsar export rec.h5 --sigmf rec
-    rtsar run --zmq-in tcp://127.0.0.1:5600 --scene scene.toml --duration 3 -o img.h5 &
-    /usr/bin/python3 tools/gnuradio_flowgraph.py rec.sigmf-meta --endpoint tcp://127.0.0.1:5600
+    rtsar simulate scene.toml -o rec.h5 && rtsar export rec.h5 --sigmf rec
+    rtsar run --zmq-in tcp://127.0.0.1:5600 --scene scene.toml --duration 5 -o img.h5 &
+    /usr/bin/python3 tools/gnuradio_flowgraph.py rec.sigmf-meta --endpoint tcp://127.0.0.1:5600 \
+        --start-delay 3
+
+(docs/pages/guide/recordings.md, "GNU Radio", runs exactly this.)  Without GNU Radio the script
+says in one line what to install, and exits with status 2.
 
 Flowgraph: File Source → Throttle (the recording's PRF × --rate) → either Stream to Tagged
 Stream (``packet_len`` = samples per shot) → ZMQ PUB Sink with pass tags (``--mode tagged``,
@@ -24,7 +28,24 @@ import sys
 import time
 from pathlib import Path
 
-from gnuradio import blocks, gr, zeromq
+INSTALL = (
+    "install GNU Radio (Debian/Ubuntu: sudo apt-get install gnuradio; elsewhere: "
+    "https://wiki.gnuradio.org/index.php/InstallingGR) and run this script with the Python "
+    "that has it (Debian: /usr/bin/python3)"
+)
+
+
+def gnuradio():
+    """GNU Radio's blocks, gr and zeromq modules, or exit with one line saying what to install."""
+    try:
+        from gnuradio import blocks, gr, zeromq
+    except ImportError as exc:
+        print(
+            f"gnuradio_flowgraph.py: {sys.executable} cannot import GNU Radio ({exc}): {INSTALL}",
+            file=sys.stderr,
+        )
+        raise SystemExit(2) from None
+    return blocks, gr, zeromq
 
 
 def main(argv=None) -> int:
@@ -35,6 +56,7 @@ def main(argv=None) -> int:
     p.add_argument("--rate", type=float, default=1.0, help="speed-up of the PRF (default 1)")
     p.add_argument("--start-delay", type=float, default=1.0, help="seconds (default 1)")
     args = p.parse_args(argv)
+    blocks, gr, zeromq = gnuradio()
     meta_path = Path(args.sigmf)
     meta = json.loads(meta_path.read_text())["global"]
     data = meta_path.with_name(meta_path.name.replace(".sigmf-meta", ".sigmf-data"))

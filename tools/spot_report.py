@@ -1,4 +1,4 @@
-"""Spotlight, bistatic and projective SAL: the issue-15 figures and the README's spot_*.png.
+"""Spotlight, bistatic and projective SAL: the issue-15 figures and docs/pages/figures/spot_*.png.
 
 A thin wrapper: the report is library code, rtsar.app.reports.spot (`--help` for its options).
 """

@@ -14,18 +14,18 @@ import time
 import numpy as np
 
 from ..analysis.timing import rate_per_s
+from ..ccd import make_correlator
 from ..ccd.base import design_mask
-from ..ccd.direct import DirectCorrelator
-from ..ccd.fft import FFTCorrelator
-from ..ccd.nonuniform import NonUniformCorrelator
-from ..ccd.partitioned import PartitionedCorrelator
 from ..lens.base import make_lens, opencl_unavailable
 from ..lens.numpy_lens import NumpyLens
 from ..lens.plan import make_plan
+from ..params import Processor
 from ..presets import preset
 from ..sinks.io import check_writable, replace_when_complete
-from .bench_pipeline import bench_pipeline
+from .bench_pipeline import CorrelatorAlone, bench_pipeline
 from .bench_record import bench_recording, recording_lines
+
+CORRELATORS = Processor.CORRELATORS  # direct, fft, partitioned, nonuniform
 
 
 def bench_lens(
@@ -73,8 +73,14 @@ def bench_lens(
     return rows
 
 
-def bench_correlators(cfg, batch=64, seconds=1.0, pushes=400) -> list[dict]:
-    """Pulses/s of the four correlators, pushes of ``batch`` lines, measured in one run.
+CORRELATOR_TABLE = "the correlator table above"
+
+
+def bench_correlators(
+    cfg, name: str, alone: CorrelatorAlone, batch: int = 64, seconds: float = 1.0, pushes=400
+) -> list[dict]:
+    """Pulses/s of the four correlators alone, pushes of ``batch`` lines (``alone``: the one
+    definition the pipeline's ratios share), measured in one run.
 
     The partitioned correlator (blocks of ``cfg.processor.partition_lines`` = L) and the
     nonuniform one (head block L, tail blocks up to ``tail_block_lines``) are also fed the way a
@@ -84,30 +90,28 @@ def bench_correlators(cfg, batch=64, seconds=1.0, pushes=400) -> list[dict]:
     plan = make_plan(cfg)
     mask = design_mask(cfg, plan.range_m)
     block = min(cfg.processor.partition_lines, mask.shape[0])
-    rng = np.random.default_rng(1)
-    shape = (max(batch, block), plan.bin_count)
-    lines = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(np.complex64)
-    corrs = {
-        "direct": DirectCorrelator(mask),
-        "fft": FFTCorrelator(mask),
-        "partitioned": PartitionedCorrelator(mask, block),
-        "nonuniform": NonUniformCorrelator(mask, block, cfg.processor.tail_block_lines),
+    rates = {
+        kind: alone.rate(name, cfg.with_processor(correlator=kind), batch, CORRELATOR_TABLE)
+        for kind in CORRELATORS
     }
-    rates = {}
-    for name, corr in corrs.items():
-        rates[name] = rate_per_s(lambda c=corr, x=lines[:batch]: c.push(x), batch, seconds)
-    one_block = lines[:block]
+    rng = np.random.default_rng(1)
+    shape = (block, plan.bin_count)
+    one_block = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(np.complex64)
     blocks = {}
-    for name in ("partitioned", "nonuniform"):
-        streaming = corrs[name]
+    for kind in ("partitioned", "nonuniform"):
+        p = cfg.processor
+        streaming = make_correlator(
+            kind, mask, p.fft_length, partition_lines=block, tail_block_lines=p.tail_block_lines
+        )
         block_rate = rate_per_s(lambda c=streaming: c.push(one_block), block, seconds)
         times = np.empty(pushes)
         for i in range(pushes):
             t0 = time.perf_counter()
             streaming.push(one_block)
             times[i] = time.perf_counter() - t0
-        blocks[name] = (block_rate, times)
-    corrs["nonuniform"].close()
+        if hasattr(streaming, "close"):
+            streaming.close()
+        blocks[kind] = (block_rate, times)
     row = {
         "stage": "correlator",
         "batch": batch,
@@ -123,10 +127,10 @@ def bench_correlators(cfg, batch=64, seconds=1.0, pushes=400) -> list[dict]:
         "aperture_pulses": mask.shape[0],
         "range_bins": mask.shape[1],
     }
-    for name, (block_rate, times) in blocks.items():
-        row[f"{name}_one_block_pulses_per_s"] = block_rate
-        row[f"{name}_push_median_ms"] = 1e3 * float(np.median(times))
-        row[f"{name}_push_p99_ms"] = 1e3 * float(np.percentile(times, 99))
+    for kind, (block_rate, times) in blocks.items():
+        row[f"{kind}_one_block_pulses_per_s"] = block_rate
+        row[f"{kind}_push_median_ms"] = 1e3 * float(np.median(times))
+        row[f"{kind}_push_p99_ms"] = 1e3 * float(np.percentile(times, 99))
     return [row]
 
 
@@ -145,7 +149,7 @@ def add_arguments(parser) -> None:
         "--real-seconds",
         type=float,
         default=10.0,
-        help="length of each real-rate pipeline run (default 10 s)",
+        help="length of each paced pipeline run, shots released at the PRF (default 10 s)",
     )
     parser.add_argument(
         "--repeats",
@@ -213,32 +217,39 @@ def run_bench(args) -> int:
             f"{_num(r['opencl_over_numpy_one_fft'], 9, '.2f')}",
             file=out,
         )
-    corr_rows = bench_correlators(cfg, seconds=seconds)
-    print("\nShifting CCD (azimuth correlation), pulses/s", file=out)
-    for r in corr_rows:
+    alone = CorrelatorAlone(seconds)
+    # At the pipeline's own batch (the micro-batch), so its ratios below reuse these figures.
+    corr_rows = bench_correlators(cfg, name, alone, cfg.processor.micro_batch, seconds=seconds)
+    r = corr_rows[0]
+    print(
+        f"\nShifting CCD (azimuth correlation) alone, pulses/s: each correlator as the pipeline "
+        f"builds it, pushed batches of {r['batch']} lines ({r['aperture_pulses']} x "
+        f"{r['range_bins']})",
+        file=out,
+    )
+    print(
+        "  "
+        + "   ".join(f"{k} {r[f'{k}_pulses_per_s']:,.0f}" for k in CORRELATORS)
+        + f"   (fft / direct {r['fft_over_direct']:.1f}x, nonuniform / partitioned "
+        f"{r['nonuniform_over_partitioned']:.2f}x)",
+        file=out,
+    )
+    for kind in ("partitioned", "nonuniform"):
         print(
-            f"batch {r['batch']}: direct {r['direct_pulses_per_s']:,.0f}, "
-            f"fft {r['fft_pulses_per_s']:,.0f}, fft/direct {r['fft_over_direct']:.1f}x, "
-            f"partitioned {r['partitioned_pulses_per_s']:,.0f}, "
-            f"nonuniform {r['nonuniform_pulses_per_s']:,.0f}, nonuniform/partitioned "
-            f"{r['nonuniform_over_partitioned']:.2f}x ({r['aperture_pulses']} x "
-            f"{r['range_bins']})",
+            f"  {kind}, one block of {r['partition_lines']} lines per push (the low-latency "
+            f"path): {r[f'{kind}_one_block_pulses_per_s']:,.0f} pulses/s, push median "
+            f"{r[f'{kind}_push_median_ms']:.3f} ms, p99 {r[f'{kind}_push_p99_ms']:.3f} ms",
             file=out,
         )
-        for kind in ("partitioned", "nonuniform"):
-            print(
-                f"  {kind}, one block of {r['partition_lines']} per push: "
-                f"{r[f'{kind}_one_block_pulses_per_s']:,.0f} pulses/s, push median "
-                f"{r[f'{kind}_push_median_ms']:.3f} ms, p99 {r[f'{kind}_push_p99_ms']:.3f} ms",
-                file=out,
-            )
     prf = cfg.geometry.prf_hz
-    best = max(corr_rows[0]["fft_pulses_per_s"], corr_rows[0]["direct_pulses_per_s"])
+    fastest = max(CORRELATORS, key=lambda k: r[f"{k}_pulses_per_s"])
     lens_key = "opencl_pulses_per_s" if reason is None else "numpy_fft_pulses_per_s"
-    lens_best = max(r[lens_key] for r in lens_rows)
+    lens_row = max(lens_rows, key=lambda row: row[lens_key])
     print(
-        f"\nreal-time factors at PRF {prf:g} Hz: lens {lens_best / prf:.2f}x, "
-        f"best correlator {best / prf:.2f}x",
+        f"\nalone, against the PRF ({prf:g} Hz): the "
+        f"{'OpenCL' if reason is None else 'NumPy'} lens {lens_row[lens_key] / prf:.2f}x real "
+        f"time (batch {lens_row['batch']}, its fastest above); the fastest correlator, "
+        f"{fastest}, {r[f'{fastest}_pulses_per_s'] / prf:.2f}x (batches of {r['batch']})",
         file=out,
     )
     pipeline_rows = []
@@ -249,7 +260,12 @@ def run_bench(args) -> int:
     )
     print(
         "\nLive pipeline end to end (simulated shots from memory, strips published on a "
-        "loopback ZeroMQ socket)",
+        "loopback ZeroMQ socket).\n"
+        "  max rate: shots replayed as fast as the pipeline takes them; capacity = pulses/s ÷ "
+        "PRF (x real time)\n"
+        "  paced: shots released at the PRF as an instrument sends them (a full queue drops "
+        "them): the shots kept of those offered, and the latency from a line's last pulse to "
+        "its strip",
         file=out,
     )
     for pname in names:
@@ -261,6 +277,7 @@ def run_bench(args) -> int:
                 real_seconds=args.real_seconds,
                 log=lambda m: print(m, file=out, flush=True),
                 repeats=args.repeats,
+                alone=alone,
             )
         )
     rec_name = getattr(args, "preset", None) or "psaltis-max"

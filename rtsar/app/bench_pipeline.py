@@ -2,17 +2,17 @@
 
 Not a test.  For a preset it measures, on the same simulated shots held in memory:
 
-* real-time factor: the pipeline fed as fast as it takes shots (replay ``max``), pulses/s ÷ PRF;
-* at the real PRF, the source behaving as an instrument (dropped when the pipeline is full):
-  dropped pulses and the latency from the arrival of the last pulse of a line to the
-  publication of its strip (median, p99), and the achieved PRF of the paced source;
-* throughput against the micro-batch cap;
+* capacity: the pipeline fed as fast as it takes shots (replay ``max``), pulses/s ÷ PRF;
+* paced at the PRF, the source behaving as an instrument (dropped when the pipeline is full):
+  the shots kept of those offered, the drops, the latency from the arrival of the last pulse
+  of a line to the publication of its strip (median, p99), and the achieved PRF of the source;
+* capacity against the micro-batch cap;
 * a plain NumPy batch range-Doppler processor (FFT matched filter in range, FFT fast convolution
   in azimuth over the whole block) on the same shots, as a ratio;
 * the CCD stage's rate inside the pipeline (its busy time) as a fraction of the same correlator
-  pushed alone;
+  alone (CorrelatorAlone: one measurement, shared with the bench's correlator table);
 * placement: lens and CCD in two worker processes, a range half each (``--swath-workers 2``),
-  at max and at real rate, for the partitioned and the nonuniform correlators.
+  at max rate and paced, for the partitioned and the nonuniform correlators.
 
 Strips go to a ZeroMQ publisher on a loopback port with no subscriber (publication is part of
 the measured path), or, with ``stalled_subscriber``, with a subscriber that never reads.
@@ -117,7 +117,7 @@ def stream_run(
         "pulses": done,
         "wall_s": wall,
         "pulses_per_s": done / wall,
-        "real_time_factor": done / wall / prf,
+        "real_time_factor": done / wall / prf,  # capacity, at max rate only (below)
         "dropped_pulses": c["dropped_pulses"],
         "gap_pulses": c["gap_pulses"],
         "latency_median_ms": d["latency_median_ms"],
@@ -126,13 +126,26 @@ def stream_run(
         "stage_busy_s": d["stage_busy_s"],
         "strips": c["strips_published"],
     }
-    if live:
+    if live:  # paced: what the instrument-like source offered, and how much of it was kept
+        out.update(paced_figures(total, done, c["gap_pulses"]))
         out["achieved_prf_hz"] = src.achieved_rate_hz()
         out["prf_error"] = out["achieved_prf_hz"] / prf - 1
+        del out["real_time_factor"]  # the source sets the rate: not a measure of capacity
     ccd_busy = d["stage_busy_s"].get("ccd")
     if ccd_busy:
         out["ccd_stage_pulses_per_s"] = done / ccd_busy
     return out
+
+
+def paced_figures(offered: int, processed: int, gap_filled: int) -> dict:
+    """A paced run's shots: offered by the source, kept (processed, less the zero pulses that
+    stood in for dropped ones), and the kept fraction."""
+    kept = processed - gap_filled
+    return {
+        "offered_pulses": offered,
+        "kept_pulses": kept,
+        "kept_fraction": kept / offered if offered else 0.0,
+    }
 
 
 def _stop_after(source, seconds: float):
@@ -144,8 +157,34 @@ def _stop_after(source, seconds: float):
     return t
 
 
-def isolated_correlator_rate(cfg: Config, batch: int, seconds: float = 1.0) -> float:
-    """Pulses/s of the configured correlator alone, pushed ``batch`` lines at a time."""
+class CorrelatorAlone:
+    """Pulses/s of a correlator alone: the one the pipeline builds from the configuration
+    (rtsar.ccd.make_correlator), pushed ``batch`` random lines at a time for ``seconds``.
+
+    One definition, measured once per (preset, correlator, batch) and kept: the bench's
+    correlator table and the pipeline's "CCD stage ÷ alone" ratios print the same number for
+    the same figure.  ``source`` says where a figure was first reported."""
+
+    def __init__(self, seconds: float = 1.0):
+        self.seconds = float(seconds)
+        self.rates: dict[tuple[str, str, int], float] = {}
+        self.source: dict[tuple[str, str, int], str] = {}
+
+    def rate(self, preset_name: str, cfg: Config, batch: int, where: str = "") -> float:
+        key = (preset_name, cfg.processor.correlator, int(batch))
+        if key not in self.rates:
+            self.rates[key] = _correlator_alone(cfg, int(batch), self.seconds)
+            self.source[key] = where
+        return self.rates[key]
+
+    def label(self, preset_name: str, cfg: Config, batch: int) -> str:
+        """How a figure reads beside a ratio: its correlator, batch, and where it was shown."""
+        key = (preset_name, cfg.processor.correlator, int(batch))
+        where = self.source.get(key) or "measured here"
+        return f"{key[1]} alone, batches of {key[2]}: {self.rates[key]:,.0f} pulses/s, {where}"
+
+
+def _correlator_alone(cfg: Config, batch: int, seconds: float) -> float:
     plan = make_plan(cfg)
     p = cfg.processor
     corr = make_correlator(
@@ -158,7 +197,12 @@ def isolated_correlator_rate(cfg: Config, batch: int, seconds: float = 1.0) -> f
     rng = np.random.default_rng(2)
     shape = (batch, plan.bin_count)
     lines = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(np.complex64)
-    return rate_per_s(lambda: corr.push(lines), batch, seconds)
+    try:
+        return rate_per_s(lambda: corr.push(lines), batch, seconds)
+    finally:
+        close = getattr(corr, "close", None)
+        if close is not None:
+            close()
 
 
 def numpy_range_doppler(cfg: Config, shots: np.ndarray) -> np.ndarray:
@@ -198,23 +242,33 @@ __all__ = [
     "Cyclic",
     "bench_numpy_range_doppler",
     "bench_shots",
-    "isolated_correlator_rate",
+    "CorrelatorAlone",
     "numpy_range_doppler",
+    "paced_figures",
     "stream_run",
     "summarize_runs",
 ]
 
 
 def bench_pipeline(
-    name: str, cfg: Config, seconds: float, real_seconds: float, log=print, repeats: int = 1
+    name: str,
+    cfg: Config,
+    seconds: float,
+    real_seconds: float,
+    log=print,
+    repeats: int = 1,
+    alone: CorrelatorAlone | None = None,
 ) -> dict:
     """The streaming figures of one preset, all measured in this call (see module docstring).
 
     ``repeats`` > 1: every run is made that many times, in rounds (each configuration once per
     round, always in the same order), so that a shared machine's slow swings fall on all of
-    them alike; ``summary`` then gives each figure's median and range over the rounds."""
+    them alike; ``summary`` then gives each figure's median and range over the rounds.
+    ``alone``: the correlators' rates alone, shared with the bench's correlator table, so a
+    figure measured there is the same number here."""
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
+    alone = alone or CorrelatorAlone(min(seconds, 1.0))
     shots = bench_shots(cfg, 2048)
     result = {"preset": name, "prf_hz": cfg.geometry.prf_hz, "repeats": repeats, "runs": []}
     part = cfg.with_processor(correlator="partitioned")
@@ -224,11 +278,7 @@ def bench_pipeline(
         r = stream_run(c, shots, secs, rate, PipelineSettings(**kw), stalled_subscriber=stalled)
         r["label"], r["round"] = label, round_
         result["runs"].append(r)
-        log(
-            f"  {label:34} {r['real_time_factor']:6.2f}x RT  dropped {r['dropped_pulses']:5d}  "
-            f"latency median {r['latency_median_ms']:8.2f} ms  p99 {r['latency_p99_ms']:8.2f} ms"
-            + (f"  PRF error {100 * r['prf_error']:+.3f} %" if "prf_error" in r else "")
-        )
+        log(f"  {label:42} {run_line(r)}")
         return r
 
     log(
@@ -245,8 +295,8 @@ def bench_pipeline(
         for kind in ("partitioned", "nonuniform", "fft"):
             c = cfg.with_processor(correlator=kind)
             top = run(f"{kind}: max rate", c, "max", seconds, round_)
-            run(f"{kind}: real rate ({real_seconds:g} s)", c, "real", real_seconds, round_)
-            iso = isolated_correlator_rate(c, top["max_batch"], seconds=min(seconds, 1.0))
+            run(f"{kind}: paced at the PRF ({real_seconds:g} s)", c, "real", real_seconds, round_)
+            iso = alone.rate(name, c, top["max_batch"])
             top["isolated_correlator_pulses_per_s"] = iso
             if "ccd_stage_pulses_per_s" in top:
                 top["ccd_stage_over_isolated"] = top["ccd_stage_pulses_per_s"] / iso
@@ -259,10 +309,13 @@ def bench_pipeline(
             round_,
             stages="overlapped",
         )
-        # A stalled subscriber (connected, never reads) against no subscriber, back to back.
-        none = run("partitioned: max rate (repeat)", part, "max", seconds, round_)
+        # A stalled subscriber (connected, never reads) against no subscriber, back to back:
+        # the same configuration as "partitioned: max rate", measured again beside its pair.
+        log("  partitioned at max rate twice more, back to back: no subscriber, then one that")
+        log("  never reads (their ratio below; the machine's swings fall on both alike)")
+        none = run("subscriber check: none", part, "max", seconds, round_)
         stalled = run(
-            "partitioned: max rate, stalled sub.",
+            "subscriber check: one that never reads",
             part,
             "max",
             seconds,
@@ -278,7 +331,7 @@ def bench_pipeline(
             c = cfg.with_processor(correlator=kind)
             run(f"{kind}: max rate, 2 swath processes", c, "max", seconds, round_, swath_workers=2)
             run(
-                f"{kind}: real rate, 2 swath processes",
+                f"{kind}: paced, 2 swath processes",
                 c,
                 "real",
                 real_seconds,
@@ -295,16 +348,19 @@ def bench_pipeline(
     base = result["summary"]["partitioned: max rate"]
     log(
         f"  plain NumPy batch range-Doppler (4096 pulses): {rd:,.0f} pulses/s = "
-        f"{rd / cfg.geometry.prf_hz:.2f}x RT; pipeline (partitioned) / NumPy = "
+        f"{rd / cfg.geometry.prf_hz:.2f}x real time; 'partitioned: max rate' / NumPy = "
         f"{base['pulses_per_s'][0] / rd:.2f}"
     )
     for label, f in result["summary"].items():
         if "ccd_stage_over_isolated" in f:
+            kind = label.split(":")[0]
+            batch = next(r["max_batch"] for r in result["runs"] if r["label"] == label)
             log(
-                f"  {label.split(':')[0]} CCD stage in the pipeline: "
+                f"  {kind}: CCD stage in the '{label}' run (pulses over its busy time): "
                 f"{_spread(f['ccd_stage_pulses_per_s'], ',.0f')} pulses/s = "
-                f"{_spread(f['ccd_stage_over_isolated'], '.2f')} of the same correlator alone "
-                f"({_spread(f['isolated_correlator_pulses_per_s'], ',.0f')})"
+                f"{_spread(f['ccd_stage_over_isolated'], '.2f')} x ("
+                + alone.label(name, cfg.with_processor(correlator=kind), batch)
+                + ")"
             )
     log(
         f"  throughput with a stalled subscriber / with none: "
@@ -313,17 +369,39 @@ def bench_pipeline(
     if repeats > 1:
         log(f"  median [min–max] over {repeats} rounds:")
         for label, f in result["summary"].items():
-            log(
-                f"  {label:34} {_spread(f['real_time_factor'], '.2f')}x RT  dropped "
-                f"{int(f['dropped_pulses'][2])} at most  latency median "
-                f"{_spread(f['latency_median_ms'], '.2f')} ms  p99 "
-                f"{_spread(f['latency_p99_ms'], '.2f')} ms"
-            )
+            log(f"  {label:42} {summary_line(f)}")
     return result
+
+
+def run_line(r: dict) -> str:
+    """One run, labelled by what it measures: capacity at max rate; what was kept when paced."""
+    latency = f"latency median {r['latency_median_ms']:8.2f} ms, p99 {r['latency_p99_ms']:8.2f} ms"
+    if "kept_fraction" not in r:
+        return f"capacity {r['real_time_factor']:6.2f}x real time  {latency}"
+    kept = f"{100 * r['kept_fraction']:.1f} %"
+    return (
+        f"kept {r['kept_pulses']:,} of {r['offered_pulses']:,} shots ({kept}), "
+        f"dropped {r['dropped_pulses']:,}  {latency}  PRF error {100 * r['prf_error']:+.3f} %"
+    )
+
+
+def summary_line(f: dict) -> str:
+    """A label's figures over the rounds, median [min–max], named as in run_line."""
+    latency = (
+        f"latency median {_spread(f['latency_median_ms'], '.2f')} ms, p99 "
+        f"{_spread(f['latency_p99_ms'], '.2f')} ms"
+    )
+    if "kept_fraction" not in f:
+        return f"capacity {_spread(f['real_time_factor'], '.2f')}x real time  {latency}"
+    return (
+        f"kept {_spread(tuple(100 * v for v in f['kept_fraction']), '.1f')} %, dropped "
+        f"{int(f['dropped_pulses'][2])} at most  {latency}"
+    )
 
 
 SUMMARIZED = (
     "real_time_factor",
+    "kept_fraction",
     "pulses_per_s",
     "dropped_pulses",
     "latency_median_ms",

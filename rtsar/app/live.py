@@ -253,8 +253,8 @@ def scene_channel_fix(missing) -> str:
     effects = [n for n in missing if n in EFFECTS]
     if len(effects) == len(missing):
         named = " and ".join(f'[[effects]] name = "{n}"' for n in effects)
-        return f"add {named} to the scene (README 'Scene files')"
-    return "add the effect that makes them to the scene (README 'Scene files')"
+        return f"add {named} to the scene (docs/pages/guide/scenes.md)"
+    return "add the effect that makes them to the scene (docs/pages/guide/scenes.md)"
 
 
 def run_stream(

@@ -1,4 +1,4 @@
-"""Scene files (TOML, README "Scene files"): point targets, or a surface for 3D imaging.
+"""Scene files (TOML, docs/pages/guide/scenes.md): point targets, or a surface for 3D imaging.
 
 A ``[surface]`` table replaces ``[[targets]]``: the scene's scatterers are the surface's speckle
 (rtsar.scene.relief.surface_scene: several per resolution cell, circular Gaussian amplitudes)
@@ -78,6 +78,12 @@ def surface_from_table(d: dict, name: str = "scene") -> SurfaceScene:
     if unknown:
         raise ValueError(f"scene: unknown keys {sorted(unknown)}")
     cfg, effects, seed = scene_settings(rest)
+    if not cfg.geometry.platform_height_m > 0:
+        raise ValueError(
+            "a [surface] scene needs the platform's height above the surface's reference plane: "
+            "set platform_height_m > 0 in [geometry] (e.g. 1.386 for zhao-insal: 2.4 m seen "
+            "54.7° from the vertical, as the built-in insal-ridge)"
+        )
     shape = table.get("shape")
     if shape not in SHAPES:
         raise ValueError(f"surface.shape must be one of {sorted(SHAPES)}, got {shape!r}")

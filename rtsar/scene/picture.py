@@ -1,4 +1,4 @@
-"""Pictures drawn in diffuse scatterers: a scene a person recognises (README "Scene files").
+"""Pictures drawn in diffuse scatterers: a scene a person recognises (docs/pages/guide/scenes.md).
 
 A picture is a small grid of grey levels — rows of characters, or text set in the 5 × 7 font
 below — laid over a rectangle of the (along-track, slant-range) plane: picture rows run along

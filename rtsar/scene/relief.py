@@ -263,7 +263,10 @@ def surface_scene(
     """
     g = cfg.geometry
     if not g.platform_height_m > 0:
-        raise ValueError("surface scenes need geometry.platform_height_m > 0 (see zhao_config)")
+        raise ValueError(
+            "surface scenes need a platform height above the reference plane "
+            f"(geometry.platform_height_m > 0, got {g.platform_height_m!r})"
+        )
     if not (isinstance(lines, int) and lines >= 1):
         raise ValueError("lines must be an integer >= 1")
     n = cfg.processor.aperture_pulses

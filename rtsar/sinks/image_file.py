@@ -6,7 +6,7 @@ nonfinite_pulses (shots zeroed because they held NaN/Inf), complete (False while
 written and in a file whose writer was killed).  With height strips (``--height insal``):
 /height_m float32 [azimuth, range], /height_valid uint8 (1: coherent and unwrapped) and
 /coherence float32, rows aligned with /image's.
-Layout in README.md ("File formats").  Complex values are HDF5 compounds of two floats named r
+Layout in docs/pages/reference/files.md.  Complex values are HDF5 compounds of two floats named r
 and i (h5py's convention).
 """
 

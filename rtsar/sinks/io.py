@@ -1,4 +1,4 @@
-"""Recording files (HDF5).  Layouts are documented in README.md ("File formats").
+"""Recording files (HDF5).  Layouts: docs/pages/reference/files.md.
 
 Recording (``rtsar simulate``):  /shots complex64 [pulse, sample], /pulse_index int64 [pulse],
 /time_s float64 [pulse], /along_track_m float64 [pulse], and (format version 2) one dataset

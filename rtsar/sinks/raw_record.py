@@ -5,9 +5,9 @@ correction, PGA, window, correlator) with ``rtsar process RAW.h5`` or ``rtsar re
 which give the live run's image.  What is recorded is the stream as ingest made it (rtsar.stream
 .ingest): one row per pulse of the stream, in order, every channel the source delivers, the
 zero pulses ingest inserted (gaps, restarts) and the shots it zeroed (NaN/Inf, wrong length)
-where the live run had them; so the file is an ordinary recording (README "File formats") whose
-``pulse_index`` counts the stream's pulses, and the instrument's own numbers and clock are kept
-beside it:
+where the live run had them; so the file is an ordinary recording
+(docs/pages/reference/files.md) whose ``pulse_index`` counts the stream's pulses, and the
+instrument's own numbers and clock are kept beside it:
 
 * ``/instrument_seq`` int64 [pulse]: the instrument's pulse counter (u64 bits; 0 where none);
 * ``/instrument_time_s`` float64 [pulse]: the instrument's clock (NaN where none);

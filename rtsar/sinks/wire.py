@@ -1,9 +1,9 @@
-"""The strip protocol on the wire: topics, JSON headers and payloads (README "Strip protocol").
+"""The strip protocol on the wire: topics, JSON headers and payloads (docs/pages/reference/wire.md).
 
 Every message is multipart,
 
     frame 0  topic, ASCII: b"strip", b"stats", b"end" or b"height"
-    frame 1  header, UTF-8 JSON object (fields in ``strip_header`` / the README)
+    frame 1  header, UTF-8 JSON object (fields in ``strip_header`` / docs/pages/reference/wire.md)
     frame 2  payload (strip only): complex64 little-endian, C order [line_count, range_bins]
              (height: float32 heights [line, bin], then frame 3: uint8 validity)
 
@@ -30,7 +30,7 @@ STATS_FORMAT = "rtsar-stats"
 
 
 def strip_header(strip: Strip, info: StreamInfo) -> dict:
-    """The JSON header of a strip message (every field is described in README.md)."""
+    """The JSON header of a strip message (every field: docs/pages/reference/wire.md)."""
     rng = info.range_m
     n_lines, n_bins = strip.lines.shape
     return {

@@ -93,7 +93,7 @@ class StripSink:
 
     ``strip``: a strip of image lines; ``height``: a height strip (3D imaging,
     rtsar.topo.stream.HeightStrip, with its own sequence number); ``stats``: the periodic stats
-    dictionary (README "Strip protocol"); ``end``: the final stats, once; ``counters``: the
+    dictionary (docs/pages/reference/wire.md); ``end``: the final stats, once; ``counters``: the
     sink's own counters, reported with the run's; ``hurry``: the run is being stopped.  A sink
     with ``wants_pulses`` also receives the stream's pulses as ingest made them (``pulses``).
     """

@@ -5,7 +5,7 @@ Range bins are independent in the azimuth correlation (Psaltis & Wagner 1981, eq
 column integrates its own range cell behind its own mask column), so K workers, each with the
 CCD columns [b_k, b_{k+1}) of the mask, together compute exactly the single process's image.
 Every worker compresses whole pulses (the range FFT needs all samples) and keeps its columns;
-the lens is the cheap half (README "Throughput"), the CCD the expensive one.
+the lens is the cheap half (docs/pages/reference/performance.md), the CCD the expensive one.
 
 Transport (ZeroMQ, one context per process):
 

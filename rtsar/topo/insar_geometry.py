@@ -1,7 +1,7 @@
 """The interferometric geometry of two receivers: phase of a height, flat earth, h_2π (Zhao 2014).
 
 Zhao's eq. 1 lacks a π and is per fixed ground position; per image pixel h_2π = λR sinθ/B⊥
-(InsalGeometry.ambiguity_height_m; the README's "3D imaging" explains the 3.286 mm decision).
+(InsalGeometry.ambiguity_height_m; docs/pages/guide/3d.md explains the 3.286 mm decision).
 """
 
 from __future__ import annotations

@@ -14,8 +14,8 @@ import importlib
 import sys
 import warnings
 
-from ... import __version__
 from ...sinks.endpoint import DEFAULT_ENDPOINT
+from ...version import version_text
 from .. import signals
 from .commands import COMMANDS, HELP, MODULE
 
@@ -37,6 +37,17 @@ EPILOG = f"""examples:
   rtsar spotlight --live --every 200 --publish   spotlight SAL: progressive images on topic 'spot'
   rtsar export rec.h5 --cphd rec.cphd        a recording as CPHD (also --sigmf; images: --sicd)
 """
+
+
+class VersionAction(argparse.Action):
+    """``--version``: asks git only when given (rtsar.version), not on every command."""
+
+    def __init__(self, option_strings, dest, help=None):
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(version_text())
+        parser.exit()
 
 
 class _Declare:
@@ -71,7 +82,11 @@ def build_parser(command: str | None = "*") -> argparse.ArgumentParser:
         "processor: an OpenCL 'AO lens' compresses each pulse in range, a shifting-"
         "CCD correlator with a chirp mask compresses in azimuth.",
     )
-    p.add_argument("--version", action="version", version=f"rtsar {__version__}")
+    p.add_argument(
+        "--version",
+        action=VersionAction,
+        help="the release and the git commit this rtsar was installed from, then exit",
+    )
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     declared = set()
     for name, module, line in COMMANDS:

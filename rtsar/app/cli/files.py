@@ -285,7 +285,7 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "simulate",
-        description="Simulate a TOML scene (format: README 'Scene files') shot by "
+        description="Simulate a TOML scene (format: docs/pages/guide/scenes.md) shot by "
         "shot with the exact range history; writes an HDF5 recording.",
     )
     s.add_argument(
@@ -304,7 +304,7 @@ def add_parsers(sub) -> None:
     s.add_argument(
         "recording",
         help="recording from `rtsar simulate` (.h5), or a CPHD (.cphd) or SigMF (.sigmf-meta) "
-        'file (these need pip install "rtsar[formats]"; README "Standard formats")',
+        'file (these need pip install "rtsar[formats]"; docs/pages/guide/recordings.md)',
     )
     s.add_argument("-o", "--output", required=True, help="image file to write (.h5)")
     add_process_options(s)

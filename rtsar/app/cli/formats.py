@@ -1,5 +1,6 @@
-"""``rtsar export``: recordings to CPHD 1.0.1 and SigMF, images to SICD (README "Standard
-formats").  The writers are rtsar.sinks.exports; they need the optional extra ``formats``."""
+"""``rtsar export``: recordings to CPHD 1.0.1 and SigMF, images to SICD
+(docs/pages/guide/recordings.md).  The writers are rtsar.sinks.exports; they need the optional
+extra ``formats``."""
 
 from __future__ import annotations
 
@@ -88,7 +89,7 @@ def add_parsers(sub) -> None:
         "centre, its bistatic receiver as a second channel; strip-map auxiliary channels are "
         "left out, and named) and/or SigMF (one capture, one annotation per shot, every "
         "channel), or an image file as SICD (NITF).  Needs the optional packages: "
-        'pip install "rtsar[formats]".  Fields filled: README "Standard formats".',
+        'pip install "rtsar[formats]".  Fields filled: docs/pages/reference/files.md.',
     )
     s.add_argument("input", help="recording (.h5, .cphd, .sigmf-meta) or, with --sicd, image (.h5)")
     s.add_argument("--cphd", metavar="OUT.cphd", help="write the recording as CPHD 1.0.1")

@@ -95,8 +95,8 @@ def add_processing_knobs(g) -> None:
         "(pra: pra:along_track_m=X,range_m=R; default the scene's brightest point, or a "
         "recording's found in a first pass; pga: e.g. pga:follow_walk=0 skips the "
         "walk-following second pass, pga:doppler_anchor=0 the Doppler anchor; an unknown key's "
-        "error lists the keys a correction takes; default: none; README 'Phase errors and "
-        "focusing')",
+        "error lists the keys a correction takes; default: none; "
+        "docs/pages/guide/corrections.md)",
     )
     g.add_argument(
         "--physical",
@@ -200,7 +200,7 @@ def add_pipeline_options(s, delivery: str) -> None:
         default=0,
         metavar="K",
         help="run lens and CCD in K processes, each on 1/K of the range bins, merged here "
-        "(README 'The swath across processes'; default 0: in this process)",
+        "(docs/pages/guide/batch-swath.md; default 0: in this process)",
     )
     g.add_argument(
         "--swath-bind",
@@ -212,7 +212,7 @@ def add_pipeline_options(s, delivery: str) -> None:
     )
     add_processing_knobs(g)
     add_height_options(g)
-    g = s.add_argument_group("publication (ZeroMQ; wire format in README 'Strip protocol')")
+    g = s.add_argument_group("publication (ZeroMQ; wire format in docs/pages/reference/wire.md)")
     g.add_argument(
         "--endpoint",
         default=DEFAULT_ENDPOINT,
@@ -301,7 +301,7 @@ def processor_changes(args, cfg):
         warnings.warn(
             f"--range-migration-taps {p.range_migration_taps} on a critically sampled range "
             "axis (range_oversampling 1) interpolates less accurately; set range_oversampling "
-            "= 2 in the scene's [processor] table (README 'What accuracy costs in time')",
+            "= 2 in the scene's [processor] table (docs/pages/reference/tradeoff.md)",
             stacklevel=2,
         )
     return cfg

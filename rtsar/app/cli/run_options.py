@@ -35,6 +35,6 @@ def add_run_options(source_group, parser) -> None:
         "them, the configuration; `rtsar process RAW.h5` or `rtsar replay RAW.h5` gives this "
         "run's image again (or another, with other options). Crash-safe like -o; written by a "
         "thread of its own behind a bounded queue: shots a slow disk could not take are "
-        "counted (record_dropped) and marked in the file, the imaging never waits (README "
-        "'Recording a live run')",
+        "counted (record_dropped) and marked in the file, the imaging never waits "
+        "(docs/pages/guide/live.md, 'Recording a live run')",
     )

@@ -27,8 +27,8 @@ def add_parsers(sub) -> None:
         description="Simulate a spotlight scene shot by shot: the Tx/Rx station on an arc about "
         "the scene centre (crouch-spotlight: 4.6 m, 50 µm steps, the crouch-sal chirp), exact "
         "path lengths (Crouch eqs. 9.1-9.2), and the fixed bistatic receiver as channel "
-        "'bistatic' when the scene has one.  Scene format: README 'Spotlight, bistatic and "
-        "projective SAL'.",
+        "'bistatic' when the scene has one.  Scene format: "
+        "docs/pages/guide/spotlight.md.",
     )
     s.add_argument(
         "scene", nargs="?", help="spotlight scene (.toml); default: the built-in spotlight-scene"
@@ -193,6 +193,13 @@ def cmd_spotlight(args) -> int:
         source = run.SpotRecording(args.recording)
         config, geometry, rotation = source.config, source.geometry, source.rotation_rad
         blocks = source.blocks(args.channel, 256)
+    if args.channel == "bistatic" and not geometry.bistatic:
+        what = args.recording or f"the scene {args.live or '(built-in)'}"
+        return die(
+            f"{what} has no bistatic receiver, so no bistatic channel: simulate a scene whose "
+            "[spotlight] table sets bistatic_range_m and bistatic_angle_deg "
+            "(docs/pages/guide/spotlight.md)"
+        )
     try:
         plan = PolarFormatPlan(config, geometry, args.channel, run.settings_from(args), args.look)
         print(run.describe(plan), file=sys.stderr)

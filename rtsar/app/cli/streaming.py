@@ -307,18 +307,19 @@ def add_parsers(sub) -> None:
         "--serial",
         metavar="URL",
         help="read framed shots from an instrument: a "
-        "serial port, a pty, or socket://HOST:PORT (frame format: README)",
+        "serial port, a pty, or socket://HOST:PORT (frame format: docs/pages/reference/wire.md)",
     )
     src.add_argument(
         "--zmq-in",
         metavar="ENDPOINT",
         help="read shots from a GNU Radio ZMQ PUB Sink at ENDPOINT (e.g. tcp://127.0.0.1:5600): "
         "complex64 vector items of one shot each, or a flat stream cut by packet_len tags "
-        "(pass tags on); processed with --preset or --scene like --serial (README 'GNU Radio'); "
-        "the main channel only: a --correct or --height stage reading an auxiliary channel is "
-        "refused before start.  Shots are numbered by the tag header's item offsets (a late "
-        "subscriber keeps their positions); a message over 1 MiB + 256 shots, a bad header or "
-        "an absurd packet_len is counted and dropped, never fatal",
+        "(pass tags on); processed with --preset or --scene like --serial "
+        "(docs/pages/guide/recordings.md); the main channel only: a --correct or --height "
+        "stage reading an auxiliary channel is refused before start.  Shots are numbered by "
+        "the tag header's item offsets (a late subscriber keeps their positions); a message "
+        "over 1 MiB + 256 shots, a bad header or an absurd packet_len is counted and dropped, "
+        "never fatal",
     )
     src.add_argument(
         "--preset",
@@ -343,7 +344,7 @@ def add_parsers(sub) -> None:
         help="stop after this many seconds of the stream, i.e. pulses at the PRF (a busy "
         "machine takes longer; --serial, --zmq-in: seconds without a byte or message, a clean "
         "end: see --link-timeout for a failure) (default: the whole scene, 10 s for the demo; "
-        "serial: never)",
+        "--serial, --zmq-in: never)",
     )
     src.add_argument(
         "--reconnect",
@@ -366,7 +367,7 @@ def add_parsers(sub) -> None:
     s.add_argument(
         "recording",
         help="recording from `rtsar simulate` (.h5), or a CPHD (.cphd) or SigMF (.sigmf-meta) "
-        'file (these need pip install "rtsar[formats]"; README "Standard formats")',
+        'file (these need pip install "rtsar[formats]"; docs/pages/guide/recordings.md)',
     )
     s.add_argument(
         "--rate",

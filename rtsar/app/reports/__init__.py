@@ -1,2 +1,2 @@
-"""Reports that regenerate the README's measured figures; ``python tools/NAME.py`` runs them and
-the tests share their scenes."""
+"""Reports that regenerate the measured figures of docs/pages/; ``python tools/NAME.py`` runs
+them and the tests share their scenes."""

@@ -63,8 +63,9 @@ def main(argv=None) -> int:
             real = stream_run(cfg, shots, args.real_seconds, "real", settings)
             runs[label].append((top, real))
             print(
-                f"  {label[:60]:60} max {top['real_time_factor']:5.2f}x RT; real rate: dropped "
-                f"{real['dropped_pulses']}, latency median {real['latency_median_ms']:.2f} ms, "
+                f"  {label[:60]:60} max rate: capacity {top['real_time_factor']:5.2f}x real time; "
+                f"paced at the PRF: dropped {real['dropped_pulses']} of {real['offered_pulses']}, "
+                f"latency median {real['latency_median_ms']:.2f} ms, "
                 f"p99 {real['latency_p99_ms']:.2f} ms",
                 flush=True,
             )

@@ -1,4 +1,5 @@
-"""Spotlight, bistatic and projective SAL: the issue-15 figures and the README pictures.
+"""Spotlight, bistatic and projective SAL: the issue-15 figures and the pictures of
+docs/pages/guide/spotlight.md.
 
     python tools/spot_report.py [--figures DIR] [--quick]
 

@@ -1,0 +1,122 @@
+"""What `rtsar bench` prints (issue 31): one definition per figure, the same number wherever it
+is the same measurement, and labels that say which figure is which.
+
+The measurements are replaced by stand-ins (this is about the report, not the machine): every
+correlator-alone measurement returns a new number, so a figure measured twice would print two
+different numbers; the pipeline runs return fixed figures, a paced run dropping shots.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import re
+
+import numpy as np
+import pytest
+
+import rtsar.app.bench as bench
+import rtsar.app.bench_pipeline as bp
+
+
+@pytest.fixture
+def stand_ins(monkeypatch):
+    counter = itertools.count(1)
+    measured = []
+
+    def alone(cfg, batch, seconds):
+        value = 1000.0 * next(counter) + 7
+        measured.append((cfg.processor.correlator, batch, value))
+        return value
+
+    def stream_run(cfg, shots, seconds, rate, settings, **kw):
+        out = {
+            "rate": rate,
+            "correlator": cfg.processor.correlator,
+            "max_batch": settings.max_batch or cfg.processor.micro_batch,
+            "pulses": 900,
+            "pulses_per_s": 1180.0,
+            "real_time_factor": 2.36,
+            "dropped_pulses": 0,
+            "latency_median_ms": 3.0,
+            "latency_p99_ms": 9.0,
+            "stage_busy_s": {"ccd": 0.5},
+            "ccd_stage_pulses_per_s": 1800.0,
+        }
+        if rate != "max":
+            del out["real_time_factor"]
+            out.update(
+                bp.paced_figures(1000, 1000, 100),  # 100 dropped, their slots zero-filled
+                pulses=1000,
+                dropped_pulses=100,
+                achieved_prf_hz=500.0,
+                prf_error=0.0,
+            )
+        return out
+
+    monkeypatch.setattr(bp, "_correlator_alone", alone)
+    monkeypatch.setattr(bp, "stream_run", stream_run)
+    monkeypatch.setattr(bp, "bench_shots", lambda cfg, n: np.zeros((4, 8), np.complex64))
+    monkeypatch.setattr(bp, "bench_numpy_range_doppler", lambda cfg, shots: 4000.0)
+    monkeypatch.setattr(bench, "rate_per_s", lambda call, n, seconds: 5000.0)
+    monkeypatch.setattr(bench, "opencl_unavailable", lambda: "stand-in: no OpenCL")
+    return measured
+
+
+def run_bench(tmp_path, capsys, **kw):
+    args = argparse.Namespace(
+        preset="tiny", seconds=0.01, real_seconds=1.0, repeats=1, device=None,
+        json=str(tmp_path / "bench.json"),
+    )  # fmt: skip
+    vars(args).update(kw)
+    assert bench.run_bench(args) == 0
+    return capsys.readouterr().out, json.loads((tmp_path / "bench.json").read_text())
+
+
+def test_a_correlator_alone_is_measured_once_and_printed_as_one_number(
+    stand_ins, tmp_path, capsys
+):
+    out, data = run_bench(tmp_path, capsys)
+    # Each (correlator, batch) measured once: the table's figures are the ratios' figures.
+    assert len(stand_ins) == len({(k, b) for k, b, _ in stand_ins}) == 4
+    table = {k: v for k, _, v in stand_ins}
+    for kind in ("partitioned", "nonuniform", "fft"):
+        figure = f"{table[kind]:,.0f}"
+        assert re.search(rf"\b{kind} {figure}\b", out), f"{kind} alone not in the table"
+        ratio_line = next(ln for ln in out.splitlines() if f"CCD stage in the '{kind}:" in ln)
+        assert f"{kind} alone, batches of 16: {figure} pulses/s" in ratio_line
+        assert "the correlator table above" in ratio_line
+    row = data["correlator"][0]
+    runs = data["pipeline"][0]["runs"]
+    for kind in ("partitioned", "nonuniform", "fft"):
+        top = next(r for r in runs if r["label"] == f"{kind}: max rate")
+        assert top["isolated_correlator_pulses_per_s"] == row[f"{kind}_pulses_per_s"]
+
+
+def test_paced_runs_say_what_was_kept_not_a_real_time_factor(stand_ins, tmp_path, capsys):
+    out, data = run_bench(tmp_path, capsys)
+    paced = [ln for ln in out.splitlines() if "paced" in ln and "dropped" in ln]
+    assert paced and all("kept 900 of 1,000 shots (90.0 %), dropped 100" in ln for ln in paced)
+    assert not any("real time" in ln for ln in paced)
+    capacity = [ln for ln in out.splitlines() if ": max rate" in ln and "capacity" in ln]
+    assert capacity and all("capacity   2.36x real time" in ln for ln in capacity)
+    assert "x RT" not in out  # every factor says what it is a factor of
+    for r in data["pipeline"][0]["runs"]:
+        assert ("real_time_factor" in r) == (r["rate"] == "max")
+        assert ("kept_fraction" in r) == (r["rate"] != "max")
+
+
+def test_rounds_keep_the_labels(stand_ins, tmp_path, capsys):
+    out, data = run_bench(tmp_path, capsys, repeats=2)
+    assert len(stand_ins) == 4  # alone figures are not measured again in the second round
+    summary = out.split("median [min–max] over 2 rounds:")[1]
+    assert "kept 90.0 %, dropped 100 at most" in summary and "capacity 2.36x real time" in summary
+    assert data["pipeline"][0]["summary"]["fft: max rate"]["real_time_factor"][0] == 2.36
+
+
+def test_zero_pulses_standing_in_for_dropped_shots_are_not_kept_shots():
+    """A paced run processes a zero pulse in each dropped shot's slot: kept = processed less
+    those (the first report said "kept 30,000 of 30,000 shots, dropped 1,488")."""
+    figures = bp.paced_figures(offered=30_000, processed=30_000, gap_filled=1_488)
+    assert figures["kept_pulses"] == 28_512 and figures["kept_fraction"] == pytest.approx(0.9504)

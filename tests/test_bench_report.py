@@ -96,7 +96,7 @@ def test_a_correlator_alone_is_measured_once_and_printed_as_one_number(
 
 def test_paced_runs_say_what_was_kept_not_a_real_time_factor(stand_ins, tmp_path, capsys):
     out, data = run_bench(tmp_path, capsys)
-    paced = [ln for ln in out.splitlines() if "paced" in ln and "dropped" in ln]
+    paced = [ln for ln in out.splitlines() if ": paced" in ln and "dropped" in ln]  # pipeline
     assert paced and all("kept 900 of 1,000 shots (90.0 %), dropped 100" in ln for ln in paced)
     assert not any("real time" in ln for ln in paced)
     capacity = [ln for ln in out.splitlines() if ": max rate" in ln and "capacity" in ln]

@@ -120,3 +120,14 @@ def test_zero_pulses_standing_in_for_dropped_shots_are_not_kept_shots():
     those (the first report said "kept 30,000 of 30,000 shots, dropped 1,488")."""
     figures = bp.paced_figures(offered=30_000, processed=30_000, gap_filled=1_488)
     assert figures["kept_pulses"] == 28_512 and figures["kept_fraction"] == pytest.approx(0.9504)
+
+
+def test_the_two_core_ideal_is_the_stages_taking_turns():
+    """The issue's figures: lens alone 187.7k, nonuniform alone 47.7k pulses/s → 38.0k."""
+    run, said = {"pulses_per_s": 27_100.0}, []
+    bp._against_ideal(run, {"pulses_per_s": 187_700.0}, 47_700.0, said.append)
+    assert run["two_core_ideal_pulses_per_s"] == pytest.approx(38_034, rel=1e-4)
+    assert run["over_two_core_ideal"] == pytest.approx(0.7125, rel=1e-3)
+    assert said == [
+        "    = 0.71 of its stages' two-core ideal 1/(1/187,700 + 1/47,700) = 38,034 pulses/s"
+    ]

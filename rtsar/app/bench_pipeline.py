@@ -28,6 +28,7 @@ import zmq
 from ..analysis.timing import rate_per_s
 from ..ccd import make_correlator
 from ..ccd.base import design_mask
+from ..lens import make_lens
 from ..lens.plan import make_plan
 from ..params import Config
 from ..scene import Simulator, point_scene
@@ -184,6 +185,32 @@ class CorrelatorAlone:
         return f"{key[1]} alone, batches of {key[2]}: {self.rates[key]:,.0f} pulses/s, {where}"
 
 
+def _lens_alone(cfg: Config, batch: int, seconds: float) -> dict:
+    """Pulses/s of the lens the pipeline builds (``--lens auto``'s choice), alone."""
+    plan = make_plan(cfg)
+    lens = make_lens(plan, "auto", batch=cfg.processor.micro_batch)
+    rng = np.random.default_rng(0)
+    S = plan.samples_per_shot
+    x = rng.standard_normal((batch, S)) + 1j * rng.standard_normal((batch, S))
+    x = x.astype(np.complex64)
+    rate = rate_per_s(lambda: lens.compress(x), batch, seconds)
+    return {"backend": lens.backend, "batch": batch, "pulses_per_s": rate}
+
+
+def _against_ideal(run: dict, lens_alone: dict, correlator_alone: float, log) -> None:
+    """The run's throughput against its stages' two-core ideal: the lens and the correlator
+    each alone on both cores, taking turns, 1/(1/L + 1/C) pulses/s (what a pipeline doing
+    nothing but these two stages could reach)."""
+    L = lens_alone["pulses_per_s"]
+    ideal = 1.0 / (1.0 / L + 1.0 / correlator_alone)
+    run["two_core_ideal_pulses_per_s"] = ideal
+    run["over_two_core_ideal"] = run["pulses_per_s"] / ideal
+    log(
+        f"    = {run['over_two_core_ideal']:.2f} of its stages' two-core ideal "
+        f"1/(1/{L:,.0f} + 1/{correlator_alone:,.0f}) = {ideal:,.0f} pulses/s"
+    )
+
+
 def _correlator_alone(cfg: Config, batch: int, seconds: float) -> float:
     plan = make_plan(cfg)
     p = cfg.processor
@@ -288,6 +315,12 @@ def bench_pipeline(
     )
     # Warm-up (OpenCL build, numba cache, FFT plans), not recorded.
     stream_run(part, shots, 0.5, "max", PipelineSettings())
+    lens_alone = _lens_alone(cfg, cfg.processor.micro_batch, min(seconds, 1.0))
+    result["lens_alone"] = lens_alone
+    log(
+        f"  the pipeline's lens alone ({lens_alone['backend']}), batches of "
+        f"{lens_alone['batch']}: {lens_alone['pulses_per_s']:,.0f} pulses/s"
+    )
     stalled_ratios = []
     for round_ in range(repeats):
         if repeats > 1:
@@ -300,15 +333,12 @@ def bench_pipeline(
             top["isolated_correlator_pulses_per_s"] = iso
             if "ccd_stage_pulses_per_s" in top:
                 top["ccd_stage_over_isolated"] = top["ccd_stage_pulses_per_s"] / iso
+            _against_ideal(top, lens_alone, iso, log)
+            if kind != "fft":  # the one-thread layout, lens overlapped with the CCD
+                over = run(f"{kind}: max rate, overlapped stages", c, "max", seconds, round_,
+                           stages="overlapped")  # fmt: skip
+                _against_ideal(over, lens_alone, iso, log)
         run("partitioned: max rate, fused stages", part, "max", seconds, round_, stages="fused")
-        run(
-            "partitioned: max rate, overlapped stages",
-            part,
-            "max",
-            seconds,
-            round_,
-            stages="overlapped",
-        )
         # A stalled subscriber (connected, never reads) against no subscriber, back to back:
         # the same configuration as "partitioned: max rate", measured again beside its pair.
         log("  partitioned at max rate twice more, back to back: no subscriber, then one that")
@@ -409,6 +439,7 @@ SUMMARIZED = (
     "ccd_stage_pulses_per_s",
     "isolated_correlator_pulses_per_s",
     "ccd_stage_over_isolated",
+    "over_two_core_ideal",
 )
 
 

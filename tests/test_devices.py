@@ -224,9 +224,14 @@ def test_auto_takes_opencl_only_where_it_is_faster(monkeypatch, opencl):
     monkeypatch.setattr(auto, "plan_rates", rates(False))
     lens = base.make_lens(plan, "auto", batch=8)
     assert lens.backend == "numpy" and lens.fallback_reason is None
-    assert lens.choice.startswith("NumPy lens: faster than OpenCL on") and "at batch 8;" in (
-        lens.choice
-    )
+    assert lens.choice.startswith("NumPy lens: at least 1.2x as fast as OpenCL on")
+    assert "at batch 8;" in lens.choice
+    # within the margin OpenCL keeps the lens: timings that swap places do not swap the choice
+    monkeypatch.setattr(
+        auto, "plan_rates", lambda a, b, sizes, key=None: {
+            "opencl": dict.fromkeys(sizes, 1.0e5), "numpy": dict.fromkeys(sizes, 1.15e5)}
+    )  # fmt: skip
+    assert base.make_lens(plan, "auto", batch=8).backend == "opencl"
 
 
 def test_auto_choice_agrees_with_its_own_measurement(monkeypatch, opencl, tmp_path):
@@ -239,7 +244,8 @@ def test_auto_choice_agrees_with_its_own_measurement(monkeypatch, opencl, tmp_pa
     assert len(cached) == 1
     (measured,) = cached.values()
     per_pulse = {k: np.mean([1 / v for v in d.values()]) for k, d in measured.items()}
-    assert lens.backend == min(per_pulse, key=per_pulse.get)
+    numpy_wins = per_pulse["numpy"] * auto.NUMPY_MARGIN < per_pulse["opencl"]
+    assert lens.backend == ("numpy" if numpy_wins else "opencl")
     assert set(measured["opencl"]) == {"16", "32"}
 
 

@@ -261,3 +261,20 @@ def test_devices_command_lists_every_device(capsys, cl_device, tmp_path, monkeyp
     assert {d["index"] for d in doc["devices"]} >= {cl_device.index}
     assert sum(d["default"] for d in doc["devices"]) == 1
     assert doc["numpy_pulses_per_s"]["8"] > 0
+
+
+def test_the_hint_tells_a_user_whose_vendors_folder_hides_the_pip_driver(monkeypatch):
+    """A user's own OCL_ICD_VENDORS is never replaced: then Intel's runtime, installed, is not
+    seen, and the line says so (it said "installed but refused")."""
+    lib = "/venv/lib/libintelocl.so"
+    monkeypatch.setattr(cl_vendors, "find_pip_drivers", lambda: {"rtsar-intel-cpu.icd": lib})
+    monkeypatch.setattr(cl_devices._platform, "machine", lambda: "x86_64")
+    monkeypatch.setattr(cl_devices.sys, "platform", "linux")
+    monkeypatch.setenv("OCL_ICD_VENDORS", "/my/vendors")
+    users = cl_vendors.Registration({"rtsar-intel-cpu.icd": lib}, "/my/vendors", "set by the user")
+    monkeypatch.setattr(cl_vendors, "_done", users)
+    hint = cl_devices.install_hint()
+    assert "OCL_ICD_VENDORS=/my/vendors hides it" in hint and lib in hint
+    ours = cl_vendors.Registration({"rtsar-intel-cpu.icd": lib}, "/my/vendors", "", True)
+    monkeypatch.setattr(cl_vendors, "_done", ours)
+    assert cl_devices.install_hint().startswith("Intel's CPU runtime is installed but refused")

@@ -205,7 +205,17 @@ def install_hint() -> str:
     if sys.platform.startswith("linux"):
         apt = _system_pocl_command()
         if machine in ("x86_64", "amd64"):
-            if cl_vendors.find_pip_drivers():
+            found = cl_vendors.find_pip_drivers()
+            reg = cl_vendors.registration()
+            own = os.environ.get(cl_vendors.ENV_VENDORS, "")
+            if found and own and not (reg is not None and reg.registered):
+                lib = next(iter(found.values()))
+                return (
+                    f"Intel's CPU runtime is installed in this environment, but your "
+                    f"{cl_vendors.ENV_VENDORS}={own} hides it from the ICD loader: unset it, "
+                    f"or add an .icd file there naming {lib}"
+                )
+            if found:
                 return (
                     "Intel's CPU runtime is installed but refused (see `rtsar devices`); "
                     f"install the system's PoCL: {apt}"

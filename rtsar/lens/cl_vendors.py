@@ -49,11 +49,13 @@ PIP_DRIVERS = {
 @dataclass(frozen=True)
 class Registration:
     """What :func:`register` did: the drivers found (icd name -> library path), the vendors
-    folder the loader reads, and a one-line account for ``rtsar devices``."""
+    folder the loader reads, a one-line account for ``rtsar devices``, and whether the drivers
+    found are visible (``registered``: rtsar's own folder lists them)."""
 
     drivers: dict
     vendors_dir: str | None
     note: str
+    registered: bool = False
 
 
 _lock = threading.Lock()
@@ -157,6 +159,7 @@ def register(environ=None) -> Registration:
                 str(folder),
                 f"registered {', '.join(sorted(drivers.values()))} for the ICD loader "
                 f"({ENV_VENDORS}={folder}, {where})",
+                registered=True,
             )
         if environ is None:
             _done = result

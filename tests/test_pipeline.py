@@ -305,7 +305,7 @@ class Delay(CorrectionStage):
         return self.held
 
 
-@pytest.mark.parametrize("stages", ["split", "fused", "overlapped"])
+@pytest.mark.parametrize("stages", ["split", "fused"])
 def test_a_stage_that_holds_pulses_keeps_lines_and_flags_exact(tiny, stages):
     cfg, scene, shots = tiny
     lost = np.arange(200, 202)
@@ -452,3 +452,23 @@ def test_ctrl_c_during_join_never_ends_it_before_the_stages(tiny):
         except KeyboardInterrupt:
             pass
     assert not returned_early  # join returned only once the sinks had ended
+
+
+@pytest.mark.parametrize("batch", [5, 37])
+def test_overlapped_stages_give_the_split_stages_lines_on_the_opencl_lens(tiny, opencl, batch):
+    """The lens enqueued (AOLens.submit) while the CCD correlates the previous batch: the
+    same lines bit for bit as the split layout on the same OpenCL lens, with a gap (zero
+    pulses, no launch) in the stream, every pulse and line counted."""
+    cfg, scene, shots = tiny
+    keep = np.setdiff1d(np.arange(len(shots)), np.arange(200, 205))
+    images, finals = {}, {}
+    for stages in ("split", "overlapped"):
+        sink = Collect()
+        settings = PipelineSettings(stages=stages, lens_backend="opencl", max_batch=24)
+        src = replay(cfg, shots[keep], seq=keep, batch=batch)
+        Pipeline(cfg, src, [sink], settings, scene.start_along_track_m).run()
+        images[stages], finals[stages] = sink.image(), sink.final["counters"]
+    np.testing.assert_array_equal(images["overlapped"], images["split"])
+    assert finals["overlapped"]["lines_out"] == finals["split"]["lines_out"] == len(images["split"])
+    assert finals["overlapped"]["gap_pulses"] == 5
+    assert finals["overlapped"]["flagged_lines"] == finals["split"]["flagged_lines"] > 0

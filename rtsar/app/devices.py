@@ -86,7 +86,9 @@ def run(args) -> int:
     print("\n" + head, file=out)
     for r in reports:
         name = r.short_label if len(r.short_label) <= 58 else r.short_label[:55] + "..."
-        if r.reason is None:
+        if r.reason is None and not r.rates:
+            print(f"{r.index:>2}  {name:<58} {r.kind:<4} {r.error:>8.1e}  {r.note}", file=out)
+        elif r.reason is None:
             rates = " ".join(f"{r.rates.get(str(b), 0):>9,.0f}" for b in batches)
             print(f"{r.index:>2}  {name:<58} {r.kind:<4} {r.error:>8.1e} {rates}", file=out)
         else:

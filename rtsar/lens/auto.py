@@ -25,6 +25,8 @@ import hashlib
 import json
 import os
 
+import numpy as np
+
 from . import cl_devices
 from .cache import read_json, write_json
 from .cl_probe import throughput
@@ -57,7 +59,8 @@ def _key(plan: LensPlan, precision: str, sizes, device_label: str, survey_key: s
         precision,
         list(sizes),
         device_label,
-        survey_key,
+        survey_key,  # the devices, their libraries, cores and speed settings (cl_devices)
+        np.__version__,  # the NumPy lens's speed is its FFT's
     ]
     return hashlib.sha256(json.dumps(shape).encode()).hexdigest()[:24]
 
@@ -121,11 +124,20 @@ def choose(
     except RuntimeError as exc:  # no platform at all
         best, why = None, str(exc)
     cl_lens = None
-    if best is not None:
-        try:
-            cl_lens = AOLens(plan, precision=precision)
-        except (RuntimeError, ValueError) as exc:  # the survey's plan built, this one did not
-            why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    if best is not None:  # the fastest device that builds this plan (double, local memory)
+        devices, refused = cl_devices.list_devices(), []
+        for report in cl_devices.ranked(cl_devices.survey()):
+            try:
+                cl_lens = AOLens(plan, device=devices[report.index], precision=precision)
+            except (RuntimeError, ValueError) as exc:  # the survey's plan built, this not
+                refused.append(f"{report.short_label}: {str(exc).splitlines()[0]}")
+                continue
+            if report.index != best.index:
+                why = f"the fastest that builds this plan ({'; '.join(refused)})"
+            best = report
+            break
+        else:
+            why = f"no OpenCL device builds this plan ({'; '.join(refused)})"
     np_lens = NumpyLens(plan, precision=precision)
     if cl_lens is None:
         np_lens.fallback_reason = why

@@ -3,8 +3,9 @@
 The lens of Psaltis & Wagner (1981, "Description of the processor") Fourier-transforms the pulse
 held by the AO cell; digitally it range-compresses each shot with the chain of a
 :class:`rtsar.lens.plan.LensPlan`.  Backends (one module each): ``opencl`` (kernels in
-``kernels/lens.cl``) and ``numpy`` (NumPy's or SciPy's FFT); ``auto`` (the default) is the OpenCL
-lens where the device can build a kernel, else the NumPy lens with a warning that says why.
+``kernels/lens.cl``) and ``numpy`` (NumPy's or SciPy's FFT); ``auto`` (the default,
+:mod:`rtsar.lens.auto`) is the OpenCL lens on the fastest device that builds it, unless the
+NumPy lens is clearly faster for the plan, else the NumPy lens with a warning that says why.
 Both are tested against :func:`compress_reference`, the plain NumPy float64 evaluation of the
 plan: relative RMS error about 1e-7 in complex64 (tolerance 1e-5) and about 1e-16 in complex128
 (tolerance 1e-12).

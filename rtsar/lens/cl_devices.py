@@ -13,9 +13,10 @@ anew and shows it all).
 
 The default device (no ``--device``, no ``RTSAR_OPENCL_DEVICE``) is the fastest device that
 builds and computes the lens right, at batch 64 on ``psaltis-max``; with one such device, that
-one.  A device asked for is a case-insensitive substring of ``"platform version / device
-(driver version)"`` (``"platform / device"`` as before, or a driver version to tell two PoCLs
-apart), or its index in ``rtsar devices``; several matches: the fastest that builds.
+one.  A device asked for is a case-insensitive part of ``"platform / device"`` (as before), of
+``"platform driver / device"`` or of ``"platform version / device (driver version)"`` (a driver
+version tells two PoCLs apart), or its index in ``rtsar devices``; several matches: the
+fastest that builds.
 """
 
 from __future__ import annotations
@@ -55,6 +56,7 @@ __all__ = [
     "install_hint",
     "list_devices",
     "measure",
+    "ranked",
     "select_device",
     "survey",
 ]
@@ -80,14 +82,69 @@ def _cpu_model() -> str:
     return _platform.processor() or _platform.machine()
 
 
+# rtsar's own code on the lens's path: a refusal it caused must not outlive its fix
+_HOST_SOURCES = ("opencl.py", "cl_launch.py", "plan.py", "cl_probe_child.py", "cl_loader.py")
+# what sets how fast a driver runs besides the driver itself
+_SPEED_ENV = ("POCL_", "OMP_", "NUMBA_", "KMP_", "CL_CONFIG_", "TBB_")
+
+
+def _driver_files() -> list:
+    """(path, size, mtime) of every driver library the loader can load: a patched driver
+    with the same version string is another driver."""
+    folders = [os.environ.get(cl_vendors.ENV_VENDORS), "/etc/OpenCL/vendors"]
+    libs = set()
+    for folder in filter(None, folders):
+        try:
+            for icd in os.scandir(folder):
+                if icd.name.endswith(".icd"):
+                    with open(icd.path, encoding="utf-8", errors="replace") as f:
+                        libs.add(f.read().strip())
+        except OSError:
+            continue
+    bundled = os.path.join(os.path.dirname(cl.__file__), ".libs")  # pyopencl's own PoCL
+    try:
+        libs.update(e.path for e in os.scandir(bundled) if ".so" in e.name)
+    except OSError:
+        pass
+    out = []
+    for lib in sorted(libs):
+        try:
+            st = os.stat(lib)
+            out.append((lib, st.st_size, int(st.st_mtime)))
+        except OSError:  # a bare name the loader resolves itself
+            out.append((lib, None, None))
+    return out
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
 def fingerprint(reports: list[DeviceReport]) -> str:
-    """What the survey's result depends on: devices and drivers, CPU, host, kernel source."""
+    """What the survey's result depends on: devices, driver versions and libraries, CPU, cores,
+    host, the speed settings in the environment, the kernel source and rtsar's host code."""
+    here = os.path.dirname(__file__)
+    host = []
+    for name in _HOST_SOURCES:
+        try:
+            with open(os.path.join(here, name), encoding="utf-8") as f:
+                host.append(f.read())
+        except OSError:
+            host.append(name)
+    speed = sorted((k, v) for k, v in os.environ.items() if k.startswith(_SPEED_ENV))
     h = hashlib.sha256()
     for part in (
         json.dumps([identity(r) for r in reports]),
+        json.dumps(_driver_files()),
         _cpu_model(),
+        str(_cores()),
         _platform.node(),
+        json.dumps(speed),
         kernel_source("lens.cl"),
+        *host,
         json.dumps([SURVEY_PRESET, SURVEY_BATCH, TOLERANCE]),
     ):
         h.update(part.encode("utf-8", "replace"))
@@ -118,17 +175,19 @@ def measure(
                 f"with the lens of {preset_name} (a second or two each; kept for later runs)"
             )
         measured, numpy_rates = probe_all(reports, preset_name, batches, seconds)
+        hung = any("no answer within" in (r.reason or r.note or "") for r in measured)
         if preset_name == SURVEY_PRESET and SURVEY_BATCH in [int(b) for b in batches]:
             key = fingerprint(reports)
-            write_json(
-                _CACHE,
-                {
-                    "fingerprint": key,
-                    "measured_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-                    "preset": SURVEY_PRESET,
-                    "devices": [asdict(r) for r in measured],
-                },
-            )
+            if not hung:  # a hang may be this moment's: the next run asks again
+                write_json(
+                    _CACHE,
+                    {
+                        "fingerprint": key,
+                        "measured_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                        "preset": SURVEY_PRESET,
+                        "devices": [asdict(r) for r in measured],
+                    },
+                )
             _keep(measured, key)
         return measured, numpy_rates
 
@@ -164,7 +223,9 @@ def _keep(reports: list[DeviceReport], key: str) -> list[DeviceReport]:
     return reports
 
 
-def _fastest(reports: list[DeviceReport]) -> list[DeviceReport]:
+def ranked(reports: list[DeviceReport]) -> list[DeviceReport]:
+    """The devices that build the lens and compute it right, the fastest first (at
+    ``SURVEY_BATCH``; one left untimed last)."""
     ok = [r for r in reports if r.reason is None]
     return sorted(ok, key=lambda r: -(r.rate() or 0.0))
 
@@ -172,7 +233,7 @@ def _fastest(reports: list[DeviceReport]) -> list[DeviceReport]:
 def default_device(say=None) -> tuple[DeviceReport | None, str]:
     """The device the lens runs on by default, and why (one line); None where none builds."""
     reports = survey(say=say)
-    ok = _fastest(reports)
+    ok = ranked(reports)
     if not ok:
         return None, refusal_summary(reports)
     best = ok[0]
@@ -245,11 +306,17 @@ def _system_pocl_command() -> str:
 
 
 def _matches(wanted: str, reports: list[DeviceReport]) -> list[DeviceReport]:
+    """The devices ``wanted`` names: an index of ``rtsar devices`` (where there is one), else a
+    case-insensitive part of "platform / device", of "platform driver / device" or of the
+    full label with the platform's version."""
     text = wanted.strip()
-    if text.isdigit():
+    if text.isdigit() and int(text) < len(reports):
         return [r for r in reports if r.index == int(text)]
     low = text.lower()
-    return [r for r in reports if low in r.full_label.lower()]
+    return [
+        r for r in reports
+        if any(low in s.lower() for s in (r.label, r.short_label, r.full_label))
+    ]  # fmt: skip
 
 
 def select_device(device: cl.Device | str | None = None, say=None) -> cl.Device:
@@ -270,8 +337,8 @@ def select_device(device: cl.Device | str | None = None, say=None) -> cl.Device:
             source = "" if device is not None else f" (from {ENV_DEVICE})"
             raise RuntimeError(f"no OpenCL device matches {wanted!r}{source}; available: {names}")
         if len(matches) > 1:  # the fastest of them that builds, by the survey
-            ranked = {r.index: k for k, r in enumerate(_fastest(survey(say=say)))}
-            matches.sort(key=lambda r: ranked.get(r.index, len(ranked) + r.index))
+            order = {r.index: k for k, r in enumerate(ranked(survey(say=say)))}
+            matches.sort(key=lambda r: order.get(r.index, len(order) + r.index))
         return devices[matches[0].index]
     best, why = default_device(say=say)
     if best is None:

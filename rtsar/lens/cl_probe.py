@@ -43,7 +43,7 @@ SURVEY_PRESET = "psaltis-max"
 SURVEY_BATCH = 64
 TOLERANCE = 1e-5  # max |lens − reference| / peak, complex64
 NO_PLATFORM = "no OpenCL platform found"
-_TIMEOUT_S = 180.0
+_TIMEOUT_S = 180.0  # a build; timing is given its own length on top
 
 
 @dataclass
@@ -60,6 +60,7 @@ class DeviceReport:
     error: float | None = None  # max |lens − reference| / peak
     build_s: float | None = None  # kernel build and first batch, s (a driver's cache shortens it)
     rates: dict = field(default_factory=dict)  # batch (str) → pulses/s on the probed preset
+    note: str | None = None  # why a device that builds and is right has no rates
 
     @property
     def label(self) -> str:
@@ -211,13 +212,17 @@ def probe_all(
     by_index = {r.index: r for r in out}
     ok = [r.index for r in out if r.reason is None]
     spec = [preset_name, ",".join(str(int(b)) for b in batches), repr(float(seconds))]
-    answer, why = _child(["time", ",".join(map(str, ok)), *spec], _TIMEOUT_S)
+    # the timing's own length (every device and the NumPy lens, every batch), with room
+    timeout = _TIMEOUT_S + 3 * float(seconds) * len(batches) * (len(ok) + 1)
+    answer, why = _child(["time", ",".join(map(str, ok)), *spec], timeout)
     if answer is None:  # a driver that builds and then fails: time each alone to find it
         answer = {}
         for i in ok:
-            one, why_one = _child(["time", str(i), *spec], _TIMEOUT_S)
-            if one is None:
+            one, why_one = _child(["time", str(i), *spec], timeout)
+            if one is None and "crashed" in why_one:  # it would crash a run too
                 by_index[i].reason = f"{why_one} while timing the lens"
+            elif one is None:  # built and right, but not timed: a candidate, ranked last
+                by_index[i].note = f"not timed ({why_one})"
             else:
                 answer.update({k: v for k, v in one.items() if k != "numpy"})
                 answer.setdefault("numpy", one.get("numpy", {}))

@@ -97,8 +97,8 @@ class AOLens:
     -----
     ``compress`` may be called with any batch size; device buffers are kept between calls and
     grown when a larger batch arrives (on CPU devices the kernel reads the input array in
-    place).  Calls on one instance are serialised by a lock; the
-    blocking copy of the result releases the GIL while the device works.
+    place).  Launches on one instance are serialised by a lock; :meth:`compress` waits for its
+    result (the GIL released meanwhile), :meth:`submit` returns at once with a job to wait on.
     """
 
     backend = "opencl"

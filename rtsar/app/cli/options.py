@@ -179,7 +179,8 @@ def add_pipeline_options(s, delivery: str) -> None:
         choices=STAGE_LAYOUTS,
         default=STAGE_LAYOUTS[0],
         help="split: lens and CCD in their own threads (default); fused: one thread; "
-        "overlapped: one thread, the lens computing the next batch while the CCD correlates",
+        "overlapped: one thread, the lens computing the next batch while the CCD correlates "
+        "(with an OpenCL lens and no --correct/--height/--physical; otherwise as fused)",
     )
     g.add_argument(
         "--max-batch",

@@ -34,6 +34,7 @@ import argparse
 import json
 import os
 import sys
+import tempfile
 import time
 
 import numpy as np
@@ -48,6 +49,8 @@ from ...presets import preset
 def _one_core() -> None:
     """One thread for numba and PoCL (before they load: numba with the numba correlators,
     PoCL at the first OpenCL call): per-pulse CPU times, not wall times of parallel regions."""
+    # its one-thread timings are not this machine's: kept apart from the cached survey
+    os.environ.setdefault("RTSAR_CACHE_DIR", tempfile.mkdtemp(prefix="rtsar-swath-model-"))
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")
     os.environ.setdefault("POCL_MAX_PTHREAD_COUNT", "1")
     os.environ.setdefault("OMP_NUM_THREADS", "1")

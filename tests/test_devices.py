@@ -211,6 +211,7 @@ def test_pip_installed_driver_is_registered_inside_the_environment(monkeypatch, 
     conda.mkdir(parents=True)
     (conda / "nvidia.icd").write_text("libnvidia-opencl.so.1\n")
     (conda / "pocl.icd").write_text("libpocl.so.2\n")  # the system's too: listed once
+    (conda / "dead.icd").write_text("/opt/anaconda1anaconda2anaconda3/lib/libintelocl.so\n")
     monkeypatch.setattr(cl_vendors.sys, "prefix", str(prefix))
     monkeypatch.setattr(cl_vendors, "_lib_dirs", lambda: [prefix / "lib"])
     monkeypatch.setattr(cl_vendors, "_in_venv", lambda: True)
@@ -225,8 +226,9 @@ def test_pip_installed_driver_is_registered_inside_the_environment(monkeypatch, 
     assert (folder / "copy-0-pocl.icd").read_text() == "libpocl.so.2\n"  # the system's stay
     assert (folder / "copy-1-nvidia.icd").read_text() == "libnvidia-opencl.so.1\n"
     assert not (folder / "copy-1-pocl.icd").exists()
+    assert not (folder / "copy-1-dead.icd").exists()  # a library that is not there
     assert (folder / "someone-else.icd").exists()
-    assert sorted(p.name for p in conda.iterdir()) == ["nvidia.icd", "pocl.icd"]  # untouched
+    assert sorted(p.name for p in conda.iterdir()) == ["dead.icd", "nvidia.icd", "pocl.icd"]
     # a child process inherits the variable: the folder lists the driver, nothing to do
     child = cl_vendors.register(dict(env))
     assert child.registered and child.vendors_dir == str(folder)

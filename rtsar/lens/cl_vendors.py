@@ -120,9 +120,13 @@ def _write_vendors(folder: Path, drivers: dict[str, str], env) -> None:
             continue
         for icd in sorted(source.glob("*.icd")):
             try:
-                wanted[f"copy-{k}-{icd.name}"] = icd.read_text(encoding="utf-8", errors="replace")
+                text = icd.read_text(encoding="utf-8", errors="replace")
             except OSError:
                 continue
+            lib = text.strip()
+            if os.path.isabs(lib) and not os.path.exists(lib):
+                continue  # a dead entry (intel-opencl-rt ships one naming a conda build path)
+            wanted[f"copy-{k}-{icd.name}"] = text
     for icd, lib in drivers.items():
         wanted[icd] = lib + "\n"
     seen = set()  # one file per library: the same driver listed twice is two devices

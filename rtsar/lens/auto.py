@@ -29,7 +29,7 @@ import numpy as np
 
 from . import cl_devices
 from .cache import read_json, write_json
-from .cl_probe import throughput
+from .cl_probe import best_rates
 from .numpy_lens import NumpyLens
 from .opencl import AOLens
 from .plan import LensPlan
@@ -79,12 +79,7 @@ def plan_rates(cl_lens, np_lens, sizes, key: str | None = None) -> dict:
         else:
             _memo[key] = rates
             return rates
-    rates = {"opencl": {}, "numpy": {}}
-    for _ in range(_ROUNDS):  # interleaved, so a neighbour's burst of load hits both alike
-        for b in sizes:
-            for name, lens in (("opencl", cl_lens), ("numpy", np_lens)):
-                rate = throughput(lens, int(b), _SECONDS)
-                rates[name][int(b)] = max(rates[name].get(int(b), 0.0), rate)
+    rates = best_rates({"opencl": cl_lens, "numpy": np_lens}, sizes, _SECONDS, _ROUNDS)
     if key:
         cache = read_json(_CACHE)
         if len(cache) > 200:  # plans come and go; keep the file small

@@ -31,6 +31,7 @@ __all__ = [
     "SURVEY_PRESET",
     "TOLERANCE",
     "DeviceReport",
+    "best_rates",
     "describe",
     "first_line",
     "identity",
@@ -165,6 +166,18 @@ def throughput(lens, batch: int, seconds: float, rng=None) -> float:
         lens.compress(x)
         times.append(time.perf_counter() - t0)
     return batch / float(np.median(times))
+
+
+def best_rates(lenses: dict, batches, seconds: float, rounds: int = 3) -> dict:
+    """``{name: {batch: pulses/s}}`` of several lenses timed interleaved (every lens at every
+    batch once a round, ``seconds`` each), each keeping its best round: a neighbour's burst of
+    load on a shared machine falls on all of them alike."""
+    best = {name: dict.fromkeys(map(int, batches), 0.0) for name in lenses}
+    for _ in range(rounds):
+        for b in map(int, batches):
+            for name, lens in lenses.items():
+                best[name][b] = max(best[name][b], throughput(lens, b, seconds))
+    return best
 
 
 # --------------------------------------------------------------------------------------------

@@ -22,11 +22,11 @@ from .cl_probe import (
     SURVEY_PRESET,
     TOLERANCE,
     DeviceReport,
+    best_rates,
     describe,
     first_line,
     identity,
     list_devices,
-    throughput,
 )
 from .numpy_lens import NumpyLens
 from .opencl import AOLens
@@ -72,13 +72,8 @@ def time_here(indices, preset_name: str, batches, seconds: float) -> dict:
     plan = _plan(preset_name)
     lenses = {str(i): AOLens(plan, device=devices[i]) for i in indices}
     lenses["numpy"] = NumpyLens(plan)
-    best = {name: dict.fromkeys(map(str, batches), 0.0) for name in lenses}
-    for _ in range(_ROUNDS):
-        for b in batches:
-            for name, lens in lenses.items():
-                rate = throughput(lens, int(b), seconds / _ROUNDS)
-                best[name][str(b)] = max(best[name][str(b)], round(rate, 1))
-    return best
+    best = best_rates(lenses, batches, seconds / _ROUNDS, _ROUNDS)
+    return {name: {str(b): round(r, 1) for b, r in d.items()} for name, d in best.items()}
 
 
 def _main(argv: list[str]) -> int:

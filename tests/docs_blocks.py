@@ -222,27 +222,35 @@ class PageRun:
             }
         )
         timeout = float(block.directives.get("timeout", DEFAULT_TIMEOUT_S))
-        proc = subprocess.Popen(
-            ["bash", "-c", script],
-            cwd=self.folder,
-            env=env,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-            start_new_session=True,
-        )
-        try:
-            out, _ = proc.communicate(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            out, _ = proc.communicate()
+        # Output to a file, not a pipe: a background job the block left behind (after a
+        # failed command under set -e) would hold a pipe open until the time limit.
+        log_path = self.folder / ".docs-block.log"
+        with open(log_path, "w", encoding="utf-8") as log:
+            proc = subprocess.Popen(
+                ["bash", "-c", script],
+                cwd=self.folder,
+                env=env,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                text=True,
+                start_new_session=True,
+            )
+            try:
+                proc.wait(timeout=timeout)
+                timed_out = False
+            except subprocess.TimeoutExpired:
+                timed_out = True
+            finally:
+                try:  # whatever the block left running in the background
+                    os.killpg(proc.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+                proc.wait()
+        out = log_path.read_text(encoding="utf-8", errors="replace")
+        log_path.unlink()
+        if timed_out:
             out += f"\n[docs test: the block ran past its {timeout:g} s limit and was killed]"
             return subprocess.CompletedProcess(proc.args, 124, out, "")
-        finally:
-            try:  # whatever the block left running in the background
-                os.killpg(proc.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
         return subprocess.CompletedProcess(proc.args, proc.returncode, out, "")
 
 

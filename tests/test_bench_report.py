@@ -74,9 +74,7 @@ def run_bench(tmp_path, capsys, **kw):
     return capsys.readouterr().out, json.loads((tmp_path / "bench.json").read_text())
 
 
-def test_a_correlator_alone_is_measured_once_and_printed_as_one_number(
-    stand_ins, tmp_path, capsys
-):
+def test_a_correlator_alone_is_measured_once_and_printed_as_one_number(stand_ins, tmp_path, capsys):
     out, data = run_bench(tmp_path, capsys)
     # Each (correlator, batch) measured once: the table's figures are the ratios' figures.
     assert len(stand_ins) == len({(k, b) for k, b, _ in stand_ins}) == 4

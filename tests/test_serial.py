@@ -88,8 +88,53 @@ def _free_port() -> int:
 )
 def test_bad_url_is_a_clear_error(url):
     with pytest.raises(ValueError, match="cannot open instrument port") as info:
-        SerialSource(url, 8)
+        SerialSource(url, 8, connect_timeout_s=0)
     assert url in str(info.value)
+
+
+def test_a_refused_socket_is_waited_for_then_a_clear_error():
+    """Nothing listening: the source tries for connect_timeout_s, says so once, then the error
+    names the port and the wait (not a bare 'Connection refused' at once)."""
+    url = f"socket://127.0.0.1:{_free_port()}"
+    messages = []
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError, match=r"waited 0.6 s: --connect-timeout") as info:
+        SerialSource(url, 8, connect_timeout_s=0.6, notify=messages.append)
+    assert 0.55 < time.perf_counter() - t0 < 3.0
+    assert url in str(info.value)
+    assert len(messages) == 1 and "waiting up to 0.6 s" in messages[0]
+
+
+def test_an_instrument_that_starts_after_the_processor_is_waited_for():
+    """From CI: the docs' `fake_instrument --listen … & rtsar run --serial socket://…` failed
+    with 'Connection refused' when rtsar connected before the instrument listened (a slower
+    machine). By default a socket:// instrument is waited for, so the order does not matter."""
+    fake = load_tool("fake_instrument")
+    cfg, shots = _tiny_shots(200)
+    port = _free_port()
+    result = {}
+
+    def serve_late():
+        time.sleep(0.7)  # the processor is already trying
+        with fake.listen(f"127.0.0.1:{port}") as server:
+            result["summary"] = fake.serve_tcp(server, [shots], 5000.0, start_delay_s=0.1)
+
+    thread = threading.Thread(target=serve_late)
+    thread.start()
+    messages = []
+    src = SerialSource(
+        f"socket://127.0.0.1:{port}",
+        cfg.waveform.samples_per_shot,
+        idle_timeout_s=2.0,
+        reconnect=False,
+        notify=messages.append,
+    )
+    _, seq = _collect(src)
+    thread.join(5.0)
+    assert result["summary"].sent == 200
+    assert len(seq) >= 150 and np.all(np.diff(seq) > 0)
+    assert "not there yet" in messages[0] and "waiting up to 10 s" in messages[0]
+    assert any(m.endswith("open") for m in messages)
 
 
 @pytest.mark.parametrize(
@@ -318,3 +363,20 @@ def test_a_false_header_claiming_64_channels_holds_no_true_frame(channel_map):
     list(src)
     assert src.counters["wrong_length"] == 4
     assert len(said) == 1 and f"{width + 1} channels x 16 samples refused" in said[0]
+
+
+def test_run_waits_for_connect_timeout_then_exits_2(capsys):
+    """`rtsar run --serial` with nothing listening: tried for --connect-timeout, said on stdout,
+    then one error line naming the port and the wait; --connect-timeout without --serial is
+    refused."""
+    from rtsar.app.cli import main
+
+    url = f"socket://127.0.0.1:{_free_port()}"
+    t0 = time.perf_counter()
+    assert main(["run", "--serial", url, "--connect-timeout", "0.4"]) == 2
+    assert 0.35 < time.perf_counter() - t0 < 5.0
+    out, err = capsys.readouterr()
+    assert "waiting up to 0.4 s" in out
+    assert url in err and "waited 0.4 s" in err
+    assert main(["run", "--connect-timeout", "1"]) == 2
+    assert "--connect-timeout is for --serial" in capsys.readouterr().err

@@ -351,8 +351,13 @@ def main(argv=None) -> int:
     )
     args = ap.parse_args(argv)
 
-    rec = None
+    rec = server = None
     try:
+        if args.listen:  # bound first: a reader connecting while the scene loads is queued
+            try:
+                server = listen(args.listen)
+            except OSError as exc:
+                raise ValueError(f"cannot listen on {args.listen}: {exc}") from None
         if args.recording:
             rec = open_recording(args.recording)
             cfg, name, cmap = rec.config, args.recording, recording_map(rec)
@@ -363,16 +368,18 @@ def main(argv=None) -> int:
             shots = scene_shots(scene, args.pulses)
         if cmap is not None:
             name += f", channels {cmap.text} (rtsar run --serial … --channel-map {cmap.text})"
-        return _serve(args, cfg, name, shots)
+        return _serve(args, cfg, name, shots, server)
     except ValueError as exc:
         print(f"fake_instrument: {exc}", file=sys.stderr)
         return 2
     finally:
         if rec is not None:
             rec.close()
+        if server is not None:
+            server.close()
 
 
-def _serve(args, cfg, name: str, shots: Iterator[np.ndarray]) -> int:
+def _serve(args, cfg, name: str, shots: Iterator[np.ndarray], server=None) -> int:
     first = next(shots, None)
     if first is None:
         raise ValueError("no shots to send")
@@ -399,15 +406,10 @@ def _serve(args, cfg, name: str, shots: Iterator[np.ndarray]) -> int:
         f"{name}: {cfg.waveform.samples_per_shot} samples/shot, {args.sample_type} "
         f"(scale {scale:g}), {prf:g} Hz"
     )
-    if args.listen:
-        try:
-            server = listen(args.listen)
-        except OSError as exc:
-            raise ValueError(f"cannot listen on {args.listen}: {exc}") from None
+    if server is not None:
         host, port = server.getsockname()[:2]
         print(f"{what}; waiting for a reader on socket://{host}:{port}", flush=True)
-        with server:
-            summary = serve_tcp(server, blocks, prf, stop, **options)
+        summary = serve_tcp(server, blocks, prf, stop, **options)
     else:
         pty = Pty()
         print(f"{what}; waiting for a reader on {pty.path}", flush=True)

@@ -98,9 +98,7 @@ def _figures(rates: dict) -> str:
     return ", ".join(f"{rates[b]:,.0f}" for b in sorted(rates))
 
 
-def choose(
-    plan: LensPlan, precision: str = "complex64", batch: int | None = None, device=None
-):
+def choose(plan: LensPlan, precision: str = "complex64", batch: int | None = None, device=None):
     """The lens for ``--lens auto`` (see the module docstring).
 
     Returns a lens whose ``choice`` says what runs and why; ``fallback_reason`` is set (and a

@@ -239,8 +239,10 @@ def default_device(say=None) -> tuple[DeviceReport | None, str]:
     best = ok[0]
     if len(ok) == 1:
         others = len(reports) - 1
-        why = "the only OpenCL device here" if not others else (
-            f"the only one of {len(reports)} OpenCL devices that builds the lens"
+        why = (
+            "the only OpenCL device here"
+            if not others
+            else (f"the only one of {len(reports)} OpenCL devices that builds the lens")
         )
         return best, why
     second = ok[1]

@@ -35,7 +35,6 @@ from .plan import make_plan
 _ROUNDS = 3
 
 
-
 def _plan(preset_name: str):
     return make_plan(preset(preset_name))
 

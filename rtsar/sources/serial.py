@@ -16,11 +16,19 @@ connection opens may be lost; the parser finds the next sync word as usual.
 A lost link is never silent: it is counted (``link_drops``) and announced (``notify``).  With
 ``reconnect`` (the default for ``socket://``) the source reopens the link with a growing pause
 (0.1 s doubling to 5 s, counted in ``reconnects``) and goes on; without it the source ends and
-``failure`` says why, so the command can exit with an error.  The parser knows the configured
-frame: ``samples_per_shot`` samples in exactly the channels the shot takes (frame channel
-``channel`` + 1 without a channel map, the map's frame channels with one); a frame of another
-shape is rejected at its header, before its payload is buffered (``wrong_length``), so no
-header, true or false, makes the parser hold more than one frame of the configured stream.
+``failure`` says why, so the command can exit with an error.
+
+An instrument that is not there yet is waited for: the first open is tried again (0.1 s doubling
+to 1 s between tries) for ``connect_timeout_s`` (default 10 s for ``socket://``, where a
+processor and an instrument started together race for the port; 0 for serial devices, where a
+missing path is more often a typo than a device still coming up), said once through
+``notify`` (a constructor argument, as the source has no other listener yet).
+
+The parser knows the configured frame: ``samples_per_shot`` samples in exactly the channels
+the shot takes (frame channel ``channel`` + 1 without a channel map, the map's frame channels
+with one); a frame of another shape is rejected at its header, before its payload is
+buffered (``wrong_length``), so no header, true or false, makes the parser hold more than one
+frame of the configured stream.
 (It took up to 64 channels: a CRC-valid false header claiming 64 held 63 true frames behind
 it, a 12 s stall at 5 Hz.)  Each shape refused is said once (``notify``), with the fix.
 """
@@ -42,6 +50,7 @@ from .frame import MAX_PAYLOAD_BYTES, Frame, FrameParser
 
 _READ_BYTES = 1 << 18  # most bytes taken in one read
 _BACKOFF_S = (0.1, 5.0)  # first and longest pause between reconnection attempts
+_CONNECT_WAIT_S = 10.0  # how long a socket:// instrument is waited for at the start
 
 
 class SerialSource(Source):
@@ -75,8 +84,11 @@ class SerialSource(Source):
         max_payload_bytes: int = MAX_PAYLOAD_BYTES,
         reconnect: bool | None = None,
         channel_map: ChannelMap | None = None,
+        connect_timeout_s: float | None = None,
+        notify=None,
     ):
         super().__init__()
+        self.notify = notify
         if not samples_per_shot >= 1:
             raise ValueError(f"samples_per_shot must be >= 1, got {samples_per_shot!r}")
         if not batch_frames >= 1:
@@ -87,6 +99,10 @@ class SerialSource(Source):
             raise ValueError(f"idle_timeout_s must be > 0 or None, got {idle_timeout_s!r}")
         if not poll_s > 0:
             raise ValueError(f"poll_s must be > 0, got {poll_s!r}")
+        if connect_timeout_s is None:
+            connect_timeout_s = _CONNECT_WAIT_S if url.startswith("socket://") else 0.0
+        if not connect_timeout_s >= 0:
+            raise ValueError(f"connect_timeout_s must be >= 0, got {connect_timeout_s!r}")
         self.url = url
         self.samples_per_shot = int(samples_per_shot)
         self.batch_frames = int(batch_frames)
@@ -108,10 +124,35 @@ class SerialSource(Source):
         self.baudrate = baudrate
         self._lock = threading.Lock()
         self._reading = False
-        try:
-            self._open()
-        except (serial.SerialException, OSError, ValueError) as exc:
-            raise ValueError(f"cannot open instrument port {url!r}: {exc}") from None
+        self._first_open(float(connect_timeout_s))
+
+    def _first_open(self, wait_s: float) -> None:
+        """Open the link, trying again for ``wait_s`` seconds (an instrument still starting);
+        a ValueError naming the port and the last error after that."""
+        end = time.perf_counter() + wait_s
+        pause = _BACKOFF_S[0]
+        told = False
+        while True:
+            try:
+                self._open()
+                break
+            except (serial.SerialException, OSError, ValueError) as exc:
+                left = end - time.perf_counter()
+                if left <= 0:
+                    waited = f" (waited {wait_s:g} s: --connect-timeout)" if wait_s > 0 else ""
+                    raise ValueError(
+                        f"cannot open instrument port {self.url!r}{waited}: {exc}"
+                    ) from None
+                if not told:
+                    self._say(
+                        f"instrument at {self.url} not there yet ({exc}); "
+                        f"waiting up to {wait_s:g} s for it"
+                    )
+                    told = True
+                time.sleep(min(pause, left))
+                pause = min(2 * pause, 1.0)
+        if told:
+            self._say(f"instrument link to {self.url} open")
 
     def aux_channels(self) -> tuple[str, ...]:
         """The channel map's auxiliary channels (none without a map: frame channel

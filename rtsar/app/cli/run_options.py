@@ -1,5 +1,6 @@
 """Options of ``rtsar run`` beyond the live pipeline's: the raw recording (``--record``,
-rtsar.sinks.raw_record) and the link's silence (``--link-timeout``, rtsar.stream.link)."""
+rtsar.sinks.raw_record), the link's silence (``--link-timeout``, rtsar.stream.link) and the
+wait for an instrument at the start (``--connect-timeout``, rtsar.sources.serial)."""
 
 from __future__ import annotations
 
@@ -17,8 +18,27 @@ def positive_seconds(text: str) -> float:
     return value
 
 
+def seconds_at_least_zero(text: str) -> float:
+    """An argparse type: seconds >= 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number of seconds, got {text!r}") from None
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0 seconds, got {text}")
+    return value
+
+
 def add_run_options(source_group, parser) -> None:
-    """--link-timeout (in the source group) and --record (beside -o)."""
+    """--link-timeout and --connect-timeout (in the source group) and --record (beside -o)."""
+    source_group.add_argument(
+        "--connect-timeout",
+        type=seconds_at_least_zero,
+        metavar="S",
+        help="with --serial: when the port cannot be opened at the start (an instrument not "
+        "listening yet), try again for S seconds before giving up, exit status 2 (default: 10 "
+        "for socket://, 0 for serial devices)",
+    )
     source_group.add_argument(
         "--link-timeout",
         type=positive_seconds,

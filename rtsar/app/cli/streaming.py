@@ -88,6 +88,11 @@ def warn_slow_first_line(scene, name) -> None:
 def cmd_run(args) -> int:
     if args.duration is not None and args.duration <= 0:
         return die(f"--duration must be > 0 seconds, got {args.duration}")
+    if args.connect_timeout is not None and not args.serial:
+        return die(
+            "--connect-timeout is for --serial (a ZeroMQ source connects when the "
+            "publisher comes up; a simulation has no link)"
+        )
     if args.serial or args.zmq_in:
         # Pulse 0's along-track position: the scene's (the instrument scans the scene the file
         # describes, as the fake instrument does); a bare preset starts at 0 m.
@@ -124,6 +129,8 @@ def cmd_run(args) -> int:
                 idle_timeout_s=args.duration,
                 reconnect=args.reconnect,
                 channel_map=cmap,
+                connect_timeout_s=args.connect_timeout,
+                notify=lambda message: print(message, flush=True),
             )
         return run_stream(
             cfg,

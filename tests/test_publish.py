@@ -53,7 +53,7 @@ def test_replay_max_into_subscribe_equals_process(tmp_path):
         )
     )
     sub.start()
-    args = ["replay", str(rec), "--rate", "max", "--endpoint", ep, "--wait-subscribers", "1"]
+    args = ["replay", str(rec), "--rate", "max", "--endpoint", ep]
     assert main(args + ["--strip-lines", "5"]) == 0
     sub.join(60)
     assert codes == [0]
@@ -65,6 +65,29 @@ def test_replay_max_into_subscribe_equals_process(tmp_path):
     np.testing.assert_allclose(rg_s, rg_b, rtol=1e-12)
     assert attrs["complete"] and attrs["missing_lines"] == 0 and attrs["missed_strips"] == 0
     assert json.loads(attrs["counters"])["pulses_processed"] > 0
+
+
+def test_a_simulated_run_waits_for_its_subscriber(tmp_path):
+    """`rtsar run --wait-subscribers 1` (the docs' two-terminal example): a subscriber that
+    starts 3 s late still gets the stream from its first strip, nothing missed."""
+    scene = tmp_path / "s.toml"
+    scene.write_text(SCENE)
+    ep = free_endpoint()
+    codes = []
+
+    def subscribe_late():
+        time.sleep(3.0)  # longer than the run's setup and its 1 s of stream
+        codes.append(main(["subscribe", ep, "-o", str(tmp_path / "sub.h5"), "--timeout", "10"]))
+
+    sub = threading.Thread(target=subscribe_late)
+    sub.start()
+    argv = ["run", "--scene", str(scene), "--endpoint", ep, "--wait-subscribers", "1"]
+    assert main(argv + ["--duration", "1", "--delivery", "lossless"]) == 0
+    sub.join(60)
+    assert codes == [0]
+    _, az, _, attrs = read_image(tmp_path / "sub.h5")
+    assert attrs["complete"] and attrs["missing_lines"] == 0 and attrs["missed_strips"] == 0
+    assert json.loads(attrs["counters"])["pulses_processed"] > 0 and len(az) > 0
 
 
 @pytest.fixture(scope="module")

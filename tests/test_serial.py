@@ -380,3 +380,10 @@ def test_run_waits_for_connect_timeout_then_exits_2(capsys):
     assert url in err and "waited 0.4 s" in err
     assert main(["run", "--connect-timeout", "1"]) == 2
     assert "--connect-timeout is for --serial" in capsys.readouterr().err
+
+
+def test_wait_subscribers_is_refused_for_an_instrument(capsys):
+    from rtsar.app.cli import main
+
+    assert main(["run", "--serial", "loop://", "--wait-subscribers", "1"]) == 2
+    assert "--wait-subscribers is for a simulated run" in capsys.readouterr().err

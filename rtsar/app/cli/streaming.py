@@ -93,6 +93,11 @@ def cmd_run(args) -> int:
             "--connect-timeout is for --serial (a ZeroMQ source connects when the "
             "publisher comes up; a simulation has no link)"
         )
+    if args.wait_subscribers and (args.serial or args.zmq_in):
+        return die(
+            "--wait-subscribers is for a simulated run: an instrument does not wait, its shots "
+            "would pile up while rtsar waited"
+        )
     if args.serial or args.zmq_in:
         # Pulse 0's along-track position: the scene's (the instrument scans the scene the file
         # describes, as the fake instrument does); a bare preset starts at 0 m.
@@ -170,6 +175,7 @@ def cmd_run(args) -> int:
         scene.start_along_track_m,
         args.output,
         args.curve_key,
+        wait_subscribers=args.wait_subscribers,
         total_pulses=source.total,
         expected_rate_hz=scene.config.geometry.prf_hz,
         height=height_stage(args, scene.config, scene),
@@ -283,7 +289,7 @@ def cmd_keygen(args) -> int:
 
 
 def add_wait_subscribers(s) -> None:
-    """--wait-subscribers (replay, demo)."""
+    """--wait-subscribers (run of a simulated scene, replay, demo)."""
     s.add_argument(
         "--wait-subscribers",
         type=int,
@@ -361,6 +367,7 @@ def add_parsers(sub) -> None:
         "socket://, off for serial ports)",
     )
     add_run_options(src, s)
+    add_wait_subscribers(s)
     add_pipeline_options(s, "drop")
     s.set_defaults(func=cmd_run)
 

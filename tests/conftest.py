@@ -1,8 +1,22 @@
 import os
+import socket
 import sys
 
 import numpy as np
 import pytest
+
+
+def _free_loopback_endpoint() -> str:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp://127.0.0.1:{s.getsockname()[1]}"
+
+
+# Commands run by the tests with the default endpoint publish on a port of this session's own
+# (rtsar.sinks.endpoint reads $RTSAR_ENDPOINT), not on 5555: a demo running on this machine, or
+# a second test session, would make them fail with "Address already in use". Set before any
+# rtsar module is imported; child processes inherit it.
+os.environ.setdefault("RTSAR_ENDPOINT", _free_loopback_endpoint())
 
 
 @pytest.fixture

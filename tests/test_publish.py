@@ -53,7 +53,7 @@ def test_replay_max_into_subscribe_equals_process(tmp_path):
         )
     )
     sub.start()
-    args = ["replay", str(rec), "--rate", "max", "--endpoint", ep]
+    args = ["replay", str(rec), "--rate", "max", "--endpoint", ep, "--wait-subscribers", "1"]
     assert main(args + ["--strip-lines", "5"]) == 0
     sub.join(60)
     assert codes == [0]
@@ -421,3 +421,25 @@ def test_what_a_cut_off_subscriber_that_reads_again_missed_is_never_more_than_co
     assert pub.counters()["messages_missed_by_stalled"] >= missed
     sub.close(0)
     pub.close()
+
+
+def test_the_default_endpoint_comes_from_rtsar_endpoint(tmp_path):
+    """$RTSAR_ENDPOINT sets the default endpoint (the suite sets its own free port in conftest,
+    so a demo on 5555 beside it does not fail tests); a child process sees it in --help."""
+    import os
+    import subprocess
+    import sys
+
+    from rtsar.sinks.endpoint import DEFAULT_ENDPOINT
+
+    assert DEFAULT_ENDPOINT == os.environ["RTSAR_ENDPOINT"] != "tcp://127.0.0.1:5555"
+    env = dict(os.environ, RTSAR_ENDPOINT="tcp://127.0.0.1:6123", COLUMNS="200")
+    out = subprocess.run(
+        [sys.executable, "-m", "rtsar", "subscribe", "--help"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+        check=True,
+    ).stdout
+    assert "default tcp://127.0.0.1:6123" in out

@@ -2,11 +2,15 @@
 the delivery modes and the longest a lossless send waits.
 
 Kept apart from the publisher (ZeroMQ) so the command line can name them without loading it.
+The default endpoint is ``$RTSAR_ENDPOINT`` where set (two instruments' processors on one host,
+or a test session beside a running demo), else tcp://127.0.0.1:5555.
 """
 
 from __future__ import annotations
 
-DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
+import os
+
+DEFAULT_ENDPOINT = os.environ.get("RTSAR_ENDPOINT", "").strip() or "tcp://127.0.0.1:5555"
 STALL_TIMEOUT_S = 2.0  # the longest a lossless send waits for a subscriber that reads nothing
 DELIVERIES = ("drop", "lossless")
 _LOOPBACK = {"127.0.0.1", "localhost", "::1", "[::1]"}

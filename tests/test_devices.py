@@ -101,7 +101,9 @@ def test_no_working_device_names_what_to_install(monkeypatch):
     best, why = cl_devices.default_device()
     assert best is None
     assert "Platform0 / dev0: the driver's compiler does not know this CPU model" in why
-    assert "-m pip install intel-opencl-rt intel-cmplr-lib-rt" in why
+    # the interpreter in full (a cold review: `python3 -m pip` outside an activated venv
+    # installs where rtsar never looks)
+    assert f"{sys.executable} -m pip install intel-opencl-rt intel-cmplr-lib-rt" in why
     # --lens auto then runs the NumPy lens and warns with that one line
     monkeypatch.delenv(cl_devices.ENV_DEVICE, raising=False)
     with pytest.warns(RuntimeWarning, match="using the NumPy lens.*pip install intel-opencl-rt"):
@@ -263,8 +265,13 @@ def test_auto_takes_opencl_only_where_it_is_faster(monkeypatch, opencl):
 
     monkeypatch.setattr(auto, "plan_rates", rates(True))
     lens = base.make_lens(plan, "auto", batch=64)
-    assert lens.backend == "opencl" and "against NumPy's 30,000, 30,000 at batches 16, 64" in (
-        lens.choice
+    assert (
+        lens.backend == "opencl"
+        and (
+            "faster for this plan: mean 11.11 µs per pulse against NumPy's 33.33 µs over batches "
+            "16, 64 (OpenCL 90,000, 90,000 pulses/s, NumPy 30,000, 30,000)"
+        )
+        in lens.choice
     )
     # the line names the device whose kernel runs the lens, with its driver version
     assert lens.choice.startswith(
@@ -274,14 +281,23 @@ def test_auto_takes_opencl_only_where_it_is_faster(monkeypatch, opencl):
     monkeypatch.setattr(auto, "plan_rates", rates(False))
     lens = base.make_lens(plan, "auto", batch=8)
     assert lens.backend == "numpy" and lens.fallback_reason is None
-    assert lens.choice.startswith("NumPy lens: at least 1.2x as fast as OpenCL on")
-    assert "at batch 8;" in lens.choice
-    # within the margin OpenCL keeps the lens: timings that swap places do not swap the choice
+    assert lens.choice.startswith("NumPy lens: faster for this plan than OpenCL on")
+    assert "over batch 8 (OpenCL 30,000 pulses/s, NumPy 90,000)" in lens.choice
+    # From a cold review: OpenCL ran though NumPy was 1.15x faster (a 1.2x margin in OpenCL's
+    # favour); the issue asks for OpenCL only where it is faster. The faster one runs.
     monkeypatch.setattr(
         auto, "plan_rates", lambda a, b, sizes, key=None: {
             "opencl": dict.fromkeys(sizes, 1.0e5), "numpy": dict.fromkeys(sizes, 1.15e5)}
     )  # fmt: skip
-    assert base.make_lens(plan, "auto", batch=8).backend == "opencl"
+    assert base.make_lens(plan, "auto", batch=8).backend == "numpy"
+    # each wins at one size: the mean time per pulse decides, and the line says who wins where
+    monkeypatch.setattr(
+        auto, "plan_rates", lambda a, b, sizes, key=None: {
+            "opencl": {16: 1.5e5, 64: 2.4e5}, "numpy": {16: 1.6e5, 64: 1.8e5}}
+    )  # fmt: skip
+    lens = base.make_lens(plan, "auto", batch=64)
+    assert lens.backend == "opencl"
+    assert "; OpenCL faster at batch 64, NumPy at 16)" in lens.choice
 
 
 def test_auto_choice_agrees_with_its_own_measurement(monkeypatch, opencl, tmp_path):
@@ -294,7 +310,7 @@ def test_auto_choice_agrees_with_its_own_measurement(monkeypatch, opencl, tmp_pa
     assert len(cached) == 1
     (measured,) = cached.values()
     per_pulse = {k: np.mean([1 / v for v in d.values()]) for k, d in measured.items()}
-    numpy_wins = per_pulse["numpy"] * auto.NUMPY_MARGIN < per_pulse["opencl"]
+    numpy_wins = per_pulse["numpy"] < per_pulse["opencl"]
     assert lens.backend == ("numpy" if numpy_wins else "opencl")
     assert set(measured["opencl"]) == {"16", "32"}
 

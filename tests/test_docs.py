@@ -114,7 +114,30 @@ def test_the_readme_fits_a_screen_and_keeps_the_two_commands():
     lines = README.read_text(encoding="utf-8").splitlines()
     assert len(lines) <= 300, f"README.md has {len(lines)} lines: move text into docs/pages/"
     for command in TWO_COMMANDS:
-        assert command in lines, f"README.md lost the line {command!r} (CI runs it as written)"
+        assert command in lines, f"README.md lost the line {command!r}"
+
+
+def test_what_ci_runs_is_what_the_two_commands_install_and_run():
+    """The two commands are skipped by the docs test (each installs an environment); what
+    stands for them is checked here: .ci/run installs command 2's extra into a fresh
+    environment and runs command 2's pytest; that extra includes command 1's (its OpenCL
+    driver); and a README block runs command 1's `rtsar run` (shortened)."""
+    from docs_blocks import tomllib
+
+    ci_lines = (ROOT / ".ci" / "run").read_text(encoding="utf-8").splitlines()
+    assert 'python -m pip install --quiet ".[test]"' in ci_lines
+    assert ci_lines[-1] == "python -m pytest -q" and TWO_COMMANDS[1].endswith(" -m pytest -q")
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"][
+        "optional-dependencies"
+    ]
+    assert '".[opencl-cpu]"' in TWO_COMMANDS[0] and "rtsar[opencl-cpu]" in extras["test"]
+    assert TWO_COMMANDS[0].endswith(".venv/bin/rtsar run")
+    runs = [
+        b for b in parse_blocks(README)
+        if b.lang == "sh" and "skip" not in b.directives
+        and any(line.startswith("rtsar run") for line in b.text.splitlines())
+    ]  # fmt: skip
+    assert runs, "no README block runs `rtsar run`"
 
 
 def cli_commands() -> set[str]:

@@ -7,11 +7,10 @@ so on small plans and batches NumPy's FFT can win):
    builds the lens), none → the NumPy lens, with a warning naming what to install;
 2. the run's own plan timed on that device and on NumPy's FFT at its configuration's
    ``micro_batch`` (what a run falling behind uses) and at 16 or fewer (what a live run keeping
-   up uses), interleaved in 3 rounds, each its best: the NumPy lens runs where its mean time
-   per pulse over these sizes is at least ``NUMPY_MARGIN`` (1.2) times shorter, the OpenCL
-   lens otherwise (within that margin two backends' timings swap places from run to run on a
-   shared machine, and the choice should not).  One configuration, one choice (so two runs of
-   it give the same lines bit for bit).
+   up uses), interleaved in 3 rounds, each its best: the backend with the shorter mean time per
+   pulse over these sizes runs (where each wins at one size, the banner says so).  The timings
+   are cached, so one configuration gets one choice (two runs of it give the same lines bit for
+   bit) even where two backends' timings are close enough to swap places between measurements.
 
 The timings are kept in the cache folder (:mod:`rtsar.lens.cache`) per plan shape, device and
 survey, so a run pays them once (about 0.4 s).  The choice and its figures are the lens's
@@ -40,7 +39,6 @@ SMALL_BATCH = 16
 _CACHE = "lens-choice.json"
 _SECONDS = 0.03  # per backend, batch size and round
 _ROUNDS = 3  # each backend keeps its best round
-NUMPY_MARGIN = 1.2  # NumPy runs only where it is this much faster (time per pulse)
 _memo: dict = {}
 
 
@@ -104,13 +102,9 @@ def choose(plan: LensPlan, precision: str = "complex64", batch: int | None = Non
     Returns a lens whose ``choice`` says what runs and why; ``fallback_reason`` is set (and a
     RuntimeWarning given by the caller) only where OpenCL could not run at all.
     """
-    asked = (
-        f"--device {device}" if device is not None
-        else f"{cl_devices.ENV_DEVICE}={os.environ.get(cl_devices.ENV_DEVICE, '').strip()}"
-    )  # fmt: skip
     if device is not None or os.environ.get(cl_devices.ENV_DEVICE, "").strip():
         lens = AOLens(plan, device=device, precision=precision)  # never replaced: errors raise
-        lens.choice = f"OpenCL lens on {lens.device_label} (asked for: {asked})"
+        lens.choice = f"OpenCL lens on {lens.device_label} ({lens.selection_reason})"
         return lens
     try:
         best, why = cl_devices.default_device()
@@ -139,17 +133,33 @@ def choose(plan: LensPlan, precision: str = "complex64", batch: int | None = Non
     sizes = batch_sizes(batch)
     key = _key(plan, precision, sizes, best.full_label, cl_devices.survey_fingerprint())
     rates = plan_rates(cl_lens, np_lens, sizes, key)
-    at = f"at batch{'es' if len(sizes) > 1 else ''} {', '.join(map(str, sizes))}"
-    cl_fig, np_fig = _figures(rates["opencl"]), _figures(rates["numpy"])
-    if _mean_time(rates["numpy"]) * NUMPY_MARGIN >= _mean_time(rates["opencl"]):
+    cl_us, np_us = 1e6 * _mean_time(rates["opencl"]), 1e6 * _mean_time(rates["numpy"])
+    figures = (
+        f"mean {{}} µs per pulse against {{}}'s {{}} µs over batch{'es' if len(sizes) > 1 else ''} "
+        f"{', '.join(map(str, sizes))} (OpenCL {_figures(rates['opencl'])} pulses/s, NumPy "
+        f"{_figures(rates['numpy'])}{_split(rates)})"
+    )
+    if cl_us <= np_us:
         cl_lens.choice = (
-            f"OpenCL lens on {best.short_label} ({why}); for this plan {cl_fig} pulses/s against "
-            f"NumPy's {np_fig} {at}"
+            f"OpenCL lens on {best.short_label} ({why}); faster for this plan: "
+            + figures.format(f"{cl_us:.2f}", "NumPy", f"{np_us:.2f}")
         )
         return cl_lens
     np_lens.choice = (
-        f"NumPy lens: at least {NUMPY_MARGIN:g}x as fast as OpenCL on {best.short_label} for "
-        f"this plan ({np_fig} pulses/s "
-        f"against {cl_fig} {at}; `--lens opencl` to use it anyway)"
+        f"NumPy lens: faster for this plan than OpenCL on {best.short_label}: "
+        + figures.format(f"{np_us:.2f}", "OpenCL", f"{cl_us:.2f}")
+        + "; `--lens opencl` to use it anyway"
     )
     return np_lens
+
+
+def _split(rates: dict) -> str:
+    """Where the two backends each win at some batch size: which wins where."""
+    cl_wins = [b for b in sorted(rates["opencl"]) if rates["opencl"][b] > rates["numpy"][b]]
+    np_wins = [b for b in sorted(rates["numpy"]) if b not in cl_wins]
+    if not cl_wins or not np_wins:
+        return ""
+    return (
+        f"; OpenCL faster at batch {', '.join(map(str, cl_wins))}, NumPy at "
+        f"{', '.join(map(str, np_wins))}"
+    )

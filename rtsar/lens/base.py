@@ -77,7 +77,7 @@ def make_lens(
         from .opencl import AOLens
 
         lens = AOLens(plan, device=device, precision=precision)
-        lens.choice = f"OpenCL lens on {lens.device_label} (--lens opencl)"
+        lens.choice = f"OpenCL lens on {lens.device_label} (--lens opencl; {lens.selection_reason})"
         return lens
     if backend == "numpy":
         lens = NumpyLens(plan, precision=precision)

@@ -25,6 +25,7 @@ import hashlib
 import json
 import os
 import platform as _platform
+import shlex
 import sys
 import threading
 import time
@@ -264,7 +265,10 @@ def refusal_summary(reports: list[DeviceReport]) -> str:
 def install_hint() -> str:
     """Exactly what to install for a working OpenCL CPU device on this machine (one phrase)."""
     machine = _platform.machine().lower()
-    pip = f"{os.path.basename(sys.executable)} -m pip install intel-opencl-rt intel-cmplr-lib-rt"
+    # The interpreter in full: `python3 -m pip` in a shell without the environment activated
+    # would install outside it, where rtsar never looks.
+    python = shlex.quote(sys.executable or "python3")
+    pip = f"{python} -m pip install intel-opencl-rt intel-cmplr-lib-rt"
     if sys.platform.startswith("linux"):
         apt = _system_pocl_command()
         if machine in ("x86_64", "amd64"):
@@ -289,7 +293,7 @@ def install_hint() -> str:
             )
         return f"install the system's PoCL: {apt}"
     if sys.platform == "darwin":
-        return "install PoCL into this environment: pip install 'pyopencl[pocl]'"
+        return f"install PoCL into this environment: {python} -m pip install 'pyopencl[pocl]'"
     return "install an OpenCL driver for this machine (a GPU's, Intel's CPU runtime, or PoCL)"
 
 
@@ -327,22 +331,36 @@ def select_device(device: cl.Device | str | None = None, say=None) -> cl.Device:
 
     Raises RuntimeError when nothing matches, or no device builds the lens by default.
     """
+    return chosen_device(device, say)[0]
+
+
+def chosen_device(device: cl.Device | str | None = None, say=None) -> tuple[cl.Device, str]:
+    """:func:`select_device`'s device and why, for the banner: the default's reason, or what
+    was asked for, and where it names several devices, which they are (the fastest of them
+    that builds runs)."""
     if isinstance(device, cl.Device):
-        return device
+        return device, "the device given"
     devices = list_devices()
     wanted = device if device is not None else os.environ.get(ENV_DEVICE, "").strip()
     if wanted:
+        asked = f"--device {wanted}" if device is not None else f"{ENV_DEVICE}={wanted}"
         reports = [describe(i, d) for i, d in enumerate(devices)]
         matches = _matches(str(wanted), reports)
         if not matches:
             names = "; ".join(f"[{r.index}] {r.full_label}" for r in reports)
             source = "" if device is not None else f" (from {ENV_DEVICE})"
             raise RuntimeError(f"no OpenCL device matches {wanted!r}{source}; available: {names}")
-        if len(matches) > 1:  # the fastest of them that builds, by the survey
-            order = {r.index: k for k, r in enumerate(ranked(survey(say=say)))}
-            matches.sort(key=lambda r: order.get(r.index, len(order) + r.index))
-        return devices[matches[0].index]
+        if len(matches) == 1:
+            return devices[matches[0].index], f"asked for: {asked}"
+        order = {r.index: k for k, r in enumerate(ranked(survey(say=say)))}
+        matches.sort(key=lambda r: order.get(r.index, len(order) + r.index))
+        names = ", ".join(f"[{r.index}] {r.short_label}" for r in matches)
+        why = (
+            f"asked for: {asked}, which names {len(matches)} devices ({names}): the fastest of "
+            f"them that builds the lens; `rtsar devices` lists their indexes, for --device N"
+        )
+        return devices[matches[0].index], why
     best, why = default_device(say=say)
     if best is None:
         raise RuntimeError(why)
-    return devices[best.index]
+    return devices[best.index], why

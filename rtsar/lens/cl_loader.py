@@ -18,13 +18,21 @@ from collections.abc import Mapping, Sequence
 import pyopencl as cl
 
 # cl_devices registers the pip-installed drivers on import, before the ICD loader's first call
-from .cl_devices import ENV_DEVICE, default_device, install_hint, list_devices, select_device
+from .cl_devices import (
+    ENV_DEVICE,
+    chosen_device,
+    default_device,
+    install_hint,
+    list_devices,
+    select_device,
+)
 from .cl_probe import first_line
 from .cl_sources import kernel_path, kernel_source, kernels_dir
 
 __all__ = [
     "ENV_DEVICE",
     "build_program",
+    "chosen_device",
     "default_context_queue",
     "default_queue",
     "device_info",

@@ -79,8 +79,9 @@ class AOLens:
         In-order queue to enqueue on (its context is used).
     device : pyopencl.Device or str, optional
         Device, or substring of its platform / device name, when neither ``context`` nor
-        ``queue`` is given; default: ``RTSAR_OPENCL_DEVICE`` or PoCL's CPU device (see
-        :mod:`rtsar.lens.cl_loader`).  Instances on the same device share one context and queue.
+        ``queue`` is given; default: ``RTSAR_OPENCL_DEVICE``, else the fastest device that
+        builds the lens (:func:`rtsar.lens.cl_devices.default_device`).  Instances on the
+        same device share one context and queue.
     kernel : {"lanes", "group"}, optional
         ``"lanes"``: one work-item transforms 8 pulses at once in SIMD vectors (fast on CPUs);
         ``"group"``: one work-group per pulse (for GPUs).  Default: by device type.
@@ -129,8 +130,11 @@ class AOLens:
         self.dtype = precision_dtype(precision)
         double = self.dtype == np.complex128
 
+        # Why this device: the default's reason, or what was asked for (for the banner).
+        self.selection_reason = "the context or queue given"
         if queue is None:
             if context is None:
+                device, self.selection_reason = cl_loader.chosen_device(device)
                 context, queue = cl_loader.default_context_queue(device)
             else:
                 queue = cl.CommandQueue(context)
@@ -139,7 +143,10 @@ class AOLens:
         self.queue = queue
         self.context = context  # held here too: a queue's own reference is not enough everywhere
         self.device = queue.device
-        self.device_label = f"{self.device.platform.name.strip()} / {self.device.name.strip()}"
+        d = self.device  # platform, driver version and device, as `rtsar devices` names it
+        self.device_label = (
+            f"{d.platform.name.strip()} {d.driver_version.strip()} / {d.name.strip()}"
+        )
 
         if kernel is None:
             kernel = "lanes" if self.device.type & cl.device_type.CPU else "group"

@@ -168,7 +168,7 @@ def cmd_process(args) -> int:
                 for c in heights.channels
             }
         eng = StreamProcessor(cfg, args.lens, args.device, rec.start_along_track_m, chain, physical)
-        if args.lens == "auto":  # which lens runs, on which device, and why
+        if args.lens != "numpy":  # which lens runs, on which device, and why
             print(f"rtsar: lens: {eng.lens.choice}", file=sys.stderr)
         prog = Progress(rec.pulses, "process")
         done = 0

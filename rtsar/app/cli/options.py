@@ -35,14 +35,16 @@ def add_lens_options(g) -> None:
         "--lens",
         default=LENS_BACKENDS[0],
         choices=LENS_BACKENDS,
-        help="AO lens backend: auto (default: OpenCL where a kernel builds on the device, else "
-        "NumPy, said on the banner), opencl (PoCL CPU unless RTSAR_OPENCL_DEVICE; an error if "
-        "it cannot build), or numpy",
+        help="AO lens backend: auto (default: the OpenCL lens where it is faster than NumPy's for "
+        "this configuration, timed once and kept; else NumPy; said on the banner's lens: line), "
+        "opencl (on --device; an error if it cannot build), or numpy",
     )
     g.add_argument(
         "--device",
-        help="OpenCL platform/device name substring (default: $RTSAR_OPENCL_DEVICE, else "
-        "PoCL's CPU device)",
+        help="OpenCL device for the lens: an index of `rtsar devices`, or a part of its "
+        "'platform version / device' name (e.g. Intel, 3.1+debian) (default: "
+        "$RTSAR_OPENCL_DEVICE, else the fastest device that builds the lens, measured once per "
+        "machine: `rtsar devices`)",
     )
 
 
@@ -281,6 +283,8 @@ def add_subscriber_options(s) -> None:
 # ---- options → library objects ---------------------------------------------------------------
 def processor_changes(args, cfg):
     """The configuration with the processor knobs given on the command line."""
+    if getattr(args, "device", None) is not None and getattr(args, "lens", None) == "numpy":
+        raise ValueError("--device names an OpenCL device; --lens numpy runs no OpenCL")
     changes = {}
     if args.correlator and getattr(args, "physical", None):
         raise ValueError(

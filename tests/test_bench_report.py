@@ -17,7 +17,9 @@ import numpy as np
 import pytest
 
 import rtsar.app.bench as bench
+import rtsar.app.bench_alone as ba
 import rtsar.app.bench_pipeline as bp
+from rtsar.lens import make_lens
 
 
 @pytest.fixture
@@ -55,7 +57,11 @@ def stand_ins(monkeypatch):
             )
         return out
 
-    monkeypatch.setattr(bp, "_correlator_alone", alone)
+    monkeypatch.setattr(ba, "_correlator_alone", alone)
+    # The pipeline's lens: the NumPy plan (as the table's with no OpenCL); a lens measured
+    # again here, not taken from the table, would print 7,777.
+    monkeypatch.setattr(ba, "make_lens", lambda plan, backend, batch: make_lens(plan, "numpy"))
+    monkeypatch.setattr(ba, "rate_per_s", lambda call, n, seconds: 7777.0)
     monkeypatch.setattr(bp, "stream_run", stream_run)
     monkeypatch.setattr(bp, "bench_shots", lambda cfg, n: np.zeros((4, 8), np.complex64))
     monkeypatch.setattr(bp, "bench_numpy_range_doppler", lambda cfg, shots: 4000.0)
@@ -76,8 +82,9 @@ def run_bench(tmp_path, capsys, **kw):
 
 def test_a_correlator_alone_is_measured_once_and_printed_as_one_number(stand_ins, tmp_path, capsys):
     out, data = run_bench(tmp_path, capsys)
-    # Each (correlator, batch) measured once: the table's figures are the ratios' figures.
-    assert len(stand_ins) == len({(k, b) for k, b, _ in stand_ins}) == 4
+    # Each (correlator, batch) measured once (3 rounds, its best): the table's figures are the
+    # ratios' figures.
+    assert len({(k, b) for k, b, _ in stand_ins}) == 4 and len(stand_ins) == 12
     table = {k: v for k, _, v in stand_ins}
     for kind in ("partitioned", "nonuniform", "fft"):
         figure = f"{table[kind]:,.0f}"
@@ -107,7 +114,7 @@ def test_paced_runs_say_what_was_kept_not_a_real_time_factor(stand_ins, tmp_path
 
 def test_rounds_keep_the_labels(stand_ins, tmp_path, capsys):
     out, data = run_bench(tmp_path, capsys, repeats=2)
-    assert len(stand_ins) == 4  # alone figures are not measured again in the second round
+    assert len(stand_ins) == 12  # alone figures are not measured again in the second round
     summary = out.split("median [min–max] over 2 rounds:")[1]
     assert "kept 90.0 %, dropped 100 at most" in summary and "capacity 2.36x real time" in summary
     assert data["pipeline"][0]["summary"]["fft: max rate"]["real_time_factor"][0] == 2.36
@@ -123,9 +130,34 @@ def test_zero_pulses_standing_in_for_dropped_shots_are_not_kept_shots():
 def test_the_two_core_ideal_is_the_stages_taking_turns():
     """The issue's figures: lens alone 187.7k, nonuniform alone 47.7k pulses/s → 38.0k."""
     run, said = {"pulses_per_s": 27_100.0}, []
-    bp._against_ideal(run, {"pulses_per_s": 187_700.0}, 47_700.0, said.append)
+    run["label"] = "nonuniform: max rate"
+    ba.against_ideal(run, {"pulses_per_s": 187_700.0}, 47_700.0, said.append)
     assert run["two_core_ideal_pulses_per_s"] == pytest.approx(38_034, rel=1e-4)
     assert run["over_two_core_ideal"] == pytest.approx(0.7125, rel=1e-3)
     assert said == [
-        "    = 0.71 of its stages' two-core ideal 1/(1/187,700 + 1/47,700) = 38,034 pulses/s"
+        "    nonuniform: max rate: 0.71 of its stages' two-core ideal 1/(1/187,700 + 1/47,700) "
+        "= 38,034 pulses/s"
     ]
+
+
+def test_the_lens_alone_is_the_lens_tables_figure_and_each_ideal_sits_under_its_run(
+    stand_ins, tmp_path, capsys
+):
+    """From a cold review: the lens table printed OpenCL at batch 64 as 65,005 pulses/s and the
+    pipeline section "the pipeline's lens alone (opencl), batches of 64: 21,936" (measured
+    again, once); and each "of its stages' two-core ideal" line came after the paced run, under
+    the wrong row."""
+    out, data = run_bench(tmp_path, capsys)
+    batch = data["pipeline"][0]["lens_alone"]["batch"]
+    row = next(r for r in data["lens"] if r["batch"] == batch)
+    assert row["numpy_fft_pulses_per_s"] == 5000.0
+    assert (
+        f"the pipeline's lens alone (numpy), batches of {batch}: 5,000 pulses/s (the AO lens "
+        "table above)"
+    ) in out
+    assert "7,777" not in out and data["pipeline"][0]["lens_alone"]["pulses_per_s"] == 5000.0
+    lines = out.splitlines()
+    for kind in ("partitioned", "nonuniform", "fft"):
+        k = next(i for i, ln in enumerate(lines) if ln.strip().startswith(f"{kind}: max rate "))
+        assert lines[k + 1].strip().startswith(f"{kind}: max rate: ")
+        assert "of its stages' two-core ideal" in lines[k + 1]

@@ -22,20 +22,29 @@ from ..lens.plan import make_plan
 from ..params import Processor
 from ..presets import preset
 from ..sinks.io import check_writable, replace_when_complete
-from .bench_pipeline import CorrelatorAlone, bench_pipeline
+from .bench_alone import CorrelatorAlone, LensAlone
+from .bench_pipeline import bench_pipeline
 from .bench_record import bench_recording, recording_lines
 
 CORRELATORS = Processor.CORRELATORS  # direct, fft, partitioned, nonuniform
 
 
 def bench_lens(
-    cfg, batches=(16, 64, 256), seconds=1.0, device=None, rounds=3, opencl=True
+    cfg,
+    batches=(16, 64, 256),
+    seconds=1.0,
+    device=None,
+    rounds=3,
+    opencl=True,
+    lenses: LensAlone | None = None,
+    name: str = "",
 ) -> list[dict]:
     """Pulses/s of the OpenCL lens and of the same plan on NumPy's and SciPy's FFT (complex64).
 
     The three backends alternate for ``rounds`` rounds and each keeps its best round, so a
     neighbour's load on the shared machine penalises none of them in particular.  With
-    ``opencl=False`` (no working OpenCL device) the OpenCL figures are None.
+    ``opencl=False`` (no working OpenCL device) the OpenCL figures are None.  ``lenses``
+    keeps the OpenCL and NumPy figures (preset ``name``) for the pipeline section to reuse.
     """
     plan = make_plan(cfg)
     rng = np.random.default_rng(0)
@@ -53,10 +62,14 @@ def bench_lens(
         calls["numpy_one_fft"] = lambda s: np.fft.fft(s, nfft, axis=-1)
         best = dict.fromkeys(calls, 0.0)
         for _ in range(rounds):
-            for name, call in calls.items():
+            for backend, call in calls.items():
                 rate = rate_per_s(lambda s=shots, f=call: f(s), b, seconds / rounds)
-                best[name] = max(best[name], rate)
+                best[backend] = max(best[backend], rate)
         cl = best.get("opencl")
+        if lenses is not None:
+            for key in ("opencl", "numpy"):
+                if key in backends:
+                    lenses.record(LensAlone.key(name, backends[key], b), best[key], LENS_TABLE)
         rows.append(
             {
                 "stage": "lens",
@@ -74,6 +87,7 @@ def bench_lens(
 
 
 CORRELATOR_TABLE = "the correlator table above"
+LENS_TABLE = "the AO lens table above"
 
 
 def bench_correlators(
@@ -197,7 +211,10 @@ def run_bench(args) -> int:
         f"PRF {cfg.geometry.prf_hz:g} Hz); OpenCL: {device}",
         file=out,
     )
-    lens_rows = bench_lens(cfg, seconds=seconds, device=args.device, opencl=reason is None)
+    lenses = LensAlone(seconds)
+    lens_rows = bench_lens(
+        cfg, seconds=seconds, device=args.device, opencl=reason is None, lenses=lenses, name=name
+    )
     print("\nAO lens (range compression), pulses/s", file=out)
     print(
         "(NumPy/SciPy: the same plan in complex64; 1 FFT: one bare np.fft.fft of the batch)",
@@ -278,6 +295,7 @@ def run_bench(args) -> int:
                 log=lambda m: print(m, file=out, flush=True),
                 repeats=args.repeats,
                 alone=alone,
+                lenses=lenses,
             )
         )
     rec_name = getattr(args, "preset", None) or "psaltis-max"

@@ -25,16 +25,15 @@ import time
 import numpy as np
 import zmq
 
-from ..analysis.timing import rate_per_s
-from ..ccd import make_correlator
 from ..ccd.base import design_mask
-from ..lens import make_lens
 from ..lens.plan import make_plan
 from ..params import Config
 from ..scene import Simulator, point_scene
 from ..sinks.publish import ZmqPublisher
 from ..sources.replay import ReplaySource
 from ..stream.pipeline import Pipeline, PipelineSettings
+from . import bench_alone
+from .bench_alone import ABOVE_ONE, CorrelatorAlone, LensAlone, against_ideal
 
 
 class Cyclic:
@@ -158,80 +157,6 @@ def _stop_after(source, seconds: float):
     return t
 
 
-class CorrelatorAlone:
-    """Pulses/s of a correlator alone: the one the pipeline builds from the configuration
-    (rtsar.ccd.make_correlator), pushed ``batch`` random lines at a time for ``seconds``.
-
-    One definition, measured once per (preset, correlator, batch) and kept: the bench's
-    correlator table and the pipeline's "CCD stage ÷ alone" ratios print the same number for
-    the same figure.  ``source`` says where a figure was first reported."""
-
-    def __init__(self, seconds: float = 1.0):
-        self.seconds = float(seconds)
-        self.rates: dict[tuple[str, str, int], float] = {}
-        self.source: dict[tuple[str, str, int], str] = {}
-
-    def rate(self, preset_name: str, cfg: Config, batch: int, where: str = "") -> float:
-        key = (preset_name, cfg.processor.correlator, int(batch))
-        if key not in self.rates:
-            self.rates[key] = _correlator_alone(cfg, int(batch), self.seconds)
-            self.source[key] = where
-        return self.rates[key]
-
-    def label(self, preset_name: str, cfg: Config, batch: int) -> str:
-        """How a figure reads beside a ratio: its correlator, batch, and where it was shown."""
-        key = (preset_name, cfg.processor.correlator, int(batch))
-        where = self.source.get(key) or "measured here"
-        return f"{key[1]} alone, batches of {key[2]}: {self.rates[key]:,.0f} pulses/s, {where}"
-
-
-def _lens_alone(cfg: Config, batch: int, seconds: float) -> dict:
-    """Pulses/s of the lens the pipeline builds (``--lens auto``'s choice), alone."""
-    plan = make_plan(cfg)
-    lens = make_lens(plan, "auto", batch=cfg.processor.micro_batch)
-    rng = np.random.default_rng(0)
-    S = plan.samples_per_shot
-    x = rng.standard_normal((batch, S)) + 1j * rng.standard_normal((batch, S))
-    x = x.astype(np.complex64)
-    rate = rate_per_s(lambda: lens.compress(x), batch, seconds)
-    return {"backend": lens.backend, "batch": batch, "pulses_per_s": rate}
-
-
-def _against_ideal(run: dict, lens_alone: dict, correlator_alone: float, log) -> None:
-    """The run's throughput against its stages' two-core ideal: the lens and the correlator
-    each alone on both cores, taking turns, 1/(1/L + 1/C) pulses/s (what a pipeline doing
-    nothing but these two stages could reach)."""
-    L = lens_alone["pulses_per_s"]
-    ideal = 1.0 / (1.0 / L + 1.0 / correlator_alone)
-    run["two_core_ideal_pulses_per_s"] = ideal
-    run["over_two_core_ideal"] = run["pulses_per_s"] / ideal
-    log(
-        f"    = {run['over_two_core_ideal']:.2f} of its stages' two-core ideal "
-        f"1/(1/{L:,.0f} + 1/{correlator_alone:,.0f}) = {ideal:,.0f} pulses/s"
-    )
-
-
-def _correlator_alone(cfg: Config, batch: int, seconds: float) -> float:
-    plan = make_plan(cfg)
-    p = cfg.processor
-    corr = make_correlator(
-        p.correlator,
-        design_mask(cfg, plan.range_m),
-        p.fft_length,
-        partition_lines=p.partition_lines,
-        tail_block_lines=p.tail_block_lines,
-    )
-    rng = np.random.default_rng(2)
-    shape = (batch, plan.bin_count)
-    lines = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(np.complex64)
-    try:
-        return rate_per_s(lambda: corr.push(lines), batch, seconds)
-    finally:
-        close = getattr(corr, "close", None)
-        if close is not None:
-            close()
-
-
 def numpy_range_doppler(cfg: Config, shots: np.ndarray) -> np.ndarray:
     """Plain NumPy batch processor: range matched filter by FFT, then azimuth fast convolution
     with the same per-range-bin mask over the whole block (range-Doppler, no migration
@@ -270,6 +195,7 @@ __all__ = [
     "bench_numpy_range_doppler",
     "bench_shots",
     "CorrelatorAlone",
+    "LensAlone",
     "numpy_range_doppler",
     "paced_figures",
     "stream_run",
@@ -285,17 +211,19 @@ def bench_pipeline(
     log=print,
     repeats: int = 1,
     alone: CorrelatorAlone | None = None,
+    lenses: LensAlone | None = None,
 ) -> dict:
     """The streaming figures of one preset, all measured in this call (see module docstring).
 
     ``repeats`` > 1: every run is made that many times, in rounds (each configuration once per
     round, always in the same order), so that a shared machine's slow swings fall on all of
     them alike; ``summary`` then gives each figure's median and range over the rounds.
-    ``alone``: the correlators' rates alone, shared with the bench's correlator table, so a
-    figure measured there is the same number here."""
+    ``alone``, ``lenses``: the correlators' and lenses' rates alone, shared with the bench's
+    correlator and lens tables, so a figure measured there is the same number here."""
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
     alone = alone or CorrelatorAlone(min(seconds, 1.0))
+    lenses = lenses or LensAlone(min(seconds, 1.0))
     shots = bench_shots(cfg, 2048)
     result = {"preset": name, "prf_hz": cfg.geometry.prf_hz, "repeats": repeats, "runs": []}
     part = cfg.with_processor(correlator="partitioned")
@@ -315,11 +243,12 @@ def bench_pipeline(
     )
     # Warm-up (OpenCL build, numba cache, FFT plans), not recorded.
     stream_run(part, shots, 0.5, "max", PipelineSettings())
-    lens_alone = _lens_alone(cfg, cfg.processor.micro_batch, min(seconds, 1.0))
+    lens_alone = bench_alone.lens_alone(name, cfg, lenses)
     result["lens_alone"] = lens_alone
     log(
         f"  the pipeline's lens alone ({lens_alone['backend']}), batches of "
-        f"{lens_alone['batch']}: {lens_alone['pulses_per_s']:,.0f} pulses/s"
+        f"{lens_alone['batch']}: {lens_alone['pulses_per_s']:,.0f} pulses/s "
+        f"({lens_alone['source']})"
     )
     stalled_ratios = []
     for round_ in range(repeats):
@@ -328,16 +257,16 @@ def bench_pipeline(
         for kind in ("partitioned", "nonuniform", "fft"):
             c = cfg.with_processor(correlator=kind)
             top = run(f"{kind}: max rate", c, "max", seconds, round_)
-            run(f"{kind}: paced at the PRF ({real_seconds:g} s)", c, "real", real_seconds, round_)
             iso = alone.rate(name, c, top["max_batch"])
             top["isolated_correlator_pulses_per_s"] = iso
             if "ccd_stage_pulses_per_s" in top:
                 top["ccd_stage_over_isolated"] = top["ccd_stage_pulses_per_s"] / iso
-            _against_ideal(top, lens_alone, iso, log)
+            against_ideal(top, lens_alone, iso, log)  # under the run it is of
+            run(f"{kind}: paced at the PRF ({real_seconds:g} s)", c, "real", real_seconds, round_)
             if kind != "fft":  # the one-thread layout, lens overlapped with the CCD
                 over = run(f"{kind}: max rate, overlapped stages", c, "max", seconds, round_,
                            stages="overlapped")  # fmt: skip
-                _against_ideal(over, lens_alone, iso, log)
+                against_ideal(over, lens_alone, iso, log)
         run("partitioned: max rate, fused stages", part, "max", seconds, round_, stages="fused")
         # A stalled subscriber (connected, never reads) against no subscriber, back to back:
         # the same configuration as "partitioned: max rate", measured again beside its pair.
@@ -391,6 +320,7 @@ def bench_pipeline(
                 f"{_spread(f['ccd_stage_over_isolated'], '.2f')} x ("
                 + alone.label(name, cfg.with_processor(correlator=kind), batch)
                 + ")"
+                + ABOVE_ONE * (f["ccd_stage_over_isolated"][0] > 1.05)
             )
     log(
         f"  throughput with a stalled subscriber / with none: "

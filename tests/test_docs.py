@@ -182,6 +182,32 @@ def test_the_readme_links_lead_somewhere():
     assert not missing, f"README.md links to missing files: {missing}"
 
 
+def github_anchor(heading: str) -> str:
+    """GitHub's anchor of a heading: lower case, punctuation but - and _ dropped, each space
+    a hyphen (runs of them kept)."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def test_every_heading_has_one_anchor_on_github_and_on_the_site():
+    """The pages read the same on GitHub and on the site (docs/mkdocs.yml), anchors included:
+    a cold review found `wire.md#instrument-frames-serial-tcp-input` (MkDocs) reaching the page
+    but not the section on GitHub (`…serial--tcp-input`: "serial / TCP")."""
+    from markdown.extensions.toc import slugify
+
+    differ = []
+    for page in [README, *pages()]:
+        fenced = False
+        for line in page.read_text(encoding="utf-8").splitlines():
+            if line.startswith("```"):
+                fenced = not fenced
+            heading = None if fenced else re.match(r"#{1,6}\s+(.*?)\s*$", line)
+            if heading:
+                text = heading.group(1).replace("`", "")
+                if slugify(text, "-") != github_anchor(text):
+                    differ.append(f"{page.relative_to(ROOT)}: {heading.group(1)!r}")
+    assert not differ, "headings whose anchors differ on GitHub and MkDocs:\n" + "\n".join(differ)
+
+
 def mkdocs_build(config: Path, site: Path) -> subprocess.CompletedProcess:
     """``mkdocs build --strict`` (never -q: it hides the warnings that strict mode counts)."""
     try:

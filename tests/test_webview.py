@@ -169,6 +169,19 @@ def test_status_carries_rate_latency_drops_and_link_counters():
     assert status["viewer"]["missed_strips"] == 1
 
 
+def test_the_link_state_is_a_silence_or_none_never_a_raw_null():
+    """From a cold review: the page's status read "link: link null, link_silences 0" on a
+    simulated run (the stats message's `link: null` shown as a counter)."""
+    frames = LiveFrames(lines=8)
+    frames.add_status("stats", {"link": None, "counters": {"link_silences": 0}}, {})
+    assert json.loads(frames.updates(Cursor())[0])["link_silent"] is None
+    frames.add_status("stats", {"link": {"silent_s": 2.5, "since_pulse": 4799}}, {})
+    assert json.loads(frames.updates(Cursor())[0])["link_silent"] == {
+        "silent_s": 2.5, "since_pulse": 4799}  # fmt: skip
+    frames.add_status("stats", {"link": {"silent_s": "x"}}, {})  # malformed: no silence
+    assert json.loads(frames.updates(Cursor())[0])["link_silent"] is None
+
+
 def test_parse_http():
     assert parse_http("8080") == ("127.0.0.1", 8080)
     assert parse_http(":0") == ("127.0.0.1", 0)
@@ -316,3 +329,14 @@ def test_the_readme_defaults_16_browsers_and_8192_lines_in_1024_rows():
         return refused.value.status
 
     assert asyncio.run(one_too_many()) == 503
+
+
+def test_a_wildcard_bind_prints_an_address_a_browser_can_open():
+    """From a cold review: `--http 0.0.0.0:0` printed http://0.0.0.0:PORT/ as the page."""
+    import socket
+
+    from rtsar.app.webview.server import page_url
+
+    assert page_url("0.0.0.0", 8080) == f"http://{socket.gethostname()}:8080/"
+    assert page_url("127.0.0.1", 81) == "http://127.0.0.1:81/"
+    assert page_url("::1", 81) == "http://[::1]:81/"

@@ -176,6 +176,7 @@ def test_the_page_shows_the_published_strips_of_a_live_run(tmp_path):
         status = driver.find_element("id", "status").text
         assert re.search(r"PRF \(pulses processed\) 1[56]\d\d Hz", status), status
         assert "missed strips 0" in status and "drops, gaps" in status
+        assert "link shots arriving" in status and "null" not in status, status
 
         # true aspect: one metre as long across as down
         driver.find_element("id", "true-aspect").click()

@@ -230,9 +230,8 @@ class LiveFrames:
                 if isinstance(header.get("counters"), dict):
                     self.status["counters"] = header["counters"]
                 self.status["source"] = str(header.get("source", ""))[:200]
-                link = {k: v for k, v in header.items() if k.startswith("link")}
-                if link:
-                    self.status["link"] = link
+                if "link" in header:  # the silence being told, or null while shots come
+                    self.status["link_silent"] = _silence(header["link"])
                 if topic == "end":
                     self.status["state"] = "stream ended"
             self.status["viewer"] = dict(subscriber_counters)
@@ -302,3 +301,14 @@ def _finite(value):
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value
+
+
+def _silence(state) -> dict | None:
+    """A stats message's ``link`` ({silent_s, since_pulse} while the source is silent, else
+    null), checked: anything else reads as no silence."""
+    if not isinstance(state, dict):
+        return None
+    silent_s, since = state.get("silent_s"), state.get("since_pulse")
+    if not isinstance(silent_s, (int, float)) or not math.isfinite(silent_s):
+        return None
+    return {"silent_s": float(silent_s), "since_pulse": since if isinstance(since, int) else None}

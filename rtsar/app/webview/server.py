@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import socket
 import threading
 import time
 from dataclasses import dataclass
@@ -40,6 +41,18 @@ class Browser:
     transport: asyncio.BaseTransport | None
     sent: int = 0
     sending: bool = False
+
+
+WILDCARDS = ("0.0.0.0", "::", "")  # bind every interface: not an address a browser opens
+
+
+def page_url(host: str, port: int) -> str:
+    """The URL a browser opens: for a wildcard bind, this machine's name (0.0.0.0 is not an
+    address to open from another machine)."""
+    if host in WILDCARDS:
+        host = socket.gethostname() or "localhost"
+    host = f"[{host}]" if ":" in host else host
+    return f"http://{host}:{port}/"
 
 
 class ViewServer:
@@ -211,8 +224,7 @@ class ViewServer:
         port = self._runner.addresses[0][1]  # the port the system chose for a 0
         self._thread = threading.Thread(target=self._receive, name="view-subscriber", daemon=True)
         self._thread.start()
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"http://{host}:{port}/"
+        return page_url(self.host, port)
 
     async def stop(self) -> None:
         self._stop.set()
@@ -243,7 +255,8 @@ def serve(
             endpoint, host, port, lines, dynamic_range_db, curve_server_key, curve_client_key
         )
         url = await server.start()
-        say(f"view: {url} shows the strips of {endpoint} (Ctrl-C to stop)")
+        where = " (all interfaces: this machine's name or address)" * (host in WILDCARDS)
+        say(f"view: {url} shows the strips of {endpoint}{where} (Ctrl-C to stop)")
         try:
             while server.failure is None:
                 await asyncio.sleep(0.5)

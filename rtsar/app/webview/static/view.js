@@ -257,9 +257,16 @@
         fixed(m.latency_recent_p99_ms, 2, " ms")],
       ["pulses processed, lines", (c.pulses_processed ?? "–") + ", " + (c.lines_out ?? "–")],
     ];
-    const link = Object.entries(m.link || {}).concat(
-      Object.entries(c).filter(([k]) => k.startsWith("link") || k === "reconnects"));
-    if (link.length) rows.push(["link", link.map(([k, v]) => k + " " + JSON.stringify(v)).join(", ")]);
+    // The link: silent now (since which pulse), else shots arriving; its counters in words.
+    const quiet = m.link_silent;
+    const linkParts = [quiet ? "SILENT for " + quiet.silent_s.toFixed(1) + " s since " +
+      (quiet.since_pulse === null ? "the start (no pulse yet)" : "pulse " + quiet.since_pulse)
+      : "shots arriving"];
+    if (c.link_silences) linkParts.push("silent " + c.link_silences + " time(s), " +
+      ((c.link_silent_ms || 0) / 1000).toFixed(1) + " s in all");
+    if (c.link_drops) linkParts.push("lost " + c.link_drops + " time(s)");
+    if (c.reconnects) linkParts.push("reconnected " + c.reconnects + " time(s)");
+    rows.push(["link", linkParts.join("; ")]);
     const problems = m.problems || [];
     rows.push(["drops, gaps", problems.length ? problems.join(", ") : "no drops/gaps"]);
     const v = m.viewer || {};
@@ -269,7 +276,9 @@
     const body = $("status").tBodies[0];
     body.replaceChildren(...rows.map(([k, val], i) => {
       const tr = document.createElement("tr");
-      if (k === "drops, gaps" && problems.length) tr.className = "problem";
+      if ((k === "drops, gaps" && problems.length) || (k === "link" && quiet)) {
+        tr.className = "problem";
+      }
       tr.id = "status-" + i;
       for (const text of [k, val]) {
         const td = document.createElement("td");

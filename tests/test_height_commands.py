@@ -213,14 +213,16 @@ def test_the_3d_demo_simulates_once_then_replays_with_heights(tmp_path, monkeypa
 
     small = tmp_path / "small.toml"
     small.write_text(SURFACE_SCENE.format(shape="ridge"))
-    monkeypatch.setattr(streaming, "DEMO_CACHE", tmp_path / "cache")
+    # the recording is cached in rtsar's cache folder (a cold review: it ignored
+    # RTSAR_CACHE_DIR and wrote ~/.cache/rtsar)
+    monkeypatch.setenv("RTSAR_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setattr(
         streaming, "load_scene", lambda name: replace(load_scene(small), name="insal-ridge")
     )
     args = ["demo", "insal", "--rate", "max", "--lens", "numpy", "--height-strip-lines", "8"]
     args += ["--endpoint", "ipc://" + str(tmp_path / "pub")]
     assert main(args + ["-o", str(tmp_path / "a.h5")]) == 0
-    (cached,) = (tmp_path / "cache").iterdir()
+    (cached,) = (tmp_path / "cache").glob("insal-ridge-*.h5")
     stamp = cached.stat().st_mtime_ns
     assert main(args + ["-o", str(tmp_path / "b.h5")]) == 0
     assert cached.stat().st_mtime_ns == stamp  # simulated once

@@ -220,12 +220,11 @@ def cmd_replay(args) -> int:
         )
 
 
-DEMO_CACHE = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "rtsar"
-
-
 def cmd_demo(args) -> int:
     scene = load_scene(BUILT_IN / f"{args.which}-ridge.toml")  # never a local file of that name
-    cached = DEMO_CACHE / f"{scene.name}-{__version__}.h5"
+    from ...lens.cache import cache_dir  # $RTSAR_CACHE_DIR, else ~/.cache/rtsar
+
+    cached = cache_dir() / f"{scene.name}-{__version__}.h5"
     if not cached.is_file():
         print(f"demo: simulating {scene.name} once into {cached} …", flush=True)
         cached.parent.mkdir(parents=True, exist_ok=True)
@@ -395,7 +394,8 @@ def add_parsers(sub) -> None:
     s = sub.add_parser(
         "demo",
         description="Simulate the built-in scene insal-ridge once (a few seconds; the recording "
-        f"is cached in {DEMO_CACHE}), then replay it at --rate times its PRF through the "
+        "is cached in rtsar's cache folder: $RTSAR_CACHE_DIR, else ~/.cache/rtsar), then "
+        "replay it at --rate times its PRF through the "
         "pipeline with height strips (--height insal), publishing image and height strips "
         "like `rtsar replay`, with the nonuniform correlator unless --correlator says "
         "otherwise (lines leave every 16 pulses). Watch with `rtsar subscribe -o demo.h5` "

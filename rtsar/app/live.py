@@ -64,7 +64,7 @@ _LABELS = {
     "reconnects": "reconnected",
     "late_releases": "late releases",
     "subscriber_stalls": "stalled subscribers cut off",
-    "messages_missed_by_stalled": "messages they may have missed",
+    "messages_missed_by_stalled": "messages sent while one was cut off",
     "flagged_lines": "flagged lines",
     "link_silences": "link silences",
     "record_dropped": "not recorded",

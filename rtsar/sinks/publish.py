@@ -18,9 +18,10 @@ there, is counted in ``messages_missed_by_stalled``.  A subscriber that never re
 misses these and also the messages already queued towards it when it stopped reading (sent,
 so not counted: up to its high-water mark here, its own receive queue and the socket
 buffers; a cold review saw 7,271 missed against 6,752 counted); for one that reads again the
-count bounds what it missed after the cut-off.  Its own count of gaps in ``seq`` is exact.  (Counting only the messages sent in drop mode missed the silent
-ones: 752 counted for 1,881 missed.)  ``hurry`` (Ctrl-C, a
-signal, the end of ``--duration``) shortens the wait so that a run always ends promptly.
+count bounds what it missed after the cut-off.  Its own count of gaps in ``seq`` is exact.
+(Counting only the messages sent in drop mode missed the silent ones: 752 counted for 1,881
+missed.)  ``hurry`` (Ctrl-C, a signal, the end of ``--duration``) shortens the wait so that a
+run always ends promptly.
 """
 
 from __future__ import annotations

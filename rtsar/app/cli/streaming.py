@@ -14,6 +14,7 @@ import zmq.auth
 
 from ... import __version__
 from ...ccd import first_line_pulses
+from ...lens.cache import cache_dir  # $RTSAR_CACHE_DIR, else ~/.cache/rtsar
 from ...presets import preset
 from ...scene import DEMO_SCENE, load_scene
 from ...scene.files import BUILT_IN, built_in_scenes
@@ -222,8 +223,6 @@ def cmd_replay(args) -> int:
 
 def cmd_demo(args) -> int:
     scene = load_scene(BUILT_IN / f"{args.which}-ridge.toml")  # never a local file of that name
-    from ...lens.cache import cache_dir  # $RTSAR_CACHE_DIR, else ~/.cache/rtsar
-
     cached = cache_dir() / f"{scene.name}-{__version__}.h5"
     if not cached.is_file():
         print(f"demo: simulating {scene.name} once into {cached} …", flush=True)

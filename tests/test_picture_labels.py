@@ -142,3 +142,63 @@ def test_tradeoff_labels_do_not_overlap(tmp_path, figures):
             if boxes[i].overlaps(boxes[j])
         ]
         assert not overlaps, overlaps
+
+
+def _all_texts(fig, renderer):
+    """(kind, text, window box) of every visible, non-empty text of the figure: point labels,
+    tick labels (major and minor), axis labels, titles, legend entries."""
+    from matplotlib.text import Text
+
+    out = []
+    for ax in fig.axes:  # a label's text, not its leader line
+        out += [("label", t.get_text(), Text.get_window_extent(t, renderer)) for t in ax.texts]
+        around = [ax.title, ax.xaxis.label, ax.yaxis.label]
+        for axis in (ax.xaxis, ax.yaxis):
+            lo, hi = sorted(axis.get_view_interval())  # the ticks drawn: within the view
+            for tick in axis.get_major_ticks() + axis.get_minor_ticks():
+                if lo <= tick.get_loc() <= hi:
+                    around += [tick.label1, tick.label2]
+        legend = ax.get_legend()
+        if legend is not None:
+            around += legend.get_texts()
+        out += [
+            ("axes", t.get_text(), t.get_window_extent(renderer))
+            for t in around
+            if t.get_visible() and t.get_text()
+        ]
+    return out
+
+
+def test_tradeoff_labels_clear_every_text_and_the_figure_edge(tmp_path, figures):
+    """The rows of one `rtsar tradeoff --quick` run (tests/data): "256" sat on "512" and on a
+    10⁻⁸ tick label, "512" ran past the right edge, the minor tick labels "3×10¹" / "4×10¹"
+    overlapped, "nonuniform" touched "direct"."""
+    import json
+    from pathlib import Path
+
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from rtsar.app.tradeoff.report import plot
+    from rtsar.app.tradeoff.scenes import TradeoffScene
+
+    rows = json.loads((Path(__file__).parent / "data" / "tradeoff_quick_rows.json").read_text())
+    plot(rows, [TradeoffScene("instrument", "quick", preset("tiny"), [], [])], tmp_path / "t.png")
+    fig = figures[0]
+    FigureCanvasAgg(fig)
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    texts = _all_texts(fig, renderer)
+    assert sum(kind == "label" for kind, _, _ in texts) == 2 * len(rows)
+    edge = fig.bbox
+    for kind, text, box in texts:
+        if kind == "label":
+            assert edge.x0 <= box.x0 and box.x1 <= edge.x1, (text, "leaves the figure")
+            assert edge.y0 <= box.y0 and box.y1 <= edge.y1, (text, "leaves the figure")
+    overlaps = [
+        (a[1], b[1])
+        for i, a in enumerate(texts)
+        for b in texts[i + 1 :]
+        if "label" in (a[0], b[0]) or a[0] == b[0]  # a label against anything; ticks vs ticks
+        if a[2].overlaps(b[2])
+    ]
+    assert not overlaps, overlaps

@@ -6,8 +6,10 @@ Shared by the test suite and ``tools/focus_report.py``.  Theory, per axis:
 * azimuth: ρA = λR/(2L), L = N·d the synthetic aperture (Crouch eq. 4.8; = L_illum/N, Psaltis
   eq. 7, for the Psaltis presets);
 * the -3 dB impulse response width of an unweighted aperture is 0.886·ρ (the half-power width of
-  a sinc); a taper broadens it by the factor ``theoretical_irw_factor`` of its weights, and the
-  two-way antenna pattern, when simulated, is part of the azimuth weights.
+  a sinc); a taper broadens it by the factor ``theoretical_irw_factor`` of its weights;
+* azimuth, measured on the correlator's own response (rtsar.analysis.azimuth_response): the
+  mask's window stays on the aperture while the two-way antenna pattern, when simulated, moves
+  with the line, so the beam is not a fixed taper (without it, the same figures as the window).
 """
 
 from __future__ import annotations
@@ -16,16 +18,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..ccd.base import aperture_offsets_m
 from ..lens.plan import range_axis_m
 from ..params import Config
 from ..scene import Simulator, point_scene
+from ..scene.effects import load_effects
 from ..stream.engine import focus_batches
 from ..windows import window
+from .azimuth_response import SINC_IRW, antenna_gain, azimuth_theory
 from .point_target import analyse_point_target
 from .theory import theoretical_irw_factor, theoretical_pslr_db
-
-SINC_IRW = 0.8859  # half-power width of sinc(x)² in units of its first-null distance
 
 
 @dataclass(frozen=True)
@@ -76,18 +77,10 @@ def range_weights(cfg: Config) -> np.ndarray:
     return window(cfg.processor.range_window, n)
 
 
-def azimuth_weights(
-    cfg: Config, slant_range_m: float, antenna: bool, antenna_length_m: float | None = None
-) -> np.ndarray:
-    """The azimuth window over the aperture, times the two-way antenna pattern (Crouch eq. 4.9)
-    when ``antenna`` (``antenna_length_m``: the antenna_pattern effect's D, default the
-    geometry's)."""
-    w = window(cfg.processor.azimuth_window, cfg.processor.aperture_pulses)
-    if antenna:
-        g = cfg.geometry
-        d_over_lambda = (antenna_length_m or g.antenna_length_m) / g.wavelength_m
-        w = w * np.sinc(d_over_lambda * aperture_offsets_m(cfg) / slant_range_m) ** 2
-    return w
+def azimuth_weights(cfg: Config) -> np.ndarray:
+    """The azimuth window over the aperture: the azimuth IRW's taper without an antenna pattern
+    (with one, the correlator's response: rtsar.analysis.azimuth_response)."""
+    return window(cfg.processor.azimuth_window, cfg.processor.aperture_pulses)
 
 
 def _focus_one(
@@ -114,23 +107,28 @@ def _focus_one(
 def run_point_targets(
     cfg: Config,
     lens_backend: str = "auto",
-    antenna: bool = False,
+    antenna: bool | dict = False,
     noise_snr_db: float | None = None,
 ) -> list[TargetResult]:
-    """Focus each acceptance target alone with the streaming engine and measure it."""
+    """Focus each acceptance target alone with the streaming engine and measure it.
+
+    ``antenna``: simulate the two-way antenna pattern (a dict: the antenna_pattern effect's
+    parameters, e.g. ``{"antenna_length_m": 58.75, "main_lobe_only": True}``).
+    """
     effects = []
     if antenna:
-        effects.append(("antenna_pattern", {}))
+        effects.append(("antenna_pattern", dict(antenna) if isinstance(antenna, dict) else {}))
     if noise_snr_db is not None:
         effects.append(("noise", {"snr_db": noise_snr_db}))
     rho_r = cfg.waveform.range_resolution_m
     rw = range_weights(cfg)
     step = cfg.geometry.along_track_step_m
+    gain = antenna_gain(load_effects(effects[:1], cfg)[0]) if antenna else None
     results = []
     for label, x, r in acceptance_targets(cfg):
         rho_a = cfg.azimuth_resolution_m(r)
-        aw = azimuth_weights(cfg, r, antenna)
-        az_irw = SINC_IRW * rho_a * theoretical_irw_factor(aw)
+        az_theory = azimuth_theory(cfg, r, gain)
+        az_irw = az_theory.irw_m
         # Room for ±12 IRW of sidelobes in azimuth (the ISLR extent is ±10 IRW).
         chip = max(64, int(np.ceil(12 * az_irw / step)))
         image, az, rg = _focus_one(cfg, x, r, effects, lens_backend, chip + 8)
@@ -156,7 +154,7 @@ def run_point_targets(
                 SINC_IRW * rho_r * theoretical_irw_factor(rw),
                 rep.azimuth.pslr_db,
                 rep.range.pslr_db,
-                theoretical_pslr_db(aw),
+                az_theory.pslr_db,
                 theoretical_pslr_db(rw),
                 rep.azimuth.islr_db,
                 rep.range.islr_db,

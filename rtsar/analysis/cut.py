@@ -208,6 +208,7 @@ def analyse_cut(
     upsample_factor: int = 16,
     *,
     islr_extent: float = 10.0,
+    peak_near: float | None = None,
 ) -> CutMetrics:
     """Measure peak, IRW, PSLR and ISLR of a 1-D complex impulse response.
 
@@ -224,6 +225,10 @@ def analyse_cut(
         is then refined exactly (band-limited evaluation), so its accuracy does not depend on it.
     islr_extent : float, optional
         Half-width of the ISLR sidelobe region in IRWs from the peak (default 10).
+    peak_near : float or None, optional
+        The response's peak is the local maximum within one sample of this (fractional)
+        sample index, not the cut's largest value (a brighter neighbour on the cut is then a
+        sidelobe: PSLR > 0 dB).  Default: the largest value.
 
     Returns
     -------
@@ -254,7 +259,13 @@ def analyse_cut(
     last = p.size - 1
 
     # Peak: best grid sample, then exact band-limited refinement within one grid step.
-    i_peak = int(np.argmax(p))
+    if peak_near is None:
+        i_peak = int(np.argmax(p))
+    else:
+        near = finite_number(peak_near, "peak_near") * factor
+        lo = min(max(int(math.floor(near)) - factor, 0), last)
+        hi = min(max(int(math.ceil(near)) + factor, 0), last)
+        i_peak = lo + int(np.argmax(p[lo : hi + 1]))
     t_peak, v_peak = refine_max(
         spectrum,
         max(i_peak - 1, 0) / factor,

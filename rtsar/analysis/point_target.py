@@ -5,6 +5,7 @@ Conventions of the cuts (IRW, PSLR, ISLR, positions): rtsar.analysis.cut.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -34,6 +35,8 @@ class PointTargetReport:
         Range position (m) of the 2-D peak on the image's range axis.
     peak_value : complex
         Complex value at the interpolated 2-D peak.
+    peak_px : (float, float)
+        The 2-D peak in (fractional) image pixels (row, column).
     """
 
     azimuth: CutMetrics
@@ -41,6 +44,7 @@ class PointTargetReport:
     azimuth_m: float
     range_m: float
     peak_value: complex
+    peak_px: tuple[float, float] = (math.nan, math.nan)
 
 
 def _uniform_axis(axis, n: int, name: str) -> tuple[float, float]:
@@ -179,11 +183,23 @@ def analyse_point_target(
     # Cuts through the refined peak, interpolated band-limited across the other axis.
     az_cut = _fft.fft(chip_img, axis=1) @ synthesis_vector(nr, r_star) / nr
     rg_cut = synthesis_vector(na, a_star) @ _fft.fft(chip_img, axis=0) / na
+    # Each cut is measured about the 2-D peak, not its own maximum (a brighter neighbour on
+    # the cut is then a sidelobe of it, not its mainlobe).
     az = analyse_cut(
-        az_cut, az_spacing, az_origin + a0 * az_spacing, factor, islr_extent=islr_extent
+        az_cut,
+        az_spacing,
+        az_origin + a0 * az_spacing,
+        factor,
+        islr_extent=islr_extent,
+        peak_near=a_star,
     )
     rg = analyse_cut(
-        rg_cut, rg_spacing, rg_origin + r0 * rg_spacing, factor, islr_extent=islr_extent
+        rg_cut,
+        rg_spacing,
+        rg_origin + r0 * rg_spacing,
+        factor,
+        islr_extent=islr_extent,
+        peak_near=r_star,
     )
     az = replace(az, peak_index=az.peak_index + a0)
     rg = replace(rg, peak_index=rg.peak_index + r0)
@@ -193,6 +209,7 @@ def analyse_point_target(
         azimuth_m=az_origin + (a0 + a_star) * az_spacing,
         range_m=rg_origin + (r0 + r_star) * rg_spacing,
         peak_value=value,
+        peak_px=(float(a0 + a_star), float(r0 + r_star)),
     )
 
 

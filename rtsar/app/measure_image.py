@@ -4,25 +4,32 @@ Method (also in ``rtsar measure --help``):
 
 * **Points.** Without ``--at``, point targets are the bright, isolated local maxima of |image|
   (rtsar.analysis.detect: within ``--threshold-db`` of the brightest pixel, ``--contrast-db``
-  (20) above the
-  90th percentile of the ±8 resolution cells around them off their own cuts, ±4 cells apart),
-  brightest first.  With
-  ``--at X,R`` the brightest pixel within 2 resolution cells of (along track X, slant range R).
+  (20) above the 90th percentile of the ±8 resolution cells around them off their own cuts,
+  the largest within ±1.5 theoretical IRWs, one per peak; closer than 4 cells to a brighter
+  point, within 10 dB of it), brightest first.  With ``--at X,R [X,R ...]`` the brightest
+  pixel within 2 resolution cells of (along track X, slant range R).
 * **Peak, cuts, IRW, PSLR** (rtsar.analysis.point_target and .cut): a chip of ±12 theoretical
   IRWs is upsampled band-limited by 16 (FFT zero-padding) around the peak, which is then
   refined exactly; the azimuth and range cuts through it give the -3 dB widths (IRW, linear
   interpolation of the half-power crossings) and the PSLR (highest sidelobe outside the
-  mainlobe, anywhere in the cut).  The mainlobe runs between the first nulls: the first minima
-  walking outward from the half-power crossings.
+  mainlobe, anywhere in the cut; none when it is under NO_SIDELOBE_DB, rounding).  The
+  mainlobe runs between the first nulls: the first minima walking outward from the half-power
+  crossings.
 * **ISLR** (rtsar.analysis.islr2d): one 2-D figure: sidelobe energy within ±10 IRWs on both
   axes, outside the null-to-null mainlobe rectangle, over the mainlobe's energy.
-* **Theory** of the processor that made the image (its configuration, in the file): IRW =
-  0.886 ρ × the window's broadening (ρR = c/2B, ρA = λR/2L), PSLR and the 2-D ISLR of the
-  range and azimuth windows (with ``--scene``, azimuth times the simulated antenna pattern).
-* **Truth** (``--scene``): each point's offset from the nearest [[targets]] entry within 3
-  cells, in resolution cells (measured - true); a height image against the scene's
-  [surface]: RMSE and bias of the valid heights and the valid fraction, on the pixels that see
-  the surface without layover (rtsar.topo.insar.height_error).
+* **Theory** of the processor that made the image (its configuration, in the file), measured
+  with the same rules: range, the window's response (IRW = 0.886 ρR × its broadening,
+  ρR = c/2B); azimuth, the correlator's own response to a point (rtsar.analysis
+  .azimuth_response: the mask with its window sliding along the exact range history, times the
+  scene's antenna pattern with ``--scene``; ρA = λR/2L without a beam).
+* **Notes** per point (``notes``, beside ``points``): a sidelobe-free cut, another found point
+  on a cut or in the ISLR region (its PSLR/ISLR are then that point's), a cut or region cut
+  short by the image edge.
+* **Truth** (``--scene``, which must have the image's waveform and geometry): each point's
+  offset from the nearest [[targets]] entry within 3 cells, in resolution cells (measured -
+  true); a height image against the scene's [surface]: RMSE and bias of the valid heights and
+  the valid fraction, on the pixels that see the surface without layover
+  (rtsar.topo.insar.height_error).
 """
 
 from __future__ import annotations
@@ -33,16 +40,19 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.acceptance import SINC_IRW, azimuth_weights, range_weights
+from ..analysis.acceptance import SINC_IRW, range_weights
+from ..analysis.azimuth_response import antenna_gain, azimuth_theory
 from ..analysis.detect import find_point_targets
-from ..analysis.islr2d import islr_2d_db, theoretical_islr_2d_db
+from ..analysis.islr2d import islr_2d_db, islr_2d_from_ratios_db, region_over_main
 from ..analysis.point_target import analyse_point_target
 from ..analysis.theory import theoretical_irw_factor, theoretical_pslr_db
 from ..params import config_from_dict
+from ..scene.effects import load_effects
 from ..scene.files import load_point_targets, load_scene, load_surface_scene
 from ..sinks.image_file import read_heights, read_image
 from ..sinks.io import write_text_when_complete
 from ..topo.insar import height_error
+from .measure_notes import NO_SIDELOBE_DB, point_notes
 
 POINT_KEYS = (
     "along_track_m",
@@ -78,28 +88,27 @@ def parse_at(text: str) -> tuple[float, float]:
 
 
 class Theory:
-    """What the processor of ``config`` should give (module docstring), per slant range."""
+    """What the processor of ``config`` should give (module docstring), per slant range.
 
-    def __init__(self, config, antenna_length_m: float | None = None, antenna: bool = False):
-        self.config = config
-        self.antenna, self.antenna_length_m = antenna, antenna_length_m
+    ``gain(offset_m, range_m)``: the two-way antenna gain the scene simulated (None: none).
+    """
+
+    def __init__(self, config, gain=None):
+        self.config, self.gain = config, gain
         rw = range_weights(config)
-        self.range_weights = rw
         rho_r = config.waveform.range_resolution_m
         self.irw_range_m = SINC_IRW * rho_r * theoretical_irw_factor(rw)
         self.pslr_range_db = theoretical_pslr_db(rw)
+        self.range_ratio = region_over_main(rw, ISLR_EXTENT_IRW)
 
     def at(self, slant_range_m: float) -> dict:
-        cfg = self.config
-        aw = azimuth_weights(cfg, slant_range_m, self.antenna, self.antenna_length_m)
+        az = azimuth_theory(self.config, slant_range_m, self.gain, CHIP_IRW, ISLR_EXTENT_IRW)
         return {
-            "irw_azimuth_m": SINC_IRW
-            * cfg.azimuth_resolution_m(slant_range_m)
-            * theoretical_irw_factor(aw),
+            "irw_azimuth_m": az.irw_m,
             "irw_range_m": self.irw_range_m,
-            "pslr_azimuth_db": theoretical_pslr_db(aw),
+            "pslr_azimuth_db": az.pslr_db,
             "pslr_range_db": self.pslr_range_db,
-            "islr_db": theoretical_islr_2d_db(aw, self.range_weights, ISLR_EXTENT_IRW),
+            "islr_db": islr_2d_from_ratios_db(az.region_over_main, self.range_ratio),
         }
 
 
@@ -113,6 +122,28 @@ def _finite(v):
     return None if isinstance(v, float) and not math.isfinite(v) else v
 
 
+def _sidelobe(pslr_db: float) -> float:
+    """The PSLR, or NaN (reported null, with a note) where no sidelobe stands above rounding."""
+    return pslr_db if pslr_db >= NO_SIDELOBE_DB else math.nan
+
+
+def check_scene_matches(scene_cfg, image_cfg, scene, path) -> None:
+    """ValueError naming the first setting where the scene's waveform or geometry differs from
+    the image's: its truth and antenna pattern would describe another instrument."""
+    mine, theirs = scene_cfg.to_dict(), image_cfg.to_dict()
+    for part in ("waveform", "geometry"):
+        for key, v in mine[part].items():
+            w = theirs[part].get(key)
+            same = v == w or (
+                isinstance(v, float) and isinstance(w, float) and math.isclose(v, w, rel_tol=1e-9)
+            )
+            if not same:
+                raise ValueError(
+                    f"--scene {scene} does not match {path}: {part}.{key} is {v!r} in the scene, "
+                    f"{w!r} in the image (give the scene the image was made from)"
+                )
+
+
 def measure_image(
     path: str | Path,
     scene: str | Path | None = None,
@@ -122,7 +153,8 @@ def measure_image(
     contrast_db: float = 20.0,
 ) -> dict:
     """The report of ``rtsar measure`` (what ``--json`` writes): ``points`` (POINT_KEYS each),
-    ``theory`` and, with a scene, ``truth`` (one entry per point) and ``height``."""
+    ``theory``, ``notes`` (a list of strings per point) and, with a scene, ``truth`` (one
+    entry per point) and ``height``."""
     image, az, rg, attrs = read_image(path)
     if "spotlight" in attrs:
         raise ValueError(
@@ -133,17 +165,25 @@ def measure_image(
         raise ValueError(f"{path} holds no image lines")
     cfg = config_from_dict(json.loads(attrs["config"]))
     d_az, d_rg = _spacing(az, "azimuth"), _spacing(rg, "range")
-    antenna, length = False, None
-    targets = None
+    gain, targets = None, None
     if scene is not None:
         sc = load_scene(scene)
+        check_scene_matches(sc.config, cfg, scene, path)
         named = dict(sc.effects)
-        antenna = "antenna_pattern" in named
-        length = named.get("antenna_pattern", {}).get("antenna_length_m")
+        if "antenna_pattern" in named:
+            gain = antenna_gain(
+                load_effects([("antenna_pattern", named["antenna_pattern"])], cfg)[0]
+            )
         targets = load_point_targets(scene)
-    theory = Theory(cfg, length, antenna)
+    theory = Theory(cfg, gain)
     rho_r = cfg.waveform.range_resolution_m
     centre_r = float(np.mean(rg))
+    centre = theory.at(centre_r)
+    cell_px = (cfg.azimuth_resolution_m(centre_r) / abs(d_az), rho_r / abs(d_rg))
+    irw_px = (centre["irw_azimuth_m"] / abs(d_az), centre["irw_range_m"] / abs(d_rg))
+    found = find_point_targets(
+        image, cell_px, threshold_db, contrast_db, irw_px=irw_px, max_points=max_points
+    )
     if at:
         positions = list(at)
         for x, r in positions:
@@ -155,10 +195,8 @@ def measure_image(
                     f"m, range {rg[0]:g} … {rg[-1]:g} m)"
                 )
     else:
-        cell_px = (cfg.azimuth_resolution_m(centre_r) / abs(d_az), rho_r / abs(d_rg))
-        found = find_point_targets(image, cell_px, threshold_db, contrast_db, max_points=max_points)
         positions = [(float(az[i]), float(rg[j])) for i, j in found]
-    points, theories, truth = [], [], []
+    points, theories, truth, reports = [], [], [], []
     for x, r in positions:
         th = theory.at(r)
         chip = tuple(
@@ -189,23 +227,39 @@ def measure_image(
             abs(rep.peak_value),
             rep.azimuth.irw_m,
             rep.range.irw_m,
-            rep.azimuth.pslr_db,
-            rep.range.pslr_db,
+            _sidelobe(rep.azimuth.pslr_db),
+            _sidelobe(rep.range.pslr_db),
             islr,
         )
         points.append({k: _finite(float(v)) for k, v in zip(POINT_KEYS, values, strict=True)})
         theories.append({k: _finite(float(v)) for k, v in th.items()})
+        reports.append((rep, chip, th))
         if targets is not None:
             truth.append(_nearest(targets, rep.azimuth_m, rep.range_m, rho_a, rho_r))
+    others = [(float(i), float(j)) for i, j in found]
+    notes = point_notes(
+        points, theories, reports, others, image.shape, (az, rg), CHIP_IRW, ISLR_EXTENT_IRW
+    )
     report = {
         "image": str(path),
         "method": {
             "upsample_factor": UPSAMPLE,
             "null_rule": "first minimum walking outward from each half-power crossing",
             "pslr": "highest sidelobe outside the null-to-null mainlobe, anywhere in the cut "
-            f"(±{CHIP_IRW:g} theoretical IRWs)",
+            f"(±{CHIP_IRW:g} theoretical IRWs); null when none stands above {NO_SIDELOBE_DB:g} dB",
             "islr": f"2-D: energy within ±{ISLR_EXTENT_IRW:g} IRWs on both axes outside the "
             "null-to-null mainlobe rectangle, over the mainlobe's",
+            "azimuth_theory": "the correlator's response to a point: its windowed mask sliding "
+            "along the exact range history"
+            + (
+                ", times the scene's antenna pattern"
+                if gain is not None
+                else (
+                    ", no antenna pattern (the scene has none)"
+                    if scene
+                    else ", no antenna pattern (give --scene for the scene's)"
+                )
+            ),
             "found": "given positions (--at)"
             if at
             else f"isolated local maxima within {threshold_db:g} dB of the brightest pixel, "
@@ -213,6 +267,7 @@ def measure_image(
         },
         "points": points,
         "theory": theories,
+        "notes": notes,
     }
     if targets is not None:
         report["truth"] = truth
@@ -275,7 +330,7 @@ def text_lines(report: dict) -> list[str]:
     """The report as a table: measured (theory) per point, then the truth and the heights."""
     out = [
         f"{report['image']}: {len(report['points'])} point(s) ({report['method']['found']}); "
-        "measured (theory)",
+        f"measured (theory: azimuth, {report['method']['azimuth_theory']})",
         f"{'#':>3}  {'along track [m]':>15} {'range [m]':>15} {'peak |x|':>10}  "
         f"{'IRW azimuth':<22}{'IRW range':<22}{'PSLR az / rg [dB]':<31}ISLR 2-D [dB]",
     ]
@@ -291,6 +346,8 @@ def text_lines(report: dict) -> list[str]:
             f"{p['peak']:10.4g}  {irw_a:<22}{irw_r:<22}{pslr:<31}"
             f"{_db(p['islr_db'])} ({_db(t['islr_db'])})"
         )
+    for i, notes in enumerate(report.get("notes", [])):
+        out += [f"{i:3d}  note: {n}" for n in notes]
     for i, t in enumerate(report.get("truth", [])):
         if t is None:
             out.append(f"{i:3d}  no scene target within {TRUTH_CELLS:g} cells")

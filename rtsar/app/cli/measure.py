@@ -42,21 +42,28 @@ def add_parsers(sub) -> None:
     s = sub.add_parser(
         "measure",
         description="Measure the image you made: finds its point targets (or measures at "
-        "--at X,R) and reports, per point, along-track and range position, peak |x|, IRW "
+        "--at X,R ...) and reports, per point, along-track and range position, peak |x|, IRW "
         "(-3 dB width) in azimuth and range, PSLR per axis and the 2-D ISLR, beside the theory "
-        "of the processor that made it (its windows included: 0.886 rho x the window's "
-        "broadening, rho_R = c/2B, rho_A = lambda R / 2L; the window's PSLR and ISLR); with "
-        "--scene, each point's offset from the scene's nearest [[targets]] entry in resolution "
-        "cells, and for a height image the RMSE, bias and valid fraction of its heights "
-        "against the scene's [surface].  Method: a chip of +-12 theoretical IRWs is upsampled "
-        "x16 (band-limited, FFT zero-padding) around the peak, refined exactly; the mainlobe "
-        "runs between the first nulls (the first minima walking outward from the half-power "
-        "crossings); PSLR: the highest sidelobe outside it, anywhere in the cut; ISLR: the "
-        "energy within +-10 IRWs on both axes outside the null-to-null rectangle over the "
-        "energy inside it (-7.0 dB for an unweighted sinc in both axes; each 1-D cut alone: "
-        "-9.7 dB).  Found points: isolated local maxima, --contrast-db above the 90th percentile "
-        "of the +-8 cells around them (off their own cuts), within --threshold-db of the "
-        "brightest pixel.  Exit status 1 when nothing was measured.",
+        "of the processor that made it, measured with the same rules: range, its window's "
+        "response (0.886 rho_R x the window's broadening, rho_R = c/2B); azimuth, the "
+        "correlator's own response to a point (the windowed mask sliding along the exact range "
+        "history, times the scene's antenna pattern with --scene; 0.886 rho_A x the window's "
+        "broadening, rho_A = lambda R / 2L, without a beam).  With --scene (which must have the "
+        "image's waveform and geometry), each point's offset from the scene's nearest "
+        "[[targets]] entry in resolution cells, and for a height image the RMSE, bias and valid "
+        "fraction of its heights against the scene's [surface].  Method: a chip of +-12 "
+        "theoretical IRWs is upsampled x16 (band-limited, FFT zero-padding) around the peak, "
+        "refined exactly; the mainlobe runs between the first nulls (the first minima walking "
+        "outward from the half-power crossings); PSLR: the highest sidelobe outside it, "
+        "anywhere in the cut (none, null, under -100 dB: rounding); ISLR: the energy within "
+        "+-10 IRWs on both axes outside the null-to-null rectangle over the energy inside it "
+        "(-7.0 dB for an unweighted sinc in both axes; each 1-D cut alone: -9.7 dB).  Found "
+        "points: local maxima within +-1.5 IRWs, one per peak, --contrast-db above the 90th "
+        "percentile of the +-8 and +-4 cells around them (off their own cuts), within "
+        "--threshold-db of the brightest pixel; within 4 cells of a brighter point, within "
+        "10 dB of it.  Notes per point say when a cut has no sidelobe, when another point lies "
+        "on a cut or in the ISLR region (its PSLR/ISLR are then that point's) and when the "
+        "image edge cuts a cut or the region short.  Exit status 1 when nothing was measured.",
     )
     s.add_argument("image", help="image file from process, run -o or subscribe -o (.h5)")
     s.add_argument(
@@ -64,10 +71,12 @@ def add_parsers(sub) -> None:
     )
     s.add_argument(
         "--at",
-        action="append",
+        action="extend",
+        nargs="+",
         metavar="X,R",
         help="measure the brightest pixel within 2 resolution cells of along track X, slant "
-        "range R (metres; repeatable) instead of finding points",
+        "range R (metres) instead of finding points; several positions after one --at, or "
+        "--at repeated",
     )
     s.add_argument("--json", metavar="OUT", help="also write the report as JSON")
     s.add_argument(

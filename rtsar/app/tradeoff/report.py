@@ -79,6 +79,8 @@ def plot(rows: list[dict], scenes: list[TradeoffScene], path: Path) -> None:
             if max(xs) > 3 * min(xs):  # a log axis only where the values span a range
                 ax.set_xscale("log")
             ax.set_yscale("log")
+            for axis in (ax.xaxis, ax.yaxis):  # minor tick labels ("3×10¹") collided
+                axis.set_minor_formatter(plt.NullFormatter())
             ax.set_xlabel(xlabel)
             ax.set_ylabel("image error vs float64 reference (relative RMS)")
             ax.set_title(f"{scene.key}: black outline = Pareto front, ★ = defaults", fontsize=9)
@@ -100,16 +102,18 @@ def plot(rows: list[dict], scenes: list[TradeoffScene], path: Path) -> None:
 
 # Offsets (points) tried for a label, nearest first: beside its point, then rings further out.
 _DIRECTIONS = [(1, 0.4), (1, -1), (-1, 0.4), (-1, -1), (0, 1.2), (0, -1.6), (1, 1.4), (-1, 1.4)]
-_OFFSETS = [(r * dx, r * dy) for r in (5, 12, 20, 30, 42) for dx, dy in _DIRECTIONS]
+_OFFSETS = [(r * dx, r * dy) for r in (5, 12, 20, 30, 42, 56, 72) for dx, dy in _DIRECTIONS]
 
 
 def place_labels(ax, points, fontsize: float = 7) -> list:
-    """Label ``points`` [(x, y, text)] so that no label covers another label or a marker.
+    """Label ``points`` [(x, y, text)] so that no label covers another label, a marker, a
+    tick label, the title, the legend, or leaves the axes (hence the figure).
 
-    Each label takes the first offset of ``_OFFSETS`` where its box meets no box placed
-    before (the markers' boxes are placed first); one that finds none takes the last
-    tried.  A label moved beyond its neighbourhood gets a thin leader line.  Call it on the
-    final layout (after tight_layout): overlaps are judged in display units.
+    Each label takes the first offset of ``_OFFSETS`` where its box lies inside the axes and
+    meets no box placed before (the markers', the tick labels', the title's and the legend's
+    first); one that finds none takes the first offset that stays inside the axes.  A label
+    moved beyond its neighbourhood gets a thin leader line.  Call it on the final layout
+    (after tight_layout): overlaps are judged in display units.
     """
     from matplotlib.text import Text  # matplotlib loads only when a plot is drawn
     from matplotlib.transforms import Bbox
@@ -121,27 +125,67 @@ def place_labels(ax, points, fontsize: float = 7) -> list:
     for x, y, _ in points:  # markers: a box of about their size
         px, py = ax.transData.transform((x, y))
         taken.append(Bbox.from_extents(px - 4, py - 4, px + 4, py + 4))
+    taken += [t.get_window_extent(renderer) for t in _axes_texts(ax) if t.get_text()]
+    legend = ax.get_legend()
+    if legend is not None:
+        taken.append(legend.get_window_extent(renderer))
+    inside = ax.get_window_extent(renderer).shrunk(0.99, 0.99)
     labels = []
     for i, (x, y, text) in enumerate(points):
         own = taken[i]
+        fallback = None
         for dx, dy in _OFFSETS:
-            far = abs(dx) > 12 or abs(dy) > 12
-            label = ax.annotate(
-                text,
-                (x, y),
-                xytext=(dx, dy),
-                textcoords="offset points",
-                fontsize=fontsize,
-                ha="left" if dx > 0 else "right" if dx < 0 else "center",
-                va="bottom" if dy >= 0 else "top",
-                arrowprops={"arrowstyle": "-", "lw": 0.4, "color": "0.5"} if far else None,
-                zorder=4,
-            )
+            label = _annotate(ax, x, y, text, dx, dy, fontsize)
+            label.update_positions(renderer)  # else its box is still at the display origin
             box = Text.get_window_extent(label, renderer).expanded(1.05, 1.1)  # text, not leader
-            if not any(box.overlaps(t) for t in taken if t is not own):
+            within = inside.contains(box.x0, box.y0) and inside.contains(box.x1, box.y1)
+            if within and not any(box.overlaps(t) for t in taken if t is not own):
                 break
-            if (dx, dy) != _OFFSETS[-1]:
-                label.remove()
+            if within and fallback is None:
+                fallback = (dx, dy)
+            label.remove()
+        else:  # no free place: the first one inside the axes (or the nearest)
+            label = _annotate(ax, x, y, text, *(fallback or _OFFSETS[0]), fontsize)
+            label.update_positions(renderer)
+            box = Text.get_window_extent(label, renderer).expanded(1.05, 1.1)
         taken.append(box)
         labels.append(label)
     return labels
+
+
+def _annotate(ax, x, y, text, dx, dy, fontsize):
+    """``text`` at (dx, dy) points from (x, y); a thin leader line when moved far."""
+    far = abs(dx) > 12 or abs(dy) > 12
+    return ax.annotate(
+        text,
+        (x, y),
+        xytext=(dx, dy),
+        textcoords="offset points",
+        fontsize=fontsize,
+        ha="left" if dx > 0 else "right" if dx < 0 else "center",
+        va="bottom" if dy >= 0 else "top",
+        arrowprops={"arrowstyle": "-", "lw": 0.4, "color": "0.5"} if far else None,
+        zorder=4,
+    )
+
+
+def _axes_texts(ax) -> list:
+    """The texts drawn around an axes: its tick labels (major and minor), axis labels and
+    title, visible ones only."""
+    texts = [ax.title, ax.xaxis.label, ax.yaxis.label]
+    for axis in (ax.xaxis, ax.yaxis):
+        texts += drawn_tick_labels(axis)
+    return [t for t in texts if t.get_visible()]
+
+
+def drawn_tick_labels(axis) -> list:
+    """The tick labels of ``axis`` that are drawn: its ticks within the view, labelled."""
+    lo, hi = sorted(axis.get_view_interval())
+    ticks = axis.get_major_ticks() + axis.get_minor_ticks()
+    return [
+        t
+        for tick in ticks
+        if lo <= tick.get_loc() <= hi
+        for t in (tick.label1, tick.label2)
+        if t.get_visible() and t.get_text()
+    ]

@@ -109,7 +109,7 @@ class TradeoffScene:
 
 
 def az_irw_m(cfg: Config, r: float) -> float:
-    w = azimuth_weights(cfg, r, antenna=False)
+    w = azimuth_weights(cfg)  # no antenna pattern here: the window is the taper
     return SINC_IRW * cfg.azimuth_resolution_m(r) * theoretical_irw_factor(w)
 
 

@@ -1,0 +1,108 @@
+"""What a reader of ``rtsar measure`` must know about each number: the notes beside a point.
+
+A measured PSLR or ISLR is the point's own only when its cuts and its ISLR region hold nothing
+else and lie inside the image.  Each point gets a list of plain sentences (``notes`` in the
+JSON, parallel to ``points``; printed under the table):
+
+* a cut without a sidelobe above NO_SIDELOBE_DB (its PSLR is null), and a theory without one;
+* another found or measured point whose mainlobe crosses a cut within the chip, or lies in
+  the ±10 IRW ISLR region: the PSLR / ISLR then measure that point;
+* a cut or the ISLR region that the image edge cuts short.
+"""
+
+from __future__ import annotations
+
+import math
+
+NO_SIDELOBE_DB = -100.0  # a "sidelobe" lower than this is rounding: complex64 images hold
+# ~7 digits, and a noise-free point's cuts read -150 to -180 dB beyond a beam-limited response
+SAME_POINT_IRW = 1.5  # a neighbour closer than this (both axes) is the point itself
+AXES = ("azimuth", "range")
+
+
+def point_notes(points, theories, reports, neighbours_px, shape, axes, chip_irw, islr_extent):
+    """Notes (lists of sentences) per point.
+
+    ``reports``: (PointTargetReport, chip half-size in px per axis, theory dict) per point;
+    ``neighbours_px``: (row, column) of the other points found in the image; ``axes``: the
+    image's (azimuth_m, range_m) axes.
+    """
+    peaks = [rep.peak_px for rep, _, _ in reports]
+    spacing = [abs(float(a[1] - a[0])) for a in axes]
+    notes = []
+    for i, (p, t, (_, chip, _)) in enumerate(zip(points, theories, reports, strict=True)):
+        out = []
+        for axis, key in zip(AXES, ("pslr_azimuth_db", "pslr_range_db"), strict=True):
+            if p[key] is None:
+                out.append(
+                    f"no {axis} sidelobe above {NO_SIDELOBE_DB:g} dB within ±{chip_irw:g} IRWs: "
+                    f"{axis} PSLR null"
+                )
+        if t["pslr_azimuth_db"] is None:
+            out.append("theory: the correlator's azimuth response has no sidelobe")
+        irw_px = [t[k] / s for k, s in zip(("irw_azimuth_m", "irw_range_m"), spacing, strict=True)]
+        measured = [
+            w / s if w is not None and math.isfinite(w) else th
+            for w, s, th in zip(
+                (p["irw_azimuth_m"], p["irw_range_m"]), spacing, irw_px, strict=True
+            )
+        ]
+        region = [islr_extent * w for w in measured]
+        out += _neighbours(i, peaks, neighbours_px, irw_px, chip, region, axes)
+        out += _edges(peaks[i], chip, region, irw_px, shape, chip_irw, islr_extent)
+        notes.append(out)
+    return notes
+
+
+def _neighbours(i, peaks, neighbours_px, irw_px, chip, region, axes):
+    out, seen = [], [peaks[i]]
+    candidates = [q for j, q in enumerate(peaks) if j != i] + list(neighbours_px)
+    for q in candidates:
+        if any(
+            abs(q[0] - s[0]) <= SAME_POINT_IRW * irw_px[0]
+            and abs(q[1] - s[1]) <= SAME_POINT_IRW * irw_px[1]
+            for s in seen
+        ):
+            continue  # this point, or one already named
+        seen.append(q)
+        d = [q[a] - peaks[i][a] for a in (0, 1)]
+        in_region = all(abs(d[a]) <= region[a] + irw_px[a] for a in (0, 1))
+        where = (
+            f"{_at(axes[0], q[0]):.6g}, {_at(axes[1], q[1]):.6g} m "
+            f"({abs(d[0]) / irw_px[0]:.1f} azimuth, {abs(d[1]) / irw_px[1]:.1f} range IRWs away)"
+        )
+        on_cut = None
+        for a in (0, 1):
+            other = 1 - a
+            if abs(d[other]) <= irw_px[other] and abs(d[a]) <= chip[a]:
+                on_cut = AXES[a]
+        if on_cut is not None:
+            also = " and the ISLR" if in_region else ""
+            out.append(
+                f"another point on the {on_cut} cut, at {where}: the {on_cut} PSLR{also} "
+                "measure it, not this point's sidelobes"
+            )
+        elif in_region:
+            out.append(f"another point in the ISLR region, at {where}: the ISLR counts it")
+    return out
+
+
+def _edges(peak, chip, region, irw_px, shape, chip_irw, islr_extent):
+    out = []
+    for a in (0, 1):
+        room = min(peak[a], shape[a] - 1 - peak[a])  # pixels to the nearer edge
+        if room < chip[a]:
+            out.append(
+                f"the {AXES[a]} cut ends at the image edge {room / irw_px[a]:.1f} IRWs from the "
+                f"peak (of ±{chip_irw:g}): its PSLR sees only that far"
+            )
+        if room < region[a]:
+            out.append(
+                f"the ISLR region (±{islr_extent:g} IRWs) is cut short by the image edge in "
+                f"{AXES[a]}: the ISLR counts less sidelobe energy than there is"
+            )
+    return out
+
+
+def _at(axis, index: float) -> float:
+    return float(axis[0] + index * (axis[1] - axis[0]))

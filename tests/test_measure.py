@@ -206,6 +206,25 @@ def test_a_spotlight_image_is_refused_in_one_line(tmp_path, capsys):
     assert "spotlight image" in capsys.readouterr().err
 
 
+def test_an_image_without_its_configuration_is_one_line(tmp_path, capsys):
+    """From a cold review: `rtsar measure` of an image without its `config` attribute was a
+    17-line KeyError traceback (quicklook reads such a file; export refuses it properly)."""
+    import h5py
+
+    path = tmp_path / "img.h5"
+    x = np.arange(8) * 1.0
+    write_image(path, np.ones((8, 8), np.complex64), x, x + 100.0, preset("tiny"))
+    with h5py.File(path, "a") as f:
+        del f.attrs["config"]
+    assert main(["measure", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: no 'config' attribute" in err and "Traceback" not in err
+    with h5py.File(path, "a") as f:
+        f.attrs["config"] = "{not json"
+    assert main(["measure", str(path)]) == 2
+    assert "its 'config' attribute does not read" in capsys.readouterr().err
+
+
 BEAM_SCENE = """preset = "psaltis-jpl"
 [processor]
 azimuth_window = "taylor"

@@ -163,7 +163,7 @@ def measure_image(
         )
     if image.size == 0:
         raise ValueError(f"{path} holds no image lines")
-    cfg = config_from_dict(json.loads(attrs["config"]))
+    cfg = _configuration(attrs, path)
     d_az, d_rg = _spacing(az, "azimuth"), _spacing(rg, "range")
     gain, targets = None, None
     if scene is not None:
@@ -366,3 +366,18 @@ def text_lines(report: dict) -> list[str]:
             f"{h['valid_fraction']:.1%} of {h['pixels_scored']} pixels that see it"
         )
     return out
+
+
+def _configuration(attrs, path) -> object:
+    """The processor's configuration stored in the image (its theory needs it): a one-line
+    ValueError naming the file where it is missing or unreadable."""
+    text = attrs.get("config")
+    if text is None:
+        raise ValueError(
+            f"{path}: no 'config' attribute (the processor's configuration): rtsar measure "
+            "reads images written by rtsar process, run -o, replay -o or subscribe -o"
+        )
+    try:
+        return config_from_dict(json.loads(text))
+    except (TypeError, ValueError, KeyError) as exc:
+        raise ValueError(f"{path}: its 'config' attribute does not read: {exc}") from None

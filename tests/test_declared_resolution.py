@@ -143,31 +143,33 @@ along_track_step_m = {step}
 aperture_pulses = 2
 range_bins = 64
 [spotlight]
-sweep_deg = 2.0
+sweep_deg = {sweep}
 [[targets]]
 x_m = 0.0
 """
 
 
-@pytest.mark.parametrize("window", ["rect", "taylor"])
-def test_spotlight_images_declare_the_resolution_they_measure(tmp_path, window):
+@pytest.mark.parametrize("window, sweep", [("rect", 2.0), ("taylor", 2.0), ("rect", 5.0)])
+def test_spotlight_images_declare_the_resolution_they_measure(tmp_path, window, sweep):
     """The progressive images' header (resolution_m, range_resolution_m) against the -3 dB
-    widths of a point target in the final image, 10 %."""
+    widths of a point target in the final image, 2 %.  At a 5° sweep the inscribed rectangle
+    keeps 94 % of the band: c/2B declared a range width 6 % too fine (10 % let it pass)."""
     from rtsar.app.spotlight import image_header
     from rtsar.spot.pfa import PfaSettings, PolarFormatPlan, polar_format
     from rtsar.spot.scene import load_spot_scene
     from rtsar.spot.simulate import SpotlightSimulator
 
     path = tmp_path / "spot.toml"
-    path.write_text(SPOT_SCENE.format(rate=64 / 0.3, step=4.6 * 1.55e-6 / (2 * 3.2e-3)))
+    step = 4.6 * 1.55e-6 / (2 * 3.2e-3)
+    path.write_text(SPOT_SCENE.format(rate=64 / 0.3, step=step, sweep=sweep))
     scene = load_spot_scene(path)
     settings = PfaSettings(extent_m=(1.6e-3, 1.6e-3), range_window=window, azimuth_window=window)
     plan = PolarFormatPlan(scene.config, scene.geometry, settings=settings)
     image = polar_format(SpotlightSimulator(scene).block()[0], plan)
     header = image_header(plan, 0, scene.geometry.pulses, scene.geometry.sweep_rad, True)
     rep = analyse_point_target(image, plan.x_m, plan.y_m, 0.0, 0.0, chip=24)
-    assert rep.azimuth.irw_m == pytest.approx(header["resolution_m"], rel=IRW_TOLERANCE)
-    assert rep.range.irw_m == pytest.approx(header["range_resolution_m"], rel=IRW_TOLERANCE)
+    assert rep.azimuth.irw_m == pytest.approx(header["resolution_m"], rel=0.02)
+    assert rep.range.irw_m == pytest.approx(header["range_resolution_m"], rel=0.02)
 
 
 @pytest.mark.parametrize("name", ["tiny", "crouch-sal"])

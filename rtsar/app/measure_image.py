@@ -51,7 +51,10 @@ from ..scene.effects import load_effects
 from ..scene.files import load_point_targets, load_scene, load_surface_scene
 from ..sinks.image_file import read_heights, read_image
 from ..sinks.io import write_text_when_complete
+from ..spot.geometry import geometry_from_dict
+from ..spot.pfa import PfaSettings, PolarFormatPlan
 from ..topo.insar import height_error
+from ..windows import impulse_response_width, window
 from .measure_notes import NO_SIDELOBE_DB, point_notes
 
 POINT_KEYS = (
@@ -101,6 +104,12 @@ class Theory:
         self.pslr_range_db = theoretical_pslr_db(rw)
         self.range_ratio = region_over_main(rw, ISLR_EXTENT_IRW)
 
+    def cell_m(self, slant_range_m: float) -> tuple[float, float]:
+        """The resolution cells (ρA = λR/2L, ρR = c/2B) the search radii and offsets count in."""
+        return self.config.azimuth_resolution_m(
+            slant_range_m
+        ), self.config.waveform.range_resolution_m
+
     def at(self, slant_range_m: float) -> dict:
         az = azimuth_theory(self.config, slant_range_m, self.gain, CHIP_IRW, ISLR_EXTENT_IRW)
         return {
@@ -109,6 +118,49 @@ class Theory:
             "pslr_azimuth_db": az.pslr_db,
             "pslr_range_db": self.pslr_range_db,
             "islr_db": islr_2d_from_ratios_db(az.region_over_main, self.range_ratio),
+        }
+
+
+class SpotTheory:
+    """What the polar-format processor should give for a spotlight image [x, y] (cross-range x
+    as "azimuth", down-range y as "range"): each axis' window over the inscribed rectangle of
+    k-space the image was formed from (rtsar.spot.pfa.PolarFormatPlan.cell_m: cells 2π/Δk,
+    λ/2Δθ (Crouch eq. 9.5) and c/2B for a narrow sweep and band), rebuilt from the image's
+    spotlight attributes (geometry, channel, look, settings)."""
+
+    def __init__(self, config, spot: dict):
+        try:
+            settings = dict(spot.get("settings") or {})
+            if settings.get("extent_m") is not None:
+                settings["extent_m"] = tuple(settings["extent_m"])
+            plan = PolarFormatPlan(
+                config,
+                geometry_from_dict(spot["geometry"]),
+                spot.get("channel", "main"),
+                PfaSettings(**settings),
+                spot.get("look", "exact"),
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"its spotlight attributes do not read: {exc}") from None
+        self.rho_m = plan.cell_m()
+        self.windows = (plan.settings.azimuth_window, plan.settings.range_window)
+        weights = [window(w, 512) for w in self.windows]
+        self.irw_m = tuple(
+            impulse_response_width(w) * rho for rho, w in zip(self.rho_m, self.windows, strict=True)
+        )
+        self.pslr_db = tuple(theoretical_pslr_db(w) for w in weights)
+        self.ratios = tuple(region_over_main(w, ISLR_EXTENT_IRW) for w in weights)
+
+    def cell_m(self, _y_m: float) -> tuple[float, float]:
+        return self.rho_m
+
+    def at(self, _y_m: float) -> dict:
+        return {
+            "irw_azimuth_m": self.irw_m[0],
+            "irw_range_m": self.irw_m[1],
+            "pslr_azimuth_db": self.pslr_db[0],
+            "pslr_range_db": self.pslr_db[1],
+            "islr_db": islr_2d_from_ratios_db(*self.ratios),
         }
 
 
@@ -156,16 +208,16 @@ def measure_image(
     ``theory``, ``notes`` (a list of strings per point) and, with a scene, ``truth`` (one
     entry per point) and ``height``."""
     image, az, rg, attrs = read_image(path)
-    if "spotlight" in attrs:
-        raise ValueError(
-            f"{path} is a spotlight image (image[x, y]): rtsar measure reads strip-map images "
-            "[azimuth, range]"
-        )
     if image.size == 0:
         raise ValueError(f"{path} holds no image lines")
     cfg = _configuration(attrs, path)
     d_az, d_rg = _spacing(az, "azimuth"), _spacing(rg, "range")
-    gain, targets = None, None
+    gain, targets, spot = None, None, "spotlight" in attrs
+    if spot and scene is not None:
+        raise ValueError(
+            f"{path} is a spotlight image: its truth offsets are not measured yet (its frame "
+            "turns with the collection); measure it without --scene"
+        )
     if scene is not None:
         sc = load_scene(scene)
         check_scene_matches(sc.config, cfg, scene, path)
@@ -175,11 +227,16 @@ def measure_image(
                 load_effects([("antenna_pattern", named["antenna_pattern"])], cfg)[0]
             )
         targets = load_point_targets(scene)
-    theory = Theory(cfg, gain)
-    rho_r = cfg.waveform.range_resolution_m
+    if spot:
+        try:
+            theory = SpotTheory(cfg, json.loads(attrs["spotlight"]))
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from None
+    else:
+        theory = Theory(cfg, gain)
     centre_r = float(np.mean(rg))
     centre = theory.at(centre_r)
-    cell_px = (cfg.azimuth_resolution_m(centre_r) / abs(d_az), rho_r / abs(d_rg))
+    cell_px = tuple(c / abs(d) for c, d in zip(theory.cell_m(centre_r), (d_az, d_rg), strict=True))
     irw_px = (centre["irw_azimuth_m"] / abs(d_az), centre["irw_range_m"] / abs(d_rg))
     found = find_point_targets(
         image, cell_px, threshold_db, contrast_db, irw_px=irw_px, max_points=max_points
@@ -203,7 +260,7 @@ def measure_image(
             max(MIN_CHIP_PX, math.ceil(CHIP_IRW * th[key] / abs(d)))
             for key, d in (("irw_azimuth_m", d_az), ("irw_range_m", d_rg))
         )
-        rho_a = cfg.azimuth_resolution_m(r)
+        rho_a, rho_r = theory.cell_m(r)
         rep = analyse_point_target(
             image,
             az,
@@ -249,7 +306,13 @@ def measure_image(
             f"(±{CHIP_IRW:g} theoretical IRWs); null when none stands above {NO_SIDELOBE_DB:g} dB",
             "islr": f"2-D: energy within ±{ISLR_EXTENT_IRW:g} IRWs on both axes outside the "
             "null-to-null mainlobe rectangle, over the mainlobe's",
-            "azimuth_theory": "the correlator's response to a point: its windowed mask sliding "
+            "axes": "spotlight image [x, y]: along_track_m and the azimuth figures are cross-range "
+            "x, range_m and the range figures down-range y"
+            if spot
+            else "strip-map image [azimuth, range]",
+            "azimuth_theory": f"2π/Δkx of the inscribed rectangle, window {theory.windows[0]}"
+            if spot
+            else "the correlator's response to a point: its windowed mask sliding "
             "along the exact range history"
             + (
                 ", times the scene's antenna pattern"

@@ -26,7 +26,7 @@ from ..sinks.io import RecordingWriter, open_recording, replace_when_complete
 from ..sources.formats.cphd_reader import open_cphd
 from ..sources.formats.sigmf_reader import open_sigmf, sigmf_base
 from ..spot.backprojection import backproject
-from ..spot.geometry import cross_range_resolution_m, geometry_from_dict
+from ..spot.geometry import geometry_from_dict
 from ..spot.pfa import PfaSettings, PolarFormatPlan, ProgressivePolarFormat, polar_format
 from ..spot.scene import SpotScene
 from ..spot.simulate import BISTATIC_CHANNEL, SpotlightSimulator
@@ -119,19 +119,21 @@ def live_blocks(scene: SpotScene, channel: str, size: int) -> Iterator[np.ndarra
         yield main if channel == "main" else aux[channel]
 
 
-def declared_resolution_m(plan: PolarFormatPlan, sweep_rad: float) -> tuple[float, float]:
-    """(cross-range, range) -3 dB widths of an image over ``sweep_rad``: λ/(2Δθ) (Crouch
-    eq. 9.5) and c/(2B), each times its window's factor (rect 0.886)."""
-    s, cfg = plan.settings, plan.config
-    lam = cfg.geometry.wavelength_m
+def declared_resolution_m(plan: PolarFormatPlan, shots: int | None = None) -> tuple[float, float]:
+    """(cross-range, range) -3 dB widths of an image of the first ``shots`` shots (all: None):
+    each window's factor (rect 0.886) times the cell 2π/Δk of the inscribed rectangle the image
+    is formed from (rtsar.spot.pfa.PolarFormatPlan.cell_m; λ/2Δθ (Crouch eq. 9.5) and c/2B
+    for a narrow sweep and band)."""
+    s = plan.settings
+    cell_x, cell_y = plan.cell_m(shots)
     return (
-        impulse_response_width(s.azimuth_window) * cross_range_resolution_m(lam, sweep_rad),
-        impulse_response_width(s.range_window) * cfg.waveform.range_resolution_m,
+        impulse_response_width(s.azimuth_window) * cell_x,
+        impulse_response_width(s.range_window) * cell_y,
     )
 
 
 def image_header(plan: PolarFormatPlan, seq: int, shots: int, sweep: float, final: bool) -> dict:
-    cross, along = declared_resolution_m(plan, sweep) if sweep > 0 else (None, None)
+    cross, along = declared_resolution_m(plan, shots) if sweep > 0 else (None, None)
     return {
         "seq": seq,
         "shots": shots,
@@ -237,12 +239,12 @@ def timed(fn, *a, **k):
 
 def describe(plan: PolarFormatPlan) -> str:
     g, s = plan.geometry, plan.settings
-    rho_x, rho_y = declared_resolution_m(plan, g.sweep_rad)
+    rho_x, rho_y = declared_resolution_m(plan)
     w_x, w_y = (impulse_response_width(w) for w in (s.azimuth_window, s.range_window))
     return (
         f"{g.pulses} shots over {math.degrees(g.sweep_rad):.3f}°, channel {plan.channel}: "
-        f"ρx = {w_x:.3f}·λ/2Δθ = {1e6 * rho_x:.2f} µm, "
-        f"ρy = {w_y:.3f}·c/2B = {1e6 * rho_y:.2f} µm; "
+        f"ρx = {w_x:.3f}·2π/Δkx = {1e6 * rho_x:.2f} µm, "
+        f"ρy = {w_y:.3f}·2π/Δky = {1e6 * rho_y:.2f} µm (the inscribed rectangle); "
         f"image {len(plan.x_m)} x {len(plan.y_m)} px of {1e6 * plan.dx:.2f} x "
         f"{1e6 * plan.dy:.2f} µm"
     )

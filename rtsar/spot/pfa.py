@@ -174,6 +174,13 @@ class PolarFormatPlan:
         phase = np.mod(kx_c * xx + self.ky_centre * yy, 2 * math.pi)
         return np.asarray(values) * np.exp(-1j * phase)
 
+    def cell_m(self, shots: int | None = None) -> tuple[float, float]:
+        """(x, y) resolution cells 2π/Δk of the inscribed rectangle an image of the first
+        ``shots`` shots (all: None) is formed from: λ/(gΔφ) and c/(gB) as the sweep and band
+        narrow to it (at 5° and 3 THz around 193 THz the rectangle keeps 94 % of the band)."""
+        lo, hi = self.kx_limits(0, len(self.psi) if shots is None else max(2, int(shots)))
+        return 2 * math.pi / (hi - lo), 2 * math.pi / (self.ky_hi - self.ky_lo)
+
     def kx_limits(self, start: int, stop: int) -> tuple[float, float]:
         """k_x extent common to every k_y row for shots start…stop-1 (the inscribed rectangle)."""
         t0, t1 = self.tan_psi[start], self.tan_psi[stop - 1]

@@ -247,3 +247,31 @@ def test_cphd_band_declares_the_range_resolution_its_image_measures(tmp_path, na
     image, az, rg, _ = read_image(img)
     rep = analyse_point_target(image, az, rg, az[len(az) // 2], r0, chip=16)
     assert rep.range.irw_m == pytest.approx(declared, rel=IRW_TOLERANCE)
+
+
+@pytest.mark.parametrize("ss", [0.5, 1.7e-4, 3.0, 0.1, 6.797e-5])
+def test_deltak_lies_within_half_the_sampling_rate(ss):
+    """From a cold review: sal-demo's SICD failed sarpy's validity, DeltaK2 2941.0346273621067
+    > 1/(2 SS) 2941.034627356502: ImpRespBW was 1/SS, and bw/2 rounded past the bound.  Both
+    SICD relations hold: |DeltaK| <= 1/(2 SS), ImpRespBW <= DeltaK2 - DeltaK1."""
+    from rtsar.sinks.exports.resolution import Resolution
+    from rtsar.sinks.exports.sicd import _direction
+
+    bw = np.nextafter(1.0 / ss, np.inf)  # an image sampled at its bandwidth, rounded up
+    d = _direction(np.array([1.0, 0.0, 0.0]), ss, Resolution(bw, "rect", ()), 0.0)
+    assert -0.5 / ss <= d["DeltaK1"] < 0 < d["DeltaK2"] <= 0.5 / ss
+    assert d["ImpRespBW"] <= d["DeltaK2"] - d["DeltaK1"]
+    assert d["DeltaK2"] == pytest.approx(0.5 * bw, rel=1e-12)
+
+
+def test_sal_demo_sicd_is_valid_for_sarpy(tmp_path):
+    """The built-in scene the review saw fail (its Col is sampled at its bandwidth)."""
+    from sarpy.io.complex.converter import open_complex
+
+    from rtsar.app.cli import main
+
+    rec, img, out = tmp_path / "r.h5", tmp_path / "i.h5", tmp_path / "s.nitf"
+    assert main(["simulate", "sal-demo", "-o", str(rec)]) == 0
+    assert main(["process", str(rec), "-o", str(img), "--lens", "numpy"]) == 0
+    assert main(["export", str(img), "--sicd", str(out)]) == 0
+    assert open_complex(str(out)).get_sicds_as_tuple()[0].is_valid(recursive=True)

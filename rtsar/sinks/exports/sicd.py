@@ -207,15 +207,19 @@ def _direction(u, ss, res: Resolution, kctr) -> dict:
     bw = res.bandwidth_cycles_per_m
     if not (0 < bw < np.inf and 0 < ss < np.inf):
         raise ValueError(f"an impulse-response bandwidth of {bw:g} cycles/m: no SICD grid")
+    # SICD: ImpRespBW <= DeltaK2 - DeltaK1 and |DeltaK| <= 1/(2 SS) (sarpy checks both).  An
+    # image sampled at exactly its bandwidth has bw = 1/SS, and rounding may put bw/2 one ulp
+    # beyond the bound: the support is clipped to it (2 dk is exact, so ImpRespBW <= 2 dk).
+    dk = min(0.5 * bw, 0.5 / ss)
     return {
         "UVectECF": {"X": u[0], "Y": u[1], "Z": u[2]},
         "SS": ss,
         "ImpRespWid": res.irw_m,
         "Sgn": -1,
-        "ImpRespBW": bw,
+        "ImpRespBW": min(bw, 2.0 * dk),
         "KCtr": kctr,
-        "DeltaK1": -0.5 * bw,
-        "DeltaK2": 0.5 * bw,
+        "DeltaK1": -dk,
+        "DeltaK2": dk,
         "WgtType": {"WindowName": "UNIFORM" if res.window == "rect" else res.window.upper()},
         **({} if res.window == "rect" else {"WgtFunct": list(res.weights)}),
     }

@@ -21,6 +21,7 @@ from rtsar.sources.gr_tags import pmt_long, pmt_rx_time, pmt_symbol, tag_header
 from rtsar.sources.zmq_in import (
     COUNTERS,
     MAX_SEQ,
+    QUEUE_BYTES,
     ZmqSource,
     default_max_message_bytes,
 )
@@ -174,26 +175,75 @@ def test_decoder_fuzz_100k_messages_raises_nothing_and_holds_one_shot_at_most():
 def test_targeted_messages_are_counted_by_kind():
     src = _source()
     msgs = _targeted()
-    for m in msgs:
+    for m in msgs[:3]:
         assert src.decode(m) == []
+    # A bad tag changes nothing: the body is still read as the stream's layout (vector items).
+    assert [len(src.decode(m)) for m in msgs[3:]] == [1, 1, 1, 1]
     c = src.counters
     assert c["bad_offsets"] == 2  # offsets 2^63 and 2^64 - 1
     assert c["bad_messages"] == 1  # the dict keyed by a dict
     assert c["bad_packet_len"] == 2  # 2^40 and -1
     assert c["bad_tags"] == 2  # packet_len True, rx_time a long
-    # A packet_len of 2^40 followed by a long stream holds nothing: its items are skipped.
+    # In a flat stream, a packet_len of 2^40 followed by a long stream holds nothing: its items
+    # are skipped.
     src = _source()
-    big = tag_header(0, [(0, pmt_symbol("packet_len"), pmt_long(1 << 40))])
+    for a in (0, S):  # two packets: the stream is flat
+        good = tag_header(a, [(a, pmt_symbol("packet_len"), pmt_long(S))])
+        assert len(src.decode(good + np.ones(S, np.complex64).tobytes())) == 1
+    big = tag_header(2 * S, [(2 * S, pmt_symbol("packet_len"), pmt_long(1 << 40))])
     src.decode(big + np.zeros(S, np.complex64).tobytes())
-    a, chunk = S, np.zeros(4096, np.complex64).tobytes()
+    a, chunk = 3 * S, np.zeros(4096, np.complex64).tobytes()
     for _ in range(200):  # 800 k items of the packet, contiguous
         assert src.decode(tag_header(a, []) + chunk) == []
         a += 4096
-    assert src._packet["parts"] is None and src._packet["have"] == a
+    assert src._packet["parts"] is None and src._packet["have"] == a - 2 * S
     assert src.counters["bad_packet_len"] == 1 and src.counters["partial_samples"] == 0
     # The next packet_len tag of the right length starts shots again.
     good = tag_header(a, [(a, pmt_symbol("packet_len"), pmt_long(S))])
     assert len(src.decode(good + np.ones(S, np.complex64).tobytes())) == 1
+
+
+def _vector(seq: int, n: int = 2) -> bytes:
+    return tag_header(seq, []) + np.full(n * S, seq, np.complex64).tobytes()
+
+
+@pytest.mark.parametrize("length", [-1, 1 << 40, True, S, S + 3])
+def test_one_packet_len_tag_does_not_change_how_a_vector_stream_is_read(length):
+    """From a cold review: one message with a packet_len tag, even a refused one, switched the
+    decoder to a flat stream for good; every later vector message was thrown away (300 pulses
+    sent, 50 processed).  Now one message, refused or not, is read alone and changes nothing."""
+    src = _source()
+    value = b"\x00" if length is True else pmt_long(length)
+    got = []
+    for i in range(20):
+        if i == 10:
+            hostile = tag_header(2 * i, [(2 * i, pmt_symbol("packet_len"), value)])
+            got += src.decode(hostile + np.zeros(2 * S, np.complex64).tobytes())
+        got += src.decode(_vector(2 * i))
+    seqs = sorted({s for s, _, _ in got})
+    assert set(range(40)) <= set(seqs)
+    assert src._flat is False and src.counters["layout_changes"] == 0
+
+
+def test_the_layout_changes_only_on_consistent_evidence():
+    """A flat stream keeps its layout through a message of whole shots (or a lost message);
+    a flowgraph restarted with vector items is read as vector items after three messages, and
+    the change is counted."""
+    src = _source()
+    out, a = [], 0
+    for _ in range(6):  # packets of S in messages of 3 S / 2 items
+        n = 3 * S // 2
+        tags = [(p, pmt_symbol("packet_len"), pmt_long(S)) for p in range(a, a + n) if p % S == 0]
+        out += src.decode(tag_header(a, tags) + np.ones(n, np.complex64).tobytes())
+        a += n
+        if a == 3 * n:  # a stray message of whole shots
+            assert src.decode(_vector(5)) == []
+    assert src._flat is True and len(out) == 8
+    vec = [src.decode(_vector(2 * i)) for i in range(6)]
+    # The first follows no message in shots (no evidence: read as the flat stream); each
+    # later one is evidence and read as vector items; the third in a row sets the layout.
+    assert [len(v) for v in vec] == [0, 2, 2, 2, 2, 2]
+    assert src._flat is False and src.counters["layout_changes"] == 1
 
 
 def test_one_message_leaves_in_batches_of_the_configured_size():
@@ -205,8 +255,8 @@ def test_one_message_leaves_in_batches_of_the_configured_size():
 
 def test_a_message_over_the_receive_limit_is_refused_counted_and_the_stream_goes_on():
     """The socket's receive limit (from the shot size) refuses a message of 4 MiB without
-    holding it; ZeroMQ drops that connection, counted in link_drops, and reconnects: the
-    shots sent after it arrive."""
+    holding it; ZeroMQ drops that connection, counted in oversized_messages, and rtsar
+    reconnects: the shots sent after it arrive."""
     limit = default_max_message_bytes(S)
     assert limit == (1 << 20) + 256 * S * 8
     ctx = zmq.Context()
@@ -239,8 +289,62 @@ def test_a_message_over_the_receive_limit_is_refused_counted_and_the_stream_goes
     pub.close(0)
     ctx.term()
     assert list(seq) == [0, 1, 7]
-    assert src.counters["link_drops"] >= 1 and "limit" in said[0]
+    # Counted by kind: a refused message, not a lost link (both were link_drops before).
+    assert src.counters["oversized_messages"] == 1 and "limit" in said[0]
+    assert src.counters["link_drops"] == 0
     assert src.counters["messages"] == 2  # the big one never reached the decoder
+
+
+def test_zeromq_queues_a_bounded_number_of_bytes_and_the_loss_shows_as_gaps():
+    """From a cold review: the SUB socket kept ZeroMQ's default queue of 1000 messages (4.7 GB
+    at psaltis-max's message limit; a flood took a run from 339 MB to 2.27 GB).  The queue is now
+    QUEUE_BYTES // the message limit: a stalled subscriber holds that much, the sink drops the
+    rest at its own limit, and the tagged shots that arrive say how many were lost."""
+    big = ZmqSource("tcp://127.0.0.1:1", 1800, 1e6, 1e3)
+    assert 50 <= big.queue_messages <= QUEUE_BYTES // default_max_message_bytes(1800)
+    shots, n_messages, s_big = 32, 60, 4096  # messages of 1 MiB, limit 9.4 MB, a queue of 3
+    limit = default_max_message_bytes(s_big)
+    ctx = zmq.Context()
+    pub = ctx.socket(zmq.XPUB)
+    pub.setsockopt(zmq.SNDHWM, 2)  # a sink that drops what its subscriber does not take
+    port = pub.bind_to_random_port("tcp://127.0.0.1")
+    src = ZmqSource(
+        f"tcp://127.0.0.1:{port}",
+        s_big,
+        1e6,
+        1e3,
+        idle_timeout_s=1.0,
+        context=ctx,
+        queue_bytes=3 * limit,
+    )
+    assert src.queue_messages == 3
+    body = np.zeros(shots * s_big, np.complex64).tobytes()
+    resumed = threading.Event()
+
+    def send():
+        pub.recv()  # subscribed
+        for i in range(n_messages):
+            pub.send(tag_header(i * shots, []) + body)
+            time.sleep(0.02)
+        resumed.wait(10)
+        time.sleep(0.3)
+        pub.send(tag_header(n_messages * shots, []) + body)
+
+    t = threading.Thread(target=send, daemon=True)
+    t.start()
+    seqs = []
+    for b in src:
+        if not seqs:
+            time.sleep(2.0)  # stalled while the flowgraph sends the rest
+            resumed.set()
+        seqs += list(b.seq)
+    t.join(5)
+    pub.close(0)
+    ctx.term()
+    sent = (n_messages + 1) * shots
+    assert seqs == sorted(seqs) and seqs[-1] == sent - 1  # the last one arrives
+    assert len(seqs) // shots < 30  # of 61: ZeroMQ's queues, the sockets' buffers, no more
+    assert sent - len(seqs) == (seqs[-1] + 1) - len(set(seqs))  # what was lost is a gap
 
 
 @pytest.mark.parametrize("name", COUNTERS)

@@ -61,6 +61,8 @@ _LABELS = {
     "truncated_frames": "cut frames",
     "bytes_skipped": "bytes skipped",
     "link_drops": "link lost",
+    "oversized_messages": "oversized messages refused",
+    "layout_changes": "stream layout changes",
     "reconnects": "reconnected",
     "late_releases": "late releases",
     "subscriber_stalls": "stalled subscribers cut off",

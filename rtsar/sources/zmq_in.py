@@ -20,8 +20,14 @@ come and timed by arrival.
 No message can end the run, and what one costs is bounded, whatever arrives:
 
 * the socket refuses a message over ``max_message_bytes`` (default: a tag-header allowance of
-  MAX_HEADER_BYTES plus MESSAGE_SHOTS shots; ZeroMQ then drops that connection and connects
-  again, counted in ``link_drops``);
+  MAX_HEADER_BYTES plus MESSAGE_SHOTS shots; ZeroMQ then drops that connection, rtsar connects
+  again, counted in ``oversized_messages``; a connection lost otherwise is a ``link_drops``);
+* ZeroMQ queues at most QUEUE_BYTES of messages unread (RCVHWM = QUEUE_BYTES // the message
+  limit, not its default of 1000 messages); a subscriber that falls behind loses messages
+  there, silently on ZeroMQ's side: tagged shots come numbered, so ingest counts the loss as
+  gap-filled pulses; untagged shots (numbered as they come) cannot tell;
+* the layout (vector items or a flat stream) is set by consistent evidence, never by one
+  message (``ZmqSource._layout``): a refused ``packet_len`` tag is no evidence at all;
 * a flat stream's unfinished shot holds at most S samples: a packet of another length is
   counted (``wrong_length``) and its samples skipped, never held; a ``packet_len`` beyond
   MAX_PACKET_SAMPLES (rtsar.params.MAX_SAMPLES_PER_SHOT) or below 1 is refused
@@ -41,6 +47,7 @@ from collections.abc import Iterator
 
 import numpy as np
 import zmq
+import zmq.utils.monitor
 
 from ..params import MAX_SAMPLES_PER_SHOT
 from .base import ShotBatch, Source
@@ -54,7 +61,9 @@ COUNTERS = (
     "wrong_length",  # messages (vector items) or packets of another length than a shot
     "bad_packet_len",  # packet_len < 1 or > MAX_PACKET_SAMPLES: refused, its samples skipped
     "partial_samples",  # samples of packets cut short, or outside any packet
-    "link_drops",  # the connection dropped (a message over the size limit, a restart)
+    "oversized_messages",  # a message over max_message_bytes: refused, ZeroMQ dropped the link
+    "link_drops",  # the connection dropped otherwise (the flowgraph stopped or restarted)
+    "layout_changes",  # the stream's layout (vector items / flat) changed on consistent evidence
     "decoder_errors",  # a message the decoder failed on (a bug: never expected)
 )
 MAX_SEQ = (1 << 63) - 1  # shot numbers travel as int64
@@ -62,6 +71,10 @@ MAX_PACKET_SAMPLES = MAX_SAMPLES_PER_SHOT
 MAX_HEADER_BYTES = 1 << 20  # tag headers: GNU Radio's carry a few tags of tens of bytes
 MESSAGE_SHOTS = 256  # shots one message may carry (GNU Radio sends a work call's buffer)
 BATCH_SHOTS = 64
+QUEUE_BYTES = 256 << 20  # what ZeroMQ may queue for us: RCVHWM = QUEUE_BYTES // message limit
+FLAT_EVIDENCE = 2  # messages with a valid packet_len tag that make the stream flat
+VECTOR_EVIDENCE = 3  # messages in a row of whole shots numbered in shots that make it vector
+RETRY_WAIT_S = 0.25  # after a drop: how long ZeroMQ has to say it reconnects by itself
 
 
 def default_max_message_bytes(samples_per_shot: int) -> int:
@@ -75,8 +88,8 @@ class ZmqSource(Source):
     ``item_rate_hz``: samples per second of a flat stream (the shot's sample rate), used with
     ``shot_rate_hz`` (the PRF, for vector items) to time shots after an ``rx_time`` tag.
     ``max_message_bytes`` (None: :func:`default_max_message_bytes`) and ``batch_shots`` bound
-    what one message costs.  Iteration ends on ``close()`` or after ``idle_timeout_s`` without a
-    message.
+    what one message costs, ``queue_bytes`` what ZeroMQ queues unread.  Iteration ends on
+    ``close()`` or after ``idle_timeout_s`` without a message.
     """
 
     live = True
@@ -93,6 +106,7 @@ class ZmqSource(Source):
         context: zmq.Context | None = None,
         max_message_bytes: int | None = None,
         batch_shots: int = BATCH_SHOTS,
+        queue_bytes: int = QUEUE_BYTES,
     ):
         super().__init__()
         self.endpoint = endpoint
@@ -102,6 +116,8 @@ class ZmqSource(Source):
         self.poll_s = poll_s
         self.max_message_bytes = int(max_message_bytes or default_max_message_bytes(self.samples))
         self.batch_shots = max(1, int(batch_shots))
+        # ZeroMQ queues whole messages (RCVHWM, default 1000): at most queue_bytes of them.
+        self.queue_messages = max(2, int(queue_bytes) // self.max_message_bytes)
         self.description = f"GNU Radio ZMQ stream {endpoint}"
         self.counters = {name: 0 for name in COUNTERS}
         self._ctx = context or zmq.Context.instance()
@@ -110,7 +126,10 @@ class ZmqSource(Source):
         self._packet: dict | None = None  # {"start", "length", "seq", "have", "parts"}
         self._last_start: tuple[int, int] | None = None  # (item offset, seq) of the last packet
         self._period: int | None = None  # items from one packet start to the next
-        self._flat = False  # a packet_len tag was seen: a flat stream sliced by tags
+        self._flat: bool | None = None  # the layout consistent evidence set (None: not yet)
+        self._flat_votes = 0  # messages with a valid packet_len tag, no vector evidence between
+        self._vector_run = 0  # vector evidence, messages in a row
+        self._prev: tuple[int, int] | None = None  # (item offset, items) of the last message
         self._clock: tuple[int, float, bool] | None = None  # (item offset, rx_time, flat?)
         self.stop_reason = ""
 
@@ -127,6 +146,50 @@ class ZmqSource(Source):
         if clock_flat != flat:  # a clock from the other layout: items differ
             return float("nan")
         return t + (offset - at) / rate
+
+    def _layout(self, offset: int | None, n_items: int, valid_packet_len: bool) -> bool:
+        """Whether this message is cut as a flat stream (True) or read as vector items.
+
+        Evidence, per message: *vector* when it is a whole number of shots and either has no
+        tag header or its item offset follows the previous message's in shots (offset + shots,
+        where a flat stream's follows in items); *flat* when it carries a ``packet_len`` tag of
+        a valid length.  A refused tag is no evidence.  The stream's layout is set by
+        FLAT_EVIDENCE flat messages without vector evidence between them, or VECTOR_EVIDENCE
+        vector messages in a row, so no single message can change how the stream is read
+        (``layout_changes`` counts the changes).  A message with evidence is read as it says;
+        one without, by the stream's layout (before there is one: flat when it continues a
+        packet left open, else vector items).
+        """
+        vector = n_items > 0 and n_items % self.samples == 0
+        if offset is not None:
+            prev, self._prev = self._prev, (offset, n_items)
+            by_items = prev is not None and offset == prev[0] + prev[1]
+            by_shots = prev is not None and offset == prev[0] + prev[1] // self.samples
+            vector = vector and by_shots and not by_items
+        evidence = "vector" if vector else "flat" if valid_packet_len else None
+        if evidence == "vector":
+            self._vector_run, self._flat_votes = self._vector_run + 1, 0
+            if self._vector_run >= VECTOR_EVIDENCE:
+                self._set_layout(False)
+        elif evidence == "flat":
+            self._vector_run, self._flat_votes = 0, self._flat_votes + 1
+            if self._flat_votes >= FLAT_EVIDENCE:
+                self._set_layout(True)
+        if evidence is not None:
+            return evidence == "flat"
+        if self._flat is not None:
+            return self._flat
+        p = self._packet
+        return p is not None and offset is not None and offset == p["start"] + p["have"]
+
+    def _set_layout(self, flat: bool) -> None:
+        if self._flat is not None and self._flat != flat:
+            self.counters["layout_changes"] += 1
+            self._say(
+                f"the stream from {self.endpoint} now reads as "
+                + ("a flat stream cut by packet_len tags" if flat else "vector items")
+            )
+        self._flat = flat
 
     def decode(self, payload: bytes) -> list[tuple[int, float, np.ndarray]]:
         """(seq, instrument time, samples) of the shots one message completes; a message that
@@ -148,19 +211,21 @@ class ZmqSource(Source):
             return []
         items = np.frombuffer(body, "<c8")
         packet = [t for t in tags if t.key == "packet_len"]
-        good = [t for t in packet if isinstance(t.value, int) and not isinstance(t.value, bool)]
-        self.counters["bad_tags"] += len(packet) - len(good)
-        self._flat = self._flat or bool(good)
+        typed = [t for t in packet if isinstance(t.value, int) and not isinstance(t.value, bool)]
+        valid = [t for t in typed if 1 <= t.value <= MAX_PACKET_SAMPLES]
+        self.counters["bad_tags"] += len(packet) - len(typed)
+        self.counters["bad_packet_len"] += len(typed) - len(valid)
+        flat = self._layout(offset, len(items), bool(valid))
         for t in tags:
             if t.key == "rx_time":
                 seconds = rx_time_s(t.value)
                 if seconds is None or not math.isfinite(seconds):
                     self.counters["bad_tags"] += 1
                 else:
-                    self._clock = (t.offset, seconds, self._flat)
-        packet = good
-        if self._flat:
-            return self._slice(offset or 0, items, packet)
+                    self._clock = (t.offset, seconds, flat)
+        if flat:
+            return self._slice(offset or 0, items, typed)
+        self._cut()  # vector items: a packet left open cannot go on through them
         if len(items) % self.samples:
             self.counters["wrong_length"] += 1
             return []
@@ -188,9 +253,7 @@ class ZmqSource(Source):
     def _start_packet(self, offset: int, length: int) -> None:
         """A packet_len tag at ``offset``: the packet before it, unfinished, is cut short."""
         self._cut()
-        if not 1 <= length <= MAX_PACKET_SAMPLES:
-            self.counters["bad_packet_len"] += 1
-        elif length != self.samples:
+        if 1 <= length <= MAX_PACKET_SAMPLES and length != self.samples:  # refused: counted
             self.counters["wrong_length"] += 1
         seq = self._packet_seq(offset)
         keep = length == self.samples and seq <= MAX_SEQ
@@ -262,7 +325,8 @@ class ZmqSource(Source):
         sock.setsockopt(zmq.SUBSCRIBE, b"")
         sock.setsockopt(zmq.LINGER, 0)
         sock.setsockopt(zmq.MAXMSGSIZE, self.max_message_bytes)
-        monitor = sock.get_monitor_socket(zmq.EVENT_DISCONNECTED)
+        sock.setsockopt(zmq.RCVHWM, self.queue_messages)
+        monitor = sock.get_monitor_socket(zmq.EVENT_DISCONNECTED | zmq.EVENT_CONNECT_RETRIED)
         poller = zmq.Poller()
         poller.register(sock, zmq.POLLIN)
         poller.register(monitor, zmq.POLLIN)
@@ -273,7 +337,7 @@ class ZmqSource(Source):
                 ready = dict(poller.poll(int(self.poll_s * 1000)))
                 if monitor in ready and self._link_dropped(monitor):
                     # ZeroMQ does not reconnect after a protocol error (a message over the
-                    # limit): connect again here (after any drop: no harm where it would).
+                    # limit): connect again here.
                     try:
                         sock.disconnect(self.endpoint)
                     except zmq.ZMQError:  # the endpoint's session is already gone
@@ -295,16 +359,30 @@ class ZmqSource(Source):
             monitor.close()
             sock.close()
 
-    def _link_dropped(self, monitor) -> int:
-        """Count the disconnections the monitor reports; how many there were."""
-        drops = 0
+    def _link_dropped(self, monitor) -> bool:
+        """Count the disconnections the monitor reports, by kind; whether one was a refused
+        message.  ZeroMQ reconnects by itself after a connection is lost (it reports a retry
+        at once) but not after a protocol error, which a message over MAXMSGSIZE is."""
+        refused = False
         while monitor.poll(0):
-            monitor.recv_multipart()
-            drops += 1
-            self.counters["link_drops"] += 1
+            event = zmq.utils.monitor.parse_monitor_message(monitor.recv_multipart())["event"]
+            if event != zmq.EVENT_DISCONNECTED:
+                continue
             self._cut()
-            self._say(
-                f"the connection to {self.endpoint} dropped (a message over the "
-                f"{self.max_message_bytes:,}-byte limit, or the flowgraph stopped); reconnecting"
-            )
-        return drops
+            retried = False
+            while monitor.poll(int(RETRY_WAIT_S * 1000)):
+                kind = zmq.utils.monitor.parse_monitor_message(monitor.recv_multipart())
+                if kind["event"] == zmq.EVENT_CONNECT_RETRIED:
+                    retried = True
+                    break
+            if retried:
+                self.counters["link_drops"] += 1
+                self._say(f"the connection to {self.endpoint} dropped (the flowgraph stopped?)")
+            else:
+                refused = True
+                self.counters["oversized_messages"] += 1
+                self._say(
+                    f"a message from {self.endpoint} over the {self.max_message_bytes:,}-byte "
+                    "limit was refused (ZeroMQ drops the connection); reconnecting"
+                )
+        return refused

@@ -79,6 +79,7 @@ PVP_LAYOUT = [
 ]
 ADDED_PVP = ("rtsar_pulse_index", 1, "I8")
 TX_WAVEFORM, RECEIVER = "rtsar-chirp", "rtsar-receiver"  # TxRcv identifiers
+TOA_ROUNDING = 1e-9  # SRP-delay spreads below this fraction of the TOA window: rounding
 
 
 def _pvps(rec, ch: ExportChannel, frame: LocalFrame, dtype, dtau: np.ndarray) -> np.ndarray:
@@ -100,11 +101,30 @@ def _pvps(rec, ch: ExportChannel, frame: LocalFrame, dtype, dtau: np.ndarray) ->
     afrr2 = 2.0 / (C_M_PER_S * wf.chirp_rate_hz_per_s)
     pv["aFRR2"], pv["aFRR1"] = afrr2, m.fxc_hz * afrr2
     pv["FX1"], pv["FX2"] = m.fx1_hz, m.fx2_hz
-    pv["TOA1"], pv["TOA2"] = m.toa1_s - dtau, m.toa2_s - dtau  # the range window, per vector
+    pv["TOA1"], pv["TOA2"] = toa_window_s(m, dtau)  # the range window, per vector
     pv["TDTropoSRP"] = 0.0
     pv["SC0"], pv["SCSS"] = m.sc0_hz, m.scss_hz
     pv[ADDED_PVP[0]] = np.asarray(rec.pulse_index, np.int64)
     return pv
+
+
+def toa_window_s(m, dtau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(TOA1, TOA2) per vector: the processor's range window relative to each vector's SRP
+    delay (τ_c + ``dtau``).  A strip map's SRP keeps its range, so ``dtau`` is 0 but for the
+    rounding of ECF positions (~1e-17 s); a spread below TOA_ROUNDING of the window is written
+    as the reference vector's exact value, so TOA1/TOA2 are exactly constant (TOAFixed) where
+    they are meant to be; the signal's phase still uses each vector's own ``dtau``."""
+    dtau = np.asarray(dtau, np.float64)
+    if dtau.size and np.ptp(dtau) <= TOA_ROUNDING * (m.toa2_s - m.toa1_s):
+        dtau = np.full(dtau.shape, dtau[dtau.size // 2])
+    return m.toa1_s - dtau, m.toa2_s - dtau
+
+
+def _fixed(arrays) -> bool:
+    """Whether every row of every array equals the first array's first row (exact equality:
+    what CPHD's *Fixed flags declare and the consistency checkers test)."""
+    first = np.asarray(arrays[0])[0]
+    return all(bool(np.all(np.asarray(a) == first)) for a in arrays)
 
 
 def tx_rcv(cfg) -> dict:
@@ -160,9 +180,11 @@ def build_xml(rec, chans, scene: dict, dwell, mode: str, frame, core_name: str, 
         "ReleaseInfo": "UNRESTRICTED",
     }
     # per vector: the SRP's delay varies
-    spans = [
-        (c.mapping.toa1_s - d, c.mapping.toa2_s - d) for c, d in zip(chans, dtaus, strict=True)
-    ]
+    spans = [toa_window_s(c.mapping, d) for c, d in zip(chans, dtaus, strict=True)]
+    # Each *Fixed flag from the values written (exact equality), per channel and for the file.
+    srps = [np.broadcast_to(frame.to_ecf(c.srp_m), (rec.pulses, 3)) for c in chans]
+    fxs = [np.array([[c.mapping.fx1_hz, c.mapping.fx2_hz]]) for c in chans]
+    toas = [np.stack(span, axis=-1) for span in spans]
     tau_span = (min(float(a.min()) for a, _ in spans), max(float(b.max()) for _, b in spans))
     fx_lo = min(c.mapping.fx1_hz for c in chans)
     fx_hi = max(c.mapping.fx2_hz for c in chans)
@@ -199,16 +221,16 @@ def build_xml(rec, chans, scene: dict, dwell, mode: str, frame, core_name: str, 
     }
     ew["Channel"] = {
         "RefChId": chans[0].identifier,
-        "FXFixedCPHD": len({(c.mapping.fx1_hz, c.mapping.fx2_hz) for c in chans}) == 1,
-        "TOAFixedCPHD": rec.pulses == 1,
-        "SRPFixedCPHD": all(c.srp_fixed for c in chans),
+        "FXFixedCPHD": _fixed(fxs),
+        "TOAFixedCPHD": _fixed(toas),
+        "SRPFixedCPHD": _fixed(srps),
         "Parameters": [
             {
                 "Identifier": c.identifier,
                 "RefVectorIndex": rec.pulses // 2,
-                "FXFixed": True,
-                "TOAFixed": rec.pulses == 1,
-                "SRPFixed": c.srp_fixed,
+                "FXFixed": True,  # FX1/FX2: the chirp band, the same for every vector
+                "TOAFixed": _fixed([toa]),
+                "SRPFixed": _fixed([srp]),
                 "Polarization": {"TxPol": "UNSPECIFIED", "RcvPol": "UNSPECIFIED"},
                 "FxC": c.mapping.fxc_hz,
                 "FxBW": c.mapping.fx2_hz - c.mapping.fx1_hz,
@@ -216,7 +238,7 @@ def build_xml(rec, chans, scene: dict, dwell, mode: str, frame, core_name: str, 
                 "DwellTimes": {"CODId": "cod", "DwellId": "dwell"},
                 "TxRcv": {"TxWFId": [TX_WAVEFORM], "RcvId": [RECEIVER]},
             }
-            for c, (a, b) in zip(chans, spans, strict=True)
+            for c, (a, b), toa, srp in zip(chans, spans, toas, srps, strict=True)
         ],
     }
     offset, pvp = 0, {}

@@ -79,10 +79,6 @@ class ExportChannel:
     srp_m: np.ndarray  # [3] (fixed: a spotlight) or [pulse, 3] (following a strip map)
     reference_range_m: float | None  # the channel's LO delay as a one-way range (FMCW)
 
-    @property
-    def srp_fixed(self) -> bool:
-        return np.ndim(self.srp_m) == 1
-
     def dtau_s(self, frame: LocalFrame) -> np.ndarray:
         """Each vector's SRP delay minus τ_c, from the ECF positions the PVPs will hold."""
         pv = {

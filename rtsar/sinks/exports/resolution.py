@@ -11,38 +11,69 @@ Both follow from the processor that made the image, not from the instrument's an
   2x/(λR) spans 2Nd/(λR) over the aperture: the width is 0.886·λR/(2Nd) (Crouch eq. 4.8 with the
   synthetic aperture L = Nd), whatever the antenna's footprint λR/D.
 
-A window weights the band and widens the response by its own factor
-(rtsar.windows.impulse_response_width, computed from the taper itself).
+A window weights the band and widens the response.  The weighting is described as it is
+applied, a sequence of equal cells across the band (what SICD's WgtFunct holds and what its
+readers derive the width from): the azimuth mask's N taps (rtsar.ccd.base: window(name, N), a
+Hann's first and last 0), an FMCW range window's S beat samples (rtsar.lens.plan), a pulsed
+chirp's spectral taper sampled at the centres of WEIGHT_CELLS cells (it is continuous over the
+band).  A sequence longer than MAX_WEIGHTS (SICD readers warn) is resampled at WEIGHT_CELLS
+cell centres, where it differs from the taper by less than 1e-4 of the width.  The declared
+width is the one of that sequence (rtsar.windows.band_response_width), but for the windows
+SICD readers size by name alone (NAMED_WIDTH: UNIFORM, HAMMING with coefficient 0.54, whatever
+WgtFunct holds): there it is the continuous window's, which a 64-tap Hamming mask (tiny's N)
+exceeds by 1.0 % (above 256 taps by < 0.3 %).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ...params import C_M_PER_S, Config
-from ...windows import impulse_response_width
+import numpy as np
+
+from ...params import C_M_PER_S, Config, FMCWChirp
+from ...windows import band_response_width, impulse_response_width, window, window_at
+
+WEIGHT_CELLS = 512  # SICD's recommended WgtFunct length
+MAX_WEIGHTS = 1024  # longer: SICD readers warn; resampled to WEIGHT_CELLS
+NAMED_WIDTH = ("rect", "hamming")  # sized by SICD readers from the window's name
+
+
+def band_weights(name: str, taps: int | None = None) -> tuple[float, ...]:
+    """The weighting of window ``name`` across the band: its ``taps`` samples as applied, or
+    (None, or more than MAX_WEIGHTS) the taper at WEIGHT_CELLS cell centres."""
+    if taps is not None and taps <= MAX_WEIGHTS:
+        return tuple(float(v) for v in window(name, taps))
+    u = (np.arange(WEIGHT_CELLS) + 0.5) / WEIGHT_CELLS
+    return tuple(float(v) for v in window_at(name, u))
 
 
 @dataclass(frozen=True)
 class Resolution:
-    """One image axis: its spatial-frequency support and the window over it."""
+    """One image axis: its spatial-frequency support and the weighting over it."""
 
     bandwidth_cycles_per_m: float
     window: str
+    weights: tuple[float, ...]  # the band's weighting as applied (band_weights)
 
     @property
     def irw_m(self) -> float:
-        """-3 dB impulse-response width (m)."""
-        return impulse_response_width(self.window) / self.bandwidth_cycles_per_m
+        """-3 dB impulse-response width (m) of the weighted band."""
+        if self.window in NAMED_WIDTH:
+            return impulse_response_width(self.window) / self.bandwidth_cycles_per_m
+        return band_response_width(self.weights) / self.bandwidth_cycles_per_m
 
 
 def range_resolution(cfg: Config) -> Resolution:
     """The range (SICD Row) axis: support 2B/c, the processor's range window."""
-    return Resolution(2.0 * cfg.waveform.bandwidth_hz / C_M_PER_S, cfg.processor.range_window)
+    name = cfg.processor.range_window
+    taps = cfg.waveform.samples_per_shot if isinstance(cfg.waveform, FMCWChirp) else None
+    bw = 2.0 * cfg.waveform.bandwidth_hz / C_M_PER_S
+    return Resolution(bw, name, band_weights(name, taps))
 
 
 def azimuth_resolution(cfg: Config, range_m: float) -> Resolution:
     """The azimuth (SICD Col) axis at closest-approach range ``range_m``: support 2Nd/(λR)."""
     g, p = cfg.geometry, cfg.processor
     aperture_m = p.aperture_pulses * g.along_track_step_m
-    return Resolution(2.0 * aperture_m / (g.wavelength_m * range_m), p.azimuth_window)
+    bw = 2.0 * aperture_m / (g.wavelength_m * range_m)
+    return Resolution(bw, p.azimuth_window, band_weights(p.azimuth_window, p.aperture_pulses))

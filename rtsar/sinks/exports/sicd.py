@@ -6,17 +6,17 @@ The mapping: SICD rows are slant range, columns along track (Grid/Type RGZERO, I
 SLANT), so the pixel array is ``image.T`` (complex64, RE32F_IM32F); Row/SS the range bin
 spacing, Col/SS the line spacing; the impulse responses are the processor's
 (rtsar.sinks.exports.resolution): bandwidths 2B/c (range) and 2Nd/(λR) (azimuth: the CCD's
-aperture of N pulses, Crouch eq. 4.8), widened by the configuration's windows, which are
-named and tabulated (WgtFunct); the scene centre pixel is the SCP, the whole image is valid
-data (ImageData/ValidData) and its footprint on the ground the collection area
-(RadarCollection/Area).  Geometry: rtsar's straight track in its local frame placed on WGS-84 as in
-rtsar.sources.formats.geometry (ARPPoly linear in time; a slant-plane image gets the default
-platform height), Timeline with one IPP set at the PRF, ImageFormation (range-Doppler RMA, INCA:
-closest approach at the column's along-track position), RadarCollection (carrier, chirp, and
-the receiver: a pulsed radar's is CHIRP demodulation (RcvFMRate 0), an FMCW dechirp STRETCH
-(RcvFMRate the chirp rate); window length and sample rate).  Timeline/CollectStart is the
-image's ``collection_start_utc`` (the recording's), else an arbitrary epoch, 2000-01-01.
-Polarisation is UNKNOWN (rtsar does not model it).
+aperture of N pulses, Crouch eq. 4.8), widened by the configuration's windows, which are named
+and tabulated as applied (WgtFunct, the width derived from it); the scene centre pixel is the
+SCP, the whole image is valid data (ImageData/ValidData) and its footprint on the ground the
+collection area (RadarCollection/Area).  Geometry: rtsar's straight track in its local frame
+placed on WGS-84 as in rtsar.sources.formats.geometry (ARPPoly linear in time; a slant-plane
+image gets the default platform height), Timeline with one IPP set at the PRF, ImageFormation
+(range-Doppler RMA, INCA: closest approach at the column's along-track position),
+RadarCollection (carrier, chirp, and the receiver: a pulsed radar's is CHIRP demodulation
+(RcvFMRate 0), an FMCW dechirp STRETCH (RcvFMRate the chirp rate); window length and sample
+rate).  Timeline/CollectStart is the image's ``collection_start_utc`` (the recording's), else an
+arbitrary epoch, 2000-01-01.  Polarisation is UNKNOWN (rtsar does not model it).
 """
 
 from __future__ import annotations
@@ -33,7 +33,6 @@ from ...params import C_M_PER_S, config_from_dict
 from ...sources.formats.geometry import LocalFrame, platform_height_m
 from ...sources.formats.requirements import require_formats
 from ...sources.formats.timebase import UNKNOWN_EPOCH, parse_utc
-from ...windows import window as taper
 from ..image_file import read_image
 from ..io import replace_when_complete
 from .resolution import Resolution, azimuth_resolution, range_resolution
@@ -208,17 +207,21 @@ def _direction(u, ss, res: Resolution, kctr) -> dict:
     bw = res.bandwidth_cycles_per_m
     if not (0 < bw < np.inf and 0 < ss < np.inf):
         raise ValueError(f"an impulse-response bandwidth of {bw:g} cycles/m: no SICD grid")
+    # SICD: ImpRespBW <= DeltaK2 - DeltaK1 and |DeltaK| <= 1/(2 SS) (sarpy checks both).  An
+    # image sampled at exactly its bandwidth has bw = 1/SS, and rounding may put bw/2 one ulp
+    # beyond the bound: the support is clipped to it (2 dk is exact, so ImpRespBW <= 2 dk).
+    dk = min(0.5 * bw, 0.5 / ss)
     return {
         "UVectECF": {"X": u[0], "Y": u[1], "Z": u[2]},
         "SS": ss,
         "ImpRespWid": res.irw_m,
         "Sgn": -1,
-        "ImpRespBW": bw,
+        "ImpRespBW": min(bw, 2.0 * dk),
         "KCtr": kctr,
-        "DeltaK1": -0.5 * bw,
-        "DeltaK2": 0.5 * bw,
+        "DeltaK1": -dk,
+        "DeltaK2": dk,
         "WgtType": {"WindowName": "UNIFORM" if res.window == "rect" else res.window.upper()},
-        **({} if res.window == "rect" else {"WgtFunct": [float(v) for v in taper(res.window, 64)]}),
+        **({} if res.window == "rect" else {"WgtFunct": list(res.weights)}),
     }
 
 

@@ -126,6 +126,17 @@ def problems(counters: dict) -> list[str]:
     return out
 
 
+def end_reason(source, link, interrupted: BaseException | None) -> str:
+    """Why a live stream ended, in words: the link timeout, the signal, else the source's own
+    reason (idle, a link lost).  The source says "closed" in all three cases: it is closed by
+    the run for the first two."""
+    if link is not None and link.failure is not None:
+        return f"--link-timeout {link.timeout_s:g}"
+    if interrupted is not None:
+        return signals.describe(interrupted)
+    return getattr(source, "stop_reason", "") or ""
+
+
 def link_words(state: dict) -> str:
     """A silence being told (rtsar.stream.link.LinkWatch.state) in words."""
     since = state["since_pulse"]
@@ -435,7 +446,7 @@ def run_stream(
         print("counted: " + ", ".join(bad), file=stream)
     silent = pipe.link.state() if pipe.link is not None else None
     if silent:  # the stream ended in a silence that had been told
-        why = getattr(source, "stop_reason", "")
+        why = end_reason(source, pipe.link, interrupted)
         print(
             f"{link_words(silent)} when the stream ended" + (f" ({why})" if why else ""),
             file=stream,

@@ -55,8 +55,16 @@ def _same_image(a, b):
     assert np.abs(x - y).max() <= 1e-5 * np.abs(x).max()
 
 
+def _flagged(path) -> set:
+    """The lines an image file lists in flagged_line_runs."""
+    with h5py.File(path, "r") as f:
+        runs = json.loads(f.attrs.get("flagged_line_runs", "[]"))
+    return {j for first, count in runs for j in range(first, first + count)}
+
+
 def _refocus(tmp_path, raw, live_img):
-    """process and replay of the recording give the live run's image (<= 1e-5 of its peak)."""
+    """process and replay of the recording give the live run's image (<= 1e-5 of its peak),
+    its flagged lines the same."""
     for argv in (
         ["process", str(raw), "-o", str(tmp_path / "p.h5"), "--lens", "numpy"],
         ["replay", str(raw), "--rate", "max", "-o", str(tmp_path / "r.h5"), "--lens", "numpy",
@@ -65,6 +73,7 @@ def _refocus(tmp_path, raw, live_img):
         assert main(argv) == 0, argv
     _same_image(live_img, tmp_path / "p.h5")
     _same_image(live_img, tmp_path / "r.h5")
+    assert _flagged(tmp_path / "p.h5") == _flagged(tmp_path / "r.h5") == _flagged(live_img)
 
 
 def test_a_simulated_run_records_every_channel_and_is_focused_again(tmp_path, capsys):
@@ -157,7 +166,17 @@ def test_a_serial_run_records_its_gaps_flags_and_restart_as_ingest_saw_them(tmp_
     want[want_seq.index(90)] = 0  # zeroed as ingest zeroed it
     np.testing.assert_array_equal(shots[shot_rows], want)
     assert not shots[~shot_rows].any()
+    # The reprocessed images flag the lines the live image flagged (before: none, and replay
+    # said "no drops/gaps, flagged lines 0").
+    live_flagged = _flagged(img)
+    assert len(live_flagged) > 2 * n
     _refocus(tmp_path, raw, img)
+    out, err = capsys.readouterr()
+    assert f"note: {len(live_flagged)} lines flagged (flagged_line_runs)" in err
+    assert f"flagged lines {len(live_flagged)}" in out  # replay's end message
+    assert f"zero pulses marked in the recording {3 + n + 1}" in out
+    with h5py.File(tmp_path / "p.h5", "r") as f:
+        assert f.attrs["flagged_lines"] == len(live_flagged)
 
 
 def test_a_zmq_in_run_records_its_stream(tmp_path, capsys):

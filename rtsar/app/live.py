@@ -53,6 +53,7 @@ _LABELS = {
     "nonfinite_pulses": "NaN/Inf",
     "wrong_length_pulses": "bad length",
     "pulses_before_start": "sent before the first received",
+    "marked_pulses": "zero pulses marked in the recording",
     "discontinuities": "restarts",
     "header_crc_errors": "header CRC errors",
     "payload_crc_errors": "payload CRC errors",

@@ -226,3 +226,49 @@ def test_repeated_shots_are_still_duplicates_and_a_clockless_stream_keeps_the_ol
     ]
     stream(ing, clockless)
     assert ing.counters["duplicates"] == 10 and ing.counters["discontinuities"] == 0
+
+
+def test_shots_the_source_marks_are_zeroed_flagged_and_counted():
+    """A recording's zero pulses (ShotBatch.flagged: pulse_flags of `run --record`) are flagged
+    like ingest's own, so a replay flags the lines the live run flagged (it flagged none)."""
+    ing = Ingest(S, aperture_pulses=4, max_gap_pulses=4)
+    x = batch(np.arange(6))
+    marked = np.array([0, 1, 0, 0, 1, 0], bool)
+    given = x.samples.copy()
+    x = ShotBatch(x.seq, x.timestamp_s, x.arrival_s, x.samples, flagged=marked)
+    samples, flagged = stream(ing, [x])
+    np.testing.assert_array_equal(flagged, marked)
+    assert not samples[marked].any()
+    np.testing.assert_array_equal(samples[~marked], given[~marked])
+    np.testing.assert_array_equal(x.samples, given)  # the source's array is not written
+    assert ing.counters["marked_pulses"] == 2 and ing.counters["nonfinite_pulses"] == 0
+
+
+def test_a_recordings_flagged_lines_at_once_equal_the_streamed_ones():
+    """rtsar process flags lines from the whole pulse_flags (RecordedFlags); the live run
+    flagged them pulse block by pulse block (LineTiming): the same lines, in any blocks."""
+    from rtsar.stream.ingest import PulseBlock
+    from rtsar.stream.timing import LineTiming, RecordedFlags
+
+    rng = np.random.default_rng(5)
+    n, pulses = 16, 400
+    marked = rng.random(pulses) < 0.01
+    marked[:2] = marked[-3:] = True  # at both ends too
+    timing = LineTiming(n, 4096)
+    streamed = []
+    for first in range(0, pulses, 7):
+        m = marked[first : first + 7]
+        k = len(m)
+        timing.record(PulseBlock(first, np.zeros((k, 1)), np.zeros(k), m, {}))
+        if first + k >= n:  # lines whose aperture has fully arrived
+            lo, hi = max(first + k - n - 6, 0), first + k - n + 1
+            lo = max(lo, len(streamed))
+            streamed += list(timing.lines(lo, np.zeros((hi - lo, 1))).flagged)
+    at_once = RecordedFlags(marked, n)
+    for first in range(0, len(streamed), 50):  # other blocks than the streamed ones
+        at_once.add(first, min(50, len(streamed) - first))
+    want = [j for j in range(len(streamed)) if streamed[j]]
+    got = [j for a, c in at_once.runs for j in range(a, a + c)]
+    assert got == want and at_once.lines == len(want) > 0
+    naive = [j for j in range(pulses - n + 1) if marked[j : j + n].any()]
+    assert want == naive

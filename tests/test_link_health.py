@@ -5,6 +5,7 @@ Before, a serial instrument silent for 25 s with its link open was never mention
 line said "no drops/gaps" while the average rate decayed, and --duration 3 ended the run with
 exit 0 and no reason (the same over --zmq-in)."""
 
+import _thread
 import re
 import socket
 import threading
@@ -17,14 +18,17 @@ import zmq
 from rtsar.app.cli import main
 from rtsar.app.live import format_status
 from rtsar.presets import preset
+from rtsar.sources.base import ShotBatch, Source
 from rtsar.sources.frame import encode_frame
 from rtsar.stream.link import LinkWatch, silence_threshold_s
+from rtsar.stream.pipeline import Pipeline
 
 
 def test_a_silence_is_told_once_and_its_end_is_told_and_counted():
     said, stopped = [], []
     watch = LinkWatch(500.0, said.append, timeout_s=3.0, on_timeout=lambda: stopped.append(1))
-    t0 = watch._last_s
+    t0 = time.monotonic()
+    watch.start(t0)
     watch.heard(30, 41, t0 + 0.1)
     watch.check(t0 + 0.9)  # 0.8 s: not yet a silence worth telling
     assert said == [] and watch.state(t0 + 0.9) is None
@@ -37,7 +41,8 @@ def test_a_silence_is_told_once_and_its_end_is_told_and_counted():
     assert watch.counters(t0 + 2.2) == {"link_silences": 1, "link_silent_ms": 2000}
     watch.check(t0 + 5.2)  # 3.1 s since pulse 97: told, and past the timeout
     assert said[-1] == "link silent for 3.1 s since pulse 97" and stopped == [1]
-    assert watch.failure == "link silent for 3 s since pulse 97 (--link-timeout 3)"
+    # the true silence, not the timeout: the watch looks every 0.1 s
+    assert watch.failure == "link silent for 3.1 s since pulse 97 (--link-timeout 3)"
 
 
 def test_the_silence_told_is_one_second_or_ten_pulse_periods():
@@ -46,7 +51,8 @@ def test_the_silence_told_is_one_second_or_ten_pulse_periods():
     assert silence_threshold_s(2.0) == 5.0
     said = []
     watch = LinkWatch(2.0, said.append)
-    t0 = watch._last_s
+    t0 = time.monotonic()
+    watch.start(t0)
     watch.check(t0 + 4.9)
     assert said == []
     watch.check(t0 + 5.0)
@@ -102,10 +108,16 @@ def test_a_serial_link_gone_quiet_is_told_and_link_timeout_ends_the_run(tmp_path
     assert re.search(r"link resumed after 1\.\d s silent \(pulse 59 → pulse 60\)", out)
     assert re.search(r"link silent for 1\.\d s since pulse 119\n", out)
     assert "link silences 2" in out  # counted on the final status line and the summary
-    assert "link silent for 1.6 s since pulse 119 when the stream ended" in out
-    assert err.strip().splitlines()[-1] == (
-        "rtsar: the stream did not end cleanly: link silent for 1.6 s since pulse 119 "
-        "(--link-timeout 1.6)"
+    # the reason is the timeout (it said "(closed)": the run closes the source at the timeout)
+    assert re.search(
+        r"link silent for 1\.[67] s since pulse 119 when the stream ended "
+        r"\(--link-timeout 1\.6\)\n",
+        out,
+    )
+    assert re.fullmatch(
+        r"rtsar: the stream did not end cleanly: link silent for 1\.[67] s since pulse 119 "
+        r"\(--link-timeout 1\.6\)",
+        err.strip().splitlines()[-1],
     )
     server.close()
 
@@ -137,3 +149,83 @@ def test_a_zmq_stream_gone_quiet_is_told_and_its_end_says_why(tmp_path, capsys):
     out = capsys.readouterr().out
     assert re.search(r"link silent for 1\.\d s since pulse 39\n", out)
     assert "when the stream ended (idle)" in out and "since pulse 39 when" in out
+
+
+class _LateShots(Source):
+    """A live source whose first shots come 0.3 s after the pipeline starts pulling."""
+
+    live = True
+    description = "late shots"
+
+    def __init__(self, samples: int):
+        super().__init__()
+        self.samples = samples
+
+    def __iter__(self):
+        time.sleep(0.3)
+        for k in range(3):
+            seq = 8 * k + np.arange(8)
+            shots = np.ones((8, self.samples), np.complex64)
+            yield ShotBatch(seq, seq * 1e-3, np.full(8, time.perf_counter()), shots)
+
+
+def test_the_silence_is_timed_from_the_first_pull_not_from_the_build():
+    """Before, the clock started when the pipeline was built: the lens and correlator's
+    preparation counted as silence, and `--link-timeout 2` over --zmq-in failed 0.1 s after
+    the banner with 'link silent for 3.4 s since the start'."""
+    cfg = preset("tiny")
+    said = []
+    pipe = Pipeline(cfg, _LateShots(cfg.waveform.samples_per_shot), [], notify=said.append,
+                    link_timeout_s=1.0)  # fmt: skip
+    time.sleep(1.5)  # the preparation between the build and the start: not the link's silence
+    stats = pipe.run()
+    assert pipe.link.failure is None and said == []
+    c = stats.counters
+    assert c["link_silences"] == 0 and c["link_silent_ms"] == 0
+    assert c["pulses_received"] == 24
+
+
+def test_a_silence_at_the_start_counts_no_more_than_the_run_lasted():
+    """A source that never delivers, with --link-timeout: the failure gives the silence as
+    measured and the totals stay within the run's elapsed time."""
+
+    class Nothing(Source):
+        live = True
+        description = "nothing"
+
+        def __iter__(self):
+            while not self._stop:
+                time.sleep(0.02)
+            return
+            yield
+
+    cfg = preset("tiny")
+    said = []
+    pipe = Pipeline(cfg, Nothing(), [], notify=said.append, link_timeout_s=1.0)
+    time.sleep(1.2)
+    stats = pipe.run()
+    assert re.fullmatch(
+        r"link silent for 1\.[01] s since the start \(no pulse yet\) \(--link-timeout 1\)",
+        pipe.link.failure,
+    )
+    assert len(said) == 1
+    assert re.fullmatch(r"link silent for 1\.[01] s since the start \(no pulse yet\)", said[0])
+    assert stats.counters["link_silent_ms"] <= 1e3 * stats.elapsed_s
+
+
+def test_a_ctrl_c_in_a_silence_is_the_reason_told(tmp_path, capsys):
+    """Ctrl-C during a told silence: the end message says "(interrupted)", not "(closed)"."""
+    argv = ["run", "--zmq-in", "ipc://" + str(tmp_path / "nobody"), "--preset", "tiny"]
+    argv += ["--lens", "numpy", "--endpoint", "ipc://" + str(tmp_path / "pub")]
+    timer = threading.Timer(2.5, _thread.interrupt_main)
+    timer.start()
+    try:
+        assert main(argv) == 130
+    finally:
+        timer.cancel()
+    out = capsys.readouterr().out
+    assert re.search(
+        r"link silent for \d\.\d s since the start \(no pulse yet\) when the stream ended "
+        r"\(interrupted\)\n",
+        out,
+    )

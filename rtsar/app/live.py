@@ -53,6 +53,7 @@ _LABELS = {
     "nonfinite_pulses": "NaN/Inf",
     "wrong_length_pulses": "bad length",
     "pulses_before_start": "sent before the first received",
+    "marked_pulses": "zero pulses marked in the recording",
     "discontinuities": "restarts",
     "header_crc_errors": "header CRC errors",
     "payload_crc_errors": "payload CRC errors",
@@ -126,6 +127,17 @@ def problems(counters: dict) -> list[str]:
         else:
             out.append(f"{_LABELS.get(key, key)} {value}")
     return out
+
+
+def end_reason(source, link, interrupted: BaseException | None) -> str:
+    """Why a live stream ended, in words: the link timeout, the signal, else the source's own
+    reason (idle, a link lost).  The source says "closed" in all three cases: it is closed by
+    the run for the first two."""
+    if link is not None and link.failure is not None:
+        return f"--link-timeout {link.timeout_s:g}"
+    if interrupted is not None:
+        return signals.describe(interrupted)
+    return getattr(source, "stop_reason", "") or ""
 
 
 def link_words(state: dict) -> str:
@@ -437,7 +449,7 @@ def run_stream(
         print("counted: " + ", ".join(bad), file=stream)
     silent = pipe.link.state() if pipe.link is not None else None
     if silent:  # the stream ended in a silence that had been told
-        why = getattr(source, "stop_reason", "")
+        why = end_reason(source, pipe.link, interrupted)
         print(
             f"{link_words(silent)} when the stream ended" + (f" ({why})" if why else ""),
             file=stream,

@@ -287,6 +287,16 @@ class Recording:
         return dict(self._file.attrs)
 
     @property
+    def pulse_flags(self) -> np.ndarray | None:
+        """A live recording's per-pulse flags (uint8 [pulse]; rtsar.sinks.raw_record: 1 a zero
+        pulse ingest inserted, 2 a shot ingest zeroed, 4 not recorded); None where not kept."""
+        flags = self._file.get("pulse_flags")
+        flags = None if flags is None else np.asarray(flags[: self.pulses], np.uint8)
+        if flags is not None and len(flags) != self.pulses:
+            raise ValueError(f"{self.path}: pulse_flags has {len(flags)} rows, not {self.pulses}")
+        return flags
+
+    @property
     def position_m(self) -> np.ndarray | None:
         """Per-pulse platform position [pulse, (x, y, z)] in metres; None where not recorded."""
         return self._file["position_m"][...] if "position_m" in self._file else None

@@ -48,6 +48,19 @@ class NameClaim:
             self.release()
             raise ValueError(refusal)
 
+    @classmethod
+    def adopted(cls, mark: str | Path, fd: int) -> NameClaim:
+        """The claim another process of the run took (``mark``, its locked ``fd`` passed on:
+        the recorder process of ``run --record``); the lock holds while either keeps it."""
+        claim = cls.__new__(cls)
+        claim.path, claim._fd = Path(mark), fd
+        return claim
+
+    @property
+    def fd(self) -> int | None:
+        """The locked descriptor (None once released)."""
+        return self._fd
+
     def release(self) -> None:
         if self._fd is not None:
             self.path.unlink(missing_ok=True)

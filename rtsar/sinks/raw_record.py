@@ -15,11 +15,17 @@ instrument's own numbers and clock are kept beside it:
   zeroed, 4 not recorded: the recorder's queue was full (``record_dropped``; its rows read as
   zeros, nothing of them was written).
 
-The file is written by a thread of its own behind a queue bounded in bytes (``queue_bytes``;
-default :func:`record_queue_bytes`): the pipeline hands each block over without waiting, so a
-slow disk never stalls the imaging; a block that does not fit is not recorded, counted
-(``record_dropped``) and marked.  A failed write (a full disk) ends the recording, not the run:
-said at once through ``notify``, the rest counted as dropped.  The file is crash-safe like the
+The file is written by a process of its own (rtsar.sinks.raw_writer: h5py serialises every
+HDF5 call of a process behind one lock, so a slow recording written by a thread stalled the
+run's image writer) behind a queue bounded in bytes (``queue_bytes``; default
+:func:`record_queue_bytes`; the bytes queued here and those handed to the process and not yet
+written): the pipeline hands each block over without waiting, a thread here passes the blocks
+on through a pipe, so a slow disk never stalls the imaging; a block that does not fit is not
+recorded, counted (``record_dropped``) and marked.  A failed write (a full disk) ends the
+recording, not the run: said at once through ``notify``, the rest counted as dropped; so does
+the recorder process's death (killed: its file keeps the shots up to its last flush).  The
+process ends with its pipe: a run killed at any moment leaves it to write what it received and
+close the file, marked incomplete.  The file is crash-safe like the
 live image (rtsar.sinks.live_file): a SIGKILL leaves a readable file with every shot up to its
 last flush (every ``flush_every_s``).  Final attributes: ``complete``, ``counters`` (JSON, the
 run's), ``record_written``, ``record_dropped``, ``record_dropped_runs`` (JSON [[first pulse,
@@ -28,40 +34,31 @@ count], ...], the first :data:`MAX_RUNS_LISTED`).
 
 from __future__ import annotations
 
-import json
+import os
+import subprocess
+import sys
 import threading
 from collections import deque
-from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
-from .. import __version__
 from ..params import Config
 from ..stream.strips import StreamInfo, StripSink
 from .h5_output import WriteFailed
-from .io import RECORDING_FORMAT, RECORDING_VERSION, describe_channels
-from .live_file import LiveFile
 from .name_claim import NameClaim
+from .raw_file import (  # noqa: F401 (the file's constants, where they were)
+    FLAGS_MEANING,
+    INSERTED,
+    MAX_RUNS_LISTED,
+    NOT_RECORDED,
+    ZEROED,
+    Shots,
+    _Dropped,
+)
+from .raw_pipe import receive, send, widen
 
 QUEUE_S = 2.0  # seconds of the stream's main-channel shots the recorder's queue holds …
 QUEUE_BYTES = (16 << 20, 256 << 20)  # … within these bounds
-TAKE_BYTES = 32 << 20  # the most the writer takes from the queue for one round of writes
-ROUND_S, ROUND_BYTES = 0.1, 4 << 20  # a round waits this long for this much (fewer HDF5 calls)
-MAX_RUNS_LISTED = 10_000
-INSERTED, ZEROED, NOT_RECORDED = 1, 2, 4  # /pulse_flags bits
-FLAGS_MEANING = (
-    "1: a zero pulse ingest inserted (a gap, a restart: no shot); 2: a shot ingest zeroed "
-    "(NaN/Inf, wrong length); 4: not recorded (the recorder's queue was full: record_dropped)"
-)
-_META = (  # the per-pulse datasets, pulse_index last: a row is whole once it has its index
-    ("time_s", np.float64),
-    ("along_track_m", np.float64),
-    ("instrument_seq", np.int64),
-    ("instrument_time_s", np.float64),
-    ("pulse_flags", np.uint8),
-    ("pulse_index", np.int64),
-)
+SEND_ITEMS = 64  # the most blocks passed on to the recorder process at one look
 
 
 def record_queue_bytes(config: Config) -> int:
@@ -72,27 +69,22 @@ def record_queue_bytes(config: Config) -> int:
     return int(min(high, max(low, QUEUE_S * per_s)))
 
 
-@dataclass
-class _Dropped:
-    """Pulses first … first + count - 1 not recorded (consecutive drops merge into one)."""
-
-    first: int
-    count: int
-
-
-def _nbytes(block) -> int:
-    """Bytes a block holds in the queue (a block of inserted zero pulses: none)."""
-    if block.inserted is not None and block.inserted.all():
-        return 0
-    return block.samples.nbytes + sum(a.nbytes for a in block.aux.values())
+def _writer_env() -> dict:
+    """The recorder process runs this rtsar (the folder it was imported from comes first)."""
+    env = dict(os.environ)
+    root = str(Path(__file__).resolve().parents[2])
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
+    return env
 
 
 class ShotRecorder(StripSink):
     """Pipeline sink that records the pulse stream to ``path`` (module docstring).
 
-    The name is claimed now (a second live writer of it is refused before any work); the file
-    is made with the first pulses (their channels fix its datasets).  ``notify``: one-line
-    messages (a failed write).  ``close()`` ends it if the run's ``end`` never came."""
+    The name is claimed now (a second live writer of it is refused before any work) and the
+    recorder process started (it does not wait for it: its start, ~0.3 s of imports, overlaps
+    the run's); the file is made with the first pulses (their channels fix its datasets).
+    ``notify``: one-line messages (a failed write).  ``close()`` ends it if the run's ``end``
+    never came."""
 
     wants_pulses = True
 
@@ -108,29 +100,56 @@ class ShotRecorder(StripSink):
         notify=None,
     ):
         self.path = Path(path)
-        self.config = config
-        self.scene = scene or {}
-        self.source = source
-        self.start_along_track_m = float(start_along_track_m)
         self.capacity = int(queue_bytes or record_queue_bytes(config))
-        self.flush_every_s = float(flush_every_s)
         self.notify = notify
         self._claim: NameClaim | None = NameClaim(self.path)
-        self._file: LiveFile | None = None
-        self._datasets: dict = {}
-        self._items: deque = deque()
-        self._bytes = 0  # bytes of the blocks queued or being written
+        self._items: deque = deque()  # blocks and drops not yet passed on
+        self._sent: deque = deque()  # (first, count, nbytes, is a drop) passed on, not done
+        self._bytes = 0  # bytes queued here or passed on and not yet written
         self._cond = threading.Condition()
         self._ending = False
-        self._final: dict = {}
+        self._final: tuple | None = None
         self.written = 0  # pulses whose rows are in the file (shots, inserted zeros)
         self.dropped = 0  # pulses not recorded
         self.dropped_runs: list[list[int]] = []
         self.failure: WriteFailed | None = None
         self._next_pulse = 0  # the stream's next pulse (checks the order)
-        self._in_hand: list = []  # the items being written (lost with them if they fail)
-        self._thread = threading.Thread(target=self._run, name="rtsar-record", daemon=True)
-        self._thread.start()
+        settings = {
+            "path": str(self.path),
+            "config": config.to_dict(),
+            "scene": scene or {},
+            "source": source,
+            "start_along_track_m": float(start_along_track_m),
+            "flush_every_s": float(flush_every_s),
+            "claim_mark": str(self._claim.path),
+        }
+        self._settings = settings
+        self._proc, self._fd_out, self._fd_in = self._start(self._claim.fd)
+        self._feeder = threading.Thread(target=self._feed, name="rtsar-record", daemon=True)
+        self._listener = threading.Thread(target=self._listen, name="rtsar-record-in", daemon=True)
+        self._feeder.start()
+        self._listener.start()
+
+    def _start(self, claim_fd: int | None):
+        """The recorder process, its pipes (to it, from it) and the claim's lock passed on."""
+        to_r, to_w = os.pipe()
+        from_r, from_w = os.pipe()
+        widen(to_w)
+        keep = (to_r, from_w) + (() if claim_fd is None else (claim_fd,))
+        argv = [sys.executable, "-m", "rtsar.sinks.raw_writer", str(to_r), str(from_w)]
+        argv.append(str(-1 if claim_fd is None else claim_fd))
+        try:
+            proc = subprocess.Popen(
+                argv, pass_fds=keep, stdin=subprocess.DEVNULL, env=_writer_env()
+            )
+        except OSError as exc:
+            for fd in (to_r, to_w, from_r, from_w):
+                os.close(fd)
+            self._claim.release()
+            raise ValueError(f"cannot record {self.path}: {exc}") from None
+        os.close(to_r)
+        os.close(from_w)
+        return proc, to_w, os.fdopen(from_r, "rb", buffering=0)
 
     # ---- the pipeline's side (never waits) -------------------------------------------------
     def pulses(self, block, info: StreamInfo) -> None:
@@ -144,27 +163,28 @@ class ShotRecorder(StripSink):
         with self._cond:
             fits = self._bytes + nbytes <= self.capacity or not self._bytes
             if self.failure is None and not self._ending and fits:
-                self._items.append(block)
+                self._items.append((block, nbytes))
                 self._bytes += nbytes
-                self._cond.notify()
+                self._cond.notify_all()
             else:
-                self._drop(block.first_pulse, n)
+                self._drop(block.first_pulse, n, mark=self.failure is None)
 
-    def _drop(self, first: int, count: int) -> None:
-        """Pulses not recorded: counted, listed, and (while the file lives) marked in it."""
+    def _drop(self, first: int, count: int, mark: bool) -> None:
+        """Pulses not recorded: counted, listed, and (``mark``: while the file lives) marked in
+        it.  Called with the lock held."""
         self.dropped += count
         runs = self.dropped_runs
         if runs and runs[-1][0] + runs[-1][1] == first:
             runs[-1][1] += count
         elif len(runs) < MAX_RUNS_LISTED:
             runs.append([first, count])
-        if self.failure is None:
+        if mark:
             last = self._items[-1] if self._items else None
             if isinstance(last, _Dropped) and last.first + last.count == first:
                 last.count += count
             else:
                 self._items.append(_Dropped(first, count))
-                self._cond.notify()
+                self._cond.notify_all()
 
     def has_room(self, nbytes: int) -> bool:
         """Whether a block of ``nbytes`` would be queued now (``rtsar bench`` waits on it)."""
@@ -182,219 +202,104 @@ class ShotRecorder(StripSink):
         A failure is kept in ``failure`` (and was told through ``notify``)."""
         with self._cond:
             if not self._ending:
-                self._final = {"counters": counters or {}, "complete": complete}
+                self._final = ("end", counters or {}, complete)
                 self._ending = True
-            self._cond.notify()
-        self._thread.join()
+            self._cond.notify_all()
+        self._feeder.join()
+        self._listener.join()
+        self._proc.wait()
+        if self._claim is not None:  # (the process released it, or died holding it)
+            self._claim.release()
+            self._claim = None
 
     def close(self) -> None:
         """End the recording if the run's end never came (it stays marked incomplete)."""
         self.finish(complete=False)
 
-    # ---- the writer thread -----------------------------------------------------------------
-    def _run(self) -> None:
+    # ---- the threads that talk to the recorder process -------------------------------------
+    def _feed(self) -> None:
+        """Pass the queued blocks on, in order, then the end (rtsar.sinks.raw_writer)."""
         try:
+            send(self._fd_out, ("init", self._settings))
             while True:
                 with self._cond:
-                    while not self._items and not self._ending:
-                        self._cond.wait(self.flush_every_s)
-                        if self._file is not None and self._file.dirty and self._file.due():
-                            break
-                    if self._items and self._bytes < ROUND_BYTES:  # a few larger writes
-                        ready = lambda: self._ending or self._bytes >= ROUND_BYTES  # noqa: E731
-                        self._cond.wait_for(ready, ROUND_S)
-                    items, size = self._take()
-                    ending = self._ending and not self._items
-                if items and self.failure is None:
-                    self._write(items)
-                with self._cond:
-                    self._bytes -= size
-                if self._file is not None and self.failure is None and self._file.dirty:
-                    if self._file.due():
-                        self._guarded(self._file.flush)
-                if ending:
-                    break
-            self._close()
+                    self._cond.wait_for(lambda: self._items or self._ending or self.failure)
+                    if not self._items or self.failure is not None:
+                        break
+                    take = min(SEND_ITEMS, len(self._items))
+                    items = [self._items.popleft() for _ in range(take)]
+                    for x in items:  # before the send: its answer cannot come before it
+                        drop = isinstance(x, _Dropped)
+                        first, count = (x.first, x.count) if drop else (x[0].first_pulse, len(x[0]))
+                        self._sent.append((first, count, 0 if drop else x[1], drop))
+                for x in items:
+                    if isinstance(x, _Dropped):
+                        send(self._fd_out, ("drop", x.first, x.count))
+                    else:
+                        send(self._fd_out, ("pulses", Shots.of(x[0])))
+            send(self._fd_out, self._final or ("end", {}, False))
+        except OSError:  # the process is gone (its pipe broken): _listen tells it
+            pass
         finally:
-            if self._claim is not None:  # no pulse ever came: the name goes free
-                self._claim.release()
-                self._claim = None
+            os.close(self._fd_out)
 
-    def _take(self) -> tuple[list, int]:
-        """Items from the queue, up to :data:`TAKE_BYTES` (at least one)."""
-        items, size = [], 0
-        while self._items and (not items or size < TAKE_BYTES):
-            item = self._items.popleft()
-            items.append(item)
-            size += 0 if isinstance(item, _Dropped) else _nbytes(item)
-        return items, size
-
-    def _guarded(self, work) -> bool:
-        """Run a write; a failed one ends the recording (said once), never the run."""
+    def _listen(self) -> None:
+        """The process's answers: blocks written or lost, a failure, its end; its death."""
+        closed = False
         try:
-            work()
-            return True
-        except WriteFailed as exc:
-            self._fail(exc)
-            return False
+            while True:
+                message = receive(self._fd_in)
+                if message[0] == "done":
+                    self._done(message[1], lost=message[2])
+                elif message[0] == "failed":
+                    self._fail(WriteFailed(message[1] or self.path, message[2], message[3]))
+                elif message[0] == "closed":
+                    closed = True
+        except (EOFError, OSError):
+            pass
+        finally:
+            self._fd_in.close()
+        if not closed and self.failure is None:  # killed, or died before its end
+            code = self._proc.wait()
+            how = f"signal {-code}" if code < 0 else f"exit status {code}"
+            kept = "the shots up to its last flush are saved, marked incomplete (complete = False)"
+            self._fail(WriteFailed(self.path, f"the recorder process ended ({how})", kept))
+        self._done(len(self._sent), lost=True)  # passed on, never answered: not recorded
+
+    def _done(self, items: int, lost: bool) -> None:
+        """The next ``items`` blocks passed on were written (or ``lost``)."""
+        with self._cond:
+            for _ in range(min(items, len(self._sent))):
+                first, count, nbytes, drop = self._sent.popleft()
+                self._bytes -= nbytes
+                if not drop and lost:
+                    self._drop(first, count, mark=False)
+                elif not drop:
+                    self.written += count
+            self._cond.notify_all()
 
     def _fail(self, exc: WriteFailed) -> None:
+        """The recording ended (a write the disk refused, the process's death): said once; what
+        is queued here is not recorded, nor anything after."""
         with self._cond:
+            if self.failure is not None:
+                return
             self.failure = exc
-            # What was being written and what is queued is lost: not recorded.
-            for x in [*self._in_hand, *self._items]:
+            for x in self._items:
                 if not isinstance(x, _Dropped):  # (a drop is counted already)
-                    self._drop(x.first_pulse, len(x))
+                    self._drop(x[0].first_pulse, len(x[0]), mark=False)
+                    self._bytes -= x[1]
             self._items.clear()
-            self._in_hand = []
+            self._cond.notify_all()
         if self.notify is not None:
             self.notify(
                 f"rtsar: --record {self.path} stopped: {exc}; the image goes on, the shots not "
                 "written are counted (record_dropped)"
             )
 
-    def _write(self, items: list) -> None:
-        self._in_hand = items
-        if self._file is None:
-            first = next((x for x in items if not isinstance(x, _Dropped)), None)
-            widths = {} if first is None else {k: a.shape[1] for k, a in first.aux.items()}
-            if not self._guarded(lambda: self._create(widths)):
-                return
-        if self._guarded(lambda: self._append(items)):
-            self.written += sum(len(x) for x in items if not isinstance(x, _Dropped))
-        self._in_hand = []
 
-    def _create(self, widths: dict[str, int]) -> None:
-        claim, self._claim = self._claim, None  # the file's writer holds it from here
-        self._file = LiveFile(
-            self.path,
-            lambda f: self._make(f, widths),
-            claim=claim,
-            flush_every_s=self.flush_every_s,
-            unit="shots",
-            tidy=self._trim,
-        )
-
-    def _make(self, f, widths: dict[str, int]) -> None:
-        s = self.config.waveform.samples_per_shot
-        rows = lambda width: max(16, min(1024, (1 << 20) // (8 * width)))  # noqa: E731 (~1 MiB)
-        ds = self._datasets
-        ds["shots"] = f.create_dataset(
-            "shots", (0, s), np.complex64, maxshape=(None, s), chunks=(rows(s), s)
-        )
-        group = f.create_group("channels")
-        for name, width in sorted(widths.items()):
-            ds[f"channels/{name}"] = group.create_dataset(
-                name, (0, width), np.complex64, maxshape=(None, width), chunks=(rows(width), width)
-            )
-        for name, dtype in _META:
-            ds[name] = f.create_dataset(name, (0,), dtype, maxshape=(None,), chunks=(4096,))
-        a = f.attrs
-        a["format"] = RECORDING_FORMAT
-        a["format_version"] = RECORDING_VERSION
-        a["config"] = json.dumps(self.config.to_dict())
-        a["scene"] = json.dumps(self.scene)
-        a["channels"] = describe_channels(self.config, widths)
-        a["rtsar_version"] = __version__
-        a["source"] = self.source
-        a["recorded_live"] = True
-        a["pulse_flags_meaning"] = FLAGS_MEANING
-        a["complete"] = False
-
-    def _trim(self, rows: int) -> None:
-        """After a failed write: every dataset back to the rows written whole."""
-        for d in self._datasets.values():
-            if d.shape[0] > rows:
-                d.resize(rows, axis=0)
-
-    def _append(self, items: list) -> None:
-        """Rows for the items: shots and channels where recorded (inserted and dropped pulses
-        are left unwritten, reading as zeros), then the per-pulse data, pulse_index last."""
-        start = self._file.rows
-        end = start + sum(x.count if isinstance(x, _Dropped) else len(x) for x in items)
-        ds = self._datasets
-        with self._file.writing():
-            for name, d in ds.items():
-                if name == "shots" or name.startswith("channels/"):
-                    d.resize(end, axis=0)
-            for row, group in _runs_of_shots(items, start):  # one write per run of shots
-                ds["shots"][row : row + sum(len(x) for x in group)] = _joined(group, None)
-                for name in group[0].aux:
-                    values = _joined(group, name)
-                    ds[f"channels/{name}"][row : row + len(values)] = values
-            p = np.arange(start, end)
-            meta = {
-                "time_s": p / self.config.geometry.prf_hz,
-                "along_track_m": self.start_along_track_m
-                + p * self.config.geometry.along_track_step_m,
-                "instrument_seq": np.concatenate([_seq(x) for x in items]),
-                "instrument_time_s": np.concatenate([_time(x) for x in items]),
-                "pulse_flags": np.concatenate([_flags(x) for x in items]),
-                "pulse_index": p,
-            }
-            for name, _ in _META:
-                ds[name].resize(end, axis=0)
-                ds[name][start:end] = meta[name]
-        self._file.stored(end)
-
-    def _close(self) -> None:
-        if self._file is None or self.failure is not None:
-            return
-        final = self._final or {"counters": {}, "complete": False}
-        attrs = {
-            "counters": json.dumps(final["counters"]),
-            "record_written": self.written,
-            "record_dropped": self.dropped,
-            "record_dropped_runs": json.dumps(self.dropped_runs),
-            "complete": final["complete"],
-        }
-        self._guarded(lambda: self._file.close(attrs))
-
-
-def _runs_of_shots(items: list, start: int):
-    """(first row, [blocks]) of each run of consecutive blocks that hold shots (inserted zero
-    pulses and dropped pulses break a run: their rows are not written)."""
-    row, group, first = start, [], start
-    for x in items:
-        n = x.count if isinstance(x, _Dropped) else len(x)
-        if isinstance(x, _Dropped) or not _nbytes(x):
-            if group:
-                yield first, group
-            group = []
-        else:
-            if not group:
-                first = row
-            group.append(x)
-        row += n
-    if group:
-        yield first, group
-
-
-def _joined(group: list, channel: str | None) -> np.ndarray:
-    """The main channel (None) or an auxiliary one of consecutive blocks, as one array."""
-    parts = [x.samples if channel is None else x.aux[channel] for x in group]
-    return parts[0] if len(parts) == 1 else np.concatenate(parts)
-
-
-def _seq(x) -> np.ndarray:
-    if isinstance(x, _Dropped) or x.seq is None:
-        return np.zeros(x.count if isinstance(x, _Dropped) else len(x), np.int64)
-    return np.where(_inserted(x), 0, x.seq)
-
-
-def _time(x) -> np.ndarray:
-    if isinstance(x, _Dropped) or x.time_s is None:
-        return np.full(x.count if isinstance(x, _Dropped) else len(x), np.nan)
-    return np.where(_inserted(x), np.nan, x.time_s)
-
-
-def _inserted(x) -> np.ndarray:
-    return np.zeros(len(x), bool) if x.inserted is None else x.inserted
-
-
-def _flags(x) -> np.ndarray:
-    if isinstance(x, _Dropped):
-        return np.full(x.count, NOT_RECORDED, np.uint8)
-    inserted = _inserted(x)
-    zeroed = x.flagged & ~inserted
-    return (inserted * INSERTED + zeroed * ZEROED).astype(np.uint8)
+def _nbytes(block) -> int:
+    """Bytes a block holds in the queue (a block of inserted zero pulses: none)."""
+    if block.inserted is not None and block.inserted.all():
+        return 0
+    return block.samples.nbytes + sum(a.nbytes for a in block.aux.values())

@@ -26,6 +26,9 @@ class ShotBatch:
     # Auxiliary receive channels of the same shots (reference interferometer, HCN cell, second
     # receiver, ...): name → complex64[n, samples_per_shot].  Empty for single-channel sources.
     aux: dict = field(default_factory=dict)
+    # bool[n] or None: shots the source marks as standing for no data (a recording's zero
+    # pulses, rtsar.sinks.raw_record pulse_flags): ingest flags them as it flags its own.
+    flagged: np.ndarray | None = None
 
     def __post_init__(self):
         n = len(self.seq)
@@ -33,6 +36,8 @@ class ShotBatch:
             raise ValueError("ShotBatch fields must all have one entry per shot")
         if any(len(a) != n for a in self.aux.values()):
             raise ValueError("ShotBatch aux channels must have one entry per shot")
+        if self.flagged is not None and len(self.flagged) != n:
+            raise ValueError("ShotBatch flagged must have one entry per shot")
 
     def __len__(self) -> int:
         return len(self.seq)

@@ -39,7 +39,10 @@ class ReplaySource(Source):
 
     ``shots[pulse, sample]``, ``pulse_index`` and ``time_s`` per shot, and ``aux`` (auxiliary
     channel name → [pulse, sample]) travelling with them; ``prf_hz`` is the recorded rate.
-    Paced replay: arrival = scheduled time; unpaced: the time the shot was read.
+    ``flagged`` (bool [pulse], optional): shots that stand for no data (a live recording's
+    zero pulses, its ``pulse_flags``): ingest flags them, so the lines they touch are flagged
+    as the live run flagged them.  Paced replay: arrival = scheduled time; unpaced: the time
+    the shot was read.
     """
 
     live = False
@@ -55,6 +58,7 @@ class ReplaySource(Source):
         description: str = "replay",
         live: bool = False,
         aux: dict | None = None,
+        flagged=None,
     ):
         super().__init__()
         self.live = live  # True: behave as an instrument (dropped when the pipeline is full)
@@ -67,6 +71,9 @@ class ReplaySource(Source):
             raise ValueError("shots, pulse_index and time_s must have one entry per shot")
         if any(len(a) != self.total for a in self.aux.values()):
             raise ValueError("every auxiliary channel must have one entry per shot")
+        self.flagged = None if flagged is None else np.asarray(flagged, bool)
+        if self.flagged is not None and len(self.flagged) != self.total:
+            raise ValueError("flagged must have one entry per shot")
         self.prf_hz = float(prf_hz)
         self.factor = parse_rate(rate)
         self.chunk = batch if self.factor is None else release_chunk(self.prf_hz * self.factor)
@@ -78,7 +85,9 @@ class ReplaySource(Source):
 
     @classmethod
     def from_recording(cls, recording, rate="real", batch: int = 64, channels=()) -> ReplaySource:
-        """The recording's shots and its auxiliary ``channels`` (those the processing reads)."""
+        """The recording's shots and its auxiliary ``channels`` (those the processing reads); a
+        live recording's zero pulses (``pulse_flags``) are flagged."""
+        flags = getattr(recording, "pulse_flags", None)  # (CPHD, SigMF: none)
         return cls(
             recording.shots,
             recording.pulse_index,
@@ -88,6 +97,7 @@ class ReplaySource(Source):
             batch,
             description=f"replay of {recording.path} ({_rate_words(rate)})",
             aux={name: recording.channels[name] for name in channels},
+            flagged=None if flags is None else flags != 0,
         )
 
     def aux_channels(self) -> tuple[str, ...]:
@@ -109,9 +119,11 @@ class ReplaySource(Source):
             if self.first_release is None:
                 self.first_release = self.last_release
             aux = {k: np.asarray(v[p : p + n], np.complex64) for k, v in self.aux.items()}
+            flagged = None if self.flagged is None else self.flagged[p : p + n]
             yield ShotBatch(
-                self.pulse_index[p : p + n], self.time_s[p : p + n], arrival, samples, aux
-            )
+                self.pulse_index[p : p + n], self.time_s[p : p + n], arrival, samples, aux,
+                flagged,
+            )  # fmt: skip
             p += n
             self.released = p
 

@@ -23,7 +23,11 @@ belongs:
   a stray shot (a number out of thin air): dropped and counted in ``stray_pulses``, and the
   stream goes on untouched.  At the end of a stream (:meth:`Ingest.flush`) a held candidate is
   taken as a discontinuity, so no shot is lost;
-* NaN/Inf samples or the wrong number of samples: the pulse is zeroed and flagged.
+* NaN/Inf samples or the wrong number of samples: the pulse is zeroed and flagged;
+* a shot the source marks as standing for no data (``ShotBatch.flagged``: a recording's zero
+  pulses, those the live run's ingest inserted or zeroed, or its recorder could not keep):
+  zeroed and flagged like one of ingest's own (counted in ``marked_pulses``), so a
+  recording's image flags the lines the live image flagged.
 
 A source whose numbers count from the instrument's pulse 0 (``origin_seq``: a GNU Radio stream,
 whose item offsets count from the flowgraph's start) anchors the stream: its first shot, number
@@ -66,6 +70,7 @@ COUNTERS = (
     "nonfinite_pulses",  # shots holding NaN/Inf, zeroed
     "wrong_length_pulses",  # shots with the wrong sample count (or a missing channel), zeroed
     "pulses_before_start",  # an anchored stream: pulses of the scan before the first received
+    "marked_pulses",  # shots the source marks as no data (a recording's zero pulses), flagged
 )
 
 
@@ -256,11 +261,16 @@ class Ingest:
             for a in channels.values():
                 bad |= nonfinite_rows(a)
             if bad.any():
+                c["nonfinite_pulses"] += int(bad.sum())
+            marked = None if batch.flagged is None else np.asarray(batch.flagged, bool) & ~bad
+            if marked is not None and marked.any():
+                c["marked_pulses"] += int(marked.sum())
+                bad = bad | marked
+            if bad.any():
                 channels = {k: a.copy() for k, a in channels.items()}
                 for a in channels.values():
                     a[bad] = 0
                 flagged |= bad
-                c["nonfinite_pulses"] += int(bad.sum())
         samples = channels.pop("")
         aux = channels
         seq = np.asarray(batch.seq, np.int64)

@@ -9,6 +9,9 @@ come again; the resumption is said too, with how long it lasted and the pulse nu
 side (the shots missed are ingest's gap), and every silence is counted (``link_silences``,
 ``link_silent_ms``: all silences told, in ms).  With ``timeout_s`` (``--link-timeout``) a
 silence that long ends the run: ``failure`` says why and ``on_timeout`` stops the source.
+
+The clock starts when the pipeline starts pulling from the source (:meth:`start`), not when the
+pipeline is built: preparing the lens and the correlator is not silence of the link.
 """
 
 from __future__ import annotations
@@ -34,7 +37,8 @@ class LinkWatch:
     """The silence of a live source (module docstring).  ``heard(first, last)`` after every
     batch (the instrument's numbers of its first and last shots), ``check()`` every
     :data:`CHECK_S` from a thread of its own (:meth:`run`), ``ended()`` when the source has
-    ended (a timeout ends the silence it tells there)."""
+    ended (a timeout ends the silence it tells there).  Nothing is timed before ``start()``,
+    called as the pipeline starts pulling from the source."""
 
     def __init__(self, prf_hz: float, notify=None, timeout_s: float | None = None, on_timeout=None):
         if timeout_s is not None and not timeout_s > 0:
@@ -47,7 +51,7 @@ class LinkWatch:
         self.silences = 0
         self._told_s = 0.0  # the silences told and over, in seconds
         self._lock = threading.Lock()
-        self._last_s = time.monotonic()  # the last batch (or the start)
+        self._last_s: float | None = None  # the last batch (or the start); None: not started
         self._last_seq: int | None = None
         self._silent = False  # the current silence has been told
         self._ended = threading.Event()
@@ -57,10 +61,19 @@ class LinkWatch:
         if self.notify is not None:
             self.notify(message)
 
+    def start(self, now: float | None = None) -> None:
+        """The pipeline starts pulling from the source: the silence is timed from here."""
+        now = time.monotonic() if now is None else now
+        with self._lock:
+            if self._last_s is None:
+                self._last_s = now
+
     def heard(self, first: int, last: int, now: float | None = None) -> None:
         """A batch came: the instrument's numbers of its first and last shots."""
         now = time.monotonic() if now is None else now
         with self._lock:
+            if self._last_s is None:  # a batch before start(): the start is now
+                self._last_s = now
             quiet_s, was, silent = now - self._last_s, self._last_seq, self._silent
             self._last_s, self._last_seq, self._silent = now, int(last), False
             if silent:
@@ -75,7 +88,7 @@ class LinkWatch:
         """Tell a silence that has reached the threshold; end the run at the timeout."""
         now = time.monotonic() if now is None else now
         with self._lock:
-            if self._ended.is_set():
+            if self._ended.is_set() or self._last_s is None:
                 return
             quiet_s, since = now - self._last_s, self._last_seq
             tell = quiet_s >= self.threshold_s and not self._silent
@@ -87,8 +100,8 @@ class LinkWatch:
             )
             if timed_out:
                 self._ended_s = now  # the run ends here: its silence is this long
-                self.failure = (
-                    f"link silent for {self.timeout_s:g} s since {_pulse(since)} "
+                self.failure = (  # the true silence: the watch looks every CHECK_S
+                    f"link silent for {quiet_s:.1f} s since {_pulse(since)} "
                     f"(--link-timeout {self.timeout_s:g})"
                 )
         if tell:
@@ -103,7 +116,7 @@ class LinkWatch:
         with self._lock:
             if self._ended_s is not None:
                 now = min(now, self._ended_s)
-            if not self._silent:
+            if not self._silent or self._last_s is None:
                 return None
             seq = None if self._last_seq is None else self._last_seq % 2**64
             return {"silent_s": now - self._last_s, "since_pulse": seq}

@@ -167,6 +167,8 @@ class Pipeline:
     # ---- stages ---------------------------------------------------------------------------
     def _source_stage(self) -> None:
         live = self.source.live
+        if self.link is not None:  # the silence is timed from here, not from the pipeline's build
+            self.link.start()
         try:
             for batch in self.source:
                 if self._stop.is_set():

@@ -14,7 +14,39 @@ from collections import deque
 import numpy as np
 
 from .ingest import PulseBlock
-from .strips import LineBlock
+from .strips import LineBlock, flag_runs
+
+
+class RecordedFlags:
+    """The flagged lines of an image focused from a recording at once (``rtsar process``):
+    line j sums pulses j … j + N - 1, and is flagged when one of them is (as
+    :meth:`LineTiming.lines` decides it while streaming).  ``add(first_line, count)`` for each
+    block of lines written, in order; ``runs``: the flagged lines as [first_line, count] runs
+    (adjacent blocks' runs merged), ``lines`` their number.  ``pulse_flagged``: bool [pulse]
+    (a recording's, 1 byte a pulse), None for a recording that flags nothing."""
+
+    def __init__(self, pulse_flagged: np.ndarray | None, aperture_pulses: int):
+        self.aperture = int(aperture_pulses)
+        self._marked = None  # flagged pulses before pulse p, p = 0 … P
+        if pulse_flagged is not None and np.any(pulse_flagged):
+            counts = np.cumsum(np.asarray(pulse_flagged, bool), dtype=np.int64)
+            self._marked = np.concatenate([[0], counts])
+        self.runs: list[list[int]] = []
+        self.lines = 0
+
+    def add(self, first_line: int, count: int) -> None:
+        if self._marked is None or not count:
+            return
+        total = len(self._marked) - 1
+        j = int(first_line) + np.arange(int(count))
+        low, high = np.clip(j, 0, total), np.clip(j + self.aperture, 0, total)
+        flagged = self._marked[high] > self._marked[low]
+        self.lines += int(flagged.sum())
+        for first, n in flag_runs(int(first_line), flagged):
+            if self.runs and sum(self.runs[-1]) == first:
+                self.runs[-1][1] += n
+            else:
+                self.runs.append([first, n])
 
 
 class LineTiming:

@@ -17,6 +17,7 @@ from ...sinks.image_file import ImageWriter, read_heights, read_image
 from ...sinks.io import RecordingWriter, replace_when_complete
 from ...sinks.record import collection_attrs, processing_attrs
 from ...stream.engine import StreamProcessor
+from ...stream.timing import RecordedFlags
 from .. import signals
 from ..progress import Progress
 from ..quicklook import save_height_quicklook, save_quicklook, spotlight_words
@@ -171,6 +172,11 @@ def cmd_process(args) -> int:
         if args.lens != "numpy":  # which lens runs, on which device, and why
             print(f"rtsar: lens: {eng.lens.choice}", file=sys.stderr)
         prog = Progress(rec.pulses, "process")
+        # A live recording's zero pulses (gaps, zeroed shots, shots not recorded): the lines
+        # whose aperture holds one are flagged, as the live run flagged them.
+        marked = getattr(rec, "pulse_flags", None)
+        marked = None if marked is None else marked != 0
+        flags = RecordedFlags(marked, cfg.processor.aperture_pulses)
         done = 0
         t0 = time.perf_counter()
         # The image goes to disk as it is focused (bounded memory), under a temporary name
@@ -189,8 +195,11 @@ def cmd_process(args) -> int:
         ):
             for shots, aux in rec.batches_with_aux(cfg.processor.micro_batch, channels):
                 signals.check()
+                if marked is not None and marked[done : done + len(shots)].any():
+                    shots, aux = _zero_marked(marked[done : done + len(shots)], shots, aux)
                 out = eng.push(shots, aux)
                 img.write(out.lines, eng.azimuth_m(out.first_line, len(out.lines)))
+                flags.add(out.first_line, len(out.lines))
                 if receivers:
                     more = [e.push(aux[c]).lines for c, e in receivers.items()]
                     _write_heights(img, heights.process(out.lines, *more))
@@ -198,7 +207,11 @@ def cmd_process(args) -> int:
                 prog.update(done)
             out = eng.flush()
             img.write(out.lines, eng.azimuth_m(out.first_line, len(out.lines)))
+            flags.add(out.first_line, len(out.lines))
             extra = {}
+            if marked is not None:  # (as run -o writes them: rtsar.sinks.record)
+                extra["flagged_line_runs"] = json.dumps(flags.runs)
+                extra["flagged_lines"] = flags.lines
             if receivers:
                 more = [e.flush().lines for e in receivers.values()]
                 _write_heights(img, heights.process(out.lines, *more) + heights.flush())
@@ -224,6 +237,13 @@ def cmd_process(args) -> int:
             f"warning: {eng.nonfinite_pulses} of {done} shots held NaN/Inf and were zeroed",
             file=sys.stderr,
         )
+    if flags.lines:
+        print(
+            f"note: {flags.lines} lines flagged (flagged_line_runs): their aperture holds zero "
+            f"pulses of the recording ({int(marked.sum())} pulses: gaps, zeroed shots, shots "
+            "not recorded, pulse_flags)",
+            file=sys.stderr,
+        )
     if counted:
         said = [f"{k} {v}" for k, v in counted.items() if v]
         print(f"corrections: {', '.join(said) or 'nothing counted'}", file=sys.stderr)
@@ -232,6 +252,17 @@ def cmd_process(args) -> int:
         f"{done / dt:,.0f} pulses/s ({eng.lens.backend} lens, {_ccd_words(cfg, physical)})"
     )
     return 0
+
+
+def _zero_marked(marked: np.ndarray, shots: np.ndarray, aux: dict) -> tuple:
+    """A block's shots and channels with the marked pulses zeroed (what ingest does with them
+    in `replay`; a recording rtsar wrote holds zeros there already)."""
+    shots = np.array(shots)
+    shots[marked] = 0
+    aux = {k: np.array(v) for k, v in aux.items()}
+    for v in aux.values():
+        v[marked] = 0
+    return shots, aux
 
 
 def _write_heights(img: ImageWriter, strips) -> None:

@@ -65,6 +65,9 @@ def test_replay_max_into_subscribe_equals_process(tmp_path):
     np.testing.assert_allclose(rg_s, rg_b, rtol=1e-12)
     assert attrs["complete"] and attrs["missing_lines"] == 0 and attrs["missed_strips"] == 0
     assert json.loads(attrs["counters"])["pulses_processed"] > 0
+    # the recording's collection start travels in the strip header to the subscriber's file
+    batch_start = read_image(tmp_path / "batch.h5")[3]["collection_start_utc"]
+    assert attrs["collection_start_utc"] == batch_start
 
 
 def test_a_simulated_run_waits_for_its_subscriber(tmp_path):

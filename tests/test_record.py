@@ -31,6 +31,7 @@ from rtsar.sinks.raw_record import (
     ShotRecorder,
     record_queue_bytes,
 )
+from rtsar.sources.formats.timebase import parse_utc, utc_now
 from rtsar.sources.frame import encode_frame
 from rtsar.stream.ingest import PulseBlock
 
@@ -106,6 +107,16 @@ def test_a_simulated_run_records_every_channel_and_is_focused_again(tmp_path, ca
         assert json.loads(f.attrs["counters"])["pulses_accepted"] == 300
     _refocus(tmp_path, raw, img)
     capsys.readouterr()
+    # From a cold review of issue 28: live recordings and images carried no collection start
+    # (their exports said 2000-01-01), and replay -o dropped the recording's. Every output
+    # keeps one: the processor's clock at the first shot, then the recording's.
+    starts = {}
+    for name in ("raw.h5", "img.h5", "p.h5", "r.h5"):
+        with h5py.File(tmp_path / name, "r") as f:
+            starts[name] = f.attrs.get("collection_start_utc")
+    assert starts["raw.h5"] is not None and len(set(starts.values())) == 1, starts
+    when = parse_utc(starts["raw.h5"])
+    assert abs((utc_now() - when).total_seconds()) < 120
 
 
 def _frames(s: int):

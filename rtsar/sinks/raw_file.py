@@ -51,12 +51,13 @@ class Shots:
     inserted: np.ndarray | None
     nbytes: int  # the bytes it holds (none for inserted zero pulses)
     widths: dict  # auxiliary channel → samples (what a file made from this block holds)
+    collection_start_utc: str | None = None  # the stream's pulse 0 (StreamInfo), for the file
 
     def __len__(self) -> int:
         return self.count
 
     @classmethod
-    def of(cls, block) -> Shots:
+    def of(cls, block, collection_start_utc: str | None = None) -> Shots:
         """A PulseBlock's recorded fields, its arrays contiguous (they travel out of band)."""
         n = len(block)
         zeros = block.inserted is not None and bool(block.inserted.all())
@@ -72,6 +73,7 @@ class Shots:
             None if block.inserted is None else c(block.inserted),
             nbytes,
             {k: int(a.shape[1]) for k, a in block.aux.items()},
+            collection_start_utc,
         )  # fmt: skip
 
 
@@ -110,6 +112,7 @@ class RawFile:
         self._file: LiveFile | None = None
         self._datasets: dict = {}
         self.written = 0  # pulses whose rows are in the file (shots, inserted zeros)
+        self.collection_start_utc: str | None = None  # from the first block of shots
         self.dropped = 0  # pulses not recorded (as marked in the file)
         self.dropped_runs: list[list[int]] = []
 
@@ -131,6 +134,7 @@ class RawFile:
         if self._file is None:
             first = next((x for x in items if not isinstance(x, _Dropped)), None)
             widths = {} if first is None else first.widths
+            self.collection_start_utc = None if first is None else first.collection_start_utc
             self._create(widths)
         self._append(items)
         for x in items:
@@ -183,6 +187,8 @@ class RawFile:
         a["recorded_live"] = True
         a["pulse_flags_meaning"] = FLAGS_MEANING
         a["complete"] = False
+        if self.collection_start_utc:  # the time of pulse 0 (time_s = 0)
+            a["collection_start_utc"] = self.collection_start_utc
 
     def _trim(self, rows: int) -> None:
         """After a failed write: every dataset back to the rows written whole."""

@@ -163,7 +163,7 @@ class ShotRecorder(StripSink):
         with self._cond:
             fits = self._bytes + nbytes <= self.capacity or not self._bytes
             if self.failure is None and not self._ending and fits:
-                self._items.append((block, nbytes))
+                self._items.append((block, nbytes, getattr(info, "collection_start_utc", None)))
                 self._bytes += nbytes
                 self._cond.notify_all()
             else:
@@ -236,7 +236,7 @@ class ShotRecorder(StripSink):
                     if isinstance(x, _Dropped):
                         send(self._fd_out, ("drop", x.first, x.count))
                     else:
-                        send(self._fd_out, ("pulses", Shots.of(x[0])))
+                        send(self._fd_out, ("pulses", Shots.of(x[0], x[2])))
             send(self._fd_out, self._final or ("end", {}, False))
         except OSError:  # the process is gone (its pipe broken): _listen tells it
             pass

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..params import config_from_dict
-from ..sources.formats.timebase import format_utc
+from ..sources.formats.timebase import format_utc, parse_utc
 from ..stream.strips import StreamInfo, Strip, StripSink
 from .image_file import ImageWriter
 from .name_claim import NameClaim
@@ -36,6 +36,16 @@ def collection_attrs(rec) -> dict:
     the SICD's Timeline/CollectStart (rtsar.sources.formats.timebase)."""
     start = getattr(rec, "collection_start", None)
     return {} if start is None else {"collection_start_utc": format_utc(start)}
+
+
+def collection_from_header(header: dict) -> dict:
+    """The image attribute of a strip header's ``collection_start_utc`` (none where absent or
+    not an ISO 8601 time: a header is never trusted to write a false time)."""
+    text = header.get("collection_start_utc")
+    try:
+        return {"collection_start_utc": format_utc(parse_utc(text))}
+    except ValueError:
+        return {}
 
 
 def processing_attrs(
@@ -138,6 +148,7 @@ class StripRecorder:
                 heights=bool(header.get("height_strips", False)),
                 source=self.source,
                 first_line=first,
+                **collection_from_header(header),
             )
             self.stream_id = header.get("stream_id")
             self.processing = processing_from_header(header)

@@ -50,6 +50,7 @@ def strip_header(strip: Strip, info: StreamInfo) -> dict:
         "first_pulse_arrival_unix_s": info.unix_s(strip.first_arrival_s),
         "last_pulse_arrival_unix_s": info.unix_s(strip.last_arrival_s),
         "publish_unix_s": time.time(),
+        "collection_start_utc": info.collection_start_utc,
         "flagged_lines": [list(r) for r in strip.flagged_lines],
         "counters": strip.counters,
         "config": info.config_dict,
@@ -94,6 +95,7 @@ def height_header(strip, seq: int, info: StreamInfo) -> dict:
         "range_first_m": float(rng[0]),
         "range_step_m": float(rng[1] - rng[0]) if len(rng) > 1 else 0.0,
         "publish_unix_s": time.time(),
+        "collection_start_utc": info.collection_start_utc,
     }
 
 
@@ -104,6 +106,7 @@ def stats_header(stats: dict, info: StreamInfo) -> dict:
         "version": STRIP_VERSION,
         "stream_id": info.stream_id,
         "publish_unix_s": time.time(),
+        "collection_start_utc": info.collection_start_utc,
         "source": info.source,
         **stats,
     }

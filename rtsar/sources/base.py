@@ -62,6 +62,9 @@ class Source(ABC):
         self._stop = False
         self.failure: str | None = None
         self.notify = None
+        # The time of the stream's pulse 0 (naive UTC) where the source knows it (a replayed
+        # recording's collection start); None: the pipeline takes the first shot's arrival.
+        self.collection_start = None
 
     def _say(self, message: str) -> None:
         if self.notify is not None:

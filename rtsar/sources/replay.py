@@ -88,7 +88,7 @@ class ReplaySource(Source):
         """The recording's shots and its auxiliary ``channels`` (those the processing reads); a
         live recording's zero pulses (``pulse_flags``) are flagged."""
         flags = getattr(recording, "pulse_flags", None)  # (CPHD, SigMF: none)
-        return cls(
+        source = cls(
             recording.shots,
             recording.pulse_index,
             recording.time_s,
@@ -99,6 +99,8 @@ class ReplaySource(Source):
             aux={name: recording.channels[name] for name in channels},
             flagged=None if flags is None else flags != 0,
         )
+        source.collection_start = getattr(recording, "collection_start", None)
+        return source
 
     def aux_channels(self) -> tuple[str, ...]:
         """The auxiliary channels given (``aux``): those it releases with every shot."""

@@ -31,6 +31,7 @@ from dataclasses import replace
 
 from ..params import Config
 from ..sources.base import Source
+from ..sources.formats.timebase import format_utc, from_unix_s
 from .engine import Lines, StreamProcessor
 from .height import HeightBatch, HeightChannel
 from .hold import HeldPulses
@@ -148,6 +149,9 @@ class Pipeline:
             corrections=tuple(corrections.names) if corrections else (),
             correction_specs=tuple(corrections.specs) if corrections else (),
             physical=None if physical is None else physical.to_dict(),
+            collection_start_utc=None
+            if getattr(source, "collection_start", None) is None
+            else format_utc(source.collection_start),
         )
         self.strips = StripAssembler(self.info)
         self.swath = None  # lens + CCD in worker processes (rtsar.stream.swath)
@@ -175,6 +179,9 @@ class Pipeline:
                     break
                 if self.link is not None and len(batch):
                     self.link.heard(int(batch.seq[0]), int(batch.seq[-1]))
+                if self.info.collection_start_utc is None and len(batch):
+                    first_s = self.info.unix_s(float(batch.arrival_s[0]))
+                    self.info.set_collection_start(format_utc(from_unix_s(first_s)))
                 if not self.q_shots.put(batch, block=not live):
                     self.own["dropped_pulses"] += len(batch)
         finally:

@@ -70,10 +70,19 @@ class StreamInfo:
     corrections: tuple = ()  # names of the correction stages, in the order they run
     correction_specs: tuple = ()  # the --correct values as given (keys and all), in that order
     physical: dict | None = None  # the physical mode's settings (PhysicalSettings.to_dict)
+    # ISO 8601 UTC of the stream's pulse 0 (rtsar.sources.formats.timebase): a replayed
+    # recording's own, else the processor's clock at the first shot's arrival (set once, by
+    # the source stage, before any strip or recorded pulse exists)
+    collection_start_utc: str | None = None
 
     def __post_init__(self):
         if not self.config_dict:
             object.__setattr__(self, "config_dict", self.config.to_dict())
+
+    def set_collection_start(self, text: str) -> None:
+        """The collection start, once (the info is otherwise fixed at the run's start)."""
+        if self.collection_start_utc is None:
+            object.__setattr__(self, "collection_start_utc", text)
 
     @property
     def azimuth_step_m(self) -> float:

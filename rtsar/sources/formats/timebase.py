@@ -23,6 +23,11 @@ def utc_now() -> dt.datetime:
     return dt.datetime.now(dt.timezone.utc).replace(tzinfo=None)
 
 
+def from_unix_s(seconds: float) -> dt.datetime:
+    """A UNIX time (seconds) as naive UTC."""
+    return dt.datetime.fromtimestamp(float(seconds), dt.timezone.utc).replace(tzinfo=None)
+
+
 def format_utc(when: dt.datetime) -> str:
     """``when`` (naive UTC) as ISO 8601 with microseconds and a Z."""
     return when.strftime(_FORMAT)

@@ -31,7 +31,6 @@ from dataclasses import replace
 
 from ..params import Config
 from ..sources.base import Source
-from ..sources.formats.timebase import format_utc, from_unix_s
 from .engine import Lines, StreamProcessor
 from .height import HeightBatch, HeightChannel
 from .hold import HeldPulses
@@ -42,7 +41,7 @@ from .overlap import overlapped_stage
 from .queue import BoundedQueue
 from .settings import PipelineSettings
 from .stats import PipelineStats
-from .strips import LineBlock, StreamInfo, StripAssembler, StripSink, new_stream_id
+from .strips import LineBlock, StreamInfo, StripAssembler, StripSink, new_stream_id, utc_text
 from .swath import SwathWorkers
 from .timing import LineTiming
 
@@ -149,9 +148,7 @@ class Pipeline:
             corrections=tuple(corrections.names) if corrections else (),
             correction_specs=tuple(corrections.specs) if corrections else (),
             physical=None if physical is None else physical.to_dict(),
-            collection_start_utc=None
-            if getattr(source, "collection_start", None) is None
-            else format_utc(source.collection_start),
+            collection_start_utc=utc_text(getattr(source, "collection_start", None)),
         )
         self.strips = StripAssembler(self.info)
         self.swath = None  # lens + CCD in worker processes (rtsar.stream.swath)
@@ -179,9 +176,8 @@ class Pipeline:
                     break
                 if self.link is not None and len(batch):
                     self.link.heard(int(batch.seq[0]), int(batch.seq[-1]))
-                if self.info.collection_start_utc is None and len(batch):
-                    first_s = self.info.unix_s(float(batch.arrival_s[0]))
-                    self.info.set_collection_start(format_utc(from_unix_s(first_s)))
+                if len(batch):
+                    self.info.first_shot_at(float(batch.arrival_s[0]))
                 if not self.q_shots.put(batch, block=not live):
                     self.own["dropped_pulses"] += len(batch)
         finally:

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..ccd.base import line_azimuth_m
 from ..params import Config
+from ..sources.formats.timebase import format_utc, from_unix_s
 
 
 @dataclass
@@ -79,10 +80,12 @@ class StreamInfo:
         if not self.config_dict:
             object.__setattr__(self, "config_dict", self.config.to_dict())
 
-    def set_collection_start(self, text: str) -> None:
-        """The collection start, once (the info is otherwise fixed at the run's start)."""
+    def first_shot_at(self, perf_s: float) -> None:
+        """Where no collection start is known, the processor's clock (UTC) at the first shot's
+        arrival (``perf_s``, perf_counter) becomes it; once (the info is otherwise fixed)."""
         if self.collection_start_utc is None:
-            object.__setattr__(self, "collection_start_utc", text)
+            when = utc_text(from_unix_s(self.unix_s(perf_s)))
+            object.__setattr__(self, "collection_start_utc", when)
 
     @property
     def azimuth_step_m(self) -> float:
@@ -192,3 +195,8 @@ def flag_runs(first: int, flagged: np.ndarray) -> list[tuple[int, int]]:
 def new_stream_id() -> str:
     """A random hex id for a run (a new id tells subscribers the publisher restarted)."""
     return uuid.uuid4().hex[:16]
+
+
+def utc_text(when) -> str | None:
+    """A naive UTC datetime as ISO 8601 (rtsar.sources.formats.timebase), None as None."""
+    return None if when is None else format_utc(when)

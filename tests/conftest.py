@@ -1,4 +1,5 @@
 import os
+import random
 import socket
 import sys
 
@@ -6,10 +7,40 @@ import numpy as np
 import pytest
 
 
+def _ephemeral_ports() -> range:
+    """The ports the system gives outgoing connections (Linux's range; the usual elsewhere)."""
+    try:
+        low, high = map(int, open("/proc/sys/net/ipv4/ip_local_port_range").read().split())
+    except (OSError, ValueError):
+        low, high = 32768, 65535
+    return range(low, high + 1)
+
+
+def free_port(span: int = 1) -> int:
+    """A loopback port, with the ``span - 1`` after it, free now and outside the ephemeral
+    range.  Not ``bind(0)``'s port: that one is ephemeral, and a client that connects to it
+    before its server listens (ZeroMQ retrying every 0.1 s, a serial socket:// waiting for its
+    instrument) may be given that very port as its own source port and connect to itself, so
+    the server's bind then fails "Address already in use" (seen once in a full run)."""
+    ephemeral = _ephemeral_ports()
+    rng = random.Random()
+    for _ in range(1000):
+        port = rng.randrange(10000, 30000)
+        ports = range(port, port + span)
+        if any(q in ephemeral for q in ports):
+            continue
+        try:
+            for q in ports:
+                with socket.socket() as s:
+                    s.bind(("127.0.0.1", q))
+        except OSError:
+            continue
+        return port
+    raise RuntimeError("no free loopback port found outside the ephemeral range")
+
+
 def _free_loopback_endpoint() -> str:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp://127.0.0.1:{s.getsockname()[1]}"
+    return f"tcp://127.0.0.1:{free_port()}"
 
 
 # Commands run by the tests with the default endpoint publish on a port of this session's own

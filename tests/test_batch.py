@@ -357,3 +357,19 @@ def test_rtsar_demo_alone_runs_the_insal_demo():
     from rtsar.app.cli import build_parser
 
     assert build_parser().parse_args(["demo"]).which == "insal"
+
+
+def test_a_dead_workers_row_waits_for_the_nannys_line():
+    """From a full run on a busy machine: the KilledWorker reached the client before the nanny
+    logged how its worker ended, and the row said "how is not known". The row waits for it."""
+    from types import SimpleNamespace
+
+    KilledWorker = type("KilledWorker", (Exception,), {})
+    exc = KilledWorker("died")
+    exc.allowed_failures, exc.last_worker = 1, SimpleNamespace(pid=4242)
+    deaths: dict[int, str] = {}
+    timer = threading.Timer(0.3, lambda: deaths.update({4242: "exited with status 3"}))
+    timer.start()
+    why = batch._why(exc, deaths, 1)
+    timer.join()
+    assert why == "its worker process died on each of 2 tries; the last exited with status 3"

@@ -7,7 +7,7 @@ import re
 
 import numpy as np
 import pytest
-from conftest import fmcw_scene_with_reference
+from conftest import fmcw_scene_with_reference, free_port
 
 sarkit_cphd = pytest.importorskip("sarkit.cphd")
 skver = pytest.importorskip("sarkit.verification")
@@ -283,7 +283,6 @@ def test_cphd_outside_rtsar_geometry_refused():
 def test_replay_of_cphd_into_subscribe_sicd(pulsed, tmp_path):
     """`replay` takes the CPHD through the live pipeline; `subscribe --sicd` writes the streamed
     image as SICD at the end of the stream: the same pixels as the recording's `process`."""
-    import socket
     import threading
 
     from sarpy.io.complex.converter import open_complex
@@ -291,9 +290,7 @@ def test_replay_of_cphd_into_subscribe_sicd(pulsed, tmp_path):
     cphd, batch = tmp_path / "rec.cphd", tmp_path / "batch.h5"
     assert main(["export", str(pulsed), "--cphd", str(cphd)]) == 0
     assert main(["process", str(pulsed), "-o", str(batch), "--lens", "numpy"]) == 0
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        ep = f"tcp://127.0.0.1:{s.getsockname()[1]}"
+    ep = f"tcp://127.0.0.1:{free_port()}"  # outside the ephemeral range (conftest)
     sub_h5, sub_sicd, codes = tmp_path / "sub.h5", tmp_path / "sub.nitf", []
     args = ["subscribe", ep, "-o", str(sub_h5), "--sicd", str(sub_sicd), "--timeout", "30"]
     sub = threading.Thread(target=lambda: codes.append(main(args)))
@@ -311,13 +308,10 @@ def test_replay_of_cphd_into_subscribe_sicd(pulsed, tmp_path):
 def test_subscribe_sicd_never_exports_a_stale_image(pulsed, tmp_path):
     """From a cold review: with no strip received, an image file left by an earlier run was
     exported as this stream's SICD."""
-    import socket
 
     stale, sicd = tmp_path / "stale.h5", tmp_path / "stale.nitf"
     assert main(["process", str(pulsed), "-o", str(stale), "--lens", "numpy"]) == 0
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        ep = f"tcp://127.0.0.1:{s.getsockname()[1]}"
+    ep = f"tcp://127.0.0.1:{free_port()}"  # outside the ephemeral range (conftest)
     args = ["subscribe", ep, "-o", str(stale), "--sicd", str(sicd), "--timeout", "0.5"]
     assert main(args) == 1  # nothing received
     assert not sicd.exists()

@@ -6,6 +6,7 @@ import re
 import h5py
 import numpy as np
 import pytest
+from conftest import free_port
 
 from rtsar.app.cli import main
 from rtsar.instrument import SECOND_RECEIVER
@@ -95,13 +96,10 @@ def test_height_without_an_interferometer_is_a_one_line_error(tmp_path, capsys):
 
 
 def test_subscribe_records_the_published_heights(insal_recording):
-    import socket
     import threading
 
     d, rec, h, v, c = insal_recording
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        ep = f"tcp://127.0.0.1:{s.getsockname()[1]}"
+    ep = f"tcp://127.0.0.1:{free_port()}"  # outside the ephemeral range (conftest)
     out, codes = d / "sub.h5", []
     sub = threading.Thread(
         target=lambda: codes.append(main(["subscribe", ep, "-o", str(out), "--timeout", "30"]))

@@ -1,13 +1,13 @@
 """ZeroMQ strips: wire format, replay → subscribe equals process, stalled subscribers, CURVE."""
 
 import json
-import socket
 import threading
 import time
 
 import numpy as np
 import pytest
 import zmq
+from conftest import free_port as _conftest_free_port
 
 from rtsar.app.cli import main
 from rtsar.presets import preset
@@ -35,9 +35,7 @@ snr_db = 10.0
 
 
 def free_endpoint() -> str:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp://127.0.0.1:{s.getsockname()[1]}"
+    return f"tcp://127.0.0.1:{_conftest_free_port()}"
 
 
 def test_replay_max_into_subscribe_equals_process(tmp_path):

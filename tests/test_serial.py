@@ -1,6 +1,5 @@
 """SerialSource over loop://, a pseudo-terminal and a TCP socket fed by the fake instrument."""
 
-import socket
 import sys
 import threading
 import time
@@ -8,6 +7,7 @@ import time
 import numpy as np
 import pytest
 from conftest import crandn
+from conftest import free_port as _conftest_free_port
 from tools_loader import load_tool
 
 from rtsar.presets import preset
@@ -78,9 +78,7 @@ def test_close_before_iterating():
 
 
 def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    return _conftest_free_port()
 
 
 @pytest.mark.parametrize(

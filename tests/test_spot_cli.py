@@ -2,12 +2,12 @@
 
 import json
 import math
-import socket
 import threading
 
 import numpy as np
 import pytest
 import zmq
+from conftest import free_port as _conftest_free_port
 
 from rtsar.app.cli import main
 from rtsar.app.spotlight import read_spot_image
@@ -42,9 +42,7 @@ amplitude = 0.7
 
 
 def free_endpoint() -> str:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp://127.0.0.1:{s.getsockname()[1]}"
+    return f"tcp://127.0.0.1:{_conftest_free_port()}"
 
 
 @pytest.fixture(scope="module")

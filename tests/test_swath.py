@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import zmq
 from conftest import crandn
+from conftest import free_port as _conftest_free_port
 
 from rtsar.app.cli import main
 from rtsar.ccd import make_ccd
@@ -45,9 +46,7 @@ class Collect(StripSink):
 
 
 def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    return _conftest_free_port(span=4)  # the results port, then one per worker
 
 
 @pytest.fixture(scope="module")

@@ -17,6 +17,7 @@ from importlib import resources
 import aiohttp
 import numpy as np
 import pytest
+from conftest import free_port as _conftest_free_port
 
 from rtsar.app.cli import main
 from rtsar.app.cli.view import parse_http
@@ -210,9 +211,7 @@ def test_the_page_fetches_nothing_from_outside_the_package():
 
 
 def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    return _conftest_free_port()
 
 
 def stalled_browser(port: int) -> socket.socket:

@@ -11,13 +11,13 @@ import io
 import os
 import re
 import shutil
-import socket
 import subprocess
 import sys
 import time
 
 import numpy as np
 import pytest
+from conftest import free_port as _conftest_free_port
 
 from rtsar.scene.picture import text_rows
 from rtsar.sinks.client import StripSubscriber
@@ -57,9 +57,7 @@ def browser_or_skip():
 
 
 def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    return _conftest_free_port()
 
 
 def expected_canvas(lines: dict[int, np.ndarray]) -> np.ndarray:

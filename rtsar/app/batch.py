@@ -418,13 +418,22 @@ def _unfinished(recording: Path, output: Path, started: float, running: bool) ->
     return FileResult(str(recording), str(output), "interrupted" if running else "not started")
 
 
+DEATH_LINE_WAIT_S = 3.0  # the longest a failed row waits for its worker's nanny to say how
+
+
 def _why(exc: Exception, deaths: dict[int, str], retries: int) -> str:
     """A failed task's row: the exception it raised, or how its worker ended (Dask's
     KilledWorker: the nanny's exit status or signal of the last one, where known)."""
     if type(exc).__name__ != "KilledWorker":
         return f"{type(exc).__name__}: {exc} (raised on each of {retries + 1} tries)"
     tries = int(getattr(exc, "allowed_failures", 0)) + 1
-    said = deaths.get(getattr(getattr(exc, "last_worker", None), "pid", None))
+    pid = getattr(getattr(exc, "last_worker", None), "pid", None)
+    # The scheduler may give up on the worker before its nanny has logged how it ended (a
+    # busy machine): wait for that line a moment rather than say "not known".
+    deadline = time.monotonic() + DEATH_LINE_WAIT_S
+    while pid is not None and pid not in deaths and time.monotonic() < deadline:
+        time.sleep(0.05)
+    said = deaths.get(pid)
     found = re.fullmatch(r"was killed by signal (\d+)", said or "")
     if found:
         with contextlib.suppress(ValueError):

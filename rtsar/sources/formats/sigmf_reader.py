@@ -12,7 +12,8 @@ converted: shots come back bit for bit.
 
 Everything the metadata declares is checked against what it describes before any work, and a
 file that contradicts itself is refused in one line naming the field: the sample rate, PRF and
-chirp against ``rtsar:config``; captures (at least one, at shot boundaries, in order); the
+chirp against ``rtsar:config``; captures (at least one, at shot boundaries, in order, their
+``core:datetime`` at their shots' ``rtsar:time_s``); the
 per-shot annotations (one per shot in an rtsar export, numbers and times finite); a spotlight
 export's station positions without the spotlight geometry they belong to.
 """
@@ -197,6 +198,42 @@ def _column(per_shot: list, key: str, shape: tuple) -> np.ndarray | None:
     return values
 
 
+CAPTURE_TIME_TOLERANCE_S = 2e-6  # core:datetime holds microseconds: two roundings
+
+
+def _capture_times(captures: list, first_shots: list, time_s, timed: bool):
+    """The collection start (UTC of time_s = 0) from the captures' ``core:datetime``, None where
+    the first has none.  Every capture's time is checked: with per-shot ``rtsar:time_s``
+    (``timed``) it must be the collection start + its first shot's time (a file whose times
+    disagree contradicts itself); without, the captures' times must increase."""
+    if not captures or not len(time_s) or captures[0].get("core:datetime") is None:
+        return None
+    at = [
+        None
+        if c.get("core:datetime") is None
+        else parse_utc(c["core:datetime"], f"capture {k}'s core:datetime")
+        for k, c in enumerate(captures)
+    ]
+    start = shifted(at[0], -float(time_s[first_shots[0]]))
+    for k in range(1, len(captures)):
+        if at[k] is None:
+            continue
+        seconds = (at[k] - start).total_seconds()
+        if timed and abs(seconds - time_s[first_shots[k]]) > CAPTURE_TIME_TOLERANCE_S:
+            raise ValueError(
+                f"capture {k}'s core:datetime {captures[k]['core:datetime']} is "
+                f"{seconds!r} s after the collection start; its shot {first_shots[k]}'s "
+                f"rtsar:time_s says {float(time_s[first_shots[k]])!r} s"
+            )
+        previous = next((t for t in at[k - 1 :: -1] if t is not None), at[0])
+        if not timed and at[k] <= previous:
+            raise ValueError(
+                f"capture {k}'s core:datetime {captures[k]['core:datetime']} is not after the "
+                "capture before it: the captures' times must increase"
+            )
+    return start
+
+
 def open_sigmf(path: str | Path, config=None) -> ForeignRecording:
     """Open a SigMF recording; ``config`` (rtsar.params.Config) where it carries none."""
     require_formats(sigmffile, "reading SigMF")
@@ -249,11 +286,7 @@ def open_sigmf(path: str | Path, config=None) -> ForeignRecording:
                 "geometry: a spotlight recording is not imaged without it"
             )
         channels = _channels(store, name, g, pulses)
-        datetime_text = captures[0].get("core:datetime")
-        collection_start = None
-        if datetime_text is not None and pulses:
-            at = parse_utc(datetime_text, "the first capture's core:datetime")
-            collection_start = shifted(at, -float(time_s[first_shots[0]]))
+        collection_start = _capture_times(captures, first_shots, time_s, bool(per_shot))
     except (ValueError, KeyError, TypeError, OverflowError, AttributeError) as exc:
         raise ValueError(f"{meta}: {exc}") from None
     return ForeignRecording(

@@ -18,6 +18,8 @@ def open_input(path: str | Path, note_times: bool = True):
     ``*.sigmf`` → SigMF, anything else → an rtsar recording (HDF5).  Shot times that do not
     increase are said in one warning (``note_times``; docs/pages/reference/faults.md)."""
     rec = _open(Path(path))
+    for note in getattr(rec, "notes", ()):  # what a reader had to say (a CPHD's track)
+        print(f"rtsar: warning: {note}", file=sys.stderr)
     if note_times:
         note_time_order(rec)
     return rec

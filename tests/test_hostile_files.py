@@ -136,6 +136,24 @@ SIGMF = {
         lambda m: m["global"]["rtsar:chirp"].update({"rate_hz_per_s": 1.0}),
         "rtsar:chirp",
     ),
+    # (a cold review: accepted with exit 0, or refused without naming the key)
+    "a shot annotation of the wrong length": (
+        lambda m: m["annotations"][4].update({"core:sample_count": 5}),
+        "shot 4's annotation has core:sample_count 5",
+    ),
+    "a time that is text": (
+        lambda m: m["annotations"][4].update({"rtsar:time_s": "x"}),
+        "shot 4's rtsar:time_s 'x'",
+    ),
+    "captures an object": (lambda m: m.update({"captures": {}}), "'captures' is a dict"),
+    "a capture that is a list": (
+        lambda m: m["captures"].__setitem__(2, [0]),
+        "captures[2] is a list",
+    ),
+    "a datetime that is no time": (
+        lambda m: m["captures"][3].update({"core:datetime": "not a time"}),
+        "at ['captures'][3]['core:datetime']: 'not a time' is not of the form",
+    ),
 }
 
 
@@ -179,6 +197,85 @@ def test_a_cphd_of_integer_samples_is_refused(good, tmp_path, capsys, command):
     }[command]
     assert main(argv) == 2
     assert "CI4" in _one_line_error(capsys, "ci4.cphd")
+
+
+def _cphd_edit(good, tmp_path, old: bytes, new: bytes) -> str:
+    raw = (good / "rec.cphd").read_bytes()
+    assert raw.count(old) == 1 and len(old) == len(new)  # the header's offsets stay true
+    bad = tmp_path / "edited.cphd"
+    bad.write_bytes(raw.replace(old, new))
+    return str(bad)
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "said"),
+    [
+        (b"<FxBW>40000000.0<", b"<FxBW>90000000.0<", "Channel FxBW 90000000.0 Hz contradicts"),
+        (b"<ModeType>STRIPMAP<", b"<ModeType>DYNAMIC <", "ModeType DYNAMIC"),
+    ],
+)
+@pytest.mark.parametrize("command", ["process", "export"])
+def test_a_cphd_that_contradicts_what_rtsar_processes_is_refused(
+    good, tmp_path, capsys, old, new, said, command
+):
+    bad = _cphd_edit(good, tmp_path, old, new)
+    capsys.readouterr()
+    if command == "process":
+        argv = ["process", bad, "-o", str(tmp_path / "x.h5"), "--lens", "numpy"]
+    else:
+        argv = ["export", bad, "--sigmf", str(tmp_path / "o")]
+    assert main(argv) == 2
+    assert said in _one_line_error(capsys, "edited.cphd")
+
+
+def test_a_cphd_track_off_the_configuration_is_said_with_its_figure(good, tmp_path, capsys):
+    import re
+
+    raw = bytearray((good / "rec.cphd").read_bytes())
+    size = int(re.search(rb"<NumBytesPVP>(\d+)<", bytes(raw)).group(1))
+    pvp = int(re.search(rb"PVP_BLOCK_BYTE_OFFSET := (\d+)", bytes(raw)).group(1))
+    for v in range(72):  # TxPos X (ECF; up, at the origin 0,0): ±50 m, across the track
+        at = pvp + v * size + 8  # after TxTime
+        x = np.frombuffer(bytes(raw[at : at + 8]), ">f8")[0] + (50.0 if v % 2 else -50.0)
+        raw[at : at + 8] = np.array(x, ">f8").tobytes()
+    bad = tmp_path / "wander.cphd"
+    bad.write_bytes(bytes(raw))
+    capsys.readouterr()
+    assert main(["process", str(bad), "-o", str(tmp_path / "x.h5"), "--lens", "numpy"]) == 0
+    said = [e for e in capsys.readouterr().err.splitlines() if "TxPos" in e]
+    assert len(said) == 1 and said[0].startswith("rtsar: warning: ") and "wander.cphd" in said[0]
+    assert "by 50 m rms" in said[0], said
+
+
+GARBAGE_COMMANDS = {
+    "process": lambda p, o: ["process", p, "-o", str(o / "x.h5")],
+    "replay": lambda p, o: ["replay", p, "--rate", "max", "--endpoint", "ipc://" + str(o / "e")],
+    "export --cphd": lambda p, o: ["export", p, "--cphd", str(o / "x.cphd")],
+    "export --sicd": lambda p, o: ["export", p, "--sicd", str(o / "x.nitf")],
+    "quicklook": lambda p, o: ["quicklook", p, "-o", str(o / "x.png")],
+    "measure": lambda p, o: ["measure", p],
+    "spotlight": lambda p, o: ["spotlight", p, "-o", str(o / "x.h5")],
+    "batch": lambda p, o: ["batch", p, "--out-dir", str(o)],
+}
+
+
+@pytest.mark.parametrize("command", sorted(GARBAGE_COMMANDS))
+def test_a_garbage_hdf5_file_is_named_by_every_command(tmp_path, capsys, command):
+    bad = tmp_path / "garbage.h5"  # HDF5's signature, then noise: h5py raises RuntimeError
+    rng = np.random.default_rng(7)
+    bad.write_bytes(b"\x89HDF\r\n\x1a\n" + rng.integers(0, 256, 4096, np.uint8).tobytes())
+    capsys.readouterr()
+    assert main(GARBAGE_COMMANDS[command](str(bad), tmp_path)) == 2
+    assert "not an HDF5 file" in _one_line_error(capsys, "garbage.h5")
+
+
+def test_export_help_says_one_capture_per_shot_as_written(good, capsys):
+    with pytest.raises(SystemExit):
+        main(["export", "--help"])
+    words = " ".join(capsys.readouterr().out.split())
+    assert "one capture and one annotation per shot" in words
+    meta = json.loads((good / "sig.sigmf-meta").read_text())
+    assert len(meta["captures"]) == len(meta["annotations"]) == 72
 
 
 # ---- a fuzz of structural corruptions -----------------------------------------------------------

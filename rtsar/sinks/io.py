@@ -338,12 +338,13 @@ def open_checked(path: str | Path, fmt: str) -> h5py.File:
     path = Path(path)
     if not path.exists():
         raise ValueError(f"{path}: no such file")
+    # HDF5 refuses a damaged file with OSError or (its superblock unreadable) RuntimeError.
     try:
         f = h5py.File(path, "r")
-    except OSError as exc:
+    except (OSError, RuntimeError) as exc:
         try:  # an image still being written by a live stream (crash-safe SWMR mode)
             f = h5py.File(path, "r", swmr=True)
-        except OSError:
+        except (OSError, RuntimeError):
             if "already open for write" in str(exc):  # a writer died before it closed the file
                 raise ValueError(
                     f"{path}: its writer did not close it (killed?), and HDF5 refuses it until "

@@ -34,6 +34,18 @@ def _frame(text: str) -> LocalFrame:
     return LocalFrame(lat, lon, heading)
 
 
+def _note_zeroed(nonfinite: dict, rec, out: str) -> None:
+    """One warning per channel whose shots held NaN/Inf: written as zeros, as ``process`` images
+    them (rtsar.sinks.exports.screen)."""
+    for name, count in nonfinite.items():
+        which = "" if name == "main" else f" of channel {name!r}"
+        print(
+            f"rtsar: warning: {count} of {rec.pulses} shots{which} of {rec.path} held NaN/Inf "
+            f"and were written to {out} as zeros",
+            file=sys.stderr,
+        )
+
+
 def cmd_export(args) -> int:
     outputs = [o for o in (args.cphd, args.sigmf, args.sicd) if o]
     if not outputs:
@@ -54,9 +66,11 @@ def cmd_export(args) -> int:
             f"pixels ({time.perf_counter() - t0:.1f} s)"
         )
         return 0
-    with open_input(args.input) as rec:
+    # A CPHD export refuses shot times out of order itself (one line): no warning first.
+    with open_input(args.input, note_times=not args.cphd) as rec:
         if args.cphd:
             info = write_cphd(rec, args.cphd, frame)
+            _note_zeroed(info["nonfinite"], rec, args.cphd)
             print(
                 f"wrote {args.cphd}: CPHD 1.0.1 {info['mode']}, {info['vectors']} vectors × "
                 f"{info['samples']} samples, channel(s) {', '.join(info['channels'])}, "
@@ -72,6 +86,7 @@ def cmd_export(args) -> int:
                 )
         if args.sigmf:
             info = write_sigmf(rec, args.sigmf)
+            _note_zeroed(info["nonfinite"], rec, info["base"] + ".sigmf-data")
             more = f" + channels {', '.join(info['channels'])}" if info["channels"] else ""
             print(
                 f"wrote {info['base']}.sigmf-meta/-data: {info['shots']} shots{more} "
@@ -87,7 +102,7 @@ def add_parsers(sub) -> None:
         "CPHD 1.0.1 (NGA phase history: FX domain, per-pulse positions, the scene reference "
         "point on the centre line; a spotlight recording on its arc, the SRP at the scene "
         "centre, its bistatic receiver as a second channel; strip-map auxiliary channels are "
-        "left out, and named) and/or SigMF (one capture, one annotation per shot, every "
+        "left out, and named) and/or SigMF (one capture and one annotation per shot, every "
         "channel), or an image file as SICD (NITF).  Needs the optional packages: "
         'pip install "rtsar[formats]".  Fields filled: docs/pages/reference/files.md.',
     )

@@ -6,16 +6,26 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from ...sinks.exports.screen import time_order_note
 from ...sinks.io import open_recording
 from ...sources.formats.sigmf_store import sigmf_base
 
 CPHD_SUFFIXES = (".cphd",)
 
 
-def open_input(path: str | Path):
+def open_input(path: str | Path, note_times: bool = True):
     """Open a recording by its name: ``*.cphd`` → CPHD, ``*.sigmf-meta``/``*.sigmf-data``/
-    ``*.sigmf`` → SigMF, anything else → an rtsar recording (HDF5)."""
-    path = Path(path)
+    ``*.sigmf`` → SigMF, anything else → an rtsar recording (HDF5).  Shot times that do not
+    increase are said in one warning (``note_times``; docs/pages/reference/faults.md)."""
+    rec = _open(Path(path))
+    for note in getattr(rec, "notes", ()):  # what a reader had to say (a CPHD's track)
+        print(f"rtsar: warning: {note}", file=sys.stderr)
+    if note_times:
+        note_time_order(rec)
+    return rec
+
+
+def _open(path: Path):
     # Each reader loads with its format only (sarkit and sigmf take a while to import).
     if path.suffix.lower() in CPHD_SUFFIXES:
         from ...sources.formats.cphd_reader import open_cphd
@@ -28,6 +38,19 @@ def open_input(path: str | Path):
     rec = open_recording(path)
     note_live_recording(rec)
     return rec
+
+
+def note_time_order(rec) -> None:
+    """One warning where a recording's shot times step back or repeat: the image goes by pulse
+    number and position, not by time, so it is unchanged, but the times cannot be trusted (a CPHD
+    export refuses them: TxTime must increase)."""
+    note = time_order_note(rec)
+    if note:
+        print(
+            f"rtsar: warning: {note}: the image does not use them (it goes by pulse_index and "
+            "position); a CPHD export refuses them",
+            file=sys.stderr,
+        )
 
 
 def note_live_recording(rec) -> None:

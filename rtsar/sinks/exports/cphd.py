@@ -49,6 +49,7 @@ from ...sources.formats.requirements import require_formats
 from ...sources.formats.timebase import UNKNOWN_EPOCH, format_utc
 from ..io import replace_when_complete
 from .cphd_collection import ExportChannel, spot_collection, strip_collection
+from .screen import require_full_aperture, require_increasing_times, zero_nonfinite
 
 try:
     import lxml.etree as etree
@@ -289,15 +290,20 @@ def build_xml(rec, chans, scene: dict, dwell, mode: str, frame, core_name: str, 
 
 def write_cphd(rec, path: str | Path, frame: LocalFrame | None = None) -> dict:
     """Write recording ``rec`` (rtsar.sinks.io.Recording) as CPHD 1.0.1 to ``path``; returns
-    a summary (vectors, samples, domain, channels written, auxiliary channels left out)."""
+    a summary (vectors, samples, domain, channels written, auxiliary channels left out, and
+    ``nonfinite``: channel → shots that held NaN/Inf, written as zeros).  Refused (ValueError,
+    one line) where the file would break CPHD's own rules: shot times that do not increase
+    (TxTime), a strip map with no full-aperture line (an image area of no extent)."""
     require_formats(skcphd, "CPHD export")
     frame = frame or LocalFrame()
     if rec.pulses < 1:
         raise ValueError(f"{rec.path}: no shots to export")
+    require_increasing_times(rec, "CPHD (TxTime, vector by vector)")
     spot = spot_geometry_of(rec.scene, rec.path)
     if spot is not None:
         chans, scene, dwell, mode, left_out = spot_collection(rec, spot, frame)
     else:
+        require_full_aperture(rec, rec.config.processor.aperture_pulses, "CPHD")
         chans, scene, dwell, mode, left_out = strip_collection(rec, frame)
     dtaus = [c.dtau_s(frame) for c in chans]
     tree = build_xml(rec, chans, scene, dwell, mode, frame, Path(path).stem, dtaus)
@@ -310,13 +316,17 @@ def write_cphd(rec, path: str | Path, frame: LocalFrame | None = None) -> dict:
     # ReferenceGeometry's place in the schema's sequence: after Dwell, before TxRcv/ProductInfo.
     root.find(f"{{{CPHD_NS}}}Dwell").addnext(skcphd.compute_reference_geometry(tree, pvps[0]))
     meta = skcphd.Metadata(xmltree=tree)
+    nonfinite = {}
     # Written beside ``path`` and renamed when complete: a run that dies leaves no partial CPHD.
     with replace_when_complete(path) as tmp, open(tmp, "wb") as f, skcphd.Writer(f, meta) as w:
         for c, p, d in zip(chans, pvps, dtaus, strict=True):
             m = c.mapping
             signal = np.empty((rec.pulses, m.num_samples), np.complex64)
+            nonfinite[c.name] = 0
             for i in range(0, rec.pulses, 1024):
-                signal[i : i + 1024] = shots_to_fx(m, c.shots[i : i + 1024], d[i : i + 1024])
+                shots, bad = zero_nonfinite(np.asarray(c.shots[i : i + 1024], np.complex64))
+                nonfinite[c.name] += bad
+                signal[i : i + 1024] = shots_to_fx(m, shots, d[i : i + 1024])
             w.write_signal(c.identifier, signal)
             w.write_pvp(c.identifier, p)
     return {
@@ -326,4 +336,5 @@ def write_cphd(rec, path: str | Path, frame: LocalFrame | None = None) -> dict:
         "mode": mode.lower(),
         "channels": [c.name for c in chans],
         "left_out": left_out,
+        "nonfinite": {name: n for name, n in nonfinite.items() if n},
     }

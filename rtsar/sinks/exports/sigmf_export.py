@@ -1,7 +1,8 @@
 """Export a recording as SigMF (Signal Metadata Format 1.x, sigmf.org), with the sigmf package.
 
 ``OUT.sigmf-data`` holds the main channel's shots one after the other, ``cf32_le`` (bit for bit
-the recording's complex64).  ``OUT.sigmf-meta`` has one capture per shot, its receive window
+the recording's complex64, but a shot holding NaN/Inf: zeros, counted, as ``process`` images
+it).  ``OUT.sigmf-meta`` has one capture per shot, its receive window
 (``core:sample_start`` = p·S; ``core:datetime`` = the recording's collection start + the shot's
 time, where the recording kept one, rtsar.sources.formats.timebase; the carrier as
 ``core:frequency``, at most 1 THz by SigMF's schema, and as the global ``rtsar:carrier_hz``),
@@ -36,6 +37,7 @@ from ...sources.formats.requirements import require_formats
 from ...sources.formats.sigmf_reader import RTSAR_EXTENSION, sigmf_base
 from ...sources.formats.timebase import format_utc, shifted
 from ..io import replace_when_complete
+from .screen import zero_nonfinite
 
 try:
     from sigmf import SigMFFile
@@ -80,14 +82,18 @@ def _captures(rec, width: int) -> list[dict]:
     ]
 
 
-def _write_channel(files, shots, sample_rate_hz, global_extra, annotations, rec) -> None:
-    """Write one SigMF pair to ``files`` = (data, metadata) paths (the temporary ones)."""
+def _write_channel(files, shots, sample_rate_hz, global_extra, annotations, rec) -> int:
+    """Write one SigMF pair to ``files`` = (data, metadata) paths (the temporary ones); returns
+    how many shots held NaN/Inf (written as zeros, rtsar.sinks.exports.screen)."""
     data, meta_path = files
+    nonfinite = 0
     with open(data, "wb") as f:
         for i in range(0, rec.pulses, BLOCK):
+            block, bad = zero_nonfinite(np.asarray(shots[i : i + BLOCK], np.complex64))
+            nonfinite += bad
             # f.write, not ndarray.tofile: a full disk is an OSError with its errno (ENOSPC)
             # that names the output; tofile's says only "N requested and M written".
-            f.write(np.ascontiguousarray(shots[i : i + BLOCK], "<c8").data)
+            f.write(np.ascontiguousarray(block, "<c8").data)
     meta = SigMFFile(
         data_file=None,  # written by us beside its final name: none to check or name
         global_info={
@@ -114,6 +120,7 @@ def _write_channel(files, shots, sample_rate_hz, global_extra, annotations, rec)
     with open(meta_path, "w") as fp:
         meta.dump(fp, pretty=True)
         fp.write("\n")
+    return nonfinite
 
 
 def write_sigmf(rec, path: str | Path) -> dict:
@@ -147,7 +154,7 @@ def _write_all(rec, base: Path, files: list) -> dict:
         raise ValueError(
             f"{rec.path}: {rec.pulses} shots, the spotlight geometry plans {len(station)}"
         )
-    channels = []
+    channels, nonfinite = [], {}
     for (name, ds), pair in zip(rec.channels.items(), files, strict=False):
         width = ds.shape[1]
         cbase = base.with_name(f"{base.name}.{name}")
@@ -155,7 +162,7 @@ def _write_all(rec, base: Path, files: list) -> dict:
         extra = {"rtsar:channel": name, "rtsar:samples_per_shot": int(width)}
         if spot is not None and spot.bistatic and name == "bistatic":
             extra["rtsar:receiver_position_m"] = [float(v) for v in spot.receiver_m()]
-        _write_channel(
+        nonfinite[name] = _write_channel(
             pair,
             ds,
             rate,
@@ -176,7 +183,7 @@ def _write_all(rec, base: Path, files: list) -> dict:
         if station is not None:
             md["rtsar:station_position_m"] = [float(v) for v in station[p]]
         annotations.append((p * s, s, md))
-    _write_channel(
+    nonfinite["main"] = _write_channel(
         files[-1],
         rec.shots,
         cfg.waveform.sample_rate_hz,
@@ -192,4 +199,9 @@ def _write_all(rec, base: Path, files: list) -> dict:
         annotations,
         rec,
     )
-    return {"base": str(base), "shots": rec.pulses, "channels": [c["name"] for c in channels]}
+    return {
+        "base": str(base),
+        "shots": rec.pulses,
+        "channels": [c["name"] for c in channels],
+        "nonfinite": {name: n for name, n in nonfinite.items() if n},
+    }

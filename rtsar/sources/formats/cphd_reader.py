@@ -22,7 +22,7 @@ from ...params import C_M_PER_S, config_from_dict
 from ...spot.geometry import geometry_from_dict
 from .cphd_geometry import SPOT_CHANNELS_PARAMETER, channel_config, derived_config, spot_to_local_m
 from .foreign import ForeignRecording, telemetry_problem
-from .geometry import EAST_HEADING_DEG, LocalFrame
+from .geometry import EAST_HEADING_DEG, LocalFrame, platform_height_m
 from .phase_history import fx_mapping, fx_to_shots
 from .requirements import require_formats
 from .timebase import parse_utc
@@ -136,7 +136,7 @@ def open_cphd(path: str | Path) -> ForeignRecording:
         params = _parameters(tree)
         scene = json.loads(params.get("rtsar:scene", "{}") or "{}")
         spot = spot_geometry_of(scene, path) if "rtsar:config" in params else None
-        mode = root.findtext("./{*}CollectionID/{*}RadarMode/{*}ModeType")
+        mode = (root.findtext("./{*}CollectionID/{*}RadarMode/{*}ModeType") or "").strip()
         if mode == "SPOTLIGHT" and spot is None and "rtsar:config" in params:
             raise ValueError(
                 "a spotlight collection (RadarMode SPOTLIGHT) written by rtsar whose rtsar:scene "
@@ -150,9 +150,20 @@ def open_cphd(path: str | Path) -> ForeignRecording:
         pvp = reader.read_pvps(channel)
         vectors = len(pvp)
         derived = None
+        if mode not in ("STRIPMAP", "SPOTLIGHT"):
+            raise ValueError(
+                f"RadarMode ModeType {mode}: rtsar images STRIPMAP collections (and the "
+                "SPOTLIGHT ones it wrote), not this one"
+            )
         if "rtsar:config" in params:  # written by rtsar: its own configuration
             cfg = config_from_dict(json.loads(params["rtsar:config"]))
             check_tx_rcv(root, cfg)
+            if mode != ("SPOTLIGHT" if spot is not None else "STRIPMAP"):
+                raise ValueError(
+                    f"RadarMode ModeType {mode} contradicts its rtsar:scene (a "
+                    f"{'spotlight' if spot is not None else 'strip-map'} collection): the file "
+                    "was changed after rtsar wrote it"
+                )
         else:  # made elsewhere: a configuration from the collection's geometry
             derived = derived_config(pvp, int(channels[0].findtext("./{*}NumSamples")))
             cfg = derived[0]
@@ -167,10 +178,14 @@ def open_cphd(path: str | Path) -> ForeignRecording:
             and np.allclose(pvp["SCSS"], m.scss_hz, rtol=1e-9)
         ):
             raise ValueError("SC0/SCSS differ from the configuration's frequency sampling")
+        notes = []
         if derived is None:
+            check_band(root, channel, pvp, m)
             lat, lon = (float(v) for v in params.get("rtsar:origin_lat_lon_deg", "0,0").split(","))
             heading = float(params.get("rtsar:heading_deg", EAST_HEADING_DEG))
             local = LocalFrame(lat, lon, heading).from_ecf(pvp["TxPos"])
+            if spot is None:
+                notes += track_note(path, cfg, local)
         else:
             local = derived[2]
         aux, along = {}, local[:, 0]
@@ -207,6 +222,7 @@ def open_cphd(path: str | Path) -> ForeignRecording:
         position if spot is None else None,
         f.close,
         collection_start,
+        notes,
     )
 
 
@@ -245,6 +261,55 @@ def check_tx_rcv(root, cfg) -> None:
                 f"TxRcv {name} {text} contradicts its rtsar:config ({want!r}): the file was "
                 "changed after rtsar wrote it"
             )
+
+
+def check_band(root, channel: str, pvp, m) -> None:
+    """The band a file rtsar wrote declares (its channel's FxC and FxBW, per-vector FX1/FX2)
+    against the FX mapping of its rtsar:config, which the processor uses: a file edited since
+    is refused, naming the field."""
+    params = [
+        p
+        for p in root.findall("./{*}Channel/{*}Parameters")
+        if p.findtext("./{*}Identifier") == channel
+    ]
+    declared = []
+    if params:
+        for name, want in (("FxC", m.fxc_hz), ("FxBW", m.fx2_hz - m.fx1_hz)):
+            text = params[0].findtext(f"./{{*}}{name}")
+            declared.append((f"Channel {name}", text, want))
+    for name, want in (("FX1", m.fx1_hz), ("FX2", m.fx2_hz)):
+        values = np.asarray(pvp[name], np.float64)
+        worst = values[np.argmax(np.abs(values - want))] if len(values) else want
+        declared.append((f"the PVP {name}", repr(float(worst)), want))
+    for name, text, want in declared:
+        try:
+            value = float(text)
+        except (TypeError, ValueError):
+            value = float("nan")
+        if not abs(value - want) <= TX_RCV_TOLERANCE * abs(want):
+            raise ValueError(
+                f"{name} {text} Hz contradicts its rtsar:config ({want!r} Hz, the band rtsar "
+                "processes): the file was changed after rtsar wrote it"
+            )
+
+
+TRACK_NOTE_M = 1e-3  # TxPos off the configured track by more than this (rms) is said
+
+
+def track_note(path, cfg, local: np.ndarray) -> list[str]:
+    """A line (in a list; none if on track) where a strip-map file's TxPos leave the straight
+    track of its rtsar:config, (x, 0, h): rtsar images that track, never these positions."""
+    r_c = cfg.processor.range_centre_m or cfg.geometry.slant_range_m
+    h = platform_height_m(r_c, cfg.geometry.platform_height_m)
+    off = np.hypot(local[:, 1], local[:, 2] - h) if len(local) else np.zeros(0)
+    rms = float(np.sqrt(np.mean(off**2))) if len(off) else 0.0
+    if not rms > TRACK_NOTE_M:
+        return []
+    return [
+        f"{path}: TxPos leaves the straight track of its rtsar:config by {rms:.3g} m rms "
+        f"(at most {float(off.max()):.3g} m) across track and in height: rtsar images the "
+        "configured track, not these positions"
+    ]
 
 
 def _spot_channels(reader, channels, params: dict, spot, cfg, local, vectors: int):

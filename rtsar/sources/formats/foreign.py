@@ -32,6 +32,7 @@ class ForeignRecording:
     position_m: np.ndarray | None = None
     closer: object = None
     collection_start: datetime.datetime | None = None  # UTC of time_s = 0 (None: unknown)
+    notes: list = field(default_factory=list)  # one line each the reader has to say (warnings)
 
     def batches(self, size: int) -> Iterator[np.ndarray]:
         for i in range(0, self.pulses, size):

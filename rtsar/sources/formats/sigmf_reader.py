@@ -12,7 +12,8 @@ converted: shots come back bit for bit.
 
 Everything the metadata declares is checked against what it describes before any work, and a
 file that contradicts itself is refused in one line naming the field: the sample rate, PRF and
-chirp against ``rtsar:config``; captures (at least one, at shot boundaries, in order); the
+chirp against ``rtsar:config``; captures (at least one, at shot boundaries, in order, their
+``core:datetime`` at their shots' ``rtsar:time_s``); the
 per-shot annotations (one per shot in an rtsar export, numbers and times finite); a spotlight
 export's station positions without the spotlight geometry they belong to.
 """
@@ -71,17 +72,48 @@ def _load(store, name: str):
     meta = store.describe(name, META)
     text = store.meta_text(name)
     try:
+        _check_shape(json.loads(text))
         handle = sigmffile.SigMFFile(metadata=text, skip_checksum=True)
         handle.validate()
     except Exception as exc:  # sigmf raises its own error kinds on a malformed file
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ValueError(f"{meta}: not SigMF metadata ({first})") from None
+        raise ValueError(f"{meta}: not SigMF metadata ({_schema_words(exc)})") from None
     g = handle.get_global_info()
     if g.get("core:datatype") != "cf32_le":
         raise ValueError(f"{meta}: core:datatype {g.get('core:datatype')!r}, rtsar reads cf32_le")
     if g.get("core:num_channels", 1) != 1:
         raise ValueError(f"{meta}: interleaved channels are not read (one channel per file)")
     return g, handle.get_captures(), handle.get_annotations()
+
+
+def _check_shape(meta) -> None:
+    """The object SigMF metadata is: ``global`` an object, ``captures`` and ``annotations``
+    lists of objects (ValueError naming the key; the sigmf package fails on them with an
+    AttributeError that names none)."""
+    if not isinstance(meta, dict):
+        raise ValueError(f"the metadata is a JSON {type(meta).__name__}, not an object")
+    if not isinstance(meta.get("global"), dict):
+        raise ValueError("'global' is missing or not an object")
+    for key in ("captures", "annotations"):
+        items = meta.get(key, [])
+        if not isinstance(items, list):
+            raise ValueError(f"{key!r} is a {type(items).__name__}, not a list of objects")
+        wrong = [k for k, item in enumerate(items) if not isinstance(item, dict)]
+        if wrong:
+            kind = type(items[wrong[0]]).__name__
+            raise ValueError(f"{key}[{wrong[0]}] is a {kind}, not an object")
+
+
+def _schema_words(exc: Exception) -> str:
+    """One line of what is wrong: a schema error (jsonschema) names where, in short."""
+    where = getattr(exc, "absolute_path", None)
+    message = getattr(exc, "message", None) or str(exc).strip() or type(exc).__name__
+    message = message.splitlines()[0]
+    if " does not match '" in message:  # a pattern too long to be read: the value alone
+        message = message.split(" does not match '")[0] + " is not of the form SigMF requires"
+    if where:
+        path = "".join(f"[{p}]" if isinstance(p, int) else f"[{p!r}]" for p in where)
+        return f"at {path}: {message}"
+    return message
 
 
 def _shots(samples: np.ndarray, width, what) -> np.ndarray:
@@ -175,12 +207,18 @@ def _per_shot(annotations: list, pulses: int, width: int, ours: bool, cfg):
     per_shot.sort(key=lambda a: a["core:sample_start"])
     if [a["core:sample_start"] for a in per_shot] != list(range(0, pulses * width, width)):
         raise ValueError("the shot annotations do not start at the shots' first samples")
+    for p, a in enumerate(per_shot):  # the shot's extent: its boundaries depend on it
+        if a.get("core:sample_count", width) != width:
+            raise ValueError(
+                f"shot {p}'s annotation has core:sample_count {a['core:sample_count']!r}; "
+                f"its shots are {width} samples (the shot boundaries are unknown)"
+            )
     raw = [a["rtsar:pulse_index"] for a in per_shot]
     if not all(isinstance(v, int) and not isinstance(v, bool) and abs(v) < 1 << 63 for v in raw):
         raise ValueError("an rtsar:pulse_index is not a whole number")
-    time_s = np.array([a.get("rtsar:time_s") for a in per_shot], np.float64)
-    if not np.isfinite(time_s).all():
-        raise ValueError("an rtsar:time_s is missing or not finite")
+    for p, a in enumerate(per_shot):
+        _finite(f"shot {p}'s rtsar:time_s", a.get("rtsar:time_s"))
+    time_s = np.array([a["rtsar:time_s"] for a in per_shot], np.float64)
     return np.array(raw, np.int64), time_s, per_shot
 
 
@@ -195,6 +233,42 @@ def _column(per_shot: list, key: str, shape: tuple) -> np.ndarray | None:
     if values.shape != (len(per_shot), *shape) or not np.isfinite(values).all():
         raise ValueError(f"{key} is not {shape or 'one'} finite number(s) in every shot")
     return values
+
+
+CAPTURE_TIME_TOLERANCE_S = 2e-6  # core:datetime holds microseconds: two roundings
+
+
+def _capture_times(captures: list, first_shots: list, time_s, timed: bool):
+    """The collection start (UTC of time_s = 0) from the captures' ``core:datetime``, None where
+    the first has none.  Every capture's time is checked: with per-shot ``rtsar:time_s``
+    (``timed``) it must be the collection start + its first shot's time (a file whose times
+    disagree contradicts itself); without, the captures' times must increase."""
+    if not captures or not len(time_s) or captures[0].get("core:datetime") is None:
+        return None
+    at = [
+        None
+        if c.get("core:datetime") is None
+        else parse_utc(c["core:datetime"], f"capture {k}'s core:datetime")
+        for k, c in enumerate(captures)
+    ]
+    start = shifted(at[0], -float(time_s[first_shots[0]]))
+    for k in range(1, len(captures)):
+        if at[k] is None:
+            continue
+        seconds = (at[k] - start).total_seconds()
+        if timed and abs(seconds - time_s[first_shots[k]]) > CAPTURE_TIME_TOLERANCE_S:
+            raise ValueError(
+                f"capture {k}'s core:datetime {captures[k]['core:datetime']} is "
+                f"{seconds!r} s after the collection start; its shot {first_shots[k]}'s "
+                f"rtsar:time_s says {float(time_s[first_shots[k]])!r} s"
+            )
+        previous = next((t for t in at[k - 1 :: -1] if t is not None), at[0])
+        if not timed and at[k] <= previous:
+            raise ValueError(
+                f"capture {k}'s core:datetime {captures[k]['core:datetime']} is not after the "
+                "capture before it: the captures' times must increase"
+            )
+    return start
 
 
 def open_sigmf(path: str | Path, config=None) -> ForeignRecording:
@@ -249,11 +323,7 @@ def open_sigmf(path: str | Path, config=None) -> ForeignRecording:
                 "geometry: a spotlight recording is not imaged without it"
             )
         channels = _channels(store, name, g, pulses)
-        datetime_text = captures[0].get("core:datetime")
-        collection_start = None
-        if datetime_text is not None and pulses:
-            at = parse_utc(datetime_text, "the first capture's core:datetime")
-            collection_start = shifted(at, -float(time_s[first_shots[0]]))
+        collection_start = _capture_times(captures, first_shots, time_s, bool(per_shot))
     except (ValueError, KeyError, TypeError, OverflowError, AttributeError) as exc:
         raise ValueError(f"{meta}: {exc}") from None
     return ForeignRecording(

@@ -338,8 +338,7 @@ def open_checked(path: str | Path, fmt: str) -> h5py.File:
     path = Path(path)
     if not path.exists():
         raise ValueError(f"{path}: no such file")
-    # HDF5 refuses a damaged file with OSError or (its superblock unreadable) RuntimeError.
-    try:
+    try:  # a damaged file: OSError, or RuntimeError where its superblock does not read
         f = h5py.File(path, "r")
     except (OSError, RuntimeError) as exc:
         try:  # an image still being written by a live stream (crash-safe SWMR mode)

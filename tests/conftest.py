@@ -183,3 +183,30 @@ slant_range_m = 1.5002
 [[effects]]
 name = "reference_interferometer"
 """
+
+
+TINY_EXPORTS_SCENE = """
+preset = "tiny"
+pulses = 72
+[processor]
+aperture_pulses = 32
+range_bins = 32
+[[targets]]
+along_track_m = 0.0
+slant_range_m = 2000.0
+"""
+
+
+@pytest.fixture(scope="session")
+def tiny_exports(tmp_path_factory):
+    """A small recording (72 shots, aperture 32), its image and its CPHD and SigMF exports:
+    the sound files the hostile-file and export tests read and edit copies of."""
+    from rtsar.app.cli import main
+
+    d = tmp_path_factory.mktemp("tiny-exports")
+    (d / "s.toml").write_text(TINY_EXPORTS_SCENE)
+    assert main(["simulate", str(d / "s.toml"), "-o", str(d / "rec.h5")]) == 0
+    assert main(["process", str(d / "rec.h5"), "-o", str(d / "img.h5"), "--lens", "numpy"]) == 0
+    assert main(["export", str(d / "rec.h5"), "--cphd", str(d / "rec.cphd")]) == 0
+    assert main(["export", str(d / "rec.h5"), "--sigmf", str(d / "sig")]) == 0
+    return d

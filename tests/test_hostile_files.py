@@ -21,27 +21,11 @@ pytest.importorskip("sarpy")
 
 from rtsar.app.cli import main  # noqa: E402
 
-SCENE = """
-preset = "tiny"
-pulses = 72
-[processor]
-aperture_pulses = 32
-range_bins = 32
-[[targets]]
-along_track_m = 0.0
-slant_range_m = 2000.0
-"""
-
 
 @pytest.fixture(scope="module")
-def good(tmp_path_factory):
-    d = tmp_path_factory.mktemp("good")
-    (d / "s.toml").write_text(SCENE)
-    assert main(["simulate", str(d / "s.toml"), "-o", str(d / "rec.h5")]) == 0
-    assert main(["process", str(d / "rec.h5"), "-o", str(d / "img.h5"), "--lens", "numpy"]) == 0
-    assert main(["export", str(d / "rec.h5"), "--cphd", str(d / "rec.cphd")]) == 0
-    assert main(["export", str(d / "rec.h5"), "--sigmf", str(d / "sig")]) == 0
-    return d
+def good(tiny_exports):
+    """The sound files (conftest.tiny_exports)."""
+    return tiny_exports
 
 
 def _one_line_error(capsys, name) -> str:

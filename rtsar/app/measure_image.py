@@ -46,10 +46,9 @@ from ..analysis.detect import find_point_targets
 from ..analysis.islr2d import islr_2d_db, islr_2d_from_ratios_db, region_over_main
 from ..analysis.point_target import analyse_point_target
 from ..analysis.theory import theoretical_irw_factor, theoretical_pslr_db
-from ..params import config_from_dict
 from ..scene.effects import load_effects
 from ..scene.files import load_point_targets, load_scene, load_surface_scene
-from ..sinks.image_file import read_heights, read_image
+from ..sinks.image_file import image_config, read_heights, read_image
 from ..sinks.io import write_text_when_complete
 from ..spot.geometry import geometry_from_dict
 from ..spot.pfa import PfaSettings, PolarFormatPlan
@@ -210,7 +209,7 @@ def measure_image(
     image, az, rg, attrs = read_image(path)
     if image.size == 0:
         raise ValueError(f"{path} holds no image lines")
-    cfg = _configuration(attrs, path)
+    cfg = image_config(attrs, path)
     d_az, d_rg = _spacing(az, "azimuth"), _spacing(rg, "range")
     gain, targets, spot = None, None, "spotlight" in attrs
     if spot and scene is not None:
@@ -429,18 +428,3 @@ def text_lines(report: dict) -> list[str]:
             f"{h['valid_fraction']:.1%} of {h['pixels_scored']} pixels that see it"
         )
     return out
-
-
-def _configuration(attrs, path) -> object:
-    """The processor's configuration stored in the image (its theory needs it): a one-line
-    ValueError naming the file where it is missing or unreadable."""
-    text = attrs.get("config")
-    if text is None:
-        raise ValueError(
-            f"{path}: no 'config' attribute (the processor's configuration): rtsar measure "
-            "reads images written by rtsar process, run -o, replay -o or subscribe -o"
-        )
-    try:
-        return config_from_dict(json.loads(text))
-    except (TypeError, ValueError, KeyError) as exc:
-        raise ValueError(f"{path}: its 'config' attribute does not read: {exc}") from None

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..params import Config
+from ..params import Config, config_from_dict
 from .h5_output import H5Output
 from .io import FORMAT_VERSION, IMAGE_FORMAT, open_checked
 from .live_file import LiveFile
@@ -46,6 +46,21 @@ def write_image(
         for k, v in attrs.items():
             f.attrs[k] = v
     out.close()
+
+
+def image_config(attrs: dict, path) -> Config:
+    """The processor's configuration an image keeps (its ``config`` attribute): a one-line
+    ValueError naming the file where it is missing or does not read."""
+    text = attrs.get("config")
+    if text is None:
+        raise ValueError(
+            f"{path}: no 'config' attribute (the processor's configuration, which rtsar "
+            "process, run -o, replay -o and subscribe -o write)"
+        )
+    try:
+        return config_from_dict(json.loads(text.decode() if isinstance(text, bytes) else text))
+    except (TypeError, ValueError, KeyError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: its 'config' attribute does not read: {exc}") from None
 
 
 def read_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:

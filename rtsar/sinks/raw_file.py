@@ -86,6 +86,15 @@ class _Dropped:
     nbytes: int = 0
 
 
+def add_run(runs: list[list[int]], first: int, count: int) -> None:
+    """Pulses ``first`` … ``first + count - 1`` into ``runs`` ([first, count] each): joined to
+    the last run where they follow it, else a new run while fewer than MAX_RUNS_LISTED."""
+    if runs and runs[-1][0] + runs[-1][1] == first:
+        runs[-1][1] += count
+    elif len(runs) < MAX_RUNS_LISTED:
+        runs.append([first, count])
+
+
 class RawFile:
     """The recording being written (module docstring).  ``claim_mark``/``claim_fd``: the run's
     claim on the name (rtsar.sinks.name_claim), held by the file's writer from its creation."""
@@ -145,11 +154,7 @@ class RawFile:
 
     def _count_drop(self, first: int, count: int) -> None:
         self.dropped += count
-        runs = self.dropped_runs
-        if runs and runs[-1][0] + runs[-1][1] == first:
-            runs[-1][1] += count
-        elif len(runs) < MAX_RUNS_LISTED:
-            runs.append([first, count])
+        add_run(self.dropped_runs, first, count)
 
     def _create(self, widths: dict[str, int]) -> None:
         claim, self._claim = self._claim, None  # the file's writer holds it from here

@@ -53,6 +53,7 @@ from .raw_file import (  # noqa: F401 (the file's constants, where they were)
     ZEROED,
     Shots,
     _Dropped,
+    add_run,
 )
 from .raw_pipe import receive, send, widen
 
@@ -173,11 +174,7 @@ class ShotRecorder(StripSink):
         """Pulses not recorded: counted, listed, and (``mark``: while the file lives) marked in
         it.  Called with the lock held."""
         self.dropped += count
-        runs = self.dropped_runs
-        if runs and runs[-1][0] + runs[-1][1] == first:
-            runs[-1][1] += count
-        elif len(runs) < MAX_RUNS_LISTED:
-            runs.append([first, count])
+        add_run(self.dropped_runs, first, count)
         if mark:
             last = self._items[-1] if self._items else None
             if isinstance(last, _Dropped) and last.first + last.count == first:

@@ -137,9 +137,7 @@ class PolarFormatPlan:
         self.dky = (self.ky_hi - self.ky_lo) / (self.rows - 1)
         self.ky = self.ky_lo + self.dky * np.arange(self.rows)
         # Image grid (rotated frame): natural cells 2π/Δk of the full planned aperture.
-        span_kx = self.kx_limits(0, len(self.psi))
-        cell_x = 2 * math.pi / (span_kx[1] - span_kx[0])
-        cell_y = 2 * math.pi / (self.ky_hi - self.ky_lo)
+        cell_x, cell_y = self.cell_m()
         self.dx, self.dy = cell_x / s.oversampling, cell_y / s.oversampling
         if s.extent_m is None:  # alias-free extents, at most DEFAULT_AXIS_PIXELS per axis
             step = float(np.median(np.diff(self.tan_psi)))

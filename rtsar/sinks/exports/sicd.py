@@ -22,18 +22,17 @@ arbitrary epoch, 2000-01-01.  Polarisation is UNKNOWN (rtsar does not model it).
 from __future__ import annotations
 
 import datetime
-import json
 import logging
 from pathlib import Path
 
 import numpy as np
 
 from ... import __version__
-from ...params import C_M_PER_S, config_from_dict
+from ...params import C_M_PER_S
 from ...sources.formats.geometry import LocalFrame, platform_height_m
 from ...sources.formats.requirements import require_formats
 from ...sources.formats.timebase import UNKNOWN_EPOCH, parse_utc
-from ..image_file import read_image
+from ..image_file import image_config, read_image
 from ..io import replace_when_complete
 from .resolution import Resolution, azimuth_resolution, range_resolution
 
@@ -287,13 +286,7 @@ def write_sicd(image_path: str | Path, path: str | Path, frame: LocalFrame | Non
                 f"{image_path}: {name} is not evenly spaced (a live image's line jumps?): "
                 "SICD's grid is uniform"
             )
-    text = attrs.get("config")
-    if text is None:
-        raise ValueError(f"{image_path}: no config attribute: the image's processing is unknown")
-    try:
-        cfg = config_from_dict(json.loads(text.decode() if isinstance(text, bytes) else str(text)))
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{image_path}: its config attribute does not parse ({exc})") from None
+    cfg = image_config(attrs, image_path)
     kept = attrs.get("collection_start_utc")
     start = None if kept is None else parse_utc(kept, f"{image_path}: collection_start_utc")
     # sarpy logs what it finds odd (a degenerate geometry) on stderr; the error here says it.

@@ -64,10 +64,19 @@ class PulsedChirp:
     pulse_duration_s: float
     sample_rate_hz: float  # complex (I/Q) samples per second
     receive_window_s: float  # AO cell time aperture
+    down_chirp: bool = False  # True: the frequency falls during the pulse (rate -B/T)
+    # Two-way delay of the first sample of every shot, counted from the centre of the
+    # transmitted pulse (an instrument's fixed receive window); None: the window is placed so
+    # that its middle lag sits at the processor's range centre (the simulated presets).
+    window_start_s: float | None = None
     kind: str = field(default="pulsed", init=False)
 
     def __post_init__(self):
         _positive(self, "bandwidth_hz", "pulse_duration_s", "sample_rate_hz", "receive_window_s")
+        if not isinstance(self.down_chirp, bool):
+            raise ValueError(f"PulsedChirp.down_chirp must be true or false, got {self.down_chirp!r}")
+        if self.window_start_s is not None:
+            _positive(self, "window_start_s")
         _shot_size(self, max(self.receive_window_s, self.pulse_duration_s))
         if self.sample_rate_hz < self.bandwidth_hz:
             raise ValueError(
@@ -79,7 +88,9 @@ class PulsedChirp:
 
     @property
     def chirp_rate_hz_per_s(self) -> float:
-        return self.bandwidth_hz / self.pulse_duration_s
+        """K, signed: -B/T for a down-chirp."""
+        rate = self.bandwidth_hz / self.pulse_duration_s
+        return -rate if self.down_chirp else rate
 
     @property
     def samples_per_shot(self) -> int:
@@ -155,6 +166,9 @@ class Geometry:
     prf_hz: float
     antenna_length_m: float
     platform_height_m: float = 0.0
+    # Absolute Doppler centroid f_dc (with its PRF ambiguity) of a squinted beam: the beam
+    # centre sees a scatterer at sin θ = -λ f_dc / (2 V) off broadside (0: broadside).
+    doppler_centroid_hz: float = 0.0
 
     def __post_init__(self):
         _positive(
@@ -170,6 +184,40 @@ class Geometry:
             and 0 <= self.platform_height_m < self.slant_range_m
         ):
             raise ValueError("platform_height_m must be in [0, slant_range_m)")
+        f_dc = self.doppler_centroid_hz
+        if not (isinstance(f_dc, (int, float)) and math.isfinite(f_dc)):
+            raise ValueError(f"Geometry.doppler_centroid_hz must be finite, got {f_dc!r}")
+        if abs(self.squint_sin) >= 0.5:
+            raise ValueError(
+                f"Geometry.doppler_centroid_hz {f_dc:g} means a squint of "
+                f"{math.degrees(math.asin(min(1.0, abs(self.squint_sin)))):.0f}° or more "
+                f"(|λ f_dc / 2V| = {abs(self.squint_sin):.3g} >= 0.5): not a strip-map beam"
+            )
+
+    @property
+    def squint_sin(self) -> float:
+        """sin θ of the beam's squint, -λ f_dc / (2 V): > 0 when the beam looks back (f_dc < 0)."""
+        return -self.wavelength_m * self.doppler_centroid_hz / (2.0 * self.speed_mps)
+
+    @property
+    def squint_tan(self) -> float:
+        s = self.squint_sin
+        return s / math.sqrt(1.0 - s * s)
+
+    @property
+    def squinted(self) -> bool:
+        return self.doppler_centroid_hz != 0.0
+
+    def beam_centre_offset_m(self, slant_range_m):
+        """Along-track offset u_c = R0 tan θ of the platform from a scatterer's closest approach
+        when the beam centre crosses it (R0 the closest-approach range; 0 at broadside)."""
+        return slant_range_m * self.squint_tan
+
+    def squint_range_excess_m(self, slant_range_m):
+        """R_c - R0 = R0 (1/cos θ - 1): how much further than closest approach the beam centre
+        sees a scatterer (formed without cancellation as R0 tan²θ / (1/cos θ + 1))."""
+        t = self.squint_tan
+        return slant_range_m * t * t / (math.sqrt(1.0 + t * t) + 1.0)
 
     @property
     def speed_mps(self) -> float:
@@ -326,18 +374,37 @@ class Config:
 
     def __post_init__(self):
         g, p = self.geometry, self.processor
-        # The mask chirp must be sampled: at the aperture edge the azimuth phase may advance by
-        # less than π per pulse, 4π/λ · d · (A/2)/R < π  ⇔  d·A/(2R) < λ/4.
+        # The mask chirp must be sampled: across the aperture the Doppler frequency of the
+        # azimuth history, f(u) = 2 V u / (λ sqrt(R² + u²)) at platform offset u, may change by
+        # less than the PRF (broadside: the phase advances by less than π per pulse at the
+        # aperture's edge, 4π/λ · d · (A/2)/R < π).  A squinted beam's centroid f_dc may lie
+        # many PRFs away: only the spread about it must fit.
         half_aperture_m = 0.5 * p.aperture_pulses * g.along_track_step_m
-        phase_step = (
-            4 * math.pi / g.wavelength_m * g.along_track_step_m * half_aperture_m / g.slant_range_m
+        centre_m = p.range_centre_m or g.slant_range_m
+        u_mid = g.beam_centre_offset_m(centre_m)
+
+        def doppler_cycles_per_pulse(u):
+            return 2.0 * g.along_track_step_m * u / (g.wavelength_m * math.hypot(g.slant_range_m, u))
+
+        spread = doppler_cycles_per_pulse(u_mid + half_aperture_m) - doppler_cycles_per_pulse(
+            u_mid - half_aperture_m
         )
+        phase_step = math.pi * spread
         if phase_step >= math.pi:
             raise ValueError(
                 f"azimuth chirp aliased: phase advances {phase_step:.2f} rad per pulse at the "
                 f"edge of the {p.aperture_pulses}-pulse aperture (limit π); shorten the aperture "
                 "or the step"
             )
+        if g.squinted and not p.range_migration_taps:
+            # the echo walks λ|f_dc|/2 m/s; over the aperture that exceeds a quarter cell
+            walk_m = abs(g.squint_sin) * p.aperture_pulses * g.along_track_step_m
+            if walk_m > 0.25 * self.waveform.range_resolution_m:
+                raise ValueError(
+                    f"a Doppler centroid of {g.doppler_centroid_hz:g} Hz walks the echo "
+                    f"{walk_m:.3g} m across the aperture: set Processor.range_migration_taps "
+                    "(e.g. 4) so that the CCD's rows follow it"
+                )
         if isinstance(self.waveform, FMCWChirp):
             if self.waveform.reference_range_m <= 0:
                 raise ValueError("FMCW reference_range_m must be > 0")

@@ -38,39 +38,96 @@ from abc import ABC, abstractmethod
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
+from ..lens.plan import range_axis_m
 from ..params import Config
 from ..samples import precision_dtype
-from ..windows import window
+from ..windows import window, window_at
 
 
 def aperture_offsets_m(cfg: Config) -> np.ndarray:
-    """Along-track offset of each aperture row from the aperture centre, x_k = (k-(N-1)/2)·d."""
+    """Platform offset u_k of each aperture row from the closest approach of the scatterer the
+    line focuses: u_k = (k - (N-1)/2)·d + u_mid.
+
+    Broadside u_mid = 0: the aperture is centred on closest approach.  A squinted beam (Doppler
+    centroid f_dc, sin θ = -λ f_dc / 2V) sees a scatterer of closest-approach range R0 around
+    u_c = R0 tan θ; u_mid is u_c at the processor's range centre, so that the rows follow the
+    beam and the line still lands on the scatterer's zero-Doppler position (line_azimuth_m).
+    """
     n = cfg.processor.aperture_pulses
-    return (np.arange(n) - 0.5 * (n - 1)) * cfg.geometry.along_track_step_m
+    g = cfg.geometry
+    u_mid = g.beam_centre_offset_m(_range_centre_m(cfg))
+    return (np.arange(n) - 0.5 * (n - 1)) * g.along_track_step_m + u_mid
+
+
+def _range_centre_m(cfg: Config) -> float:
+    return cfg.processor.range_centre_m or cfg.geometry.slant_range_m
+
+
+def squint_aperture_pulses(cfg: Config) -> int:
+    """Rows of the mask each range column uses: all N broadside; with squint, N less the rows
+    the beam centre u_c = R0 tan θ moves across the swath (the mask of each column follows its
+    own beam, so every line of the image is one zero-Doppler time; Psaltis & Wagner's mask is
+    two-dimensional already)."""
+    n = cfg.processor.aperture_pulses
+    g = cfg.geometry
+    if not g.squinted:
+        return n
+    r = range_axis_m(cfg)
+    span = abs(g.beam_centre_offset_m(float(r[-1] - r[0]))) / g.along_track_step_m
+    rows = n - math.ceil(span) - 1
+    if rows < 2:
+        raise ValueError(
+            f"aperture_pulses {n} leaves no aperture: the squinted beam's centre moves "
+            f"{span:.1f} rows across the swath"
+        )
+    return rows
+
+
+def mask_window(cfg: Config, range_m: np.ndarray) -> np.ndarray:
+    """The azimuth window of each mask column, float64[N, len(range_m)].
+
+    Broadside: Processor.azimuth_window over the N rows, the same for every column.  Squinted:
+    the window over squint_aperture_pulses rows centred on the column's beam centre
+    u_c(R0) = R0 tan θ (evaluated at the exact row positions), zero elsewhere.
+    """
+    proc = cfg.processor
+    n = proc.aperture_pulses
+    g = cfg.geometry
+    if not g.squinted:
+        return np.broadcast_to(window(proc.azimuth_window, n)[:, None], (n, len(range_m)))
+    rows = squint_aperture_pulses(cfg)
+    d = g.along_track_step_m
+    u = aperture_offsets_m(cfg)[:, None]
+    centre = g.beam_centre_offset_m(np.asarray(range_m, np.float64))[None, :]
+    # position within the column's aperture, 0 … 1 across its rows (window_at's convention)
+    pos = (u - centre) / (d * (rows - 1)) + 0.5
+    inside = (pos >= 0.0) & (pos <= 1.0)
+    return np.where(inside, window_at(proc.azimuth_window, np.clip(pos, 0.0, 1.0)), 0.0)
 
 
 def design_mask(cfg: Config, range_m: np.ndarray) -> np.ndarray:
     """Mask[k, r] (complex128): conjugate of the expected azimuth phase history, windowed.
 
-    The expected phase of a scatterer at closest-approach range R seen from offset x_k is
-    -4π/λ·(sqrt(R² + x_k²) - R) (exact range history; Psaltis eq. 2 is its parabolic limit
-    k1/y0·x²).  With ``per_bin_mask`` each range column uses its own R (the k1/y0 dependence);
-    otherwise every column uses the range centre.  Scaled by 1/N, so a unit-amplitude history
-    compresses to a unit peak with the rectangular window.  Phase formed in float64, reduced
-    mod 2π before the exponential.
+    The expected phase of a scatterer at closest-approach range R seen from offset u_k is
+    -4π/λ·(sqrt(R² + u_k²) - R) (exact range history; Psaltis eq. 2 is its parabolic limit
+    k1/y0·x²; u_k of aperture_offsets_m, which follows a squinted beam, so the mask carries the
+    Doppler centroid and the range-dependent FM rate of the hyperbola at each bin).  With
+    ``per_bin_mask`` each range column uses its own R (the k1/y0 dependence); otherwise every
+    column uses the range centre.  Windowed by mask_window; scaled by 1/(rows used), so a
+    unit-amplitude history compresses to a unit peak with the rectangular window.  Phase formed
+    in float64, reduced mod 2π before the exponential.
     """
     proc = cfg.processor
     x = aperture_offsets_m(cfg)[:, None]
     if proc.per_bin_mask:
         r = np.asarray(range_m, dtype=np.float64)[None, :]
     else:
-        centre = proc.range_centre_m or cfg.geometry.slant_range_m
-        r = np.full((1, len(range_m)), float(centre))
+        r = np.full((1, len(range_m)), float(_range_centre_m(cfg)))
     # sqrt(R² + x²) - R = x² / (sqrt(R² + x²) + R): no cancellation for x ≪ R.
     excess_m = x * x / (np.sqrt(r * r + x * x) + r)
     cycles = np.mod(2.0 * excess_m / cfg.geometry.wavelength_m, 1.0)
-    w = window(proc.azimuth_window, proc.aperture_pulses)[:, None]
-    return w * np.exp(2j * math.pi * cycles) / proc.aperture_pulses
+    w = mask_window(cfg, range_m)
+    return w * np.exp(2j * math.pi * cycles) / squint_aperture_pulses(cfg)
 
 
 def correlate_reference(lines: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -134,8 +191,11 @@ def line_azimuth_m(
     """Along-track position of image lines first_line … first_line + count - 1.
 
     Line j is the line whose N-pulse aperture ends with pulse j + N - 1; it is focused at the
-    aperture centre x_0 + (j + (N - 1)/2) d (module docstring, eq. 1).
+    aperture centre x_0 + (j + (N - 1)/2) d (module docstring, eq. 1), less the squinted
+    beam's offset u_mid (aperture_offsets_m): the scatterers' closest approach, zero-Doppler
+    geometry.
     """
     n = cfg.processor.aperture_pulses
     j = first_line + np.arange(count)
-    return start_along_track_m + (j + 0.5 * (n - 1)) * cfg.geometry.along_track_step_m
+    u_mid = cfg.geometry.beam_centre_offset_m(_range_centre_m(cfg))
+    return start_along_track_m + (j + 0.5 * (n - 1)) * cfg.geometry.along_track_step_m - u_mid

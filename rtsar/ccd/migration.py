@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import fft as sfft
 
+from ..lens.plan import squint_label_offset_m
 from ..params import Config
 from .base import Correlator, aperture_offsets_m, design_mask
 from .fft import FFTCorrelator
@@ -93,7 +94,9 @@ def migration_bins(cfg: Config, range_m: np.ndarray) -> np.ndarray:
         r = np.full((1, len(range_m)), float(centre))
     x = aperture_offsets_m(cfg)[:, None]
     excess_m = x * x / (np.sqrt(r * r + x * x) + r)
-    return excess_m / step_m
+    # A squinted beam: the lens labels bin r with R0 but its echoes lie R_c - R0 further out
+    # (rtsar.lens.plan.squint_label_offset_m, taken at the middle bin): the rows read there.
+    return (excess_m - squint_label_offset_m(cfg)) / step_m
 
 
 def interpolation_weights(frac_bins: np.ndarray, taps: int) -> tuple[np.ndarray, np.ndarray]:

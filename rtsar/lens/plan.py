@@ -51,8 +51,32 @@ def next_pow2(n: int) -> int:
     return 1 << max(0, (int(n) - 1).bit_length())
 
 
-def _pulsed_lags(wf: PulsedChirp, bins: int) -> tuple[int, int]:
-    """(first lag of the range window, lags free of wrap-around)."""
+def _pulsed_lags(cfg: Config) -> tuple[int, int]:
+    """(first lag of the range window, lags the window may take).
+
+    A window centred on the processor's range centre takes only the S - P + 1 lags free of
+    wrap-around.  An instrument's fixed window (``PulsedChirp.window_start_s``) keeps every echo
+    whose centre falls inside the shot, lags -P/2 … S - P/2 - 1: the echoes near either end are
+    compressed with the part of their chirp the window holds (a wider response, told in the
+    docs), and the lens transforms over nfft >= S + P so that no lag wraps onto another.
+    """
+    wf, bins = cfg.waveform, cfg.processor.range_bins
+    if wf.window_start_s is not None:
+        lags = wf.samples_per_shot
+        if bins > lags:
+            raise ValueError(
+                f"range window of {bins} bins exceeds the {lags} samples of the instrument's "
+                "receive window"
+            )
+        lowest = -(wf.pulse_samples // 2)
+        centre = cfg.processor.range_centre_m
+        if centre is None:
+            first = lowest + (lags - bins) // 2
+        else:  # the bins around the asked range centre, kept inside the window
+            t_open = wf.window_start_s + 0.5 * wf.pulse_duration_s
+            lag = round((2.0 * centre / C_M_PER_S - t_open) * wf.sample_rate_hz) - bins // 2
+            first = min(max(lag, lowest), lowest + lags - bins)
+        return first, lags
     valid = wf.samples_per_shot - wf.pulse_samples + 1
     if bins > valid:
         raise ValueError(
@@ -65,15 +89,21 @@ def _pulsed_lags(wf: PulsedChirp, bins: int) -> tuple[int, int]:
 
 
 def receive_window_open_s(cfg: Config) -> float:
-    """Two-way delay at which the pulsed receiver's window (the AO aperture) opens.
+    """Two-way delay at which the pulsed receiver's window (the AO aperture) opens, counted
+    from the start of the transmitted pulse (the echo of range R starts 2R/c after it).
 
-    Chosen so that the middle output bin sits at the processor's range centre.
+    An instrument's fixed window: its ``window_start_s`` (counted from the pulse centre) plus
+    half the pulse.  Otherwise chosen so that the middle output bin sits at the processor's
+    range centre.
     """
     wf = cfg.waveform
     if not isinstance(wf, PulsedChirp):
         raise TypeError("receive_window_open_s applies to pulsed waveforms")
+    if wf.window_start_s is not None:
+        return wf.window_start_s + 0.5 * wf.pulse_duration_s
     centre = cfg.processor.range_centre_m or cfg.geometry.slant_range_m
-    first, _ = _pulsed_lags(wf, cfg.processor.range_bins)
+    centre += cfg.geometry.squint_range_excess_m(centre)  # where the beam centre sees it
+    first, _ = _pulsed_lags(cfg)
     return 2.0 * centre / C_M_PER_S - (first + cfg.processor.range_bins // 2) / wf.sample_rate_hz
 
 
@@ -100,10 +130,9 @@ def _fmcw_bins(cfg: Config) -> tuple[int, int, float]:
     return nfft, bin_start, bin_m
 
 
-def range_axis_m(cfg: Config) -> np.ndarray:
-    """Slant range of each output bin (float64[range_bins]): ``make_plan(cfg).range_m`` without
-    building the filters.  FMCW: R = R_ref + c f / (2K) at beat frequency f = k fs / nfft;
-    pulsed: R = c (τ_open + l / fs) / 2 at lag l."""
+def raw_range_axis_m(cfg: Config) -> np.ndarray:
+    """Range at which each output bin's echo lies (float64[range_bins]): FMCW R = R_ref +
+    c f / (2K) at beat frequency f = k fs / nfft; pulsed R = c (τ_open + l / fs) / 2 at lag l."""
     wf, bins = cfg.waveform, cfg.processor.range_bins
     if isinstance(wf, FMCWChirp):
         _, bin_start, bin_m = _fmcw_bins(cfg)
@@ -114,10 +143,30 @@ def range_axis_m(cfg: Config) -> np.ndarray:
                 "range_oversampling must be 1 for pulsed waveforms (sample_rate_hz "
                 "already oversamples the chirp band)"
             )
-        first, _ = _pulsed_lags(wf, bins)
+        first, _ = _pulsed_lags(cfg)
         lags = first + np.arange(bins)
         return 0.5 * C_M_PER_S * (receive_window_open_s(cfg) + lags / wf.sample_rate_hz)
     raise TypeError(f"unsupported waveform {type(wf).__name__}")
+
+
+def squint_label_offset_m(cfg: Config) -> float:
+    """R_c - R0 at the middle bin: what range_axis_m takes off the raw ranges of a squinted
+    beam (0 broadside).  The beam centre sees a scatterer of closest-approach range R0 at
+    R_c = R0 / cos θ; the CCD's range-migration taps carry the rest, bin by bin."""
+    g = cfg.geometry
+    if not g.squinted:
+        return 0.0
+    raw = raw_range_axis_m(cfg)
+    r_c = float(raw[len(raw) // 2])
+    return r_c - r_c * math.sqrt(1.0 - g.squint_sin**2)  # R_c (1 - cos θ)
+
+
+def range_axis_m(cfg: Config) -> np.ndarray:
+    """Slant range of each output bin (float64[range_bins]): ``make_plan(cfg).range_m`` without
+    building the filters.  Broadside the raw range of raw_range_axis_m; a squinted beam's bins
+    are labelled with closest-approach ranges (zero-Doppler geometry), the raw ranges less
+    squint_label_offset_m."""
+    return raw_range_axis_m(cfg) - squint_label_offset_m(cfg)
 
 
 def make_plan(cfg: Config) -> LensPlan:
@@ -145,8 +194,9 @@ def make_plan(cfg: Config) -> LensPlan:
         )
     if isinstance(wf, PulsedChirp):
         range_m = range_axis_m(cfg)  # first: it checks the range window fits
-        nfft = next_pow2(S)
-        first, _ = _pulsed_lags(wf, bins)
+        # A fixed window keeps the partly held echoes: no lag may wrap (nfft >= S + P - 1).
+        nfft = next_pow2(S + wf.pulse_samples if wf.window_start_s is not None else S)
+        first, _ = _pulsed_lags(cfg)
         replica = pulsed_replica(wf)
         ref_spec = np.fft.fft(replica, nfft)
         f = np.fft.fftfreq(nfft, d=1.0 / wf.sample_rate_hz)

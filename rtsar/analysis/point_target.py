@@ -164,8 +164,14 @@ def analyse_point_target(
     r0, r1 = max(ir - chip_rg, 0), min(ir + chip_rg, n_rg - 1) + 1
     chip_img = img[a0:a1, r0:r1].astype(np.complex128)
     na, nr = chip_img.shape
-    spectrum_2d = _fft.fft2(chip_img)
+    # A squinted image keeps its Doppler centroid: the chip's spectrum may sit anywhere in
+    # [-1/2, 1/2) cycles per pixel, and a band-limited interpolant about zero frequency would
+    # split it.  Each axis is brought to baseband first (the spectral centre from the phase of
+    # the chip's lag-one correlation); the peak's phase is restored below.
+    centre_a, centre_r = _spectral_centre(chip_img, 0), _spectral_centre(chip_img, 1)
     ca, cr = ia - a0, ir - r0
+    chip_img = chip_img * _carrier(na, centre_a, ca)[:, None] * _carrier(nr, centre_r, cr)[None]
+    spectrum_2d = _fft.fft2(chip_img)
 
     # 2-D upsampled grid of +-2 pixels around the brightest pixel (within the chip's data).
     def grid(c, n):
@@ -179,6 +185,7 @@ def analyse_point_target(
     local = synth_a @ spectrum_2d @ synth_r.T / (na * nr)
     ka, kr = np.unravel_index(int(np.argmax(np.abs(local))), local.shape)
     a_star, r_star, value = _refine_peak_2d(spectrum_2d, float(ta[ka]), float(tr[kr]), factor)
+    value *= np.exp(2j * np.pi * (centre_a * (a_star - ca) + centre_r * (r_star - cr)))
 
     # Cuts through the refined peak, interpolated band-limited across the other axis.
     az_cut = _fft.fft(chip_img, axis=1) @ synthesis_vector(nr, r_star) / nr
@@ -211,6 +218,21 @@ def analyse_point_target(
         peak_value=value,
         peak_px=(float(a0 + a_star), float(r0 + r_star)),
     )
+
+
+def _spectral_centre(chip: np.ndarray, axis: int) -> float:
+    """Centre of the chip's spectrum along ``axis``, cycles per pixel in [-1/2, 1/2): the phase
+    of Σ x[n + 1] conj(x[n]) (0 for a chip of one pixel or no signal)."""
+    x = np.moveaxis(chip, axis, 0)
+    if len(x) < 2:
+        return 0.0
+    c = complex(np.vdot(x[:-1], x[1:]))
+    return float(np.angle(c) / (2.0 * np.pi)) if c else 0.0
+
+
+def _carrier(n: int, centre: float, origin: int) -> np.ndarray:
+    """exp(-i2π centre (k - origin)), k = 0 … n-1: moves a spectrum centred at ``centre`` to 0."""
+    return np.exp(-2j * np.pi * centre * (np.arange(n) - origin))
 
 
 def _refine_peak_2d(spectrum_2d: np.ndarray, a_guess: float, r_guess: float, factor: int):

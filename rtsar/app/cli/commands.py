@@ -9,6 +9,8 @@ from __future__ import annotations
 
 COMMANDS = (  # in the order of ``rtsar --help``
     ("presets", "files", "list instrument presets and their theoretical figures"),
+    ("import", "instrument",
+     "a real instrument's raw data block (its instrument TOML) as a recording"),
     ("simulate", "files", "simulate the raw shots of a scene into a recording"),
     ("process", "files", "focus a recording through the streaming engine"),
     ("quicklook", "files", "PNG of an image file (dB, axes in metres)"),

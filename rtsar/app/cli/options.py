@@ -302,7 +302,8 @@ def processor_changes(args, cfg):
         changes["range_migration_taps"] = args.range_migration_taps
     cfg = cfg.with_processor(**changes) if changes else cfg
     p = cfg.processor
-    if p.range_migration_taps and p.range_oversampling < 2:
+    # (a pulsed lens has no oversampling knob: its sample rate over the chirp band is fixed)
+    if p.range_migration_taps and p.range_oversampling < 2 and cfg.waveform.kind == "fmcw":
         warnings.warn(
             f"--range-migration-taps {p.range_migration_taps} on a critically sampled range "
             "axis (range_oversampling 1) interpolates less accurately; set range_oversampling "

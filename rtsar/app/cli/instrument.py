@@ -1,0 +1,154 @@
+"""``rtsar import``: a real instrument's raw data block, described by an instrument TOML, as a
+recording that ``process``, ``replay``, ``export``, ``batch`` and ``measure`` take as they are."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+
+import numpy as np
+
+from ...params import C_M_PER_S
+from ...sinks.io import RecordingWriter, replace_when_complete
+from .. import signals
+from ..progress import Progress
+from .options import die
+
+IMPORT_BLOCK_PULSES = 256
+
+
+def cmd_import(args) -> int:
+    from ...ccd.base import squint_aperture_pulses
+    from ...sources.formats.instrument_config import (
+        ESTIMATE_PULSES,
+        estimate_centroid,
+        instrument_config,
+    )
+    from ...sources.formats.instrument_file import (
+        dc_offset,
+        iter_pulse_blocks,
+        read_instrument_file,
+    )
+
+    try:
+        inst = read_instrument_file(args.instrument)
+        if inst.replica_file is not None:
+            raise ValueError(
+                f"{args.instrument}: radar.replica_file: a measured replica is read but the "
+                "lens compresses with the ideal chirp of chirp_rate_hz_per_s; remove the key"
+            )
+        pulses, samples = inst.shape
+        print(
+            f"{inst.data_file.name}: {pulses} pulses × {samples} samples ({inst.data_format})",
+            file=sys.stderr,
+        )
+        dc = dc_offset(inst, IMPORT_BLOCK_PULSES)
+        head = np.concatenate(
+            [x for p0, x in _blocks(inst, iter_pulse_blocks, dc, ESTIMATE_PULSES)]
+        )
+        head[~np.isfinite(head).all(axis=1)] = 0
+        estimate = None
+        if len(head) >= 16:
+            estimate = estimate_centroid(inst, head)
+            print(f"estimated from the data: {estimate.summary()}", file=sys.stderr)
+        if inst.doppler_centroid_hz is not None and not args.estimate_doppler:
+            f_dc, source = inst.doppler_centroid_hz, "the instrument file's"
+        elif estimate is not None:
+            f_dc, source = estimate.centroid_hz, "estimated"
+        else:
+            raise ValueError(
+                f"{args.instrument}: geometry.doppler_centroid_hz: not given, and "
+                f"{pulses} pulses are too few to estimate it (16 at least)"
+            )
+        cfg = instrument_config(inst, f_dc, args.micro_batch)
+        if pulses < cfg.processor.aperture_pulses:
+            raise ValueError(
+                f"{inst.data_file}: {pulses} pulses, fewer than the aperture of "
+                f"{cfg.processor.aperture_pulses}: no line could be focused"
+            )
+    except ValueError as exc:
+        return die(str(exc))
+    print(f"Doppler centroid used: {f_dc:.1f} Hz ({source})", file=sys.stderr)
+    wf, g, p = cfg.waveform, cfg.geometry, cfg.processor
+    rows = squint_aperture_pulses(cfg)
+    bandwidth_hz = 2.0 * g.along_track_step_m * g.prf_hz / g.antenna_length_m
+    print(
+        f"processor: aperture {rows} pulses ({bandwidth_hz:.0f} Hz of Doppler) in a CCD of "
+        f"{p.aperture_pulses} rows, squint {math.degrees(math.asin(g.squint_sin)):.3f}°, "
+        f"{wf.samples_per_shot} range bins of {0.5 * C_M_PER_S / wf.sample_rate_hz:.3f} m, "
+        f"range migration {p.range_migration_taps} taps",
+        file=sys.stderr,
+    )
+    prog = Progress(pulses, "import")
+    bad = 0
+    t0 = time.perf_counter()
+    step, prf = g.along_track_step_m, g.prf_hz
+    t_first = inst.first_pulse_time_s or 0.0
+    with (
+        signals.deferred(),
+        replace_when_complete(args.output) as tmp,
+        RecordingWriter(tmp, cfg, None, chunk_pulses=p.micro_batch) as rec,
+    ):
+        for p0, x in _blocks(inst, iter_pulse_blocks, dc, pulses):
+            signals.check()
+            nonfinite = ~np.isfinite(x).all(axis=1)
+            bad += int(nonfinite.sum())
+            x[nonfinite] = 0
+            idx = np.arange(p0, p0 + len(x))
+            rec.write(x.astype(np.complex64), idx, t_first + idx / prf, idx * step)
+            prog.update(p0 + len(x))
+        rec.annotate(
+            instrument_file=str(inst.path),
+            instrument_data_file=str(inst.data_file),
+            instrument_extra=json.dumps(inst.extra, default=str),
+            dc_offset_removed=[dc.real, dc.imag],
+            nonfinite_pulses_zeroed=bad,
+            doppler_centroid_source=source,
+            doppler_centroid_estimated_hz=np.nan if estimate is None else estimate.centroid_hz,
+        )
+    prog.done(pulses)
+    dt = time.perf_counter() - t0
+    if bad:
+        print(f"warning: {bad} pulses held NaN/Inf samples and were zeroed", file=sys.stderr)
+    print(
+        f"wrote {args.output}: {pulses} shots × {samples} samples at {prf:g} Hz, DC offset "
+        f"{dc.real:+.4f}{dc.imag:+.4f}j removed, Doppler centroid {f_dc:.1f} Hz; "
+        f"{dt:.1f} s"
+    )
+    return 0
+
+
+def _blocks(inst, iter_pulse_blocks, dc: complex, pulses: int):
+    """The file's first ``pulses`` pulses in import blocks, DC removed."""
+    for p0, x in iter_pulse_blocks(inst, IMPORT_BLOCK_PULSES, dc=dc):
+        if p0 >= pulses:
+            return
+        yield p0, x[: pulses - p0]
+
+
+def add_parsers(sub) -> None:
+    s = sub.add_parser(
+        "import",
+        description="Read a real instrument's raw data block and its published parameters from "
+        "an instrument TOML ([radar], [geometry], [data]: docs/pages/guide/own-data.md) and "
+        "write an rtsar recording (.h5).  The samples' DC offset is removed and reported; the "
+        "Doppler centroid is estimated from the data (pulse-to-pulse phase for its fraction of "
+        "the PRF, the range walk for its ambiguity) and printed beside the file's, and the "
+        "file's is used unless --estimate-doppler.",
+    )
+    s.add_argument("instrument", help="instrument file (.toml), e.g. the shared radarsat1 one")
+    s.add_argument("-o", "--output", required=True, help="recording to write (.h5)")
+    s.add_argument(
+        "--estimate-doppler",
+        action="store_true",
+        help="use the Doppler centroid estimated from the data even when the file gives one",
+    )
+    s.add_argument(
+        "--micro-batch",
+        type=int,
+        default=64,
+        help="pulses per lens launch in the recording's processor settings (default 64)",
+    )
+    s.set_defaults(func=cmd_import)

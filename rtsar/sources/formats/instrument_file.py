@@ -1,0 +1,423 @@
+"""Instrument files: a user's description (TOML) of a raw radar data block, for ``rtsar import``.
+
+The file gives the radar, the acquisition geometry and the file holding the raw samples; names
+carry SI units, and delays are counted from the centre of the transmitted pulse::
+
+    [radar]
+    carrier_hz = 5.3e9
+    sample_rate_hz = 32.317e6
+    chirp_rate_hz_per_s = -0.72135e12   # signed: negative is a down-chirp
+    pulse_length_s = 41.75e-6
+    prf_hz = 1256.98                    # optional: replica_file (a measured chirp, complex .npy)
+
+    [geometry]
+    effective_velocity_m_per_s = 7062.0
+    window_start_s = 6.5956e-3          # two-way delay of the block's first range sample
+    doppler_centroid_hz = -6900.0       # optional: estimated from the data when absent
+    looking = "right"                   # optional: "right" (default) or "left"
+
+    [data]
+    file = "block.mat"                  # relative to this file's folder
+    variable = "data"                   # the MATLAB (v5 or v7.3) variable
+    first_range_cell = 760              # any key not read here is kept, in `extra`
+
+Optional ``[geometry]`` keys: ``antenna_length_m``, ``first_pulse_time_s`` (or in ``[data]``).
+Optional ``[data]`` keys: ``format`` (mat5, mat73, npy or raw; else told by the suffix and, for
+``.mat``, the header), ``axes`` ("pulse,sample", the default, or "sample,pulse" for an array
+stored transposed), ``agc_db_file`` (per-pulse receiver gain in dB, a float .npy); for raw binary
+(``.bin``, ``.dat``, ``.raw``): ``sample_type``, ``pulses``, ``samples_per_pulse``,
+``header_bytes`` (0) and ``byte_order`` ("little").  Every problem is a one-line ``ValueError``
+naming the TOML file and the key (and the data file where it is the data file's).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+C_M_PER_S = 299_792_458.0
+RADAR_KEYS = ("carrier_hz", "sample_rate_hz", "chirp_rate_hz_per_s", "pulse_length_s", "prf_hz")
+GEOMETRY_KEYS = ("effective_velocity_m_per_s", "window_start_s")
+OPTIONAL_GEOMETRY = ("doppler_centroid_hz", "looking", "antenna_length_m", "first_pulse_time_s")
+FORMATS = ("mat5", "mat73", "npy", "raw")
+RAW_KEYS = ("sample_type", "pulses", "samples_per_pulse", "header_bytes", "byte_order")
+DATA_KEYS = ("file", "variable", "format", "axes", "agc_db_file", "first_pulse_time_s") + RAW_KEYS
+SAMPLE_TYPES = {"cf32": "c8", "cf64": "c16", "ci16": "i2", "ci8": "i1", "cu8": "u1"}
+"""Raw sample types and their NumPy codes: ``cf32``/``cf64`` complex, the others I, Q pairs."""
+CU8_OFFSET = 127.5
+"""The zero of ``cu8`` samples (unsigned 8-bit I, Q, as RTL-SDR receivers write them)."""
+
+
+@dataclass(frozen=True)
+class InstrumentFile:
+    """An instrument file, read and checked by ``read_instrument_file``; SI units."""
+
+    path: Path
+    carrier_hz: float
+    sample_rate_hz: float
+    chirp_rate_hz_per_s: float
+    pulse_length_s: float
+    prf_hz: float
+    effective_velocity_m_per_s: float
+    window_start_s: float
+    doppler_centroid_hz: float | None
+    looking: str
+    antenna_length_m: float | None
+    first_pulse_time_s: float | None
+    data_file: Path
+    variable: str | None
+    data_format: str
+    shape: tuple[int, int]
+    extra: dict
+    replica_file: Path | None
+    agc_db_file: Path | None
+    axes: str = "pulse,sample"
+    """How the array is stored: "pulse,sample" (a row per pulse) or "sample,pulse"."""
+    raw_layout: dict = field(default_factory=dict)
+    """Raw binary only: sample_type, header_bytes, byte_order."""
+
+
+class _Checker:
+    """Checks the keys of one instrument file; ``fail`` makes its one-line errors."""
+
+    def __init__(self, path: Path):
+        self.path = path
+
+    def fail(self, key: str, what: str) -> ValueError:
+        return ValueError(f"{self.path}: {key}: {what}")
+
+    def table(self, doc: dict, name: str, known: tuple | None = None) -> dict:
+        table = doc.get(name)
+        if not isinstance(table, dict):
+            raise self.fail(f"[{name}]", "missing table")
+        for key in table if known else ():
+            if key not in known:
+                raise self.fail(f"{name}.{key}", f"unknown key; known: {', '.join(known)}")
+        return table
+
+    def number(self, section: str, table: dict, key: str, positive=True, required=True):
+        name, value = f"{section}.{key}", table.get(key)
+        if value is None:
+            if required:
+                raise self.fail(name, "missing")
+            return None
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(name, f"{value!r}: a number is needed")
+        if not math.isfinite(value) or (positive and value <= 0):
+            raise self.fail(name, f"{value!r}: must be finite{' and > 0' if positive else ''}")
+        return float(value)
+
+    def integer(self, data: dict, key: str, default=None, minimum: int = 1) -> int:
+        value = data.get(key, default)
+        if value is None:
+            raise self.fail(f"data.{key}", "missing (raw binary data needs it)")
+        if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+            raise self.fail(f"data.{key}", f"{value!r}: an integer >= {minimum} is needed")
+        return value
+
+    def file(self, section: str, table: dict, key: str) -> Path | None:
+        if key not in table:
+            return None
+        if not isinstance(table[key], str):
+            raise self.fail(f"{section}.{key}", f"{table[key]!r}: a file name is needed")
+        found = self.path.parent / Path(table[key]).expanduser()
+        if not found.is_file():
+            raise self.fail(f"{section}.{key}", f"{found}: no such file")
+        return found
+
+    def npy(self, key: str, file: Path) -> np.ndarray:
+        try:
+            return np.load(file, mmap_mode="r", allow_pickle=False)
+        except (OSError, ValueError) as exc:
+            raise self.fail(key, f"{file}: unreadable as .npy: {exc}") from None
+
+    def raw_layout(self, data: dict) -> dict:
+        kind, order = data.get("sample_type"), data.get("byte_order", "little")
+        if kind not in SAMPLE_TYPES:
+            raise self.fail("data.sample_type", f"{kind!r}: one of {', '.join(SAMPLE_TYPES)}")
+        if order not in ("little", "big"):
+            raise self.fail("data.byte_order", f"{order!r}: little or big")
+        header = self.integer(data, "header_bytes", 0, 0)
+        return {"sample_type": kind, "header_bytes": header, "byte_order": order}
+
+
+def _data_format(check: _Checker, data: dict, file: Path) -> str:
+    if "format" in data:
+        if data["format"] not in FORMATS:
+            raise check.fail("data.format", f"{data['format']!r}: one of {', '.join(FORMATS)}")
+        return data["format"]
+    suffix = file.suffix.lower()
+    if suffix == ".mat":  # v7.3 is HDF5 after a 512-byte header (MATLAB's "userblock")
+        with open(file, "rb") as f:
+            f.seek(512)
+            return "mat73" if f.read(4) == b"\x89HDF" else "mat5"
+    if suffix in (".npy", ".bin", ".dat", ".raw"):
+        return "npy" if suffix == ".npy" else "raw"
+    raise check.fail("data.format", f"{file.name}: unknown suffix; give one of {FORMATS}")
+
+
+def _stored_shape(check: _Checker, data: dict, fmt: str, file: Path, variable) -> tuple:
+    """The array's shape as stored (MATLAB's shape for .mat); complex samples checked."""
+    if fmt in ("mat5", "mat73") and not isinstance(variable, str):
+        raise check.fail("data.variable", "missing (a MATLAB file needs the variable's name)")
+    if fmt == "mat5":  # is it complex? seen on loading (iter_pulse_blocks)
+        import scipy.io
+
+        found = {name: shape for name, shape, _ in scipy.io.whosmat(str(file))}
+        if variable not in found:
+            names = ", ".join(sorted(found)) or "none"
+            raise check.fail("data.variable", f"{variable!r} not in {file.name}; it has {names}")
+        return tuple(found[variable])
+    if fmt == "mat73":
+        import h5py
+
+        with h5py.File(file, "r") as f:
+            dset = f.get(variable)
+            if not isinstance(dset, h5py.Dataset):
+                names = ", ".join(sorted(k for k in f if not k.startswith("#"))) or "none"
+                raise check.fail(
+                    "data.variable", f"{variable!r} not in {file.name}; it has {names}"
+                )
+            if set(dset.dtype.names or ()) != {"real", "imag"}:
+                raise check.fail("data.variable", f"{file.name}: real {dset.dtype}; complex needed")
+            return dset.shape[::-1]  # HDF5 sees MATLAB's (column-major) array transposed
+    if fmt == "npy":
+        a = check.npy("data.file", file)
+        if a.ndim == 3 and a.shape[2] == 2 and not np.iscomplexobj(a):
+            return a.shape[:2]  # I, Q along the last axis
+        if a.ndim == 2 and not np.iscomplexobj(a):
+            why = "complex samples are needed (or a last axis of 2: I, Q)"
+            raise check.fail("data.file", f"{file}: real {a.dtype} array; {why}")
+        return a.shape
+    layout = check.raw_layout(data)
+    pulses, samples = check.integer(data, "pulses"), check.integer(data, "samples_per_pulse")
+    kind = layout["sample_type"]
+    bytes_per_sample = np.dtype(SAMPLE_TYPES[kind]).itemsize * (1 if kind[1] == "f" else 2)
+    expected = layout["header_bytes"] + pulses * samples * bytes_per_sample
+    if file.stat().st_size != expected:
+        size = file.stat().st_size
+        raise check.fail("data.file", f"{file}: {size} bytes, expected {expected} from the keys")
+    return (pulses, samples) if data.get("axes") != "sample,pulse" else (samples, pulses)
+
+
+def read_instrument_file(path) -> InstrumentFile:
+    """Read and check an instrument file, and what its data file holds (not the samples).
+
+    Parameters
+    ----------
+    path : str or Path
+        The TOML file.
+
+    Returns
+    -------
+    InstrumentFile
+
+    Raises
+    ------
+    ValueError
+        ``'<file>: <key>: <what is wrong>'``: a syntax error, a missing or unknown key, a value
+        out of range, parameters that contradict each other or the data file.
+    """
+    path = Path(path)
+    check = _Checker(path)
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise check.fail("file", f"cannot read: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise check.fail("TOML syntax", str(exc)) from None
+    for name in doc:
+        if name not in ("radar", "geometry", "data"):
+            raise check.fail(name, "unknown table; known: [radar], [geometry], [data]")
+    radar = check.table(doc, "radar", RADAR_KEYS + ("replica_file",))
+    geometry = check.table(doc, "geometry", GEOMETRY_KEYS + OPTIONAL_GEOMETRY)
+    data = check.table(doc, "data")
+    v = {k: check.number("radar", radar, k) for k in RADAR_KEYS if k != "chirp_rate_hz_per_s"}
+    v.update({k: check.number("geometry", geometry, k) for k in GEOMETRY_KEYS})
+    chirp = v["chirp_rate_hz_per_s"] = check.number("radar", radar, "chirp_rate_hz_per_s", False)
+    band_hz = abs(chirp) * v["pulse_length_s"]
+    if chirp == 0:
+        raise check.fail("radar.chirp_rate_hz_per_s", "0: a chirp's rate cannot be zero")
+    if band_hz > v["sample_rate_hz"]:  # the chirp's band would not fit complex sampling
+        why = f"|rate| x pulse_length_s = {band_hz:.6g} Hz exceeds sample_rate_hz"
+        raise check.fail("radar.chirp_rate_hz_per_s", why)
+    dc_hz = check.number("geometry", geometry, "doppler_centroid_hz", False, False)
+    v["doppler_centroid_hz"] = dc_hz
+    limit_hz = v["effective_velocity_m_per_s"] * v["carrier_hz"] / C_M_PER_S  # (2 v / lambda) / 2
+    if dc_hz is not None and abs(dc_hz) >= limit_hz:
+        why = f"{dc_hz:g} Hz: |value| >= v / wavelength = {limit_hz:.6g} Hz, a 90 degree squint"
+        raise check.fail("geometry.doppler_centroid_hz", why)
+    v["looking"] = geometry.get("looking", "right")
+    if v["looking"] not in ("right", "left"):
+        raise check.fail("geometry.looking", f"{v['looking']!r}: right or left")
+    v["antenna_length_m"] = check.number("geometry", geometry, "antenna_length_m", required=False)
+    if "first_pulse_time_s" in geometry and "first_pulse_time_s" in data:
+        raise check.fail("data.first_pulse_time_s", "given in [geometry] as well")
+    where = "geometry" if "first_pulse_time_s" in geometry else "data"
+    v["first_pulse_time_s"] = check.number(where, doc[where], "first_pulse_time_s", False, False)
+
+    if "file" not in data:
+        raise check.fail("data.file", "missing")
+    file = v["data_file"] = check.file("data", data, "file")
+    try:
+        fmt = v["data_format"] = _data_format(check, data, file)
+    except OSError as exc:
+        raise check.fail("data.file", f"{file}: unreadable: {exc}") from None
+    axes = v["axes"] = data.get("axes", "pulse,sample")
+    if axes not in ("pulse,sample", "sample,pulse"):
+        raise check.fail("data.axes", f'{axes!r}: "pulse,sample" or "sample,pulse"')
+    for key in RAW_KEYS if fmt != "raw" else ():
+        if key in data:
+            raise check.fail(f"data.{key}", f"for raw binary data only, not {fmt}")
+    if "variable" in data and fmt not in ("mat5", "mat73"):
+        raise check.fail("data.variable", f"for MATLAB files only, not {fmt}")
+    v["variable"] = data.get("variable") if fmt in ("mat5", "mat73") else None
+    try:
+        stored = _stored_shape(check, data, fmt, file, v["variable"])
+    except ValueError as exc:
+        if str(exc).startswith(f"{path}: "):
+            raise
+        raise check.fail("data.file", f"{file}: unreadable as {fmt}: {exc}") from None
+    except Exception as exc:  # noqa: BLE001 - a reader's every failure: the user's file is bad
+        raise check.fail("data.file", f"{file}: unreadable as {fmt}: {exc}") from None
+    if len(stored) != 2:
+        raise check.fail("data.file", f"{file}: an array of shape {stored}; 2-D is needed")
+    shape = v["shape"] = (int(stored[0]), int(stored[1]))[:: 1 if axes == "pulse,sample" else -1]
+    if shape[0] < 2:
+        raise check.fail("data.file", f"{file}: {shape[0]} pulse(s); at least 2 are needed")
+    pulse_samples = v["pulse_length_s"] * v["sample_rate_hz"]
+    if pulse_samples > shape[1]:
+        why = f"{pulse_samples:.1f} samples, more than the {shape[1]} per pulse of {file.name}"
+        raise check.fail("radar.pulse_length_s", why)
+
+    replica = v["replica_file"] = check.file("radar", radar, "replica_file")
+    if replica is not None:
+        r = check.npy("radar.replica_file", replica)
+        if r.ndim != 1 or not np.iscomplexobj(r) or r.size < 2:
+            why = f"{r.dtype} {r.shape}: a complex 1-D array is needed"
+            raise check.fail("radar.replica_file", f"{replica}: {why}")
+    agc = v["agc_db_file"] = check.file("data", data, "agc_db_file")
+    if agc is not None:
+        g = check.npy("data.agc_db_file", agc)
+        if g.shape != shape[:1] or g.dtype.kind not in "iuf" or not np.isfinite(g).all():
+            why = f"{g.dtype} {g.shape}: finite gains in dB, one per pulse ({shape[0]}), needed"
+            raise check.fail("data.agc_db_file", f"{agc}: {why}")
+    v["raw_layout"] = check.raw_layout(data) if fmt == "raw" else {}
+    v["extra"] = {k: value for k, value in data.items() if k not in DATA_KEYS}
+    return InstrumentFile(path=path, **v)
+
+
+def _complex(x: np.ndarray, offset: float = 0.0) -> np.ndarray:
+    """complex128 from complex samples, a MATLAB compound (real, imag), or I, Q on the last axis."""
+    if x.dtype.names is not None:
+        return x["real"].astype(np.float64) + 1j * x["imag"].astype(np.float64)
+    if np.iscomplexobj(x):
+        return x.astype(np.complex128)
+    out = np.empty(x.shape[:-1], np.complex128)
+    out.real, out.imag = x[..., 0] - offset, x[..., 1] - offset
+    return out
+
+
+def _file_blocks(inst: InstrumentFile, block_pulses: int) -> Iterator[tuple[int, np.ndarray]]:
+    """Blocks of the samples as the file holds them (no AGC), [pulse, sample]."""
+    pulses = inst.shape[0]
+    pulse_axis = 0 if inst.axes == "pulse,sample" else 1
+    offset = 0.0
+    if inst.data_format == "mat73":
+        import h5py
+
+        with h5py.File(inst.data_file, "r") as f:
+            dset = f[inst.variable]  # MATLAB's array transposed: its pulse axis is the other one
+            for p0 in range(0, pulses, block_pulses):
+                p1 = min(p0 + block_pulses, pulses)
+                yield p0, _complex(dset[p0:p1] if pulse_axis == 1 else dset[:, p0:p1].T)
+        return
+    if inst.data_format == "mat5":
+        import scipy.io
+
+        a = scipy.io.loadmat(inst.data_file, variable_names=[inst.variable])[inst.variable]
+        if not np.iscomplexobj(a):
+            why = f"{inst.data_file.name}: real {a.dtype}; complex samples are needed"
+            raise ValueError(f"{inst.path}: data.variable: {why}")
+    elif inst.data_format == "npy":
+        a = np.load(inst.data_file, mmap_mode="r", allow_pickle=False)
+    else:
+        layout = inst.raw_layout
+        kind = layout["sample_type"]
+        dtype = np.dtype(SAMPLE_TYPES[kind]).newbyteorder("<>"[layout["byte_order"] == "big"])
+        stored = inst.shape[:: 1 if pulse_axis == 0 else -1] + (() if kind[1] == "f" else (2,))
+        a = np.memmap(inst.data_file, dtype, "r", layout["header_bytes"], stored)
+        offset = CU8_OFFSET if kind == "cu8" else 0.0
+    for p0 in range(0, pulses, block_pulses):
+        x = a[p0 : p0 + block_pulses] if pulse_axis == 0 else a[:, p0 : p0 + block_pulses]
+        yield p0, _complex(np.asarray(x if pulse_axis == 0 else np.swapaxes(x, 0, 1)), offset)
+
+
+def iter_pulse_blocks(
+    inst: InstrumentFile, block_pulses: int = 256, *, dc: complex = 0j
+) -> Iterator[tuple[int, np.ndarray]]:
+    """The raw array in blocks of pulses, in order, read lazily where the format allows.
+
+    ``.npy`` is memory-mapped, raw binary read through ``np.memmap``, MATLAB v7.3 (HDF5) in
+    h5py slices; a MATLAB v5 file is loaded once (that format cannot be read in part).  Raw
+    samples are as their ``sample_type`` says: ``cf32``/``cf64`` complex (I, Q floats),
+    ``ci16``/``ci8`` signed integers I, Q, ``cu8`` unsigned bytes I, Q whose zero, 127.5, is
+    subtracted.
+
+    Parameters
+    ----------
+    inst : InstrumentFile
+    block_pulses : int
+        Pulses per block (the last block may be shorter).
+    dc : complex
+        Subtracted from every sample before the AGC gain: the converter added it after the
+        receiver's gain (``dc_offset``).
+
+    Yields
+    ------
+    (int, ndarray)
+        The block's first pulse, and its samples: complex128 ``[pulses, samples per pulse]``.
+        With ``agc_db_file``, pulse p is multiplied by ``10**(-agc_db[p] / 20)``: the receiver
+        applied that gain (in dB), and dividing it out restores the echo's level.
+    """
+    if isinstance(block_pulses, bool) or not isinstance(block_pulses, int) or block_pulses < 1:
+        raise ValueError(f"block_pulses: {block_pulses!r}: a positive integer is needed")
+    gain = None
+    if inst.agc_db_file is not None:
+        gain = 10.0 ** (-np.load(inst.agc_db_file).astype(np.float64) / 20.0)
+    for p0, x in _file_blocks(inst, block_pulses):
+        if dc:
+            x -= dc
+        if gain is not None:
+            x *= gain[p0 : p0 + len(x), None]
+        yield p0, x
+
+
+def dc_offset(inst: InstrumentFile, block_pulses: int = 256) -> complex:
+    """The mean of all finite samples as the file holds them (before any AGC), block by block.
+
+    Non-finite samples are left out (the importer counts them); 0 if no sample is finite.
+    """
+    total, count = 0j, 0
+    for _, x in _file_blocks(inst, block_pulses):
+        finite = np.isfinite(x)
+        total += complex(x[finite].sum())
+        count += int(finite.sum())
+    return total / count if count else 0j
+
+
+def load_replica(inst: InstrumentFile) -> np.ndarray | None:
+    """The measured chirp replica (complex128, 1-D), or None when the file names none."""
+    if inst.replica_file is None:
+        return None
+    return np.load(inst.replica_file, allow_pickle=False).astype(np.complex128)

@@ -74,7 +74,9 @@ class PulsedChirp:
     def __post_init__(self):
         _positive(self, "bandwidth_hz", "pulse_duration_s", "sample_rate_hz", "receive_window_s")
         if not isinstance(self.down_chirp, bool):
-            raise ValueError(f"PulsedChirp.down_chirp must be true or false, got {self.down_chirp!r}")
+            raise ValueError(
+                f"PulsedChirp.down_chirp must be true or false, got {self.down_chirp!r}"
+            )
         if self.window_start_s is not None:
             _positive(self, "window_start_s")
         _shot_size(self, max(self.receive_window_s, self.pulse_duration_s))
@@ -384,7 +386,9 @@ class Config:
         u_mid = g.beam_centre_offset_m(centre_m)
 
         def doppler_cycles_per_pulse(u):
-            return 2.0 * g.along_track_step_m * u / (g.wavelength_m * math.hypot(g.slant_range_m, u))
+            return (
+                2.0 * g.along_track_step_m * u / (g.wavelength_m * math.hypot(g.slant_range_m, u))
+            )
 
         spread = doppler_cycles_per_pulse(u_mid + half_aperture_m) - doppler_cycles_per_pulse(
             u_mid - half_aperture_m

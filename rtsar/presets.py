@@ -44,6 +44,41 @@ def _psaltis_max() -> Config:
     )
 
 
+def _radarsat1() -> Config:
+    # RADARSAT-1 fine beam as in Cumming & Wong's Vancouver block (../shared/data/radarsat1):
+    # C band, a 30.1 MHz down-chirp of 41.75 µs sampled at 32.317 MHz, PRF 1256.98 Hz, 7062 m/s,
+    # a 15 m antenna and the Doppler centroid -6900 Hz (1.58° of squint: the echo walks
+    # 195 m/s, 22 range cells across the 668-pulse aperture).  A centred 2048-sample window
+    # keeps 512 of its 700 fully compressed lags; the CCD holds the aperture plus the 12 rows
+    # the squinted beam's centre moves across them.  8 range-migration taps: the samples are
+    # only 1.07x the chirp band, where 4 Lanczos taps widen the range response by 6 %.
+    return Config(
+        PulsedChirp(
+            bandwidth_hz=0.72135e12 * 41.75e-6,
+            pulse_duration_s=41.75e-6,
+            sample_rate_hz=32.317e6,
+            receive_window_s=2048 / 32.317e6,
+            down_chirp=True,
+        ),
+        Geometry(
+            wavelength_m=299_792_458.0 / 5.3e9,
+            slant_range_m=990e3,
+            along_track_step_m=7062.0 / 1256.98,
+            prf_hz=1256.98,
+            antenna_length_m=15.0,
+            doppler_centroid_hz=-6900.0,
+        ),
+        Processor(
+            aperture_pulses=681,
+            range_bins=512,
+            range_window="taylor",
+            azimuth_window="taylor",
+            fft_length=2048,
+            range_migration_taps=8,
+        ),
+    )
+
+
 def _crouch_sal() -> Config:
     # Crouch (2012) stripmap SAL: 1.55 µm, 3 THz over 300 ms, 10 µm steps, 2048 shots in the
     # aperture, ≈1.5 m range, 10 µm fibre aperture.  The LO is delayed to 1.5 m so the beat
@@ -126,6 +161,7 @@ PRESETS = {
     "crouch-spotlight": _crouch_spotlight,
     "zhao-insal": _zhao_insal,
     "tiny": _tiny,
+    "radarsat1": _radarsat1,
 }
 
 

@@ -233,8 +233,11 @@ def scan_extent(cfg: Config, targets: Targets, start, pulses) -> tuple[float, in
     # Past the first/last target: half an aperture plus 8 azimuth resolutions (at least 8 lines),
     # so the outermost targets' mainlobes and first sidelobes are inside the image.
     margin_m = 0.5 * n * step + max(8 * step, 8 * cfg.azimuth_resolution_m())
-    lo = float(targets.along_track_m.min()) if len(targets) else 0.0
-    hi = float(targets.along_track_m.max()) if len(targets) else 0.0
+    # A squinted beam sees a target from around its closest approach plus R0 tan θ.
+    g = cfg.geometry
+    seen = targets.along_track_m + g.beam_centre_offset_m(targets.slant_range_m)
+    lo = float(seen.min()) if len(targets) else 0.0
+    hi = float(seen.max()) if len(targets) else 0.0
     start = float(lo - margin_m if start is None else start)
     if not math.isfinite(start):
         raise ValueError("scene: start_along_track_m must be finite")

@@ -29,9 +29,12 @@ class AntennaPattern(Effect):
         if not isinstance(main_lobe_only, bool):
             raise ValueError("antenna_pattern.main_lobe_only must be true or false")
         self.main_lobe_only = main_lobe_only
+        self.squint_sin = g.squint_sin
 
     def target_gain(self, pulse, along_offset_m, slant_range_m):
-        x = self.d_over_lambda * (along_offset_m / slant_range_m)
+        # A squinted beam (Geometry.doppler_centroid_hz) points at sin θ = -λ f_dc / 2V behind
+        # broadside for f_dc < 0: its centre is where (x_target - x_platform)/R = -sin θ.
+        x = self.d_over_lambda * (along_offset_m / slant_range_m + self.squint_sin)
         gain = np.sinc(x) ** 2
         if self.main_lobe_only:
             gain = np.where(np.abs(x) < 1.0, gain, 0.0)
@@ -40,7 +43,7 @@ class AntennaPattern(Effect):
     def along_track_support_m(self, max_slant_range_m):
         """First-null offset at the largest closest-approach range R: sinθ = λ/D with
         sinθ = x/sqrt(R² + x²), so |x| < R s/sqrt(1 - s²), s = λ/D (None: no bound)."""
-        s = 1.0 / self.d_over_lambda
+        s = 1.0 / self.d_over_lambda + abs(self.squint_sin)  # the lobe's far edge
         if not self.main_lobe_only or s >= 1.0:
             return None
         return max_slant_range_m * s / np.sqrt(1.0 - s * s)

@@ -30,8 +30,10 @@ from .instrument_file import InstrumentFile
 #: Doppler bandwidth processed when the file gives no antenna length, as a fraction of the PRF
 #: (strip-map radars sample their Doppler band at 1.2 to 1.5 times its width).
 DEFAULT_BANDWIDTH_OF_PRF = 0.75
-#: Range-migration taps of an instrument's processor (Lanczos, a = 2): rtsar.ccd.migration.
-INSTRUMENT_TAPS = 4
+#: Range-migration taps of an instrument's processor (Lanczos, a = 4; rtsar.ccd.migration): a
+#: radar's samples often cover the chirp band only 1.1x over, where 4 taps (a = 2) widen the
+#: range response by ~6 % (RADARSAT-1, 1.07x: 6 % with 4 taps, 2 % with 8).
+INSTRUMENT_TAPS = 8
 #: Pulses range-compressed to estimate the Doppler centroid.
 ESTIMATE_PULSES = 2048
 

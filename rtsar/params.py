@@ -283,9 +283,15 @@ class Processor:
                       the migration span in bins range offsets; "fft" shares its transforms
                       (2.3-2.7x the time at 5 offsets), "direct"/"partitioned" run one
                       correlator per offset (~5x)
+    range_migration_domain  where the taps read: "time" (the exact two-dimensional mask,
+                      one tap set per bin offset the range history spans, rtsar.ccd.migration)
+                      or "doppler" (the "fft" correlator only: one T-tap read per azimuth
+                      frequency of each block, rtsar.ccd.doppler_migration; RADARSAT-1's 22
+                      cells of squinted walk cost T multiply-adds, not 22 + T spectral ones)
     """
 
     CORRELATORS = ("direct", "fft", "partitioned", "nonuniform")  # a constant, not a field
+    MIGRATION_DOMAINS = ("time", "doppler")  # a constant, not a field
 
     aperture_pulses: int
     range_bins: int
@@ -301,6 +307,7 @@ class Processor:
     micro_batch: int = 64
     precision: str = "complex64"
     range_migration_taps: int = 0
+    range_migration_domain: str = "time"
 
     def __post_init__(self):
         for name in ("aperture_pulses", "range_bins", "range_oversampling", "micro_batch"):
@@ -359,6 +366,16 @@ class Processor:
         if not (isinstance(taps, int) and not isinstance(taps, bool) and 0 <= taps <= 64):
             raise ValueError(
                 f"Processor.range_migration_taps must be an integer in 0..64 (0: off), got {taps!r}"
+            )
+        if self.range_migration_domain not in self.MIGRATION_DOMAINS:
+            raise ValueError(
+                f"Processor.range_migration_domain must be one of {self.MIGRATION_DOMAINS}, "
+                f"got {self.range_migration_domain!r}"
+            )
+        if self.range_migration_domain == "doppler" and self.correlator != "fft":
+            raise ValueError(
+                "Processor.range_migration_domain = 'doppler' needs correlator = 'fft' (it reads "
+                f"the range in each overlap-save block's azimuth spectrum), got {self.correlator!r}"
             )
         if self.range_centre_m is not None and not (
             math.isfinite(self.range_centre_m) and self.range_centre_m > 0

@@ -45,13 +45,16 @@ def _psaltis_max() -> Config:
 
 
 def _radarsat1() -> Config:
-    # RADARSAT-1 fine beam as in Cumming & Wong's Vancouver block (../shared/data/radarsat1):
-    # C band, a 30.1 MHz down-chirp of 41.75 µs sampled at 32.317 MHz, PRF 1256.98 Hz, 7062 m/s,
-    # a 15 m antenna and the Doppler centroid -6900 Hz (1.58° of squint: the echo walks
-    # 195 m/s, 22 range cells across the 668-pulse aperture).  A centred 2048-sample window
-    # keeps 512 of its 700 fully compressed lags; the CCD holds the aperture plus the 12 rows
-    # the squinted beam's centre moves across them.  8 range-migration taps: the samples are
-    # only 1.07x the chirp band, where 4 Lanczos taps widen the range response by 6 %.
+    # RADARSAT-1 fine beam as in Cumming & Wong's Vancouver block (../shared/data/radarsat1,
+    # the processor `rtsar import` makes of its instrument.toml with a 15 m antenna): C band, a
+    # 30.1 MHz down-chirp of 41.75 µs sampled at 32.317 MHz in a fixed 2048-sample window
+    # opening 6.5956 ms after the pulse centre, PRF 1256.98 Hz, 7062 m/s, the Doppler centroid
+    # -6900 Hz (1.58° of squint: the echo walks 195 m/s, 22 range cells across the 668-pulse
+    # aperture).  The CCD holds the aperture plus the 47 rows the squinted beam's centre moves
+    # across the 2048 bins.  8 range-migration taps (the samples are only 1.07x the chirp band,
+    # where 4 Lanczos taps widen the range response by 6 %), read in each block's azimuth
+    # spectrum (rtsar.ccd.doppler_migration): 8 multiply-adds a sample where the time-domain
+    # taps need 31 spectral ones for the walk.
     return Config(
         PulsedChirp(
             bandwidth_hz=0.72135e12 * 41.75e-6,
@@ -59,22 +62,24 @@ def _radarsat1() -> Config:
             sample_rate_hz=32.317e6,
             receive_window_s=2048 / 32.317e6,
             down_chirp=True,
+            window_start_s=6.5956e-3,
         ),
         Geometry(
             wavelength_m=299_792_458.0 / 5.3e9,
-            slant_range_m=990e3,
+            slant_range_m=993_030.0,
             along_track_step_m=7062.0 / 1256.98,
             prf_hz=1256.98,
             antenna_length_m=15.0,
             doppler_centroid_hz=-6900.0,
         ),
         Processor(
-            aperture_pulses=681,
-            range_bins=512,
+            aperture_pulses=716,
+            range_bins=2048,
             range_window="taylor",
             azimuth_window="taylor",
             fft_length=2048,
             range_migration_taps=8,
+            range_migration_domain="doppler",
         ),
     )
 

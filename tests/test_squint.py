@@ -32,7 +32,7 @@ def squinted():
     plan = make_plan(cfg)
     # truth: closest-approach along-track and range, off the pixel grid
     xs = np.array([3000.0, 3400.0, 3800.0])
-    rs = plan.range_m[[100, 256, 400]] + np.array([1.3, 0.7, 2.1])
+    rs = plan.range_m[[800, 1024, 1240]] + np.array([1.3, 0.7, 2.1])
     scene = point_scene(cfg, xs, rs, effects=[("antenna_pattern", {"main_lobe_only": True})])
     shots = Simulator(scene).block(scene.pulses)
     image, az, rg = process_block(cfg, shots, "numpy", scene.start_along_track_m)

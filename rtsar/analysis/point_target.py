@@ -164,13 +164,14 @@ def analyse_point_target(
     r0, r1 = max(ir - chip_rg, 0), min(ir + chip_rg, n_rg - 1) + 1
     chip_img = img[a0:a1, r0:r1].astype(np.complex128)
     na, nr = chip_img.shape
-    # A squinted image keeps its Doppler centroid: the chip's spectrum may sit anywhere in
-    # [-1/2, 1/2) cycles per pixel, and a band-limited interpolant about zero frequency would
-    # split it.  Each axis is brought to baseband first (the spectral centre from the phase of
-    # the chip's lag-one correlation); the peak's phase is restored below.
-    centre_a, centre_r = _spectral_centre(chip_img, 0), _spectral_centre(chip_img, 1)
+    # A squinted image keeps its Doppler centroid: the chip's azimuth spectrum may sit anywhere
+    # in [-1/2, 1/2) cycles per line, and a band-limited interpolant about zero frequency would
+    # split it.  The azimuth axis is brought to baseband first (the spectral centre from the
+    # phase of the chip's lag-one correlation along azimuth); the peak's phase is restored
+    # below.  Range spectra are centred by the lens.
+    centre_a = _spectral_centre(chip_img, 0)
     ca, cr = ia - a0, ir - r0
-    chip_img = chip_img * _carrier(na, centre_a, ca)[:, None] * _carrier(nr, centre_r, cr)[None]
+    chip_img = chip_img * _carrier(na, centre_a, ca)[:, None]
     spectrum_2d = _fft.fft2(chip_img)
 
     # 2-D upsampled grid of +-2 pixels around the brightest pixel (within the chip's data).
@@ -185,7 +186,7 @@ def analyse_point_target(
     local = synth_a @ spectrum_2d @ synth_r.T / (na * nr)
     ka, kr = np.unravel_index(int(np.argmax(np.abs(local))), local.shape)
     a_star, r_star, value = _refine_peak_2d(spectrum_2d, float(ta[ka]), float(tr[kr]), factor)
-    value *= np.exp(2j * np.pi * (centre_a * (a_star - ca) + centre_r * (r_star - cr)))
+    value *= np.exp(2j * np.pi * centre_a * (a_star - ca))
 
     # Cuts through the refined peak, interpolated band-limited across the other axis.
     az_cut = _fft.fft(chip_img, axis=1) @ synthesis_vector(nr, r_star) / nr

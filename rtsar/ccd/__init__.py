@@ -100,6 +100,12 @@ def make_ccd(config: Config, range_m: np.ndarray, physical=None) -> Correlator:
 
         return PhysicalCCD(config, range_m, physical)
     p = config.processor
+    if p.range_migration_taps and p.range_migration_domain == "doppler":
+        from .doppler_migration import DopplerMigrationCorrelator  # numba: when asked for
+
+        return DopplerMigrationCorrelator(
+            config, range_m, p.range_migration_taps, p.fft_length, p.precision
+        )
     if p.range_migration_taps:
         mask = design_migration_mask(config, range_m)
     else:

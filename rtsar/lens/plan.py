@@ -201,7 +201,7 @@ def make_plan(cfg: Config) -> LensPlan:
         ref_spec = np.fft.fft(replica, nfft)
         f = np.fft.fftfreq(nfft, d=1.0 / wf.sample_rate_hz)
         taper = window_at(proc.range_window, (f + 0.5 * wf.bandwidth_hz) / wf.bandwidth_hz)
-        spectrum = np.conj(ref_spec) * taper
+        spectrum = np.conj(ref_spec) * taper * secondary_range_compression(cfg, f)
         post = np.full(bins, 1.0 / (nfft * wf.pulse_samples), dtype=np.complex128)
         return LensPlan(
             S,
@@ -216,6 +216,30 @@ def make_plan(cfg: Config) -> LensPlan:
             range_m,
         )
     raise TypeError(f"unsupported waveform {type(wf).__name__}")
+
+
+def secondary_range_compression(cfg: Config, f_hz: np.ndarray) -> np.ndarray | float:
+    """The lens's share of a squinted beam's range-azimuth coupling, for a CCD that reads the
+    range in the azimuth spectrum (``range_migration_domain = "doppler"``): there an echo's
+    range chirp has the rate K_m = K / (1 - K / K_src), K_src = 2 V² f0³ D³ / (c R f_η²),
+    D = sqrt(1 - (λ f_η / 2V)²), and the lens takes out the extra phase -π f² / K_src at the
+    Doppler centroid f_η = f_dc and the range centre (Cumming & Wong 2005, sec. 6.2, SRC in the
+    range frequency domain): exp(-iπ f² / K_src).  1.0 otherwise: broadside K_src is infinite,
+    and the time-domain taps read each pulse's own compressed line, which has no coupling."""
+    g = cfg.geometry
+    if not g.squinted or cfg.processor.range_migration_domain != "doppler":
+        return 1.0
+    centre = cfg.processor.range_centre_m or g.slant_range_m
+    d = math.sqrt(1.0 - g.squint_sin**2)
+    k_src = (
+        2.0
+        * g.speed_mps**2
+        * g.carrier_hz**3
+        * d**3
+        / (C_M_PER_S * centre * g.doppler_centroid_hz**2)
+    )
+    cycles = np.mod(-0.5 * f_hz * f_hz / k_src, 1.0)
+    return np.exp(2j * math.pi * cycles)
 
 
 def dft(x: np.ndarray, sign: int, n: int, fft=np.fft) -> np.ndarray:

@@ -11,8 +11,9 @@ into the Config every other command reads from a recording:
   estimated from the data by rtsar.analysis.doppler_centroid), ``antenna_length_m`` (the file's,
   or the one whose Doppler bandwidth 2V/D is DEFAULT_BANDWIDTH_OF_PRF of the PRF);
 * processor: the aperture λR/(D d) at mid-swath, plus the rows the squinted beam's centre
-  moves across the swath (rtsar.ccd.base.squint_aperture_pulses), range-migration taps, the
-  overlap-save correlator.
+  moves across the swath (rtsar.ccd.base.squint_aperture_pulses), the overlap-save correlator
+  with its range-migration taps read in each block's azimuth spectrum
+  (rtsar.ccd.doppler_migration).
 """
 
 from __future__ import annotations
@@ -88,6 +89,7 @@ def _processor(rows: int, wf: PulsedChirp, micro_batch: int) -> Processor:
         fft_length=next_pow2(2 * rows),
         micro_batch=micro_batch,
         range_migration_taps=INSTRUMENT_TAPS,
+        range_migration_domain="doppler",
     )
 
 

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from rtsar.analysis.point_target import analyse_point_target
+from rtsar.analysis.point_target import analyse_point_target, azimuth_carrier_cycles
 from rtsar.ccd import make_ccd
 from rtsar.ccd.doppler_migration import DopplerMigrationCorrelator, doppler_migration_bins
 from rtsar.lens import make_plan
@@ -93,7 +93,15 @@ def test_doppler_domain_focuses_as_the_exact_time_domain_mask(scene):
         c = cfg.with_processor(range_migration_domain=domain)
         img, az, rg = process_block(c, shots, "numpy", sc.start_along_track_m)
         reports[domain] = [
-            analyse_point_target(img, az, rg, x, r, search_radius_m=(60.0, 20.0))
+            analyse_point_target(
+                img,
+                az,
+                rg,
+                x,
+                r,
+                search_radius_m=(60.0, 20.0),
+                azimuth_centre_cycles=azimuth_carrier_cycles(cfg),
+            )
             for x, r in zip(xs, rs, strict=True)
         ]
     for t, d, x, r in zip(reports["time"], reports["doppler"], xs, rs, strict=True):

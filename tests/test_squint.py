@@ -12,7 +12,7 @@ import pytest
 
 from rtsar.analysis.azimuth_response import antenna_gain, azimuth_theory
 from rtsar.analysis.doppler_centroid import estimate_doppler_centroid
-from rtsar.analysis.point_target import analyse_point_target
+from rtsar.analysis.point_target import analyse_point_target, azimuth_carrier_cycles
 from rtsar.analysis.theory import theoretical_irw_factor
 from rtsar.lens import make_lens, make_plan
 from rtsar.presets import preset
@@ -53,7 +53,15 @@ def test_positions_in_zero_doppler_geometry(squinted):
     cfg, g, scene, shots, image, az, rg, xs, rs = squinted
     cell_m = C / (2 * cfg.waveform.sample_rate_hz)
     for x, r in zip(xs, rs, strict=True):
-        rep = analyse_point_target(image, az, rg, x, r, search_radius_m=(60.0, 20.0))
+        rep = analyse_point_target(
+            image,
+            az,
+            rg,
+            x,
+            r,
+            search_radius_m=(60.0, 20.0),
+            azimuth_centre_cycles=azimuth_carrier_cycles(cfg),
+        )
         assert abs(rep.azimuth_m - x) / g.along_track_step_m < 0.1
         assert abs(rep.range_m - r) / cell_m < 0.1
 
@@ -65,7 +73,15 @@ def test_widths_against_theory(squinted):
     range_irw = 0.886 * C / (2 * cfg.waveform.bandwidth_hz)
     range_irw *= theoretical_irw_factor(window("taylor", 4096))
     for x, r in zip(xs, rs, strict=True):
-        rep = analyse_point_target(image, az, rg, x, r, search_radius_m=(60.0, 20.0))
+        rep = analyse_point_target(
+            image,
+            az,
+            rg,
+            x,
+            r,
+            search_radius_m=(60.0, 20.0),
+            azimuth_centre_cycles=azimuth_carrier_cycles(cfg),
+        )
         theory = azimuth_theory(cfg, r, gain=beam).irw_m
         assert rep.azimuth.irw_m == pytest.approx(theory, rel=0.05)
         assert rep.range.irw_m == pytest.approx(range_irw, rel=0.05)

@@ -25,7 +25,7 @@ from ..scene.effects import load_effects
 from ..stream.engine import focus_batches
 from ..windows import window
 from .azimuth_response import SINC_IRW, antenna_gain, azimuth_theory
-from .point_target import analyse_point_target
+from .point_target import analyse_point_target, azimuth_carrier_cycles
 from .theory import theoretical_irw_factor, theoretical_pslr_db
 
 
@@ -62,6 +62,12 @@ def acceptance_targets(cfg: Config) -> list[tuple[str, float, float]]:
     dr = rm[1] - rm[0]
     n = len(rm)
     edge = max(10, n // 16)  # bins between an edge target and the swath edge (room for sidelobes)
+    wf = cfg.waveform
+    if getattr(wf, "window_start_s", None) is not None:
+        # an instrument's fixed window: the outer P/2 bins hold echoes cut by the window (a
+        # wider response by design); the edge targets stand where echoes are whole, plus the
+        # squinted walk's half-aperture and room for sidelobes
+        edge = max(edge, wf.pulse_samples // 2 + 16 + n // 64)
     step = cfg.geometry.along_track_step_m
     return [
         ("near edge", 0.31 * step, rm[edge] + 0.27 * dr),
@@ -88,7 +94,11 @@ def _focus_one(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One isolated target, with margin_lines image lines either side of it."""
     n, step = cfg.processor.aperture_pulses, cfg.geometry.along_track_step_m
-    start = x - (0.5 * (n - 1) + margin_lines) * step
+    # line j focuses at start + (j + (N-1)/2) d - u_mid (u_mid: a squinted beam's look back)
+    u_mid = cfg.geometry.beam_centre_offset_m(
+        cfg.processor.range_centre_m or cfg.geometry.slant_range_m
+    )
+    start = x + u_mid - (0.5 * (n - 1) + margin_lines) * step
     scene = point_scene(
         cfg,
         [x],
@@ -140,6 +150,7 @@ def run_point_targets(
             near_range_m=r,
             search_radius_m=(3 * rho_a, 3 * rho_r),
             chip=chip,
+            azimuth_centre_cycles=azimuth_carrier_cycles(cfg),
         )
         results.append(
             TargetResult(

@@ -83,6 +83,7 @@ def analyse_point_target(
     upsample_factor: int = 16,
     *,
     islr_extent: float = 10.0,
+    azimuth_centre_cycles: float = 0.0,
 ) -> PointTargetReport:
     """Locate and measure a point target in a complex image ``[azimuth, range]``.
 
@@ -112,6 +113,11 @@ def analyse_point_target(
         Upsampling factor for the 2-D peak search and the cuts (default 16).
     islr_extent : float, optional
         ISLR sidelobe region half-width in IRWs (see :func:`analyse_cut`).
+    azimuth_centre_cycles : float, optional
+        Centre of the image's azimuth spectrum in cycles per line: a squinted image keeps its
+        Doppler centroid, f_dc / PRF (mod 1: azimuth_carrier_cycles).  The chip
+        is brought to baseband before any band-limited interpolation (about zero frequency it
+        would split the spectrum) and the peak's phase restored.  0: broadside.
 
     Returns
     -------
@@ -164,14 +170,10 @@ def analyse_point_target(
     r0, r1 = max(ir - chip_rg, 0), min(ir + chip_rg, n_rg - 1) + 1
     chip_img = img[a0:a1, r0:r1].astype(np.complex128)
     na, nr = chip_img.shape
-    # A squinted image keeps its Doppler centroid: the chip's azimuth spectrum may sit anywhere
-    # in [-1/2, 1/2) cycles per line, and a band-limited interpolant about zero frequency would
-    # split it.  The azimuth axis is brought to baseband first (the spectral centre from the
-    # phase of the chip's lag-one correlation along azimuth); the peak's phase is restored
-    # below.  Range spectra are centred by the lens.
-    centre_a = _spectral_centre(chip_img, 0)
     ca, cr = ia - a0, ir - r0
-    chip_img = chip_img * _carrier(na, centre_a, ca)[:, None]
+    centre_a = float(azimuth_centre_cycles)
+    if centre_a:  # a squinted image: its azimuth spectrum to baseband first
+        chip_img = chip_img * _carrier(na, centre_a, ca)[:, None]
     spectrum_2d = _fft.fft2(chip_img)
 
     # 2-D upsampled grid of +-2 pixels around the brightest pixel (within the chip's data).
@@ -221,14 +223,11 @@ def analyse_point_target(
     )
 
 
-def _spectral_centre(chip: np.ndarray, axis: int) -> float:
-    """Centre of the chip's spectrum along ``axis``, cycles per pixel in [-1/2, 1/2): the phase
-    of Σ x[n + 1] conj(x[n]) (0 for a chip of one pixel or no signal)."""
-    x = np.moveaxis(chip, axis, 0)
-    if len(x) < 2:
-        return 0.0
-    c = complex(np.vdot(x[:-1], x[1:]))
-    return float(np.angle(c) / (2.0 * np.pi)) if c else 0.0
+def azimuth_carrier_cycles(config) -> float:
+    """The azimuth spectrum's centre of an image a configuration focuses, cycles per line in
+    [-1/2, 1/2): its Doppler centroid over the PRF (lines are one pulse apart; 0 broadside)."""
+    g = config.geometry
+    return float(np.mod(g.doppler_centroid_hz / g.prf_hz + 0.5, 1.0) - 0.5)
 
 
 def _carrier(n: int, centre: float, origin: int) -> np.ndarray:

@@ -44,7 +44,7 @@ from ..analysis.acceptance import SINC_IRW, range_weights
 from ..analysis.azimuth_response import antenna_gain, azimuth_theory
 from ..analysis.detect import find_point_targets
 from ..analysis.islr2d import islr_2d_db, islr_2d_from_ratios_db, region_over_main
-from ..analysis.point_target import analyse_point_target
+from ..analysis.point_target import analyse_point_target, azimuth_carrier_cycles
 from ..analysis.theory import theoretical_irw_factor, theoretical_pslr_db
 from ..scene.effects import load_effects
 from ..scene.files import load_point_targets, load_scene, load_surface_scene
@@ -253,6 +253,7 @@ def measure_image(
     else:
         positions = [(float(az[i]), float(rg[j])) for i, j in found]
     points, theories, truth, reports = [], [], [], []
+    carrier = azimuth_carrier_cycles(theory.config)  # a squinted image keeps its centroid
     for x, r in positions:
         th = theory.at(r)
         chip = tuple(
@@ -270,10 +271,11 @@ def measure_image(
             chip=chip,
             upsample_factor=UPSAMPLE,
             islr_extent=ISLR_EXTENT_IRW,
+            azimuth_centre_cycles=carrier,
         )
         widths = (rep.azimuth.irw_m, rep.range.irw_m)
         islr = (
-            islr_2d_db(image, rep, d_az, d_rg, UPSAMPLE, ISLR_EXTENT_IRW)
+            islr_2d_db(image, rep, d_az, d_rg, UPSAMPLE, ISLR_EXTENT_IRW, carrier)
             if all(math.isfinite(w) for w in widths)
             else math.nan  # no -3 dB width within the chip: not a point (reported as null)
         )

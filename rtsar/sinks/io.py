@@ -253,12 +253,6 @@ class RecordingWriter:
             self._position.resize(end, axis=0)
             self._position[self.pulses : end] = xyz
 
-    def annotate(self, **attrs) -> None:
-        """Provenance as file attributes (an import's instrument file), never read as settings."""
-        with self._out.writing():
-            for name, value in attrs.items():
-                self._f.attrs[name] = value
-
     def close(self) -> None:
         """Close the file; WriteFailed when its last bytes cannot be written (then, and after
         any failed write, the file is closed once and left as it is)."""

@@ -8,30 +8,35 @@ import math
 import sys
 import time
 
+import h5py
 import numpy as np
 
+from ...analysis.doppler_centroid import DopplerEstimate, estimate_doppler_centroid
+from ...ccd.base import squint_aperture_pulses
+from ...lens import make_lens, make_plan
 from ...params import C_M_PER_S
 from ...sinks.io import RecordingWriter, replace_when_complete
+from ...sources.formats.instrument_config import instrument_config
+from ...sources.formats.instrument_file import dc_offset, iter_pulse_blocks, read_instrument_file
 from .. import signals
 from ..progress import Progress
 from .options import die
 
 IMPORT_BLOCK_PULSES = 256
+ESTIMATE_PULSES = 2048  # pulses range-compressed to estimate the Doppler centroid
+
+
+def estimate_centroid(inst, shots: np.ndarray) -> DopplerEstimate:
+    """The Doppler centroid of the first ESTIMATE_PULSES ``shots`` [pulse, sample] (DC removed),
+    range-compressed by the instrument's own lens (NumPy, broadside labels)."""
+    cfg = instrument_config(inst, 0.0)
+    lens = make_lens(make_plan(cfg), "numpy")
+    lines = lens.compress(np.ascontiguousarray(shots[:ESTIMATE_PULSES], np.complex64))
+    bin_m = 0.5 * C_M_PER_S / inst.sample_rate_hz
+    return estimate_doppler_centroid(lines, inst.prf_hz, cfg.geometry.wavelength_m, bin_m)
 
 
 def cmd_import(args) -> int:
-    from ...ccd.base import squint_aperture_pulses
-    from ...sources.formats.instrument_config import (
-        ESTIMATE_PULSES,
-        estimate_centroid,
-        instrument_config,
-    )
-    from ...sources.formats.instrument_file import (
-        dc_offset,
-        iter_pulse_blocks,
-        read_instrument_file,
-    )
-
     try:
         inst = read_instrument_file(args.instrument)
         if inst.replica_file is not None:
@@ -45,9 +50,7 @@ def cmd_import(args) -> int:
             file=sys.stderr,
         )
         dc = dc_offset(inst, IMPORT_BLOCK_PULSES)
-        head = np.concatenate(
-            [x for p0, x in _blocks(inst, iter_pulse_blocks, dc, ESTIMATE_PULSES)]
-        )
+        head = np.concatenate([x for _, x in _blocks(inst, dc, ESTIMATE_PULSES)])
         head[~np.isfinite(head).all(axis=1)] = 0
         estimate = None
         if len(head) >= 16:
@@ -86,28 +89,26 @@ def cmd_import(args) -> int:
     t0 = time.perf_counter()
     step, prf = g.along_track_step_m, g.prf_hz
     t_first = inst.first_pulse_time_s or 0.0
-    with (
-        signals.deferred(),
-        replace_when_complete(args.output) as tmp,
-        RecordingWriter(tmp, cfg, None, chunk_pulses=p.micro_batch) as rec,
-    ):
-        for p0, x in _blocks(inst, iter_pulse_blocks, dc, pulses):
-            signals.check()
-            nonfinite = ~np.isfinite(x).all(axis=1)
-            bad += int(nonfinite.sum())
-            x[nonfinite] = 0
-            idx = np.arange(p0, p0 + len(x))
-            rec.write(x.astype(np.complex64), idx, t_first + idx / prf, idx * step)
-            prog.update(p0 + len(x))
-        rec.annotate(
-            instrument_file=str(inst.path),
-            instrument_data_file=str(inst.data_file),
-            instrument_extra=json.dumps(inst.extra, default=str),
-            dc_offset_removed=[dc.real, dc.imag],
-            nonfinite_pulses_zeroed=bad,
-            doppler_centroid_source=source,
-            doppler_centroid_estimated_hz=np.nan if estimate is None else estimate.centroid_hz,
-        )
+    with signals.deferred(), replace_when_complete(args.output) as tmp:
+        with RecordingWriter(tmp, cfg, None, chunk_pulses=p.micro_batch) as rec:
+            for p0, x in _blocks(inst, dc, pulses):
+                signals.check()
+                nonfinite = ~np.isfinite(x).all(axis=1)
+                bad += int(nonfinite.sum())
+                x[nonfinite] = 0
+                idx = np.arange(p0, p0 + len(x))
+                rec.write(x.astype(np.complex64), idx, t_first + idx / prf, idx * step)
+                prog.update(p0 + len(x))
+        with h5py.File(tmp, "a") as f:  # provenance, never read back as settings
+            f.attrs.update(
+                instrument_file=str(inst.path),
+                instrument_data_file=str(inst.data_file),
+                instrument_extra=json.dumps(inst.extra, default=str),
+                dc_offset_removed=[dc.real, dc.imag],
+                nonfinite_pulses_zeroed=bad,
+                doppler_centroid_source=source,
+                doppler_centroid_estimated_hz=np.nan if estimate is None else estimate.centroid_hz,
+            )
     prog.done(pulses)
     dt = time.perf_counter() - t0
     if bad:
@@ -120,7 +121,7 @@ def cmd_import(args) -> int:
     return 0
 
 
-def _blocks(inst, iter_pulse_blocks, dc: complex, pulses: int):
+def _blocks(inst, dc: complex, pulses: int):
     """The file's first ``pulses`` pulses in import blocks, DC removed."""
     for p0, x in iter_pulse_blocks(inst, IMPORT_BLOCK_PULSES, dc=dc):
         if p0 >= pulses:

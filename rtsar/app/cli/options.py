@@ -302,8 +302,16 @@ def processor_changes(args, cfg):
         changes["range_migration_taps"] = args.range_migration_taps
     cfg = cfg.with_processor(**changes) if changes else cfg
     p = cfg.processor
-    # (a pulsed lens has no oversampling knob: its sample rate over the chirp band is fixed)
-    if p.range_migration_taps and p.range_oversampling < 2 and cfg.waveform.kind == "fmcw":
+    wf = cfg.waveform
+    if p.range_migration_taps and wf.kind == "pulsed" and p.range_migration_taps < 8:
+        # a pulsed lens has no oversampling knob: its samples cover the chirp band fs/B times
+        warnings.warn(
+            f"--range-migration-taps {p.range_migration_taps} on a critically sampled range "
+            f"axis (fs/B = {wf.sample_rate_hz / wf.bandwidth_hz:.2f}) interpolates less "
+            "accurately; 8 taps or more (docs/pages/reference/tradeoff.md)",
+            stacklevel=2,
+        )
+    elif p.range_migration_taps and p.range_oversampling < 2 and wf.kind == "fmcw":
         warnings.warn(
             f"--range-migration-taps {p.range_migration_taps} on a critically sampled range "
             "axis (range_oversampling 1) interpolates less accurately; set range_oversampling "

@@ -16,6 +16,8 @@ from ... import __version__
 from ...ccd import first_line_pulses
 from ...lens.cache import cache_dir  # $RTSAR_CACHE_DIR, else ~/.cache/rtsar
 from ...presets import preset
+from ...sources.formats.instrument_config import instrument_config
+from ...sources.formats.instrument_file import read_instrument_file
 from ...scene import DEMO_SCENE, load_scene
 from ...scene.files import BUILT_IN, built_in_scenes
 from ...sinks.io import check_writable
@@ -103,7 +105,14 @@ def cmd_run(args) -> int:
         # Pulse 0's along-track position: the scene's (the instrument scans the scene the file
         # describes, as the fake instrument does); a bare preset starts at 0 m.
         start_m, described = 0.0, None
-        if args.preset and not args.scene:
+        if getattr(args, "instrument", None):
+            if args.preset or args.scene:
+                return die("--instrument replaces --preset and --scene: give one of them")
+            try:
+                cfg = _instrument_config(args.instrument)
+            except ValueError as exc:
+                return die(str(exc))
+        elif args.preset and not args.scene:
             cfg = preset(args.preset)
         else:
             described = load_scene(args.scene or DEMO_SCENE)
@@ -158,8 +167,11 @@ def cmd_run(args) -> int:
             link_timeout_s=args.link_timeout,
         )
 
-    if args.preset:
-        return die("--preset applies to --serial; a scene file carries its own configuration")
+    if args.preset or getattr(args, "instrument", None):
+        return die(
+            "--preset and --instrument apply to --serial and --zmq-in; a scene file carries its "
+            "own configuration"
+        )
     scene = load_scene(args.scene or DEMO_SCENE)
     scene = replace(scene, config=processor_changes(args, scene.config))
     warn_outside_swath(scene)
@@ -297,6 +309,18 @@ def add_wait_subscribers(s) -> None:
     )
 
 
+def _instrument_config(path: str):
+    """The Config of an instrument file for a live run (its Doppler centroid must be given:
+    a live stream has no block to estimate it from before it starts)."""
+    inst = read_instrument_file(path)
+    if inst.doppler_centroid_hz is None:
+        raise ValueError(
+            f"{path}: geometry.doppler_centroid_hz: a live run needs it (rtsar import "
+            "estimates it from a recorded block and prints it)"
+        )
+    return instrument_config(inst, inst.doppler_centroid_hz)
+
+
 def add_parsers(sub) -> None:
     s = sub.add_parser(
         "run",
@@ -336,6 +360,13 @@ def add_parsers(sub) -> None:
         "--preset",
         help="with --serial or --zmq-in: the processing configuration preset (default: the "
         "--scene's configuration)",
+    )
+    src.add_argument(
+        "--instrument",
+        metavar="TOML",
+        help="with --serial or --zmq-in: the processing configuration of an instrument file, "
+        "as `rtsar import` reads it (docs/pages/guide/own-data.md); its [data] block gives the "
+        "samples per pulse, and a live run needs its geometry.doppler_centroid_hz",
     )
     src.add_argument(
         "--baudrate", type=int, default=3_000_000, help="serial line rate (default 3000000)"

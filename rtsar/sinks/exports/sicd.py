@@ -287,6 +287,12 @@ def write_sicd(image_path: str | Path, path: str | Path, frame: LocalFrame | Non
                 "SICD's grid is uniform"
             )
     cfg = image_config(attrs, image_path)
+    if cfg.geometry.squinted:  # its azimuth spectrum sits at f_dc: DeltaKCOAPoly, not written
+        raise ValueError(
+            f"{image_path} is squinted (Doppler centroid {cfg.geometry.doppler_centroid_hz:g} "
+            "Hz): SICD export of squinted images is not supported yet (its azimuth spectral "
+            "support would be declared centred on zero); the image file keeps the centroid"
+        )
     kept = attrs.get("collection_start_utc")
     start = None if kept is None else parse_utc(kept, f"{image_path}: collection_start_utc")
     # sarpy logs what it finds odd (a degenerate geometry) on stderr; the error here says it.

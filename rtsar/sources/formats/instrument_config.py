@@ -21,9 +21,6 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-import numpy as np
-
-from ...analysis.doppler_centroid import DopplerEstimate, estimate_doppler_centroid
 from ...lens.plan import next_pow2, range_axis_m
 from ...params import C_M_PER_S, Config, Geometry, Processor, PulsedChirp
 from .instrument_file import InstrumentFile
@@ -35,8 +32,6 @@ DEFAULT_BANDWIDTH_OF_PRF = 0.75
 #: radar's samples often cover the chirp band only 1.1x over, where 4 taps (a = 2) widen the
 #: range response by ~6 % (RADARSAT-1, 1.07x: 6 % with 4 taps, 2 % with 8).
 INSTRUMENT_TAPS = 8
-#: Pulses range-compressed to estimate the Doppler centroid.
-ESTIMATE_PULSES = 2048
 
 
 def instrument_config(
@@ -91,16 +86,3 @@ def _processor(rows: int, wf: PulsedChirp, micro_batch: int) -> Processor:
         range_migration_taps=INSTRUMENT_TAPS,
         range_migration_domain="doppler",
     )
-
-
-def estimate_centroid(inst: InstrumentFile, shots: np.ndarray) -> DopplerEstimate:
-    """The Doppler centroid of the first ESTIMATE_PULSES ``shots`` [pulse, sample] (DC removed),
-    range-compressed by the instrument's own lens (NumPy, broadside labels)."""
-    from ...lens import make_lens, make_plan  # the lens floor: only when estimating
-
-    cfg = instrument_config(inst, 0.0)
-    plan = make_plan(cfg)
-    lens = make_lens(plan, "numpy")
-    lines = lens.compress(np.ascontiguousarray(shots[:ESTIMATE_PULSES], np.complex64))
-    bin_m = 0.5 * C_M_PER_S / inst.sample_rate_hz
-    return estimate_doppler_centroid(lines, inst.prf_hz, cfg.geometry.wavelength_m, bin_m)

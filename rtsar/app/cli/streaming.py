@@ -16,13 +16,13 @@ from ... import __version__
 from ...ccd import first_line_pulses
 from ...lens.cache import cache_dir  # $RTSAR_CACHE_DIR, else ~/.cache/rtsar
 from ...presets import preset
-from ...sources.formats.instrument_config import instrument_config
-from ...sources.formats.instrument_file import read_instrument_file
 from ...scene import DEMO_SCENE, load_scene
 from ...scene.files import BUILT_IN, built_in_scenes
 from ...sinks.io import check_writable
 from ...sinks.publish import DEFAULT_ENDPOINT
 from ...sources.channel_map import ChannelMap
+from ...sources.formats.instrument_config import instrument_config
+from ...sources.formats.instrument_file import read_instrument_file
 from ...sources.replay import ReplaySource
 from ...sources.serial import SerialSource
 from ...sources.sim import SimSource

@@ -32,36 +32,28 @@ def scene():
 
 
 def test_the_migration_at_the_centroid_is_the_beam_centre_range():
-    """Δ(f_dc, r) of (M4) from the squint's own geometry: the beam centre sees R0 at R0/cos θ,
-    and the lens labels bins R_c - R0 (at mid-swath) short of their raw range."""
+    """Δ(f, r) of (M4) at the frequency bin nearest the centroid, from the instrument's own
+    conventions: the beam centre sees R0 at R0 / cos θ; an echo centred at sample n of the fixed
+    window lies at R = c (window_start + n / fs) / 2, and the lens labels the middle bin
+    R_c - R0 short of that (R_c (1 - cos θ) at the middle)."""
     cfg = preset("radarsat1")
-    g = cfg.geometry
-    plan = make_plan(cfg)
-    m = 4096  # frequency bins fine enough that one lies within 0.31 Hz of f_dc
-    shift = doppler_migration_bins(cfg, plan.range_m, m)
+    g, wf = cfg.geometry, cfg.waveform
+    label = make_plan(cfg).range_m  # the columns' R0, as the image declares them
+    m = 4096
+    shift = doppler_migration_bins(cfg, label, m)
     k = round((g.doppler_centroid_hz % g.prf_hz) * m / g.prf_hz) % m
-    f = np.fft.fftfreq(m, 1 / g.prf_hz)[k]
-    f_abs = (
-        g.doppler_centroid_hz
-        + ((f - g.doppler_centroid_hz + g.prf_hz / 2) % g.prf_hz)
-        - (g.prf_hz / 2)
-    )
-    cos = math.sqrt(1 - (g.wavelength_m * f_abs / (2 * g.speed_mps)) ** 2)
-    label = plan.range_m  # R0 labels
-    bin_m = C / (2 * cfg.waveform.sample_rate_hz)
-    # the label offset, from the raw axis: the middle bin's raw range minus its label
-    offset = (
-        0.5
-        * C
-        * (
-            cfg.waveform.window_start_s
-            + cfg.waveform.pulse_duration_s / 2
-            + (-(cfg.waveform.pulse_samples // 2) + 1024) / cfg.waveform.sample_rate_hz
-        )
-        - label[1024]
-    )
-    expect = (label / cos - label - offset) / bin_m
-    assert np.abs(shift[k] - expect).max() < 1e-6
+    f = g.doppler_centroid_hz + ((k * g.prf_hz / m - g.doppler_centroid_hz) % g.prf_hz)
+    f -= g.prf_hz if f - g.doppler_centroid_hz > g.prf_hz / 2 else 0.0
+    cos_f = math.sqrt(1 - (g.wavelength_m * f / (2 * g.speed_mps)) ** 2)
+    cos_dc = math.sqrt(1 - (g.wavelength_m * g.doppler_centroid_hz / (2 * g.speed_mps)) ** 2)
+    bin_m = C / (2 * wf.sample_rate_hz)
+    # bin 1024 is the lag where an echo starts 1024 - P//2 samples into the window: its centre
+    # is half the pulse later, and R = c (window_start + n_centre / fs) / 2 there
+    n_centre = 1024 - wf.pulse_samples // 2 + 0.5 * wf.pulse_duration_s * wf.sample_rate_hz
+    raw_mid = 0.5 * C * (wf.window_start_s + n_centre / wf.sample_rate_hz)
+    expect = (label / cos_f - label - raw_mid * (1 - cos_dc)) / bin_m
+    assert abs(f - g.doppler_centroid_hz) < g.prf_hz / m
+    assert np.abs(shift[k] - expect).max() < 1e-3
 
 
 def test_streaming_equals_one_block(scene):

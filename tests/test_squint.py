@@ -111,3 +111,17 @@ def test_broadside_costs_nothing_new():
     n, d = cfg.processor.aperture_pulses, cfg.geometry.along_track_step_m
     assert line_azimuth_m(cfg, 0.0, 0, 1)[0] == pytest.approx(0.5 * (n - 1) * d)
     assert abs(design_mask(cfg, r)).sum(axis=0) == pytest.approx(np.ones(len(r)))
+
+
+def test_the_simulated_echo_sits_where_the_instruments_convention_puts_it():
+    """Independent of the lens plan: with the fixed window of the radarsat1 preset, an echo
+    from slant range R is centred 2R/c after the pulse centre, i.e. at sample
+    (2R/c - window_start) fs (the shared instrument.toml's convention)."""
+    cfg = preset("radarsat1")
+    wf = cfg.waveform
+    r = 0.5 * C * (wf.window_start_s + 1000.3 / wf.sample_rate_hz)
+    scene = point_scene(cfg, [0.0], [r], pulses=1, start_along_track_m=0.0)
+    shot = Simulator(scene).block(1)[0]
+    lit = np.flatnonzero(np.abs(shot) > 0.5)
+    centre = 0.5 * (lit[0] + lit[-1] + 1)  # the chirp's rectangular envelope, its midpoint
+    assert centre == pytest.approx((2 * r / C - wf.window_start_s) * wf.sample_rate_hz, abs=0.6)

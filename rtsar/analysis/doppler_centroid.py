@@ -8,7 +8,7 @@ the azimuth signal only tells f_dc modulo the PRF; the range walk tells the rest
   coefficient method): the expected phase advance between neighbouring pulses is 2π f_dc / PRF,
   so with C = Σ_{p, r} y[p + 1, r] · conj(y[p, r]) over the range-compressed lines y,
 
-      f_frac = PRF · arg(C) / 2π        in [-PRF/2, PRF/2)                                 (D1)
+      f_frac = PRF · arg(C) / 2π        in (-PRF/2, PRF/2]                                 (D1)
 
 * **ambiguity**, from the range walk: a scatterer's echo moves in range at dR/dt = -λ f_dc / 2
   across its aperture, so the scene's range-compressed magnitude, seen Δp pulses later, is
@@ -19,7 +19,7 @@ the azimuth signal only tells f_dc modulo the PRF; the range walk tells the rest
       f_walk = -2 Δr PRF / (λ Δp),      f_dc = f_frac + M · PRF,  M = round((f_walk - f_frac)/PRF)
                                                                                             (D2)
 
-The walk must be known to better than half a PRF: λ PRF / 4 m/s (RADARSAT-1: 17.8 m/s, or 1.4
+The walk must be known to better than half a PRF: λ PRF / 4 m/s (RADARSAT-1: 17.8 m/s, or 1.56
 range cells over Δp = 512 pulses), comfortably more than the parabola's error.
 """
 
@@ -30,13 +30,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+#: Below this |C| / Σ|y|² the pulse-to-pulse phase is noise's (white noise: ~1/sqrt(samples);
+#: RADARSAT-1's Vancouver block: 0.33).
+MIN_COHERENCE = 0.05
+
 
 @dataclass(frozen=True)
 class DopplerEstimate:
     """What the estimator found (every frequency in Hz, walk in metres per second)."""
 
     centroid_hz: float  # absolute: f_frac + ambiguity · PRF
-    fractional_hz: float  # (D1), in [-PRF/2, PRF/2)
+    fractional_hz: float  # (D1), in (-PRF/2, PRF/2]
     ambiguity: int  # M of (D2)
     walk_m_per_s: float  # dR/dt measured from the range walk
     walk_centroid_hz: float  # f_walk of (D2): the coarse, unambiguous estimate
@@ -102,6 +106,11 @@ def estimate_doppler_centroid(
     if not 1 <= lag_pulses < len(y):
         raise ValueError(f"lag_pulses must be in 1 … {len(y) - 1}, got {lag_pulses}")
     f_frac, coherence = fractional_centroid_hz(y, prf_hz)
+    if coherence < MIN_COHERENCE:
+        raise ValueError(
+            f"the echoes' pulse-to-pulse coherence is {coherence:.3f} (below {MIN_COHERENCE}): "
+            "noise, not a scene; no Doppler centroid to estimate"
+        )
     walk_m = range_walk_bins(y, lag_pulses) * bin_m
     walk_m_per_s = walk_m * prf_hz / lag_pulses
     f_walk = -2.0 * walk_m_per_s / wavelength_m

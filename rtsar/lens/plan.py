@@ -72,7 +72,8 @@ def _pulsed_lags(cfg: Config) -> tuple[int, int]:
         centre = cfg.processor.range_centre_m
         if centre is None:
             first = lowest + (lags - bins) // 2
-        else:  # the bins around the asked range centre, kept inside the window
+        else:  # the bins around the asked range centre (where the beam centre sees it)
+            centre += cfg.geometry.squint_range_excess_m(centre)
             t_open = wf.window_start_s + 0.5 * wf.pulse_duration_s
             lag = round((2.0 * centre / C_M_PER_S - t_open) * wf.sample_rate_hz) - bins // 2
             first = min(max(lag, lowest), lowest + lags - bins)

@@ -54,18 +54,27 @@ def cmd_import(args) -> int:
         head[~np.isfinite(head).all(axis=1)] = 0
         estimate = None
         if len(head) >= 16:
-            estimate = estimate_centroid(inst, head)
-            print(f"estimated from the data: {estimate.summary()}", file=sys.stderr)
+            try:
+                estimate = estimate_centroid(inst, head)
+                print(f"estimated from the data: {estimate.summary()}", file=sys.stderr)
+            except ValueError as exc:  # all-zero echoes, say: told, fatal only if needed
+                print(f"no Doppler centroid from the data: {exc}", file=sys.stderr)
         if inst.doppler_centroid_hz is not None and not args.estimate_doppler:
             f_dc, source = inst.doppler_centroid_hz, "the instrument file's"
         elif estimate is not None:
             f_dc, source = estimate.centroid_hz, "estimated"
         else:
             raise ValueError(
-                f"{args.instrument}: geometry.doppler_centroid_hz: not given, and "
-                f"{pulses} pulses are too few to estimate it (16 at least)"
+                f"{args.instrument}: geometry.doppler_centroid_hz: not given, and the data "
+                f"({pulses} pulses; 16 at least, not all zero) cannot tell it"
             )
-        cfg = instrument_config(inst, f_dc, args.micro_batch)
+        try:
+            cfg = instrument_config(inst, f_dc, args.micro_batch)
+        except ValueError as exc:  # the parameters together: name the file
+            raise ValueError(f"{args.instrument}: {exc}") from None
+        if inst.extra:  # [data] keys rtsar does not read: kept in the recording, said here
+            kept = ", ".join(sorted(inst.extra))
+            print(f"kept as provenance, not read: [data] {kept}", file=sys.stderr)
         if pulses < cfg.processor.aperture_pulses:
             raise ValueError(
                 f"{inst.data_file}: {pulses} pulses, fewer than the aperture of "

@@ -5,11 +5,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
+try:
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
 from ...sinks.name_claim import check_unclaimed
 
 # Options naming files a command reads, and files it writes (``--sigmf BASE`` writes
 # BASE.sigmf-meta and BASE.sigmf-data).
-INPUT_OPTIONS = ("scene", "recording", "image", "input", "images", "inputs")
+INPUT_OPTIONS = ("scene", "recording", "image", "input", "images", "inputs", "instrument")
 INPUT_OPTIONS += ("curve_key", "curve_server_key", "curve_client_key")
 OUTPUT_OPTIONS = ("output", "png", "json", "out", "cphd", "sicd", "sigmf", "record")
 COMMAND_INPUTS = {"spotlight": ("live",), "projective": ("simulate",)}  # named like others
@@ -17,7 +22,8 @@ COMMAND_OUTPUTS = {"quicklook": ("height",)}  # --height PNG (elsewhere --height
 # Commands whose -o writes an HDF5 file (a recording or an image), and the suffixes of what
 # such a file is not: `process rec.h5 -o x.png` wrote HDF5 under a picture's name.
 HDF5_OUTPUT_COMMANDS = (
-    "simulate", "process", "run", "replay", "subscribe", "demo", "spot-simulate", "spotlight"
+    "simulate", "process", "run", "replay", "subscribe", "demo", "spot-simulate", "spotlight",
+    "import",
 )  # fmt: skip
 NOT_HDF5_SUFFIXES = (
     ".png", ".jpg", ".jpeg", ".gif", ".pdf", ".svg", ".tif", ".tiff", ".csv", ".json", ".txt",
@@ -81,7 +87,24 @@ def _files_of(value: str, option: str) -> list[Path]:
         return [Path(value + ".sigmf-meta"), Path(value + ".sigmf-data")]
     if path.suffix.lower() in (".sigmf-meta", ".sigmf-data"):
         return [path.with_suffix(".sigmf-meta"), path.with_suffix(".sigmf-data")]
+    if option == "instrument":  # the file and the data (and AGC, replica) files it names
+        return [path, *_instrument_files(path)]
     return [path]
+
+
+def _instrument_files(path: Path) -> list[Path]:
+    """The files an instrument TOML names ([data] file, agc_db_file; [radar] replica_file),
+    relative to its folder; none when it cannot be read (its reader says why, later)."""
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return []
+    named = [
+        (doc.get("data") or {}).get("file"),
+        (doc.get("data") or {}).get("agc_db_file"),
+        (doc.get("radar") or {}).get("replica_file"),
+    ]
+    return [path.parent / n for n in named if isinstance(n, str)]
 
 
 def _identity(path: Path):

@@ -296,6 +296,12 @@ def write_cphd(rec, path: str | Path, frame: LocalFrame | None = None) -> dict:
     (TxTime), a strip map with no full-aperture line (an image area of no extent)."""
     require_formats(skcphd, "CPHD export")
     frame = frame or LocalFrame()
+    if rec.config.geometry.squinted:  # its scene point and dwell would be placed abeam
+        raise ValueError(
+            f"{rec.path} is squinted (Doppler centroid {rec.config.geometry.doppler_centroid_hz:g}"
+            " Hz): CPHD export of squinted recordings is not supported yet (the scene, image "
+            "area and dwell times would be placed abeam); SigMF keeps the shots as they are"
+        )
     if rec.pulses < 1:
         raise ValueError(f"{rec.path}: no shots to export")
     require_increasing_times(rec, "CPHD (TxTime, vector by vector)")

@@ -253,7 +253,8 @@ def measure_image(
     else:
         positions = [(float(az[i]), float(rg[j])) for i, j in found]
     points, theories, truth, reports = [], [], [], []
-    carrier = azimuth_carrier_cycles(theory.config)  # a squinted image keeps its centroid
+    config = getattr(theory, "config", None)  # a spotlight image's theory has none: no squint
+    carrier = 0.0 if config is None else azimuth_carrier_cycles(config)
     for x, r in positions:
         th = theory.at(r)
         chip = tuple(

@@ -23,7 +23,7 @@ from ..params import Processor
 from ..presets import preset
 from ..sinks.io import check_writable, replace_when_complete
 from .bench_alone import CorrelatorAlone, LensAlone
-from .bench_pipeline import bench_pipeline
+from .bench_pipeline import bench_pipeline, with_correlator
 from .bench_record import bench_recording, recording_lines
 
 CORRELATORS = Processor.CORRELATORS  # direct, fft, partitioned, nonuniform
@@ -105,7 +105,7 @@ def bench_correlators(
     mask = design_mask(cfg, plan.range_m)
     block = min(cfg.processor.partition_lines, mask.shape[0])
     rates = {
-        kind: alone.rate(name, cfg.with_processor(correlator=kind), batch, CORRELATOR_TABLE)
+        kind: alone.rate(name, with_correlator(cfg, kind), batch, CORRELATOR_TABLE)
         for kind in CORRELATORS
     }
     rng = np.random.default_rng(1)

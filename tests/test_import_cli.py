@@ -119,3 +119,23 @@ def test_import_never_overwrites_what_it_reads(tmp_path, capsys):
         assert "would replace what it reads" in capsys.readouterr().err
         assert target.read_bytes() == before
     assert main(["import", str(toml), "-o", str(tmp_path / "x.png")]) == 2
+
+
+def test_run_takes_the_instrument_file_for_a_live_link(tmp_path, capsys):
+    """`rtsar run --zmq-in … --instrument FILE`: the instrument's processor, its shots' length;
+    a link that stays silent ends the run as any live run (no shot is needed to check the
+    configuration), and an instrument file without a centroid is refused by name."""
+    from conftest import free_port
+
+    toml = _instrument(tmp_path, _noise(), doppler="doppler_centroid_hz = 0.0")
+    endpoint = f"tcp://127.0.0.1:{free_port()}"
+    args = ["run", "--zmq-in", endpoint, "--instrument", str(toml), "--duration", "0.5"]
+    assert main(args + ["--endpoint", f"tcp://127.0.0.1:{free_port()}"]) == 0
+    # the aperture λR/(D d) at mid-window: c/10 GHz, R = c (1e-4 s + 32/10 MHz)/2, 20 m, 0.1 m
+    c = 299_792_458.0
+    rows = round(c / 10e9 * 0.5 * c * (1e-4 + 32 / 10e6) / (20.0 * 0.1))
+    assert f"CCD {rows} x 64" in capsys.readouterr().out
+    toml = _instrument(tmp_path, _noise(), doppler="")
+    assert main(args) == 2
+    assert "geometry.doppler_centroid_hz: a live run needs it" in capsys.readouterr().err
+    assert main(["run", "--instrument", str(toml)]) == 2  # a simulated run has its scene

@@ -49,19 +49,25 @@ def test_the_scene_is_hard(squinted):
     assert math.degrees(math.asin(g.squint_sin)) == pytest.approx(1.58, abs=0.01)
 
 
+def _measured(squinted):
+    """(true along track, true range, the point's report) for each target, measured about the
+    image's declared Doppler centroid."""
+    cfg, _, _, _, image, az, rg, xs, rs = squinted
+    carrier = azimuth_carrier_cycles(cfg)
+    return [
+        (
+            x,
+            r,
+            analyse_point_target(image, az, rg, x, r, (60.0, 20.0), azimuth_centre_cycles=carrier),
+        )
+        for x, r in zip(xs, rs, strict=True)
+    ]
+
+
 def test_positions_in_zero_doppler_geometry(squinted):
     cfg, g, scene, shots, image, az, rg, xs, rs = squinted
     cell_m = C / (2 * cfg.waveform.sample_rate_hz)
-    for x, r in zip(xs, rs, strict=True):
-        rep = analyse_point_target(
-            image,
-            az,
-            rg,
-            x,
-            r,
-            search_radius_m=(60.0, 20.0),
-            azimuth_centre_cycles=azimuth_carrier_cycles(cfg),
-        )
+    for x, r, rep in _measured(squinted):
         assert abs(rep.azimuth_m - x) / g.along_track_step_m < 0.1
         assert abs(rep.range_m - r) / cell_m < 0.1
 
@@ -72,16 +78,7 @@ def test_widths_against_theory(squinted):
     # range: 0.886 c / 2B times the Taylor window's broadening (Psaltis eq. 6)
     range_irw = 0.886 * C / (2 * cfg.waveform.bandwidth_hz)
     range_irw *= theoretical_irw_factor(window("taylor", 4096))
-    for x, r in zip(xs, rs, strict=True):
-        rep = analyse_point_target(
-            image,
-            az,
-            rg,
-            x,
-            r,
-            search_radius_m=(60.0, 20.0),
-            azimuth_centre_cycles=azimuth_carrier_cycles(cfg),
-        )
+    for _, r, rep in _measured(squinted):
         theory = azimuth_theory(cfg, r, gain=beam).irw_m
         assert rep.azimuth.irw_m == pytest.approx(theory, rel=0.05)
         assert rep.range.irw_m == pytest.approx(range_irw, rel=0.05)

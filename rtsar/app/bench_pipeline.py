@@ -54,7 +54,6 @@ class Cyclic:
         return self.shots[np.arange(start, stop) % n]
 
 
-
 def pipeline_kinds(cfg) -> tuple[tuple[str, ...], str]:
     """(correlators the pipeline runs compare, the one the other runs use).  A plan whose
     range-migration taps read in the azimuth spectrum (``range_migration_domain = "doppler"``:
@@ -71,6 +70,7 @@ def with_correlator(cfg, kind: str):
     so another kind measured alone (plain mask) takes the time-domain setting."""
     domain = cfg.processor.range_migration_domain if kind == "fft" else "time"
     return cfg.with_processor(correlator=kind, range_migration_domain=domain)
+
 
 def bench_shots(cfg: Config, pulses: int = 4096, seed: int = 0) -> np.ndarray:
     """Shots of a few point targets spread over the swath (what the pipeline sees in a scan)."""

@@ -250,3 +250,32 @@ def test_the_flowgraph_without_gnu_radio_says_what_to_install(tmp_path):
     assert done.returncode == 2 and done.stdout == ""
     assert "Traceback" not in done.stderr and done.stderr.count("\n") == 1
     assert "apt-get install gnuradio" in done.stderr
+
+
+def test_one_short_packet_costs_its_own_number_not_the_streams_scale(rng):
+    """Issue 36, item 3: 1,500 good packets, one with packet_len 10, 1,500 more: the period
+    was learnt from the smallest spacing ever seen (10 items), so every later packet took
+    ~S/10 numbers (26,983 zero-filled pulses, the image 10x too long).  Now the short packet
+    is counted and costs one number; the good ones stay consecutive."""
+    good = 300
+    shots = _shots(rng, 2 * good)
+    parts, tags, at = [], [], 0
+    for p in range(2 * good):
+        if p == good:  # the short packet, inserted between the two halves
+            tags.append((at, pmt_symbol("packet_len"), pmt_long(10)))
+            parts.append(np.zeros(10, np.complex64))
+            at += 10
+        tags.append((at, pmt_symbol("packet_len"), pmt_long(S)))
+        parts.append(shots[p])
+        at += S
+    flat = np.concatenate(parts)
+    src = ZmqSource("tcp://127.0.0.1:1", S, item_rate_hz=1000.0, shot_rate_hz=50.0)
+    out = []
+    for a in range(0, len(flat), 64):
+        mine = [t for t in tags if a <= t[0] < a + 64]
+        out += src.decode(tag_header(a, mine) + flat[a : a + 64].tobytes())
+    seqs = [s for s, _, _ in out]
+    assert len(out) == 2 * good and src.counters["wrong_length"] == 1
+    assert seqs == [*range(good), *range(good + 1, 2 * good + 1)]  # one number lost, no more
+    for k, (_, _, samples) in enumerate(out):
+        np.testing.assert_array_equal(samples, shots[k])

@@ -8,8 +8,8 @@ Two layouts, told apart by the message length:
 
 With pass tags, each message begins with GNU Radio's tag header (rtsar.sources.gr_tags): its
 item offset numbers the shots (vector items: the item's offset; a flat stream: the packets'
-starts, one shot per packet period, the smallest spacing of starts seen, so guard samples
-between packets are no gap: seq = the previous packet's + round(Δoffset / period), the first
+starts, one shot per packet period, the smallest spacing of starts seen that holds a shot
+(>= S items: a short packet cannot shrink it), so guard samples between packets are no gap: seq = the previous packet's + round(Δoffset / period), the first
 packet's offset // S), so a message lost on the way becomes a gap that ingest zero-fills, as for
 serial frames; ``rx_time`` tags give the instrument clock (later shots: rx_time + items / rate).
 The numbers count from the flowgraph's item 0 (``seq_origin``): a subscriber that joins late
@@ -244,8 +244,12 @@ class ZmqSource(Source):
         else:
             last, last_seq = self._last_start
             step = offset - last
-            if step > 0 and (self._period is None or step < self._period):
+            # The period is the smallest spacing a whole shot fits in (>= S items): a short or
+            # refused packet (packet_len 10) may cost its own number, never the stream's scale.
+            if step >= self.samples and (self._period is None or step < self._period):
                 self._period = step
+            if self._period is None:  # no spacing a shot fits yet: one number per packet
+                self._period = self.samples
             seq = last_seq + max(1, round(step / self._period)) if step > 0 else last_seq + 1
         self._last_start = (offset, seq)
         return seq

@@ -401,3 +401,39 @@ def test_fuzz_of_corrupted_files_gives_no_traceback(good, tmp_path, capsys):
         argv = ["process", str(tmp_path / f"s{k}.sigmf-meta"), "-o", str(out), "--lens", "numpy"]
         refused += _ends_cleanly(argv, capsys)
     assert refused >= 2 * FUZZ_FILES * 2  # most corruptions are refused (each counts 2)
+
+
+def test_a_sigmf_archive_bounds_the_metadata_it_expands(tmp_path, monkeypatch):
+    """Issue 36, item 6: a 10 KiB .sigmf (a sparse tar of four 1000 MiB metadata members)
+    took 5 GB of memory: the cap was per member, not on the total, and a sparse member's
+    declared size is not bytes the file holds.  Now the total is bounded before any read, and
+    a sparse member is refused, each in one line."""
+    import subprocess
+    import tarfile
+
+    from rtsar.sources.formats import sigmf_store
+
+    def archive(name, members):
+        path = tmp_path / name
+        with tarfile.open(path, "w") as tar:
+            for member, text in members.items():
+                src = tmp_path / member
+                src.write_text(text)
+                tar.add(src, arcname=member)
+        return path
+
+    monkeypatch.setattr(sigmf_store, "MAX_META_BYTES", 100)
+    each = '{"global": {}, "pad": "' + "x" * 40 + '"}'  # under the cap alone, over it together
+    path = archive("many.sigmf", {f"r{k}.sigmf-meta": each for k in range(3)})
+    with pytest.raises(ValueError, match="in all, over the 100-byte limit"):
+        sigmf_store.Archive(path)
+    sparse = tmp_path / "big.sigmf-meta"
+    with open(sparse, "wb") as f:  # 64 MiB declared, a few bytes held
+        f.truncate(64 << 20)
+    tar = tmp_path / "sparse.sigmf"
+    subprocess.run(
+        ["tar", "--sparse", "-cf", str(tar), "-C", str(tmp_path), "big.sigmf-meta"], check=True
+    )
+    assert tar.stat().st_size < 1 << 20
+    with pytest.raises(ValueError, match="sparse member"):
+        sigmf_store.Archive(tar)

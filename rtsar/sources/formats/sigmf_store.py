@@ -19,7 +19,7 @@ ARCHIVE = ".sigmf"
 COMPRESSED_ARCHIVES = (".sigmf.gz", ".sigmf.xz", ".sigmf.zip")
 META, DATA = ".sigmf-meta", ".sigmf-data"
 SUFFIXES = (META, DATA, *COMPRESSED_ARCHIVES, ARCHIVE)  # the names a SigMF recording goes by
-MAX_META_BYTES = 1 << 30  # a metadata file larger than this is no SigMF rtsar reads
+MAX_META_BYTES = 1 << 30  # metadata (a file, or an archive's members in all) rtsar reads
 
 
 class SideBySide:
@@ -65,12 +65,18 @@ class Archive:
         try:
             with tarfile.open(path, "r:") as tar:  # "r:": uncompressed only
                 members = [m for m in tar.getmembers() if m.isfile()]
-                self._meta = {}
-                for m in members:
-                    if m.name.endswith(META):
-                        if m.size > MAX_META_BYTES:
-                            raise ValueError(f"{m.name}: {m.size} bytes, too large for metadata")
-                        self._meta[_base(m.name, META)] = tar.extractfile(m).read()
+                sparse = [m.name for m in members if m.issparse()]
+                if sparse:  # its declared sizes are not bytes the file holds
+                    raise ValueError(f"{sparse[0]}: a sparse member: not a SigMF archive")
+                metas = [m for m in members if m.name.endswith(META)]
+                # every metadata member is read whole: their total is bounded before any read
+                total = sum(m.size for m in metas)
+                if total > MAX_META_BYTES:
+                    raise ValueError(
+                        f"{len(metas)} metadata member(s) of {total} bytes in all, over the "
+                        f"{MAX_META_BYTES}-byte limit for SigMF metadata"
+                    )
+                self._meta = {_base(m.name, META): tar.extractfile(m).read() for m in metas}
         except (tarfile.TarError, OSError, EOFError) as exc:
             raise ValueError(f"{path}: not a SigMF archive (an uncompressed tar): {exc}") from None
         # Data members: where their bytes lie in the archive file.

@@ -9,9 +9,10 @@ Two layouts, told apart by the message length:
 With pass tags, each message begins with GNU Radio's tag header (rtsar.sources.gr_tags): its
 item offset numbers the shots (vector items: the item's offset; a flat stream: the packets'
 starts, one shot per packet period, the smallest spacing of starts seen that holds a shot
-(>= S items: a short packet cannot shrink it), so guard samples between packets are no gap: seq = the previous packet's + round(Δoffset / period), the first
-packet's offset // S), so a message lost on the way becomes a gap that ingest zero-fills, as for
-serial frames; ``rx_time`` tags give the instrument clock (later shots: rx_time + items / rate).
+(>= S items: a short packet cannot shrink it), so guard samples between packets are no gap:
+seq = the previous packet's + round(Δoffset / period), the first packet's offset // S), so a
+message lost on the way becomes a gap that ingest zero-fills, as for serial frames; ``rx_time``
+tags give the instrument clock (later shots: rx_time + items / rate).
 The numbers count from the flowgraph's item 0 (``seq_origin``): a subscriber that joins late
 keeps every shot's position along track, and ingest counts the shots it missed
 (rtsar.stream.ingest, ``pulses_before_start``).  Without tags the shots are numbered as they

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..ccd.base import beam_look_back_m
 from ..lens.plan import range_axis_m
 from ..params import Config
 from ..scene import Simulator, point_scene
@@ -94,11 +95,8 @@ def _focus_one(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One isolated target, with margin_lines image lines either side of it."""
     n, step = cfg.processor.aperture_pulses, cfg.geometry.along_track_step_m
-    # line j focuses at start + (j + (N-1)/2) d - u_mid (u_mid: a squinted beam's look back)
-    u_mid = cfg.geometry.beam_centre_offset_m(
-        cfg.processor.range_centre_m or cfg.geometry.slant_range_m
-    )
-    start = x + u_mid - (0.5 * (n - 1) + margin_lines) * step
+    # line j focuses at start + (j + (N-1)/2) d - u_mid (rtsar.ccd.base.line_azimuth_m)
+    start = x + beam_look_back_m(cfg) - (0.5 * (n - 1) + margin_lines) * step
     scene = point_scene(
         cfg,
         [x],

@@ -54,13 +54,17 @@ def aperture_offsets_m(cfg: Config) -> np.ndarray:
     beam and the line still lands on the scatterer's zero-Doppler position (line_azimuth_m).
     """
     n = cfg.processor.aperture_pulses
-    g = cfg.geometry
-    u_mid = g.beam_centre_offset_m(_range_centre_m(cfg))
-    return (np.arange(n) - 0.5 * (n - 1)) * g.along_track_step_m + u_mid
+    return (np.arange(n) - 0.5 * (n - 1)) * cfg.geometry.along_track_step_m + beam_look_back_m(cfg)
 
 
 def _range_centre_m(cfg: Config) -> float:
     return cfg.processor.range_centre_m or cfg.geometry.slant_range_m
+
+
+def beam_look_back_m(cfg: Config) -> float:
+    """u_mid: the squinted beam's centre offset R0 tan θ at the processor's range centre, by
+    which a line's zero-Doppler position trails its aperture centre (0 broadside)."""
+    return cfg.geometry.beam_centre_offset_m(_range_centre_m(cfg))
 
 
 def squint_aperture_pulses(cfg: Config) -> int:
@@ -197,5 +201,5 @@ def line_azimuth_m(
     """
     n = cfg.processor.aperture_pulses
     j = first_line + np.arange(count)
-    u_mid = cfg.geometry.beam_centre_offset_m(_range_centre_m(cfg))
-    return start_along_track_m + (j + 0.5 * (n - 1)) * cfg.geometry.along_track_step_m - u_mid
+    step_m = cfg.geometry.along_track_step_m
+    return start_along_track_m + (j + 0.5 * (n - 1)) * step_m - beam_look_back_m(cfg)

@@ -27,7 +27,7 @@ import os
 import numpy as np
 
 from . import cl_devices
-from .cache import read_json, write_json
+from .cache import rates_or_none, read_json, write_json
 from .cl_probe import best_rates
 from .numpy_lens import NumpyLens
 from .opencl import AOLens
@@ -70,13 +70,10 @@ def plan_rates(cl_lens, np_lens, sizes, key: str | None = None) -> dict:
     cache = read_json(_CACHE) if key else {}
     hit = cache.get(key) if key else None
     if isinstance(hit, dict) and set(hit) == {"opencl", "numpy"}:
-        try:
-            rates = {k: {int(b): float(v) for b, v in d.items()} for k, d in hit.items()}
-        except (TypeError, ValueError, AttributeError):
-            pass
-        else:
-            _memo[key] = rates
-            return rates
+        found = {k: rates_or_none(d, sizes) for k, d in hit.items()}
+        if all(v is not None for v in found.values()):
+            _memo[key] = found
+            return found
     rates = best_rates({"opencl": cl_lens, "numpy": np_lens}, sizes, _SECONDS, _ROUNDS)
     if key:
         cache = read_json(_CACHE)

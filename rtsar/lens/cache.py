@@ -8,10 +8,11 @@ cannot be read (missing, damaged, another version's) counts as empty and is meas
 from __future__ import annotations
 
 import json
+import math
 import os
 from pathlib import Path
 
-__all__ = ["cache_dir", "read_json", "write_json"]
+__all__ = ["cache_dir", "rates_or_none", "read_json", "write_json"]
 
 
 def cache_dir() -> Path:
@@ -45,3 +46,26 @@ def write_json(name: str, data: dict) -> Path | None:
         tmp.unlink(missing_ok=True)
         return None
     return path
+
+
+def rates_or_none(found, sizes=None) -> dict[int, float] | None:
+    """``{batch: pulses/s}`` from a cached ``found``, or None where it cannot be trusted.
+
+    A cache is advice: an entry that is not a mapping of batch sizes to finite, positive
+    rates (a damaged file, a hand edit, NaN from a failed timing), or that lacks one of the
+    batch ``sizes`` asked for, is measured again rather than believed.
+    """
+    if not isinstance(found, dict) or not found:
+        return None
+    rates = {}
+    for batch, rate in found.items():
+        try:
+            b, r = int(batch), float(rate)
+        except (TypeError, ValueError, OverflowError):
+            return None
+        if b <= 0 or not math.isfinite(r) or r <= 0.0:
+            return None
+        rates[b] = r
+    if sizes is not None and not set(int(b) for b in sizes) <= set(rates):
+        return None
+    return rates

@@ -34,7 +34,7 @@ from dataclasses import asdict
 import pyopencl as cl
 
 from . import cl_probe, cl_vendors
-from .cache import read_json, write_json
+from .cache import rates_or_none, read_json, write_json
 from .cl_probe import (
     NO_PLATFORM,
     SURVEY_BATCH,
@@ -208,6 +208,8 @@ def survey(say=None) -> list[DeviceReport]:
                 found = [DeviceReport(**d) for d in cached["devices"]]
             except (KeyError, TypeError):
                 found = None
+            if found and any(r.rates and rates_or_none(r.rates) is None for r in found):
+                found = None  # a damaged rate (NaN, negative, not a number) is measured again
             if found and [identity(r) for r in found] == [identity(r) for r in reports]:
                 return _keep(found, key)
         return measure(say=say)[0]

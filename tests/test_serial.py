@@ -81,10 +81,9 @@ def _free_port() -> int:
     return _conftest_free_port()
 
 
-@pytest.mark.parametrize(
-    "url", [f"socket://127.0.0.1:{_free_port()}", "/no/such/tty", "nosuchscheme://x"]
-)
+@pytest.mark.parametrize("url", ["socket://127.0.0.1:{free}", "/no/such/tty", "nosuchscheme://x"])
 def test_bad_url_is_a_clear_error(url):
+    url = url.format(free=_free_port())  # the port is chosen at run time, not in the test's id
     with pytest.raises(ValueError, match="cannot open instrument port") as info:
         SerialSource(url, 8, connect_timeout_s=0)
     assert url in str(info.value)

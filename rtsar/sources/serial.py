@@ -99,6 +99,12 @@ class SerialSource(Source):
             raise ValueError(f"idle_timeout_s must be > 0 or None, got {idle_timeout_s!r}")
         if not poll_s > 0:
             raise ValueError(f"poll_s must be > 0, got {poll_s!r}")
+        if url.startswith("socket://"):
+            host, _, port = url[len("socket://") :].partition("?")[0].rpartition(":")
+            if not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+                raise ValueError(
+                    f"{url!r}: a socket:// instrument is socket://HOST:PORT, PORT 1-65535"
+                )
         if connect_timeout_s is None:
             connect_timeout_s = _CONNECT_WAIT_S if url.startswith("socket://") else 0.0
         if not connect_timeout_s >= 0:

@@ -6,6 +6,7 @@ Also the small translations from options to library objects that several command
 
 from __future__ import annotations
 
+import argparse
 import sys
 import warnings
 from dataclasses import replace
@@ -15,7 +16,7 @@ from ...focus.spec import correct_option
 from ...lens import LENS_BACKENDS, range_axis_m
 from ...params import PRECISIONS, Processor
 from ...physical import CARRIERS, paper_ccd
-from ...sinks.endpoint import DEFAULT_ENDPOINT, DELIVERIES, STALL_TIMEOUT_S
+from ...sinks.endpoint import DEFAULT_ENDPOINT, DELIVERIES, STALL_TIMEOUT_S, endpoint_error
 from ...stream.pipeline import PipelineSettings
 from ...stream.settings import STAGE_LAYOUTS
 
@@ -29,6 +30,23 @@ def die(msg: str) -> int:
 
 
 # ---- option groups ---------------------------------------------------------------------------
+def zmq_endpoint(text: str) -> str:
+    """An argparse type: a ZeroMQ endpoint, checked before start (one line, exit 2)."""
+    why = endpoint_error(text)
+    if why:
+        raise argparse.ArgumentTypeError(f"{text!r}: {why}")
+    return text
+
+
+def swath_address(text: str) -> str:
+    """An argparse type for --swath-bind: a HOST, or tcp://HOST:PORT."""
+    if "://" in text and (not text.startswith("tcp://") or endpoint_error(text)):
+        raise argparse.ArgumentTypeError(f"{text!r}: give a HOST or tcp://HOST:PORT (port 0-65535)")
+    if not text.strip():
+        raise argparse.ArgumentTypeError("give a HOST or tcp://HOST:PORT")
+    return text
+
+
 def add_lens_options(g) -> None:
     """--lens and --device (process, run, replay)."""
     g.add_argument(
@@ -208,6 +226,7 @@ def add_pipeline_options(s, delivery: str) -> None:
     g.add_argument(
         "--swath-bind",
         default="127.0.0.1",
+        type=swath_address,
         metavar="HOST|tcp://HOST:PORT",
         help="where the swath workers connect; with a PORT the workers are not started here: "
         "run `rtsar swath-worker --connect tcp://HOST:PORT --index k` for k = 0 … K-1 "
@@ -219,6 +238,7 @@ def add_pipeline_options(s, delivery: str) -> None:
     g.add_argument(
         "--endpoint",
         default=DEFAULT_ENDPOINT,
+        type=zmq_endpoint,
         help=f"where to publish strips (default {DEFAULT_ENDPOINT}, loopback)",
     )
     g.add_argument(
@@ -266,6 +286,7 @@ def add_subscriber_options(s) -> None:
         "endpoint",
         nargs="?",
         default=DEFAULT_ENDPOINT,
+        type=zmq_endpoint,
         help=f"publisher (default {DEFAULT_ENDPOINT})",
     )
     s.add_argument(

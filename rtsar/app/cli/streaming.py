@@ -49,6 +49,7 @@ from .options import (
     processor_changes,
     strip_lines,
     warn_outside_swath,
+    zmq_endpoint,
 )
 from .run_options import add_run_options
 
@@ -347,6 +348,7 @@ def add_parsers(sub) -> None:
     src.add_argument(
         "--zmq-in",
         metavar="ENDPOINT",
+        type=zmq_endpoint,
         help="read shots from a GNU Radio ZMQ PUB Sink at ENDPOINT (e.g. tcp://127.0.0.1:5600): "
         "complex64 vector items of one shot each, or a flat stream cut by packet_len tags "
         "(pass tags on); processed with --preset or --scene like --serial "

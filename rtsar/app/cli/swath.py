@@ -12,7 +12,7 @@ from ...stream.swath import (
     worker_endpoints,
 )
 from ...stream.swath_worker import serve
-from .options import die
+from .options import die, zmq_endpoint
 
 
 def cmd_swath_worker(args) -> int:
@@ -54,6 +54,7 @@ def add_parsers(sub) -> None:
     s.add_argument(
         "--connect",
         metavar="tcp://HOST:PORT",
+        type=zmq_endpoint,
         help="the coordinator's --swath-bind endpoint (default: none; or --shots/--results)",
     )
     s.add_argument("--index", type=int, default=0, help="this worker's slice, 0 … K-1 (default 0)")
@@ -67,8 +68,12 @@ def add_parsers(sub) -> None:
         f"been down this long (default {COORDINATOR_TIMEOUT_S:g}; 0: wait forever; else at "
         f"least {MIN_COORDINATOR_TIMEOUT_S:g})",
     )
-    s.add_argument("--shots", help="the pulse endpoint itself (as the coordinator spawns them)")
-    s.add_argument("--results", help="the results endpoint itself")
+    s.add_argument(
+        "--shots",
+        type=zmq_endpoint,
+        help="the pulse endpoint itself (as the coordinator spawns them)",
+    )
+    s.add_argument("--results", type=zmq_endpoint, help="the results endpoint itself")
     s.add_argument(
         "--parent-pid",
         type=int,

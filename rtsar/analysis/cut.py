@@ -162,12 +162,14 @@ def lobe_metrics(
     peak_power: float,
     islr_extent: float,
     refine_sidelobe=None,
+    pslr_extent: float | None = None,
 ) -> tuple[float, float, float]:
     """IRW (in samples of ``p``), PSLR and ISLR (dB) of a finely sampled power response ``p``.
 
     ``i_peak`` is the grid maximum, ``t_peak`` the (fractional) peak position and ``peak_power``
     the peak power; ``refine_sidelobe(i)``, if given, returns the refined power of the local
-    maximum at grid sample ``i``.
+    maximum at grid sample ``i``; ``pslr_extent``, if given, confines the PSLR's search to
+    within that many IRWs of the peak (a neighbouring target further out is not a sidelobe).
     """
     last = p.size - 1
     irw_samples, null_left, null_right = mainlobe(p, i_peak, peak_power)
@@ -180,9 +182,13 @@ def lobe_metrics(
     if null_right is not None:
         sidelobe[null_right + 1 :] = True
 
+    distance = np.abs(np.arange(p.size) - t_peak)
+    searched = sidelobe
+    if pslr_extent is not None and math.isfinite(irw_samples):
+        searched = sidelobe & (distance <= pslr_extent * irw_samples)
     # PSLR: the highest sidelobe (refined like the peak when it is an interior local maximum).
-    if sidelobe.any():
-        candidates = np.flatnonzero(sidelobe)
+    if searched.any():
+        candidates = np.flatnonzero(searched)
         i_side = int(candidates[np.argmax(p[candidates])])
         side_power = p[i_side]
         interior = 0 < i_side < last and sidelobe[i_side - 1] and sidelobe[i_side + 1]
@@ -195,7 +201,6 @@ def lobe_metrics(
 
     # ISLR: sidelobe energy within +-islr_extent IRWs of the peak over the mainlobe energy.
     main_energy = float(np.sum(p[lo : hi + 1]))
-    distance = np.abs(np.arange(p.size) - t_peak)
     side_energy = float(np.sum(p[sidelobe & (distance <= islr_extent * irw_samples)]))
     islr_db = 10.0 * math.log10(side_energy / main_energy) if side_energy > 0 else -math.inf
     return irw_samples, pslr_db, islr_db
@@ -209,6 +214,7 @@ def analyse_cut(
     *,
     islr_extent: float = 10.0,
     peak_near: float | None = None,
+    pslr_extent: float | None = None,
 ) -> CutMetrics:
     """Measure peak, IRW, PSLR and ISLR of a 1-D complex impulse response.
 
@@ -229,6 +235,9 @@ def analyse_cut(
         The response's peak is the local maximum within one sample of this (fractional)
         sample index, not the cut's largest value (a brighter neighbour on the cut is then a
         sidelobe: PSLR > 0 dB).  Default: the largest value.
+    pslr_extent : float or None, optional
+        Half-width, in IRWs from the peak, of the region where the PSLR's sidelobe is sought
+        (default: the whole cut).
 
     Returns
     -------
@@ -281,7 +290,7 @@ def analyse_cut(
         return abs(v_side) ** 2
 
     irw_up, pslr_db, islr_db = lobe_metrics(
-        p, i_peak, t_peak * factor, peak_power, islr_extent, refine_sidelobe
+        p, i_peak, t_peak * factor, peak_power, islr_extent, refine_sidelobe, pslr_extent
     )
     irw_samples = irw_up / factor
 

@@ -84,6 +84,7 @@ def analyse_point_target(
     *,
     islr_extent: float = 10.0,
     azimuth_centre_cycles: float = 0.0,
+    pslr_extent: float | None = None,
 ) -> PointTargetReport:
     """Locate and measure a point target in a complex image ``[azimuth, range]``.
 
@@ -118,6 +119,8 @@ def analyse_point_target(
         Doppler centroid, f_dc / PRF (mod 1: azimuth_carrier_cycles).  The chip
         is brought to baseband before any band-limited interpolation (about zero frequency it
         would split the spectrum) and the peak's phase restored.  0: broadside.
+    pslr_extent : float or None, optional
+        Half-width in IRWs of the PSLR's search (see :func:`analyse_cut`; default: the chip).
 
     Returns
     -------
@@ -202,6 +205,7 @@ def analyse_point_target(
         factor,
         islr_extent=islr_extent,
         peak_near=a_star,
+        pslr_extent=pslr_extent,
     )
     rg = analyse_cut(
         rg_cut,
@@ -210,6 +214,7 @@ def analyse_point_target(
         factor,
         islr_extent=islr_extent,
         peak_near=r_star,
+        pslr_extent=pslr_extent,
     )
     az = replace(az, peak_index=az.peak_index + a0)
     rg = replace(rg, peak_index=rg.peak_index + r0)

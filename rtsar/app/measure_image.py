@@ -9,12 +9,12 @@ Method (also in ``rtsar measure --help``):
   point, within 10 dB of it), brightest first.  With ``--at X,R [X,R ...]`` the brightest
   pixel within 2 resolution cells of (along track X, slant range R).
 * **Peak, cuts, IRW, PSLR** (rtsar.analysis.point_target and .cut): a chip of ±12 theoretical
-  IRWs is upsampled band-limited by 16 (FFT zero-padding) around the peak, which is then
-  refined exactly; the azimuth and range cuts through it give the -3 dB widths (IRW, linear
-  interpolation of the half-power crossings) and the PSLR (highest sidelobe outside the
-  mainlobe, anywhere in the cut; none when it is under NO_SIDELOBE_DB, rounding).  The
-  mainlobe runs between the first nulls: the first minima walking outward from the half-power
-  crossings.
+  IRWs (at least ±32 pixels, for the interpolation) is upsampled band-limited by 16 (FFT
+  zero-padding) around the peak, which is then refined exactly; the azimuth and range cuts
+  through it give the -3 dB widths (IRW, linear interpolation of the half-power crossings) and
+  the PSLR (highest sidelobe outside the mainlobe within ±12 IRWs of the peak, even where the
+  chip is wider; none when it is under NO_SIDELOBE_DB, rounding).  The mainlobe runs between
+  the first nulls: the first minima walking outward from the half-power crossings.
 * **ISLR** (rtsar.analysis.islr2d): one 2-D figure: sidelobe energy within ±10 IRWs on both
   axes, outside the null-to-null mainlobe rectangle, over the mainlobe's energy.
 * **Theory** of the processor that made the image (its configuration, in the file), measured
@@ -273,6 +273,7 @@ def measure_image(
             upsample_factor=UPSAMPLE,
             islr_extent=ISLR_EXTENT_IRW,
             azimuth_centre_cycles=carrier,
+            pslr_extent=CHIP_IRW,
         )
         widths = (rep.azimuth.irw_m, rep.range.irw_m)
         islr = (

@@ -32,6 +32,8 @@ def die(msg: str) -> int:
 # ---- option groups ---------------------------------------------------------------------------
 def zmq_endpoint(text: str) -> str:
     """An argparse type: a ZeroMQ endpoint, checked before start (one line, exit 2)."""
+    if text == argparse.SUPPRESS:  # an optional positional left out (add_subscriber_options)
+        return text
     why = endpoint_error(text)
     if why:
         raise argparse.ArgumentTypeError(f"{text!r}: {why}")
@@ -285,9 +287,16 @@ def add_subscriber_options(s) -> None:
     s.add_argument(
         "endpoint",
         nargs="?",
+        default=argparse.SUPPRESS,  # absent: --endpoint's value (or its default) stands
+        type=zmq_endpoint,
+        help=f"publisher (default {DEFAULT_ENDPOINT}); or --endpoint, as run and replay take it",
+    )
+    s.add_argument(
+        "--endpoint",
+        dest="endpoint",
         default=DEFAULT_ENDPOINT,
         type=zmq_endpoint,
-        help=f"publisher (default {DEFAULT_ENDPOINT})",
+        help="the publisher, as an option (the same as the positional ENDPOINT)",
     )
     s.add_argument(
         "--curve-server-key",

@@ -15,7 +15,7 @@ import zmq.auth
 from ... import __version__
 from ...ccd import first_line_pulses
 from ...lens.cache import cache_dir  # $RTSAR_CACHE_DIR, else ~/.cache/rtsar
-from ...presets import preset
+from ...presets import PRESETS, preset
 from ...scene import DEMO_SCENE, load_scene
 from ...scene.files import BUILT_IN, built_in_scenes
 from ...sinks.io import check_writable
@@ -360,8 +360,10 @@ def add_parsers(sub) -> None:
     )
     src.add_argument(
         "--preset",
-        help="with --serial or --zmq-in: the processing configuration preset (default: the "
-        "--scene's configuration)",
+        choices=sorted(PRESETS),
+        metavar="NAME",
+        help=f"with --serial or --zmq-in: the processing configuration, one of "
+        f"{', '.join(sorted(PRESETS))} (default: the --scene's configuration)",
     )
     src.add_argument(
         "--instrument",

@@ -1,0 +1,35 @@
+"""One command line (issue 37, item 6): the same option means the same thing in every command,
+and a wrong value is answered about itself."""
+
+import pytest
+
+from rtsar.app.cli import build_parser, main
+from rtsar.presets import PRESETS
+from rtsar.sinks.endpoint import DEFAULT_ENDPOINT
+
+
+@pytest.mark.parametrize("command", ["view", "subscribe"])
+def test_subscribers_take_endpoint_as_an_option_like_run_and_replay(command):
+    extra = ["-o", "x.h5"] if command == "subscribe" else []
+    parse = build_parser(command).parse_args
+    assert parse([command, *extra]).endpoint == DEFAULT_ENDPOINT
+    assert parse([command, "tcp://127.0.0.1:6001", *extra]).endpoint == "tcp://127.0.0.1:6001"
+    option = parse([command, "--endpoint", "tcp://127.0.0.1:6002", *extra])
+    assert option.endpoint == "tcp://127.0.0.1:6002"
+
+
+@pytest.mark.parametrize("command", ["run", "replay"])
+def test_publishers_take_endpoint_as_an_option(command):
+    argv = [command, "--endpoint", "tcp://127.0.0.1:6003"] + (
+        ["r.h5"] if command == "replay" else []
+    )
+    assert build_parser(command).parse_args(argv).endpoint == "tcp://127.0.0.1:6003"
+
+
+def test_an_unknown_preset_is_answered_about_the_preset(capsys):
+    with pytest.raises(SystemExit) as stop:
+        main(["run", "--preset", "nope"])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.splitlines()[-1]  # the line after the usage
+    assert "--preset" in err and "nope" in err and "--serial" not in err
+    assert all(name in err for name in PRESETS)

@@ -132,11 +132,23 @@ def test_found_points_are_the_isolated_peaks_not_the_speckle(tmp_path, rng):
     write_image(path, img, az, rg, cfg)
     out = tmp_path / "m.json"
     assert main(["measure", str(path), "--json", str(out)]) == 0
-    found = json.loads(out.read_text())["points"]
+    report = json.loads(out.read_text())
+    found = report["points"]
     assert len(found) == 2
     for p, (x0, r0, _) in zip(found, pts, strict=True):
         assert abs(p["along_track_m"] - x0) < 0.01 * rho_a
         assert abs(p["range_m"] - r0) < 0.01 * rho_r
+    # Issue 37: points in clutter 25 dB under them, alone, get no clutter note: their ISLR
+    # is their response's ...
+    assert not any("clutter" in n for notes in report["notes"] for n in notes)
+    # ... and a point 5 dB over the speckle is told that its ISLR measures the scene.
+    weak = sinc_image([(az[200], rg[200], 10 ** (-20 / 20))], rho_a, rho_r, az, rg)
+    write_image(path, img + weak, az, rg, cfg)
+    assert main(["measure", str(path), "--at", f"{az[200]},{rg[200]}", "--json", str(out)]) == 0
+    report = json.loads(out.read_text())
+    islr, theory = report["points"][0]["islr_db"], report["theory"][0]["islr_db"]
+    assert islr > theory + 10.0
+    assert any("clutter, speckle, noise" in n for n in report["notes"][0])
 
 
 def test_height_rmse_and_valid_fraction_against_the_scene_surface(tmp_path):
@@ -226,6 +238,9 @@ def test_a_spotlight_image_is_measured_against_its_inscribed_rectangle(tmp_path,
     assert main(["spotlight", str(rec), "-o", str(img), "--extent-mm", "1.2", "1.2"]) == 0
     capsys.readouterr()
     assert main(["measure", str(img), "--json", str(tmp_path / "m.json")]) == 0
+    header = capsys.readouterr().out.splitlines()[1]  # the table's column headings
+    assert "cross range [m]" in header and "down range [m]" in header
+    assert "along track" not in header and "azimuth" not in header
     report = json.loads((tmp_path / "m.json").read_text())
     assert "cross-range x" in report["method"]["axes"] and len(report["points"]) == 2
     for point, theory in zip(report["points"], report["theory"], strict=True):

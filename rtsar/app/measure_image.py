@@ -305,8 +305,9 @@ def measure_image(
         "method": {
             "upsample_factor": UPSAMPLE,
             "null_rule": "first minimum walking outward from each half-power crossing",
-            "pslr": "highest sidelobe outside the null-to-null mainlobe, anywhere in the cut "
-            f"(±{CHIP_IRW:g} theoretical IRWs); null when none stands above {NO_SIDELOBE_DB:g} dB",
+            "pslr": "highest sidelobe outside the null-to-null mainlobe within "
+            f"±{CHIP_IRW:g} theoretical IRWs of the peak; null when none stands above "
+            f"{NO_SIDELOBE_DB:g} dB",
             "islr": f"2-D: energy within ±{ISLR_EXTENT_IRW:g} IRWs on both axes outside the "
             "null-to-null mainlobe rectangle, over the mainlobe's",
             "axes": "spotlight image [x, y]: along_track_m and the azimuth figures are cross-range "
@@ -394,11 +395,15 @@ def _db(v: float | None) -> str:
 
 def text_lines(report: dict) -> list[str]:
     """The report as a table: measured (theory) per point, then the truth and the heights."""
+    spotlight = report["method"]["axes"].startswith("spotlight")
+    names = ("cross range", "down range") if spotlight else ("along track", "range")
+    short = ("cross", "down") if spotlight else ("azimuth", "range")
     out = [
         f"{report['image']}: {len(report['points'])} point(s) ({report['method']['found']}); "
         f"measured (theory: azimuth, {report['method']['azimuth_theory']})",
-        f"{'#':>3}  {'along track [m]':>15} {'range [m]':>15} {'peak |x|':>10}  "
-        f"{'IRW azimuth':<22}{'IRW range':<22}{'PSLR az / rg [dB]':<31}ISLR 2-D [dB]",
+        f"{'#':>3}  {names[0] + ' [m]':>15} {names[1] + ' [m]':>15} {'peak |x|':>10}  "
+        f"{'IRW ' + short[0]:<22}{'IRW ' + short[1]:<22}"
+        f"{f'PSLR {short[0][:2]} / {short[1][:2]} [dB]':<31}ISLR 2-D [dB]",
     ]
     for i, (p, t) in enumerate(zip(report["points"], report["theory"], strict=True)):
         irw_a = f"{_length(p['irw_azimuth_m'])} ({_length(t['irw_azimuth_m'])})"

@@ -7,7 +7,10 @@ JSON, parallel to ``points``; printed under the table):
 * a cut without a sidelobe above NO_SIDELOBE_DB (its PSLR is null), and a theory without one;
 * another found or measured point whose mainlobe crosses a cut within the chip, or lies in
   the ±10 IRW ISLR region: the PSLR / ISLR then measure that point;
-* a cut or the ISLR region that the image edge cuts short.
+* a cut or the ISLR region that the image edge cuts short;
+* an ISLR more than CLUTTER_DB above its theory with no neighbour to blame: the energy about
+  the point (clutter, speckle, noise) dominates, and the ISLR measures the scene, not the
+  response.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ NO_SIDELOBE_DB = -100.0  # a "sidelobe" lower than this is rounding: complex64 i
 # ~7 digits, and a noise-free point's cuts read -150 to -180 dB beyond a beam-limited response
 SAME_POINT_IRW = 1.5  # a neighbour closer than this (both axes) is the point itself
 AXES = ("azimuth", "range")
+CLUTTER_DB = 10.0  # measured ISLR this far above its theory: the surroundings, not the response
 
 
 def point_notes(points, theories, reports, neighbours_px, shape, axes, chip_irw, islr_extent):
@@ -48,8 +52,17 @@ def point_notes(points, theories, reports, neighbours_px, shape, axes, chip_irw,
             )
         ]
         region = [islr_extent * w for w in measured]
-        out += _neighbours(i, peaks, neighbours_px, irw_px, chip, region, axes)
+        searched = [min(c, chip_irw * w) for c, w in zip(chip, irw_px, strict=True)]
+        near = _neighbours(i, peaks, neighbours_px, irw_px, searched, region, axes)
+        out += near
         out += _edges(peaks[i], chip, region, irw_px, shape, chip_irw, islr_extent)
+        above = _excess_db(p["islr_db"], t["islr_db"])
+        if above is not None and above > CLUTTER_DB and not near:
+            out.append(
+                f"ISLR {above:.1f} dB above its theory with no other point near: the energy "
+                "about the point (clutter, speckle, noise) dominates it, so it measures the "
+                "scene, not the response"
+            )
         notes.append(out)
     return notes
 
@@ -102,6 +115,14 @@ def _edges(peak, chip, region, irw_px, shape, chip_irw, islr_extent):
                 f"{AXES[a]}: the ISLR counts less sidelobe energy than there is"
             )
     return out
+
+
+def _excess_db(measured, theory) -> float | None:
+    if measured is None or theory is None:
+        return None
+    if not (math.isfinite(measured) and math.isfinite(theory)):
+        return None
+    return float(measured - theory)
 
 
 def _at(axis, index: float) -> float:

@@ -58,6 +58,7 @@ def _paced(config: Config, path: Path, seconds: float, blocks) -> dict:
             time.sleep(wait)
         rec.pulses(_block(first, blocks[(first // BLOCK) % len(blocks)], prf), None)
         first += BLOCK
+    streamed = time.perf_counter() - t0
     rec.finish({})
     elapsed = time.perf_counter() - t0
     shot_bytes = blocks[0][0].nbytes
@@ -66,6 +67,8 @@ def _paced(config: Config, path: Path, seconds: float, blocks) -> dict:
         "pulses": first,
         "record_written": rec.written,
         "record_dropped": rec.dropped,
+        "stream_seconds": streamed,
+        "close_seconds": elapsed - streamed,
         "written_mb_per_s": rec.written * shot_bytes / 1e6 / elapsed,
         "seconds_with_close": elapsed,
     }
@@ -119,9 +122,11 @@ def recording_lines(name: str, row: dict) -> list[str]:
     p, f = row["paced"], row["as_fast"]
     return [
         f"\nRaw recording (run --record) at {name} on the disk of {row['folder']}",
-        f"paced at the PRF ({p['stream_mb_per_s']:.0f} MB/s): {p['written_mb_per_s']:.0f} MB/s "
-        f"written, {p['record_written']:,} of {p['pulses']:,} shots recorded, "
-        f"record_dropped {p['record_dropped']:,}",
+        f"paced at the PRF ({p['stream_mb_per_s']:.0f} MB/s) for {p['stream_seconds']:.1f} s: "
+        f"{p['record_written']:,} of {p['pulses']:,} shots recorded, record_dropped "
+        f"{p['record_dropped']:,}",
+        f"  the queue drained and the file closed {p['close_seconds']:.2f} s after the last "
+        f"shot: {p['written_mb_per_s']:.0f} MB/s from the first shot to the close",
         f"as fast as it takes them: {f['page_cache_mb_per_s']:.0f} MB/s into the page cache, "
         f"{f['disk_mb_per_s']:.0f} MB/s to the disk (fsync at the end; {f['mb']:.0f} MB)",
     ]

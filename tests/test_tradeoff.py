@@ -93,3 +93,48 @@ def test_gain_fitted_error_ignores_a_constant_phase_only():
     ramp = np.exp(1j * 0.01 * np.arange(20))[:, None]
     err = gain_fitted_error(ref * ramp, ref)
     assert 0.02 < err < 0.07
+
+
+class _Variant:
+    def __init__(self, name, cost_s):
+        self.value, self.cost_s, self.lens_backend = name, cost_s, "numpy"
+
+
+def test_interleaved_passes_keep_the_order_of_a_2x_cost_through_a_load_swing():
+    """Issue 37: `tradeoff --quick` ranked complex128 faster than complex64 — the machine's
+    load changed between one variant's passes and the next's.  A scripted machine here gets
+    3x slower after five timed passes; a pass costs its variant's true cost times the
+    load at that moment.  One variant after the other, the cheap one's passes would all fall
+    in the slow spell (3 against 2); interleaved (each round rotates through every variant)
+    each keeps unloaded passes, the 2x order comes out right and its floor repeats (spread
+    0)."""
+    from rtsar.app.tradeoff.measure import cost_ratio, measure_costs
+    from rtsar.presets import preset
+
+    cfg = preset("tiny")
+    shots = np.zeros((cfg.processor.aperture_pulses, 4), np.complex64)
+    calls = []
+
+    def engine(config, x, lens, device, start_m, v, scene):
+        calls.append(v.value)
+        load = 3.0 if len(calls) - 2 > 5 else 1.0  # after two warm-ups and five timed passes
+        return None, None, None, [v.cost_s * load], [1]
+
+    cheap, dear = _Variant("complex64", 1.0), _Variant("complex128", 2.0)
+    costs = measure_costs([cfg, cfg], [dear, cheap], shots, 5, engine=engine)
+    assert calls[:2] == ["complex128", "complex64"]  # warm-ups first
+    assert calls[2:6] == ["complex128", "complex64", "complex64", "complex128"]  # rotated
+    t_dear, t_cheap = (c[3] for c in costs)
+    assert t_cheap.pulses_per_s == pytest.approx(2 * t_dear.pulses_per_s)
+    assert t_cheap.passes == 5 and t_cheap.spread == 0.0
+    rows = [{"us_per_pulse": 1e6 / t.pulses_per_s, "spread": t.spread} for t in (t_cheap, t_dear)]
+    assert cost_ratio(rows[1], rows[0]) == "2.00×"
+
+
+def test_a_difference_within_the_passes_noise_is_shown_as_such():
+    from rtsar.app.tradeoff.measure import cost_ratio
+
+    base = {"us_per_pulse": 10.0, "spread": 0.02}
+    assert cost_ratio({"us_per_pulse": 10.4, "spread": 0.02}, base) == "≈"  # within 5 %
+    assert cost_ratio({"us_per_pulse": 13.0, "spread": 0.40}, base) == "≈"  # its floor wanders
+    assert cost_ratio({"us_per_pulse": 13.0, "spread": 0.10}, base) == "1.30×"

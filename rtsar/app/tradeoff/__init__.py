@@ -48,7 +48,7 @@ import numpy as np
 
 from ...lens.base import opencl_unavailable
 from ...sinks.io import write_text_when_complete
-from .measure import measure_cost, measure_quality, reference_image, trace_latency_s
+from .measure import measure_costs, measure_quality, reference_image, trace_latency_s
 from .report import markdown, pareto_front, plot
 from .scenes import TradeoffScene, Variant, default_scenes, make_scene, simulate
 from .spotlight import run_spotlight, spotlight_markdown
@@ -82,36 +82,35 @@ def run_tradeoff(
         simulate(scene)
         log(f"[{scene.key}] simulated {len(scene.shots)} shots in {time.perf_counter() - t0:.1f} s")
         refs: dict = {}
-        for v in scene.variants:
+        configs = [scene.config_of(v) for v in scene.variants]
+        for v, cfg in zip(scene.variants, configs, strict=True):
+            if v.default:  # its peak sets the physical mode's full scale (run_engine)
+                ref = _reference(scene, cfg, refs)
+                scene.image_peak = float(np.abs(ref).max())
+        t0 = time.perf_counter()
+        costs = measure_costs(
+            configs,
+            scene.variants,
+            scene.shots,
+            repeats,
+            device,
+            scene.start_along_track_m,
+            scene,
+        )
+        log(
+            f"[{scene.key}] timed {len(configs)} variants, {repeats} interleaved passes each, "
+            f"in {time.perf_counter() - t0:.1f} s"
+        )
+        for v, cfg, (image, az, rg, timing) in zip(scene.variants, configs, costs, strict=True):
             done += 1
-            cfg = scene.config_of(v)
-            key = (
-                scene.reference_migration_taps,
-                cfg.processor.aperture_pulses,
-                cfg.processor.range_window,
-                cfg.processor.azimuth_window,
-                cfg.processor.range_oversampling,
-                cfg.processor.range_bins,
-            )
-            if key not in refs:
-                refs[key] = reference_image(
-                    cfg, scene.reference_shots, scene.reference_migration_taps
-                )
-                if v.default:
-                    scene.image_peak = float(np.abs(refs[key]).max())
-            t0 = time.perf_counter()
-            image, az, rg, timing = measure_cost(
-                cfg,
-                scene.shots,
-                v.lens_backend,
-                repeats,
-                device,
-                scene.start_along_track_m,
-                v,
-                scene,
-            )
             quality = measure_quality(
-                cfg, image, az, rg, refs[key], scene.targets, gain_fit=bool(scene.effects)
+                cfg,
+                image,
+                az,
+                rg,
+                _reference(scene, cfg, refs),
+                scene.targets,
+                gain_fit=bool(scene.effects),
             )
             rows.append(
                 {
@@ -128,10 +127,25 @@ def run_tradeoff(
             )
             log(
                 f"[{done}/{total}] {scene.key}: {v.knob} = {v.value}: "
-                f"{timing.pulses_per_s:,.0f} pulses/s, latency {timing.latency_p50_ms:.1f} ms, "
-                f"error {quality.image_error:.2e} ({time.perf_counter() - t0:.1f} s)"
+                f"{timing.pulses_per_s:,.0f} pulses/s (passes ±{100 * timing.spread:.0f} %), "
+                f"latency {timing.latency_p50_ms:.1f} ms, error {quality.image_error:.2e}"
             )
     return pareto_front(rows)
+
+
+def _reference(scene: TradeoffScene, cfg, refs: dict) -> np.ndarray:
+    """The float64 reference image of a variant's geometry, made once per geometry."""
+    key = (
+        scene.reference_migration_taps,
+        cfg.processor.aperture_pulses,
+        cfg.processor.range_window,
+        cfg.processor.azimuth_window,
+        cfg.processor.range_oversampling,
+        cfg.processor.range_bins,
+    )
+    if key not in refs:
+        refs[key] = reference_image(cfg, scene.reference_shots, scene.reference_migration_taps)
+    return refs[key]
 
 
 # ---- command -----------------------------------------------------------------------------------
@@ -149,7 +163,10 @@ def add_arguments(parser) -> None:
         "seconds, not the figures to quote",
     )
     parser.add_argument(
-        "--repeats", type=int, default=2, help="timed passes per variant, best kept (default 2)"
+        "--repeats",
+        type=int,
+        help="timed passes per variant, interleaved with the scene's other variants, the best "
+        "kept and the spread reported (default 2; with --quick 5: its passes are short)",
     )
     parser.add_argument(
         "--lens-numpy",
@@ -165,6 +182,8 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
+    if args.repeats is None:
+        args.repeats = 5 if args.quick else 2
     if args.repeats < 1:
         raise ValueError("--repeats must be >= 1")
     scenes = default_scenes(args.quick, not getattr(args, "no_corrections", False))

@@ -50,11 +50,13 @@ def reference_image(cfg: Config, shots: np.ndarray, migration_taps: int = 0) -> 
 
 @dataclass
 class Timing:
-    pulses_per_s: float
+    pulses_per_s: float  # the best of the timed passes
     realtime_factor: float  # PRF-paced time of the shots / processing time
     latency_p50_ms: float
     latency_p99_ms: float
     keeps_up: bool
+    passes: int = 1  # timed passes, interleaved with the scene's other variants
+    spread: float = 0.0  # (second fastest − fastest) / fastest pass: this row's timing noise
 
 
 def trace_latency_s(service_s, lines_per_batch, batch: int, pulses: int, n: int, prf_hz: float):
@@ -107,37 +109,76 @@ def run_engine(
     return image, eng.azimuth_m(0, len(image)), eng.range_m, service, counts
 
 
-def measure_cost(
-    cfg: Config,
+def measure_costs(
+    configs: list[Config],
+    variants: list,
     shots: np.ndarray,
-    lens_backend: str,
     repeats: int = 2,
     device=None,
     start_m=0.0,
-    variant=None,
     scene=None,
+    engine=None,
 ):
-    """Warm-up, then the best of ``repeats`` timed passes → (image, az, rg, Timing)."""
-    warm = min(len(shots), 2 * cfg.processor.aperture_pulses + 2 * cfg.processor.micro_batch)
-    run_engine(cfg, shots[:warm], lens_backend, device, start_m, variant, scene)  # JIT, builds
-    best = None
-    for _ in range(repeats):
-        result = run_engine(cfg, shots, lens_backend, device, start_m, variant, scene)
-        if best is None or sum(result[3]) < sum(best[3]):
-            best = result
-    image, az, rg, service, counts = best
-    p = cfg.processor
-    prf = cfg.geometry.prf_hz
-    total = sum(service)
-    lat = trace_latency_s(service, counts, p.micro_batch, len(shots), p.aperture_pulses, prf)
-    timing = Timing(
-        len(shots) / total,
-        len(shots) / prf / total,
-        1e3 * float(np.median(lat)),
-        1e3 * float(np.percentile(lat, 99)),
-        total < len(shots) / prf,
-    )
-    return image, az, rg, timing
+    """The cost of each variant of a scene → [(image, az, rg, Timing)], in ``variants`` order.
+
+    Every variant is warmed up first (JIT, kernel builds); then ``repeats`` rounds each time
+    every variant once, in an order rotated by one each round, so a change in the machine's
+    load (these machines' speed swings 2x from hour to hour) falls on every variant alike
+    rather than on whichever ran during it.  A variant's cost is its fastest pass; its
+    ``spread`` (second fastest − fastest, over the fastest) is how well that floor repeats,
+    the noise its comparisons must beat (:func:`cost_ratio`); passes slowed by a busy moment
+    lie above the floor and widen it only when they are all but one.  ``engine``: the pass
+    to time (default :func:`run_engine`).
+    """
+    engine = engine or run_engine
+    for cfg, v in zip(configs, variants, strict=True):
+        p = cfg.processor
+        warm = min(len(shots), 2 * p.aperture_pulses + 2 * p.micro_batch)
+        engine(cfg, shots[:warm], v.lens_backend, device, start_m, v, scene)  # JIT, builds
+    best: list = [None] * len(variants)
+    totals: list[list[float]] = [[] for _ in variants]
+    for r in range(repeats):
+        order = list(range(len(variants)))
+        order = order[r % len(order) :] + order[: r % len(order)]
+        for i in order:
+            v = variants[i]
+            result = engine(configs[i], shots, v.lens_backend, device, start_m, v, scene)
+            totals[i].append(sum(result[3]))
+            if best[i] is None or sum(result[3]) < sum(best[i][3]):
+                best[i] = result
+    out = []
+    for cfg, result, passes in zip(configs, best, totals, strict=True):
+        image, az, rg, service, counts = result
+        p = cfg.processor
+        prf = cfg.geometry.prf_hz
+        total = sum(service)
+        lat = trace_latency_s(service, counts, p.micro_batch, len(shots), p.aperture_pulses, prf)
+        timing = Timing(
+            len(shots) / total,
+            len(shots) / prf / total,
+            1e3 * float(np.median(lat)),
+            1e3 * float(np.percentile(lat, 99)),
+            total < len(shots) / prf,
+            len(passes),
+            _floor_spread(passes),
+        )
+        out.append((image, az, rg, timing))
+    return out
+
+
+def _floor_spread(passes: list[float]) -> float:
+    if len(passes) < 2:
+        return 0.0
+    fastest, second = sorted(passes)[:2]
+    return (second - fastest) / fastest
+
+
+def cost_ratio(row: dict, base: dict) -> str:
+    """This row's time per pulse over ``base``'s, or "≈" where the difference is within the
+    two rows' timing noise (the larger spread of their passes, at least 5 %)."""
+    ratio = row["us_per_pulse"] / base["us_per_pulse"]
+    noise = max(row.get("spread", 0.0), base.get("spread", 0.0), 0.05)
+    return "≈" if abs(ratio - 1.0) <= noise else f"{ratio:.2f}×"
 
 
 @dataclass

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..quicklook import file_pyplot, save_figure
+from .measure import cost_ratio
 from .scenes import TradeoffScene
 
 # ---- the sweep ---------------------------------------------------------------------------------
@@ -29,15 +30,20 @@ def markdown(rows: list[dict], scenes: list[TradeoffScene]) -> str:
     for scene in scenes:
         out.append(f"**{scene.key}**: {scene.description}\n")
         out.append(
-            "| knob | value | pulses/s | × RT | latency p50 / p99 [ms] | image error | "
+            "| knob | value | pulses/s (passes' spread) | time vs default | × RT | "
+            "latency p50 / p99 [ms] | image error | "
             "peak phase [mrad] | az. IRW [m] | az. / rg. IRW ratio | az. / rg. PSLR [dB] | "
             "az. / rg. ISLR [dB] | pos. error [cells] | front |"
         )
-        out.append("|" + "---|" * 13)
-        for r in (r for r in rows if r["scene"] == scene.key):
+        out.append("|" + "---|" * 14)
+        mine = [r for r in rows if r["scene"] == scene.key]
+        base = next((r for r in mine if r["default"]), mine[0] if mine else None)
+        for r in mine:
             name = f"**{r['value']}**" if r["default"] else r["value"]
+            spread = f" (±{100 * r.get('spread', 0.0):.0f} %)"
+            versus = "—" if r is base else cost_ratio(r, base)
             out.append(
-                f"| {r['knob']} | {name} | {r['pulses_per_s']:,.0f} | "
+                f"| {r['knob']} | {name} | {r['pulses_per_s']:,.0f}{spread} | {versus} | "
                 f"{r['realtime_factor']:.1f} | {r['latency_p50_ms']:.1f} / "
                 f"{r['latency_p99_ms']:.1f}{'' if r['keeps_up'] else ' (falls behind)'} | "
                 f"{r['image_error']:.1e} | {1e3 * r['peak_phase_error_rad']:.2f} | "
@@ -65,6 +71,15 @@ def plot(rows: list[dict], scenes: list[TradeoffScene], path: Path) -> None:
             strict=True,
         ):
             for r in sel:
+                if xkey == "us_per_pulse" and r.get("spread"):  # the passes' spread: its noise
+                    ax.errorbar(
+                        r[xkey] * (1 + r["spread"] / 2),
+                        r["image_error"],
+                        xerr=r[xkey] * r["spread"] / 2,
+                        color=colours[r["knob"]],
+                        lw=0.8,
+                        zorder=2,
+                    )
                 ax.scatter(
                     r[xkey],
                     r["image_error"],

@@ -171,7 +171,8 @@ def cmd_spot_simulate(args) -> int:
     bi = " + channel bistatic" if g.bistatic else ""
     print(
         f"wrote {args.output}: {n} shots × {scene.config.waveform.samples_per_shot} samples{bi}, "
-        f"sweep {math.degrees(g.sweep_rad):.3f}°, {len(scene.amplitude)} targets, rotation "
+        f"sweep {math.degrees(g.sweep_rad):.3f}°, {len(scene.amplitude)} "
+        f"target{'' if len(scene.amplitude) == 1 else 's'}, rotation "
         f"{math.degrees(scene.rotation_rad):.1f}°; {1e3 * dt / n:.2f} ms/shot"
     )
     return 0

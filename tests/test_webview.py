@@ -247,7 +247,8 @@ def test_server_feeds_several_browsers_survives_a_restart_and_a_stalled_one_wait
     endpoint = f"tcp://127.0.0.1:{free_port()}"
 
     async def scenario():
-        server = ViewServer(endpoint, port=0, lines=256, updates_per_s=50)
+        # stall_s: the stalled browser stays while looked at (its cut: test_webview_guard.py)
+        server = ViewServer(endpoint, port=0, lines=256, updates_per_s=50, stall_s=600)
         url = await server.start()
         port = int(url.rsplit(":", 1)[1].strip("/"))
         stalled = await asyncio.get_running_loop().run_in_executor(None, stalled_browser, port)

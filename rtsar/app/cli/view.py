@@ -7,6 +7,7 @@ import warnings
 
 from ...sinks.endpoint import is_local_endpoint
 from ..view import view
+from ..webview.access import new_token, normalise_origin, read_token
 from .options import add_subscriber_options, die
 
 DEFAULT_HTTP_HOST = "127.0.0.1"
@@ -27,6 +28,27 @@ def parse_http(text: str) -> tuple[str, int]:
     return host, number
 
 
+def http_access(args) -> tuple[tuple[str, ...], str | None]:
+    """(allowed origins, token) from the --http options; ValueError (one line) for a bad
+    origin, an unreadable token file, two ways to give the token, or a CURVE-encrypted stream
+    served with neither a token nor --http-insecure."""
+    origins = tuple(normalise_origin(o) for o in args.allow_origin)
+    if args.http_token and args.http_token_file:
+        raise ValueError("give --http-token (a fresh token) or --http-token-file, not both")
+    token = read_token(args.http_token_file) if args.http_token_file else None
+    if args.http_token:
+        token = new_token()
+    if token is not None and args.http_insecure:
+        raise ValueError("--http-insecure asks for no token: drop it or the token option")
+    if args.curve_server_key and token is None and not args.http_insecure:
+        raise ValueError(
+            "the stream is CURVE-encrypted and --http would show its image in clear to whoever "
+            "reaches the page: give --http-token (the page then asks for the token in the URL "
+            "printed) or --http-insecure (serve it without one, your choice)"
+        )
+    return origins, token
+
+
 def cmd_view(args) -> int:
     if args.lines < 1:
         return die(f"--lines must be >= 1, got {args.lines}")
@@ -34,14 +56,31 @@ def cmd_view(args) -> int:
         return die(f"--timeout must be > 0 seconds, got {args.timeout}")
     if not args.dynamic_range_db > 0:
         return die(f"--dynamic-range-db must be > 0, got {args.dynamic_range_db}")
+    http_only = [
+        name
+        for name, given in (
+            ("--allow-origin", args.allow_origin),
+            ("--http-token", args.http_token),
+            ("--http-token-file", args.http_token_file),
+            ("--http-insecure", args.http_insecure),
+        )
+        if given
+    ]
+    if args.http is None and http_only:
+        return die(f"{http_only[0]} applies to the page of --http only")
     if args.http is not None:
         if args.png:
             return die("give --http (a page for browsers) or --png (a snapshot), not both")
         host, port = parse_http(args.http)
+        origins, token = http_access(args)
         if not is_local_endpoint(f"tcp://{host}:{port}"):
+            who = (
+                "whoever reaches it sees the image (no password"
+                if token is None
+                else ("the image and the token travel in clear (a token")
+            )
             warnings.warn(
-                f"serving the page on {host}:{port}, beyond loopback: whoever reaches it sees "
-                "the image (no password, no encryption)",
+                f"serving the page on {host}:{port}, beyond loopback: {who}, no encryption)",
                 UserWarning,
                 stacklevel=1,
             )
@@ -60,6 +99,8 @@ def cmd_view(args) -> int:
             args.curve_server_key,
             args.curve_client_key,
             say,
+            allowed_origins=origins,
+            token=token,
         )
     return view(
         args.endpoint,
@@ -81,9 +122,13 @@ def add_parsers(sub) -> None:
         "--http [HOST:]PORT serves a page (the waterfall with a colour bar and axes in metres, "
         "a true-aspect switch, the run's PRF, latency, drops, gaps and link counters, and the "
         "height strips of a 3D run) to up to 16 browsers at once, e.g. from a laptop: open "
-        "http://HOST:PORT/.  It outlives publisher restarts (a new stream starts a new "
+        "http://HOST:PORT/.  Whoever reaches HOST:PORT sees the image; a web page from "
+        "another origin does not (its WebSocket is refused, 403), and --http-token asks for a "
+        "secret.  A CURVE-encrypted stream is served only with --http-token or "
+        "--http-insecure.  It outlives publisher restarts (a new stream starts a new "
         "waterfall).  A viewer, or a browser, that cannot keep up skips frames; it never slows "
-        "the processor and nothing queues up for it.",
+        "the processor and nothing queues up for it; a browser that reads nothing for 10 s "
+        "loses its place.",
     )
     add_subscriber_options(s)
     s.add_argument("--png", metavar="FILE", help="write a snapshot PNG and exit")
@@ -93,6 +138,33 @@ def add_parsers(sub) -> None:
         help="serve the live page on HOST:PORT (HOST default 127.0.0.1, loopback only; "
         "0.0.0.0 for every interface, with a warning: the page has no password; port 0: "
         "any free port, printed) until Ctrl-C",
+    )
+    s.add_argument(
+        "--allow-origin",
+        action="append",
+        default=[],
+        metavar="ORIGIN",
+        help="--http: also let pages from ORIGIN (http(s)://HOST[:PORT], e.g. a proxy's) open "
+        "the view's WebSocket; repeatable (default: only the page's own origin, as the browser "
+        "reached it; a client that sends no Origin, not a browser, is let in)",
+    )
+    s.add_argument(
+        "--http-token",
+        action="store_true",
+        help="--http: make a fresh secret token that the page, its status and its WebSocket "
+        "ask for (?token=... or Authorization: Bearer ...); the printed URL carries it",
+    )
+    s.add_argument(
+        "--http-token-file",
+        metavar="FILE",
+        help="--http: the token is the first line of FILE (at least 16 letters, digits, - _ .), "
+        "the same across restarts and out of the process list",
+    )
+    s.add_argument(
+        "--http-insecure",
+        action="store_true",
+        help="--http of a CURVE-encrypted stream (--curve-server-key) without a token: "
+        "whoever reaches the page sees the image in clear (refused unless you say so)",
     )
     s.add_argument(
         "--lines",

@@ -10,37 +10,83 @@ Threads: a subscriber thread receives the strips (rtsar.sinks.client) and update
 waits for a change, sends what changed since that browser's last update (at most
 ``updates_per_s`` times a second) and waits for its connection to take it.  A browser that
 reads slowly therefore gets fewer, larger updates; what waits for it is one update at most.
+
+Who reads (rtsar.app.webview.access): a WebSocket from another web page's origin is refused
+(HTTP 403), and with a token the page, its status and the WebSocket ask for it.  A browser that
+reads nothing for ``STALL_S`` seconds loses its slot: its socket is cut, not closed politely (a
+polite close would wait for it to read what is queued).  Reading is shown by a pong that echoes
+one of the random pings sent every ``STALL_S / 4`` (a client that reads nothing cannot echo
+them), or by the bytes queued for it going down.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
+import secrets
 import socket
+import sys
 import threading
 import time
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, field
 from importlib import resources
 
 from aiohttp import WSMsgType, web
 
 from ...sinks.client import StripSubscriber
+from .access import origin_refusal, token_refusal
 from .frames import Cursor, LiveFrames
 
 STATIC = resources.files(__package__) / "static"
 SILENCE_S = 5.0  # no message for this long: the page says the publisher is silent
 MAX_BROWSERS = 16  # more at once are refused (HTTP 503): memory stays bounded
+STALL_S = 10.0  # a browser that reads nothing for this long loses its slot
+LOG_REPEAT_S = 10.0  # refusals and drops: one line of a kind at most this often, then a count
 _CONTENT_TYPES = {".html": "text/html", ".js": "text/javascript", ".css": "text/css"}
 
 
 @dataclass
 class Browser:
     """One connected browser: messages sent to it, whether a send waits on it now, and its
-    connection (``transport.get_write_buffer_size()``: what waits for it)."""
+    connection (``transport.get_write_buffer_size()``: what waits for it); when it last showed
+    that it reads (``read_at``, event-loop seconds), the bytes queued for it when last looked at,
+    the payloads of the last pings sent to it; whether it was cut for reading nothing."""
 
     transport: asyncio.BaseTransport | None
+    peer: str = "?"
+    read_at: float = 0.0
     sent: int = 0
     sending: bool = False
+    buffered_bytes: int = 0
+    pinged_at: float = -math.inf
+    pings: deque = field(default_factory=lambda: deque(maxlen=8))
+    dropped: bool = False
+
+
+class Said:
+    """Lines for the operator, one of a kind at most every LOG_REPEAT_S seconds; the next line
+    of that kind says how many were left unsaid, so a page that retries in a loop cannot fill the
+    terminal.  ``clock``: seconds, monotonic."""
+
+    def __init__(self, say, clock=time.monotonic):
+        self.say, self.clock = say, clock
+        self._last: dict[str, float] = {}
+        self._unsaid: dict[str, int] = {}
+
+    def __call__(self, kind: str, line: str) -> None:
+        now = self.clock()
+        if now - self._last.get(kind, -math.inf) < LOG_REPEAT_S:
+            self._unsaid[kind] = self._unsaid.get(kind, 0) + 1
+            return
+        self._last[kind] = now
+        unsaid = self._unsaid.pop(kind, 0)
+        self.say(line + (f" (and {unsaid} more since the last such line)" if unsaid else ""))
+
+
+def _stderr(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
 
 
 WILDCARDS = ("0.0.0.0", "::", "")  # bind every interface: not an address a browser opens
@@ -59,7 +105,12 @@ class ViewServer:
     """``rtsar view --http``: subscribe to ``endpoint`` and serve the live page on host:port.
 
     ``subscriber`` options as for :class:`StripSubscriber` (CURVE keys).  ``start`` runs in
-    the caller's event loop and returns the page's URL (a port 0 is chosen by the system).
+    the caller's event loop and returns the page's URL (a port 0 is chosen by the system; the
+    token, if any, in its query).  ``allowed_origins``: normalised origins
+    (:func:`~rtsar.app.webview.access.normalise_origin`) admitted beside the page's own;
+    ``token``: the secret the page and the WebSocket ask for (None: none asked); ``stall_s``: a
+    browser that reads nothing for this long loses its slot; ``say``: one line for the operator
+    (a refusal, a drop).
     """
 
     def __init__(
@@ -73,6 +124,10 @@ class ViewServer:
         curve_client_key=None,
         updates_per_s: float = 10.0,
         max_browsers: int = MAX_BROWSERS,
+        allowed_origins=(),
+        token: str | None = None,
+        stall_s: float = STALL_S,
+        say=_stderr,
     ):
         self.frames = LiveFrames(lines, endpoint=endpoint)
         self.host, self.port = host, int(port)
@@ -81,6 +136,14 @@ class ViewServer:
         self.max_browsers = int(max_browsers)
         self.browsers: dict[web.WebSocketResponse, Browser] = {}
         self.updates_sent = 0
+        self.allowed_origins = frozenset(allowed_origins)
+        self.token = token
+        self.stall_s = float(stall_s)
+        self.ping_s = self.stall_s / 4
+        self.refused = 0  # handshakes and pages refused (origin, token)
+        self.dropped = 0  # browsers cut for reading nothing
+        self._said = Said(say)
+        self._watcher: asyncio.Task | None = None
         self._slots = 0  # browsers connected or shaking hands
         self._sub = StripSubscriber(endpoint, curve_server_key, curve_client_key, hwm_messages=64)
         self._stop = threading.Event()
@@ -130,7 +193,24 @@ class ViewServer:
             self._changed = asyncio.Event()
 
     # ---- HTTP ----------------------------------------------------------------------------------
+    def _refuse(self, request: web.Request, reason: str | None) -> None:
+        """Refuse the request (HTTP 403, the reason as its one-line body) when there is a
+        reason, and tell the operator."""
+        if reason is None:
+            return
+        self.refused += 1
+        self._said("refused", f"view: refused {request.path} to {request.remote}: {reason}")
+        raise web.HTTPForbidden(text=reason + "\n")
+
+    def _token_refusal(self, request: web.Request) -> str | None:
+        given = request.query.get("token")
+        scheme, _, value = request.headers.get("Authorization", "").partition(" ")
+        if given is None and scheme.lower() == "bearer":
+            given = value.strip()
+        return token_refusal(given, self.token)
+
     async def _page(self, request: web.Request) -> web.Response:
+        self._refuse(request, self._token_refusal(request))
         return self._file("index.html")
 
     async def _static(self, request: web.Request) -> web.Response:
@@ -147,26 +227,34 @@ class ViewServer:
         return web.Response(
             text=text,
             content_type=_CONTENT_TYPES[suffix],
-            headers={"Cache-Control": "no-store"},
+            headers={"Cache-Control": "no-store", "Referrer-Policy": "no-referrer"},
         )
 
     async def _status(self, request: web.Request) -> web.Response:
+        self._refuse(request, self._token_refusal(request))
         return web.json_response(self.frames.snapshot_status())
 
     async def _socket(self, request: web.Request) -> web.StreamResponse:
+        origin = request.headers.get("Origin")
+        host = request.headers.get("Host")
+        self._refuse(request, origin_refusal(origin, host, self.allowed_origins))
+        self._refuse(request, self._token_refusal(request))
         if self._slots >= self.max_browsers:
             raise web.HTTPServiceUnavailable(text=f"at most {self.max_browsers} browsers at once")
         self._slots += 1  # taken before the handshake's await: a burst cannot overshoot
-        ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=1 << 16)
+        # autoping off: the pongs come to _read, which checks them against the pings sent
+        ws = web.WebSocketResponse(autoping=False, max_msg_size=1 << 16)
         try:
             await ws.prepare(request)
         except BaseException:
             self._slots -= 1
             raise
-        browser = self.browsers[ws] = Browser(request.transport)
+        loop = asyncio.get_running_loop()
+        browser = Browser(request.transport, str(request.remote), read_at=loop.time())
+        self.browsers[ws] = browser
         self.frames.set_browsers(len(self.browsers))
         self._wake()
-        reader = asyncio.ensure_future(self._read(ws))
+        reader = asyncio.ensure_future(self._read(ws, browser))
         cursor = Cursor()
         try:
             while not ws.closed and not reader.done():
@@ -181,25 +269,64 @@ class ViewServer:
                     browser.sent += 1
                     self.updates_sent += 1
                 browser.sending = False
+                if loop.time() - browser.pinged_at >= self.ping_s:
+                    browser.pinged_at = loop.time()
+                    browser.pings.append(secrets.token_bytes(8))
+                    await ws.ping(browser.pings[-1])
                 await asyncio.sleep(self.interval_s)
                 if not changed.is_set():
                     with contextlib.suppress(asyncio.TimeoutError):
-                        await asyncio.wait_for(changed.wait(), 1.0)
+                        await asyncio.wait_for(changed.wait(), min(1.0, self.ping_s))
         except (ConnectionError, RuntimeError):
-            pass  # the browser went away mid-send
+            pass  # the browser went away mid-send, or was cut by _watch
         finally:
             reader.cancel()
             self.browsers.pop(ws, None)
             self._slots -= 1
             self.frames.set_browsers(len(self.browsers))
-            await ws.close()
+            if not browser.dropped:
+                try:  # a polite close, within the time a reading browser would need
+                    await asyncio.wait_for(ws.close(), self.stall_s)
+                except asyncio.TimeoutError:
+                    if browser.transport is not None:
+                        browser.transport.abort()
         return ws
 
-    async def _read(self, ws: web.WebSocketResponse) -> None:
-        """Take the browser's messages (none are expected) until it closes."""
+    async def _read(self, ws: web.WebSocketResponse, browser: Browser) -> None:
+        """Take the browser's messages until it closes: its pongs (a pong that echoes one of
+        our pings shows that it read up to that ping) and its pings (answered)."""
         async for msg in ws:
-            if msg.type in (WSMsgType.ERROR, WSMsgType.CLOSE):
+            if msg.type == WSMsgType.PONG and msg.data in browser.pings:
+                browser.read_at = asyncio.get_running_loop().time()
+            elif msg.type == WSMsgType.PING:
+                await ws.pong(msg.data)
+            elif msg.type in (WSMsgType.ERROR, WSMsgType.CLOSE):
                 break
+
+    async def _watch(self) -> None:
+        """Cut every browser that has shown no reading for ``stall_s``: no pong echoing a ping,
+        and the bytes queued for it not going down.  Checked ten times per ``stall_s``."""
+        loop = asyncio.get_running_loop()
+        while True:
+            await asyncio.sleep(self.stall_s / 10)
+            now = loop.time()
+            for browser in list(self.browsers.values()):
+                transport = browser.transport
+                queued = transport.get_write_buffer_size() if transport is not None else 0
+                if queued < browser.buffered_bytes:
+                    browser.read_at = now  # the system took some: the browser reads
+                browser.buffered_bytes = queued
+                if now - browser.read_at > self.stall_s and not browser.dropped:
+                    browser.dropped = True
+                    self.dropped += 1
+                    self._said(
+                        "dropped",
+                        f"view: cut the browser at {browser.peer}: it read nothing for "
+                        f"{self.stall_s:g} s ({queued / 2**20:.1f} MiB waiting for it; its "
+                        "slot is free again)",
+                    )
+                    if transport is not None:
+                        transport.abort()  # wakes its send; a close would wait for it to read
 
     def app(self) -> web.Application:
         app = web.Application()
@@ -224,12 +351,17 @@ class ViewServer:
         port = self._runner.addresses[0][1]  # the port the system chose for a 0
         self._thread = threading.Thread(target=self._receive, name="view-subscriber", daemon=True)
         self._thread.start()
-        return page_url(self.host, port)
+        self._watcher = asyncio.ensure_future(self._watch())
+        query = f"?token={self.token}" if self.token is not None else ""
+        return page_url(self.host, port) + query
 
     async def stop(self) -> None:
         self._stop.set()
-        for ws in list(self.browsers):
-            await ws.close()
+        if self._watcher is not None:
+            self._watcher.cancel()
+        for ws in list(self.browsers):  # a browser that reads nothing does not hold the end
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(ws.close(), 1.0)
         if self._runner is not None:
             await self._runner.cleanup()
         if self._thread is not None:
@@ -246,13 +378,25 @@ def serve(
     curve_server_key=None,
     curve_client_key=None,
     say=print,
+    allowed_origins=(),
+    token: str | None = None,
 ) -> int:
     """Serve the page until Ctrl-C or a signal (exit status 0), or until the subscriber fails
-    (1).  ``say`` prints the page's URL and the end."""
+    (1).  ``say`` prints the page's URL (with its token), the refusals and drops, and the end.
+    ``allowed_origins``, ``token``: as for :class:`ViewServer`."""
 
     async def main() -> int:
         server = ViewServer(
-            endpoint, host, port, lines, dynamic_range_db, curve_server_key, curve_client_key
+            endpoint,
+            host,
+            port,
+            lines,
+            dynamic_range_db,
+            curve_server_key,
+            curve_client_key,
+            allowed_origins=allowed_origins,
+            token=token,
+            say=say,
         )
         url = await server.start()
         where = " (all interfaces: this machine's name or address)" * (host in WILDCARDS)
@@ -264,6 +408,11 @@ def serve(
             return 1
         finally:
             await server.stop()
+            if server.refused or server.dropped:  # the lines held back by Said, counted
+                say(
+                    f"view: {server.refused} request(s) refused (origin, token), "
+                    f"{server.dropped} browser(s) cut for reading nothing"
+                )
 
     try:
         return asyncio.run(main())

@@ -22,7 +22,10 @@
 
   function connect() {
     const scheme = location.protocol === "https:" ? "wss://" : "ws://";
-    const ws = new WebSocket(scheme + location.host + "/ws");
+    // rtsar view --http-token: the page's address carries the token; the socket asks for it too
+    const token = query.get("token");
+    const ask = token === null ? "" : "?token=" + encodeURIComponent(token);
+    const ws = new WebSocket(scheme + location.host + "/ws" + ask);
     ws.binaryType = "arraybuffer";
     ws.onopen = () => { S.connected = true; showState(); };
     ws.onclose = () => {

@@ -296,7 +296,8 @@ def add_subscriber_options(s) -> None:
         dest="endpoint",
         default=DEFAULT_ENDPOINT,
         type=zmq_endpoint,
-        help="the publisher, as an option (the same as the positional ENDPOINT)",
+        help=f"the publisher, as an option (the same as the positional ENDPOINT; default "
+        f"{DEFAULT_ENDPOINT})",
     )
     s.add_argument(
         "--curve-server-key",

@@ -1,7 +1,9 @@
 """Run a source through the pipeline with a ZeroMQ publisher and a live status line.
 
 Shared by ``rtsar run`` (simulated scene or serial instrument) and ``rtsar replay``.  Ctrl-C stops
-the source; what already arrived is still focused, published and (with ``-o``) written.
+the source; what already arrived is still focused, published and (with ``-o``) written.  A stop
+ends the run in bounded time: a recording (``--record``) that has not finished
+rtsar.sinks.raw_record.HURRY_S after it is given up on, and the shots it may lack are counted.
 """
 
 from __future__ import annotations
@@ -71,6 +73,8 @@ _LABELS = {
     "flagged_lines": "flagged lines",
     "link_silences": "link silences",
     "record_dropped": "not recorded",
+    "record_unconfirmed": "not confirmed in the recording (it may lack them)",
+    "image_lines_lost": "lines not written to -o",
     "swath_refused_messages": "refused swath messages",
 }
 
@@ -298,11 +302,11 @@ def run_stream(
 
     Exit status: 0 when the stream ended cleanly, 1 when the source failed (an instrument link
     lost for good, silent for ``link_timeout_s``) or nothing could be written to ``output`` or
-    ``record``, 2 when the disk refused the recording, 128 + the signal number when
-    interrupted (130 for Ctrl-C).  ``record``: the raw shots' file (rtsar.sinks.raw_record;
-    ``scene``, the scene's dict, goes into it).  ``expected_rate_hz``: the rate the source
-    should deliver (a simulation's PRF, a paced replay's): a stream processed slower is warned
-    about.
+    ``record``, 2 when the disk refused the image or the recording (or the recording was
+    given up on), 128 + the signal number when interrupted (130 for Ctrl-C).  ``record``: the
+    raw shots' file (rtsar.sinks.raw_record; ``scene``, the scene's dict, goes into it).
+    ``expected_rate_hz``: the rate the source should deliver (a simulation's PRF, a paced
+    replay's): a stream processed slower is warned about.
     ``channel_fix(missing)``: how to give the source the auxiliary channels a stage reads and it
     lacks (check_source_channels, before anything starts).
     """
@@ -432,6 +436,7 @@ def run_stream(
         stream.write("\n")
     d = stats.as_dict()
     c = d["counters"]
+    c.update(files.counters())  # final: taken when the outputs had ended, not before
     latency = (
         f"latency median {d['latency_median_ms']:.2f} ms, p99 {d['latency_p99_ms']:.2f} ms"
         if math.isfinite(d["latency_median_ms"])

@@ -1,6 +1,11 @@
 """The files a live run writes: its image (``-o IMG.h5``) and its raw shots (``--record
 RAW.h5``), set up before the stream starts (their names claimed: a name another process is
-writing is refused before any work) and reported at its end."""
+writing is refused before any work) and reported at its end.
+
+Each fails on its own: a disk that refuses the image ends the image, not the recording, nor
+the run (rtsar.sinks.record.ImageFileSink), and the other way round (rtsar.sinks.raw_record).
+The image is closed after the recording has ended (or been given up on: rtsar.sinks.raw_record
+.HURRY_S after a stop), so the recording's counters it stores are final."""
 
 from __future__ import annotations
 
@@ -32,14 +37,25 @@ class LiveOutputs:
         self.raw: ShotRecorder | None = None
         try:
             if output:
-                self.image = ImageFileSink(output, source)
+                self.image = ImageFileSink(output, source, notify=notify)
             if record:
                 self.raw = ShotRecorder(
                     record, config, scene, source, start_along_track_m, notify=notify
                 )
+                if self.image is not None:
+                    self.image.settle = self._end_recording
         except BaseException:  # (the second name refused: the first one's claim goes too)
             self.release()
             raise
+
+    def _end_recording(self, stats: dict) -> dict:
+        """The recording ended (its end comes here, before the image's close): its counters."""
+        self.raw.finish(stats.get("counters", {}))
+        return self.raw.counters()
+
+    def counters(self) -> dict:
+        """The outputs' final counters (after the run's end), for its summary."""
+        return {k: v for sink in self.sinks for k, v in sink.counters().items()}
 
     @property
     def sinks(self) -> list:
@@ -58,7 +74,10 @@ class LiveOutputs:
         a write the disk refused)."""
         status = 0
         if self.image is not None:
-            if self.image.lines:
+            if self.image.failure is not None:
+                print(f"rtsar: error: {self.image.failure}", file=err)
+                status = 2
+            elif self.image.lines:
                 print(f"wrote {self.output}: {self.image.lines} lines", file=stream)
             else:
                 wrong = counters.get("wrong_length")
@@ -78,6 +97,7 @@ class LiveOutputs:
         if raw is not None:
             if raw.failure is not None:
                 print(f"rtsar: error: {raw.failure}", file=err)
+                print(_lost_recording(self.record, raw), file=stream)
                 status = 2
             elif raw.written:
                 missed = (
@@ -95,3 +115,18 @@ class LiveOutputs:
                 print(f"rtsar: no recording written to {self.record}: no shot came", file=err)
                 status = max(status, 1)
         return status
+
+
+def _lost_recording(path: str, raw: ShotRecorder) -> str:
+    """What a recording that failed holds, in counts (rtsar.sinks.raw_record)."""
+    unsure = (
+        f"; {raw.unconfirmed} handed over and never confirmed (record_unconfirmed: the file "
+        "may lack them)"
+        if raw.unconfirmed
+        else ""
+    )
+    return (
+        f"{path}: {raw.written} shots confirmed on disk (record_written"
+        + (", at least" if raw.unconfirmed else "")
+        + f"), {raw.dropped} not recorded (record_dropped){unsure}"
+    )

@@ -144,6 +144,7 @@ class LiveFile:
                 "the writer's flag",
             )
         if self._out.closed_cleanly:  # every row written went to disk, and the metadata too
+            self.saved_rows = self.rows
             saved = f"its {self.rows} {self.unit} are saved"
         else:  # the last flush's rows are readable (SWMR); later ones may be lost
             saved = f"at least its first {self.saved_rows} {self.unit} are saved"

@@ -124,6 +124,7 @@ class RawFile:
         self.collection_start_utc: str | None = None  # from the first block of shots
         self.dropped = 0  # pulses not recorded (as marked in the file)
         self.dropped_runs: list[list[int]] = []
+        self.saved = (0, 0)  # (written, dropped) of the rows sure to be on disk (note_saved)
 
     def release(self) -> None:
         """The claim on the name goes (a file never made; the file's writer releases its own)."""
@@ -137,6 +138,14 @@ class RawFile:
     def flush_if_due(self) -> None:
         if self.due():
             self._file.flush()
+            self.note_saved()
+
+    def note_saved(self) -> None:
+        """``saved`` becomes the counts of now when every row written is on disk (after a flush,
+        the close, or a failure whose one close went through: rtsar.sinks.live_file), so that
+        what the run is told never exceeds what a reader of the file finds."""
+        if self._file is not None and self._file.saved_rows == self._file.rows:
+            self.saved = (self.written, self.dropped)
 
     def append(self, items: list) -> None:
         """Rows for the items (Shots and _Dropped, in stream order); WriteFailed from the disk."""
@@ -151,6 +160,7 @@ class RawFile:
                 self._count_drop(x.first, x.count)
             else:
                 self.written += len(x)
+        self.note_saved()  # (the first rows are flushed at once)
 
     def _count_drop(self, first: int, count: int) -> None:
         self.dropped += count
@@ -232,17 +242,24 @@ class RawFile:
         self._file.stored(end)
 
     def close(self, counters: dict, complete: bool) -> None:
-        """Close with the final attributes (nothing when no shot ever came)."""
+        """Close with the final attributes (nothing when no shot ever came).  The run's
+        ``counters`` were taken before this file was finished: their ``record_*`` entries are
+        this file's own.  ``complete``: the run's end came (``complete``) and every pulse it
+        handed over has its row here (none dropped)."""
         if self._file is None:
             return
+        own = {"record_written": self.written, "record_dropped": self.dropped}
+        counters = {k: v for k, v in counters.items() if not k.startswith("record_")}
         attrs = {
-            "counters": json.dumps(counters),
-            "record_written": self.written,
-            "record_dropped": self.dropped,
+            "counters": json.dumps({**counters, **own}),
+            **own,
             "record_dropped_runs": json.dumps(self.dropped_runs),
-            "complete": complete,
+            "complete": bool(complete) and not self.dropped,
         }
-        self._file.close(attrs)
+        try:
+            self._file.close(attrs)
+        finally:
+            self.note_saved()
 
 
 def _runs_of_shots(items: list, start: int):

@@ -27,17 +27,29 @@ the recorder process's death (killed: its file keeps the shots up to its last fl
 process ends with its pipe: a run killed at any moment leaves it to write what it received and
 close the file, marked incomplete.  The file is crash-safe like the
 live image (rtsar.sinks.live_file): a SIGKILL leaves a readable file with every shot up to its
-last flush (every ``flush_every_s``).  Final attributes: ``complete``, ``counters`` (JSON, the
-run's), ``record_written``, ``record_dropped``, ``record_dropped_runs`` (JSON [[first pulse,
-count], ...], the first :data:`MAX_RUNS_LISTED`).
+last flush (every ``flush_every_s``).  Final attributes: ``complete`` (True only when the run's
+end came and every pulse handed over has its row: none dropped), ``counters`` (JSON, the run's;
+its ``record_*`` entries the file's own), ``record_written``, ``record_dropped``,
+``record_dropped_runs`` (JSON [[first pulse, count], ...], the first :data:`MAX_RUNS_LISTED`).
+
+What the run counts is what a reader of the file finds: ``record_written`` counts the rows the
+process has confirmed on disk (flushed, or in the closed file), never rows merely handed to
+HDF5; ``record_dropped`` the pulses sure not to be recorded.  Once the recording has ended,
+``record_unconfirmed`` counts the rest: pulses handed over whose rows the process never
+confirmed, because it died or was given up on (the file may hold some of them: then
+``record_written`` is a lower bound); 0 after a clean close.  A stop (``hurry``: Ctrl-C, a
+signal, the end of ``--duration``) gives the recording :data:`HURRY_S` to finish; a process
+that has not finished by then (a hung disk) is killed, and the run goes on to its end.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
 import threading
+import time
 from collections import deque
 from pathlib import Path
 
@@ -60,6 +72,8 @@ from .raw_pipe import receive, send, widen
 QUEUE_S = 2.0  # seconds of the stream's main-channel shots the recorder's queue holds …
 QUEUE_BYTES = (16 << 20, 256 << 20)  # … within these bounds
 SEND_ITEMS = 64  # the most blocks passed on to the recorder process at one look
+HURRY_S = 5.0  # after a stop, the most the recording is waited for; then its process is killed
+GONE_S = 2.0  # after that kill, the most its pipes are waited on (a process stuck in the kernel)
 
 
 def record_queue_bytes(config: Config) -> int:
@@ -85,7 +99,7 @@ class ShotRecorder(StripSink):
     recorder process started (it does not wait for it: its start, ~0.3 s of imports, overlaps
     the run's); the file is made with the first pulses (their channels fix its datasets).
     ``notify``: one-line messages (a failed write).  ``close()`` ends it if the run's ``end``
-    never came."""
+    never came, within :data:`HURRY_S`."""
 
     wants_pulses = True
 
@@ -110,10 +124,17 @@ class ShotRecorder(StripSink):
         self._cond = threading.Condition()
         self._ending = False
         self._final: tuple | None = None
-        self.written = 0  # pulses whose rows are in the file (shots, inserted zeros)
-        self.dropped = 0  # pulses not recorded
+        self.written = 0  # pulses whose rows are confirmed on disk (shots, inserted zeros)
+        self.dropped = 0  # pulses sure not to be recorded
+        self.unconfirmed = 0  # at the end: pulses handed over, neither (module docstring)
         self.dropped_runs: list[list[int]] = []
         self.failure: WriteFailed | None = None
+        self.gave_up = False  # killed after HURRY_S
+        self._hurried_s: float | None = None  # when the run asked to hurry (monotonic)
+        self._finishing_s = 0.0  # when finish() began (monotonic)
+        self._heard_s = time.monotonic()  # the process's last answer
+        self._ended: dict | None = None  # the final counters, once the recording has ended
+        self._listened = threading.Event()  # the process's answers have all been read
         self._next_pulse = 0  # the stream's next pulse (checks the order)
         settings = {
             "path": str(self.path),
@@ -189,29 +210,114 @@ class ShotRecorder(StripSink):
             return self._bytes + nbytes <= self.capacity or not self._bytes
 
     def counters(self) -> dict:
+        """``record_written``, ``record_dropped``; once ended, ``record_unconfirmed`` too (their
+        final values: module docstring)."""
+        if self._ended is not None:
+            return dict(self._ended)
         return {"record_written": self.written, "record_dropped": self.dropped}
 
     def end(self, stats: dict, info: StreamInfo) -> None:
         self.finish(stats.get("counters", {}))
 
+    def hurry(self) -> None:
+        """The run is being stopped: the recording has :data:`HURRY_S` from now to finish."""
+        with self._cond:
+            if self._hurried_s is None:
+                self._hurried_s = time.monotonic()
+            self._cond.notify_all()
+
     def finish(self, counters: dict | None = None, complete: bool = True) -> None:
-        """Write what is queued, close the file with the final attributes, release the name.
-        A failure is kept in ``failure`` (and was told through ``notify``)."""
+        """Write what is queued, close the file with the final attributes, release the name;
+        once hurried, give up after HURRY_S (the process killed).  A failure is kept in
+        ``failure`` (and was told through ``notify``, but for the giving up: the run's end
+        tells it).  A second call returns at once."""
+        if self._ended is not None:
+            return
         with self._cond:
             if not self._ending:
                 self._final = ("end", counters or {}, complete)
                 self._ending = True
+                self._finishing_s = time.monotonic()
             self._cond.notify_all()
-        self._feeder.join()
-        self._listener.join()
-        self._proc.wait()
-        if self._claim is not None:  # (the process released it, or died holding it)
-            self._claim.release()
-            self._claim = None
+        if not self._settled():
+            self._give_up()
+        with self._cond:  # (the process released it, or died holding it)
+            claim, self._claim = self._claim, None
+        if claim is not None:
+            claim.release()
+        with self._cond:
+            self.unconfirmed = self._next_pulse - self.written - self.dropped
+            self._ended = {
+                "record_written": self.written,
+                "record_dropped": self.dropped,
+                "record_unconfirmed": self.unconfirmed,
+            }
 
     def close(self) -> None:
-        """End the recording if the run's end never came (it stays marked incomplete)."""
+        """End the recording if the run's end never came (it stays marked incomplete), within
+        :data:`HURRY_S`."""
+        self.hurry()
         self.finish(complete=False)
+
+    def _settled(self) -> bool:
+        """Wait for the process to close the file and end (polled: a hurry may come meanwhile);
+        False once hurried and HURRY_S have passed since the hurry and since the end began (a
+        run that took long to drain its pipeline still gives the recording its HURRY_S)."""
+        told = False
+        while not self._listened.wait(0.05):
+            hurried, now = self._hurried_s, time.monotonic()
+            if hurried is not None:
+                if now - max(hurried, self._finishing_s) >= HURRY_S:
+                    return False
+            elif not told and now - max(self._heard_s, self._finishing_s) >= HURRY_S:
+                told = True  # (a run that ends by itself waits for its recording: says so)
+                if self.notify is not None:
+                    self.notify(
+                        f"rtsar: waiting for --record {self.path} to finish (its process has "
+                        f"not answered for {HURRY_S:g} s); Ctrl-C gives it up {HURRY_S:g} s later"
+                    )
+        self._feeder.join(GONE_S)  # (its pipe's reader has gone: it ends)
+        try:
+            self._proc.wait(GONE_S)  # (its pipe is closed: it is exiting)
+        except subprocess.TimeoutExpired:
+            self._kill()
+        return True
+
+    def _kill(self) -> None:
+        with contextlib.suppress(OSError):  # (gone already)
+            self._proc.kill()
+
+    def _give_up(self) -> None:
+        """The stop's deadline passed: the process is killed; what it never confirmed stays
+        unconfirmed (the file may hold some of it), what it was never handed is dropped."""
+        with self._cond:
+            self.gave_up = True
+            if self.failure is None:
+                self.failure = WriteFailed(
+                    self.path,
+                    f"the recording did not finish within {HURRY_S:g} s of the stop (a stuck "
+                    "disk?): its process was killed",
+                    "the shots up to its last flush are saved, marked incomplete "
+                    "(complete = False)",
+                )
+            self._drop_queued()
+        self._kill()
+        # Its pipes break with it, and the answers it sent before are still read; a process
+        # stuck in the kernel (a dead disk) dies only when its write returns: not waited for.
+        self._listened.wait(GONE_S)
+        self._feeder.join(GONE_S)
+        try:
+            self._proc.wait(GONE_S)
+        except subprocess.TimeoutExpired:
+            pass
+
+    def _drop_queued(self) -> None:
+        """What is queued here will never be passed on: not recorded.  Called with the lock."""
+        for x in self._items:
+            if not isinstance(x, _Dropped):  # (a drop is counted already)
+                self._drop(x[0].first_pulse, len(x[0]), mark=False)
+                self._bytes -= x[1]
+        self._items.clear()
 
     # ---- the threads that talk to the recorder process -------------------------------------
     def _feed(self) -> None:
@@ -241,13 +347,25 @@ class ShotRecorder(StripSink):
             os.close(self._fd_out)
 
     def _listen(self) -> None:
-        """The process's answers: blocks written or lost, a failure, its end; its death."""
+        """The process's answers: blocks handed to HDF5 or lost, rows saved, a failure, its end;
+        its death."""
+        try:
+            self._answers()
+        finally:
+            self._listened.set()
+
+    def _answers(self) -> None:
         closed = False
         try:
             while True:
                 message = receive(self._fd_in)
+                self._heard_s = time.monotonic()
                 if message[0] == "done":
                     self._done(message[1], lost=message[2])
+                elif message[0] == "saved":
+                    with self._cond:
+                        if self._ended is None:  # (given up: the counts are final)
+                            self.written = int(message[1])
                 elif message[0] == "failed":
                     self._fail(WriteFailed(message[1] or self.path, message[2], message[3]))
                 elif message[0] == "closed":
@@ -261,18 +379,20 @@ class ShotRecorder(StripSink):
             how = f"signal {-code}" if code < 0 else f"exit status {code}"
             kept = "the shots up to its last flush are saved, marked incomplete (complete = False)"
             self._fail(WriteFailed(self.path, f"the recorder process ended ({how})", kept))
-        self._done(len(self._sent), lost=True)  # passed on, never answered: not recorded
+        with self._cond:  # passed on, never answered: their room is free, their fate unknown
+            self._bytes -= sum(nbytes for _, _, nbytes, _ in self._sent)
+            self._sent.clear()
+            self._cond.notify_all()
 
     def _done(self, items: int, lost: bool) -> None:
-        """The next ``items`` blocks passed on were written (or ``lost``)."""
+        """The next ``items`` blocks passed on are in HDF5's hands (counted once ``saved``
+        says so), or ``lost`` (not recorded)."""
         with self._cond:
             for _ in range(min(items, len(self._sent))):
                 first, count, nbytes, drop = self._sent.popleft()
                 self._bytes -= nbytes
-                if not drop and lost:
+                if not drop and lost and self._ended is None:
                     self._drop(first, count, mark=False)
-                elif not drop:
-                    self.written += count
             self._cond.notify_all()
 
     def _fail(self, exc: WriteFailed) -> None:
@@ -282,11 +402,7 @@ class ShotRecorder(StripSink):
             if self.failure is not None:
                 return
             self.failure = exc
-            for x in self._items:
-                if not isinstance(x, _Dropped):  # (a drop is counted already)
-                    self._drop(x[0].first_pulse, len(x[0]), mark=False)
-                    self._bytes -= x[1]
-            self._items.clear()
+            self._drop_queued()
             self._cond.notify_all()
         if self.notify is not None:
             self.notify(

@@ -9,9 +9,13 @@ never on this process's writes (rtsar.sinks.raw_record).
 
 Messages in: ``("init", settings)`` first, then ``("pulses", Shots)`` and ``("drop", first,
 count)`` in stream order, ``("end", counters, complete)`` last.  Messages out:
-``("done", items, lost)`` (the next ``items`` messages in have been written, or lost when
-``lost``), ``("failed", path, reason, kept)`` once when the disk refuses a write (the recording
-ends; every later message is answered as lost), ``("closed",)`` after the file is closed.
+``("done", items, lost)`` (the next ``items`` messages in have been handed to HDF5 (their
+queue room is free), or lost when ``lost``), ``("saved", written, dropped)`` (the file's counts
+of shot rows and of rows marked not recorded that are sure to be on disk: after each flush, a
+failure and the close; a reader of the file finds at least these, and exactly these once the
+file is closed), ``("failed", path, reason, kept)`` once when the disk refuses a write (the
+recording ends; every later message is answered as lost), ``("closed",)`` after the file is
+closed.
 The run's death closes the pipe: what was received is written and the file is closed, marked
 incomplete (``complete`` False), as a run that never sent its end.  Terminal signals (Ctrl-C,
 SIGHUP, SIGTERM) are the run's to handle: this process ends when its pipe does.
@@ -51,6 +55,7 @@ class Writer:
         self.final = {"counters": {}, "complete": False}
         self.failed = False
         self._send_lock = threading.Lock()
+        self._told_saved = (0, 0)
 
     def tell(self, message) -> None:
         with self._send_lock:
@@ -109,6 +114,7 @@ class Writer:
                 self.bytes -= size
             if self.file is not None and not self.failed:
                 self._guarded(self.file.flush_if_due)
+            self._tell_saved()
             if ending:
                 break
         reader.join()
@@ -116,7 +122,14 @@ class Writer:
             self._guarded(lambda: self.file.close(**self.final))
         if self.file is not None:
             self.file.release()
+        self._tell_saved()
         self.tell(("closed",))
+
+    def _tell_saved(self) -> None:
+        """The counts sure to be on disk, when they changed (rtsar.sinks.raw_file.RawFile)."""
+        if self.file is not None and self.file.saved != self._told_saved:
+            self._told_saved = self.file.saved
+            self.tell(("saved", *self._told_saved))
 
     def _take(self) -> tuple[list, int]:
         items, size = [], 0
@@ -148,6 +161,9 @@ class Writer:
                 queued = len(self.items)
                 self.items.clear()
                 self.bytes = 0
+            if self.file is not None:  # (every row is on disk if its one close went through)
+                self.file.note_saved()
+                self._tell_saved()
             self.tell(("failed", str(exc.path), exc.reason, exc.kept))
             if queued:
                 self.tell(("done", queued, True))

@@ -24,6 +24,7 @@ import numpy as np
 from ..params import config_from_dict
 from ..sources.formats.timebase import format_utc, parse_utc
 from ..stream.strips import StreamInfo, Strip, StripSink
+from .h5_output import WriteFailed
 from .image_file import ImageWriter
 from .name_claim import NameClaim
 from .wire import height_header, strip_header
@@ -241,6 +242,11 @@ class StripRecorder:
         if self.writer is not None:
             self.writer.flush_if_due()
 
+    def flush(self) -> None:
+        """Every line written so far to the disk (crash-safe: readable after a kill)."""
+        if self.writer is not None:
+            self.writer.flush()
+
     def release_claim(self) -> None:
         """Give up the claim on the name if no writer took it (no strip came)."""
         if self._claim is not None:
@@ -287,31 +293,75 @@ class StripRecorder:
 
 
 class ImageFileSink(StripSink):
-    """Pipeline sink: record every strip, in process (lossless), to an image file."""
+    """Pipeline sink: record every strip, in process (lossless), to an image file.
 
-    def __init__(self, path: str | Path, source: str):
+    A write the disk refuses (full, quota) ends this file, not the run: said once through
+    ``notify``, kept in ``failure``; the other outputs go on, and ``image_lines_lost`` counts
+    the lines handed to it that the file is not sure to hold.  ``settle(stats)``, where given,
+    is called at the end once every line is on disk and before the file is closed: it returns
+    counters of outputs that end first (a recording's final ones), stored in place of the
+    run's."""
+
+    def __init__(self, path: str | Path, source: str, notify=None, settle=None):
         self.recorder = StripRecorder(path, source)
         self.lines = 0
+        self.notify = notify
+        self.settle = settle
+        self.failure: WriteFailed | None = None
+        self.lines_handed = 0
+
+    def _guarded(self, work, tell: bool = True) -> None:
+        """``work`` on the file unless it failed; a failure ends it (told at once if ``tell``;
+        at the end, the run's report tells it)."""
+        if self.failure is not None:
+            return
+        try:
+            work()
+        except WriteFailed as exc:
+            self.failure = exc
+            self.recorder.release_claim()
+            if tell and self.notify is not None:
+                self.notify(f"rtsar: -o {self.recorder.path} stopped: {exc}; the run goes on")
+
+    def counters(self) -> dict:
+        if self.failure is None:
+            return {}
+        writer = self.recorder.writer
+        saved = 0 if writer is None else writer.saved_lines
+        return {"image_lines_lost": max(0, self.lines_handed - saved)}
 
     def strip(self, strip: Strip, info: StreamInfo) -> None:
-        self.recorder.add_strip(strip_header(strip, info), strip.lines)
+        self.lines_handed += len(strip.lines)
+        header = strip_header(strip, info)
+        self._guarded(lambda: self.recorder.add_strip(header, strip.lines))
 
     def stats(self, stats: dict, info: StreamInfo) -> None:  # periodic: flush a quiet stream
-        self.recorder.flush_if_due()
+        self._guarded(self.recorder.flush_if_due)
 
     def height(self, strip, seq: int, info: StreamInfo) -> None:
-        self.recorder.add_height(
-            height_header(strip, seq, info), strip.height_m, strip.valid, strip.coherence
+        self._guarded(
+            lambda: self.recorder.add_height(
+                height_header(strip, seq, info), strip.height_m, strip.valid, strip.coherence
+            )
         )
 
     def end(self, stats: dict, info: StreamInfo) -> None:
-        self.lines = self.recorder.finish(
-            stats["counters"],
-            lens=info.lens_backend,
-            **processing_attrs(
-                info.config.processor.correlator,
-                info.corrections,
-                info.physical,
-                info.correction_specs,
-            ),
-        )
+        counters = dict(stats["counters"])
+        self._guarded(self.recorder.flush, tell=False)  # on disk before waiting on others
+        if self.settle is not None:
+            counters.update(self.settle(stats))
+        counters.update(self.counters())
+
+        def close() -> None:
+            self.lines = self.recorder.finish(
+                counters,
+                lens=info.lens_backend,
+                **processing_attrs(
+                    info.config.processor.correlator,
+                    info.corrections,
+                    info.physical,
+                    info.correction_specs,
+                ),
+            )
+
+        self._guarded(close, tell=False)

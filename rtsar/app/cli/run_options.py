@@ -54,7 +54,9 @@ def add_run_options(source_group, parser) -> None:
         "channel, the instrument's pulse numbers and clock, the gaps and flags as ingest saw "
         "them, the configuration; `rtsar process RAW.h5` or `rtsar replay RAW.h5` gives this "
         "run's image again (or another, with other options). Crash-safe like -o; written by a "
-        "thread of its own behind a bounded queue: shots a slow disk could not take are "
-        "counted (record_dropped) and marked in the file, the imaging never waits "
+        "process of its own behind a bounded queue: shots a slow disk could not take are "
+        "counted (record_dropped) and marked in the file, the imaging never waits; a stop "
+        "gives the recording 5 s to finish, then gives it up and says how many shots it may "
+        "lack "
         "(docs/pages/guide/live.md, 'Recording a live run')",
     )

@@ -411,6 +411,7 @@ def test_a_growing_file_read_between_its_two_resizes_gives_matching_lines(tmp_pa
         f["range_m"] = np.arange(3.0)
         f.attrs["format"] = "rtsar-image"
         f.attrs["format_version"] = 1
+        f.attrs["complete"] = False  # a live writer's (a finished file's axes must match)
     image, az, rg, attrs = read_image(path)
     assert image.shape == (32, 3) and az.shape == (32,)
 

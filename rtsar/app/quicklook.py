@@ -145,6 +145,11 @@ def quicklook_figure(
     image = np.asarray(image)
     if image.ndim != 2 or image.shape[0] == 0 or image.shape[1] == 0:
         raise ValueError(f"image must be a non-empty 2-D array, got shape {image.shape}")
+    if (len(azimuth_m), len(range_m)) != image.shape:  # never drawn on axes cut to fit
+        raise ValueError(
+            f"azimuth_m ({len(azimuth_m)}) and range_m ({len(range_m)}) must match the image's "
+            f"{image.shape[0]} lines x {image.shape[1]} columns"
+        )
     db = to_db(image, dynamic_range_db)
     axes = image_axes(azimuth_m, range_m, spotlight)
     fig, ax = plt.subplots(figsize=(8, _figure_height(axes, image.shape, true_aspect)), dpi=100)

@@ -106,7 +106,7 @@ def surface_from_table(d: dict, name: str = "scene") -> SurfaceScene:
         surface = SHAPES[shape](**params)
     except TypeError as exc:
         raise ValueError(f"surface ({shape}): {exc}") from None
-    return surface_scene(
+    return surface_scene(  # (its grid bounded by MAX_GRID_POINTS before it is made)
         cfg,
         surface,
         lines,
@@ -157,9 +157,10 @@ def _with_pictures(d: dict, name: str) -> Scene:
             )
         except ValueError as exc:
             raise ValueError(f"pictures[{i}]: {exc}") from None
+        made = sum(len(p) for p in parts)  # counted after each picture: they never pile up
+        if made > MAX_TARGETS:
+            raise ValueError(f"scene: {made} scatterers by pictures[{i}] exceed {MAX_TARGETS}")
     targets = combine_targets(*parts)
-    if len(targets) > MAX_TARGETS:
-        raise ValueError(f"scene: {len(targets)} scatterers exceed {MAX_TARGETS}")
     start, pulses = scan_extent(cfg, targets, d.get("start_along_track_m"), d.get("pulses"))
     return replace(points, targets=targets, pulses=pulses, start_along_track_m=start)
 

@@ -61,6 +61,9 @@ _TARGET_KEYS = {
 DEMO_SCENE = Path(__file__).with_name("scenes") / "demo.toml"
 MAX_PULSES = 1_000_000_000
 MAX_TARGETS = 100_000
+# The grid a [[pictures]] table or a [surface] lays out, blank or dropped points included: a
+# scene file declaring more is refused before any point is made (the kept ones: MAX_TARGETS).
+MAX_GRID_POINTS = 1_000_000
 
 
 @dataclass(frozen=True, eq=False)

@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from ..params import Config
-from .model import Targets
+from .model import MAX_GRID_POINTS, Targets
 from .surfaces import MAGNITUDES, resolution_cell_m
 
 LEVELS = {" ": 0.0, ".": 0.0, ":": 0.1, "+": 0.3, "o": 0.6, "#": 1.0}
@@ -100,6 +100,12 @@ def picture_targets(
     -------
     Targets
         One scatterer per grid point with a non-zero level (complex128 amplitudes).
+
+    Raises
+    ------
+    ValueError
+        For a grid of more than rtsar.scene.model.MAX_GRID_POINTS points (blank ones
+        included), before any is made; for levels, extents or parameters out of range.
     """
     levels = np.asarray(levels, np.float64)
     if levels.ndim != 2 or 0 in levels.shape:
@@ -121,8 +127,17 @@ def picture_targets(
         raise ValueError(f"picture.magnitude must be one of {MAGNITUDES}, got {magnitude!r}")
     rho_a, rho_r = resolution_cell_m(config, 0.5 * (r0 + r1))
     dx, dr = step_a * rho_a, step_r * rho_r
-    # Grid points at cell centres of a spacing that divides the rectangle evenly.
-    nx, nr = max(1, round((x1 - x0) / dx)), max(1, round((r1 - r0) / dr))
+    # Grid points at cell centres of a spacing that divides the rectangle evenly; counted
+    # before any is made (a NaN or infinite count fails the test too).
+    nx, nr = (x1 - x0) / dx, (r1 - r0) / dr
+    if nx <= MAX_GRID_POINTS and nr <= MAX_GRID_POINTS:
+        nx, nr = max(1, round(nx)), max(1, round(nr))
+    if not nx * nr <= MAX_GRID_POINTS:
+        raise ValueError(
+            f"a grid of {nx:.4g} x {nr:.4g} scatterers ({step_a:g} x {step_r:g} cells apart) "
+            f"exceeds {MAX_GRID_POINTS:,} points: a smaller rectangle or a wider "
+            "cells_per_scatterer"
+        )
     x = x0 + (np.arange(nx) + 0.5) * (x1 - x0) / nx
     r = r0 + (np.arange(nr) + 0.5) * (r1 - r0) / nr
     rows = np.minimum((np.arange(nx) + 0.5) * levels.shape[0] / nx, levels.shape[0] - 1)

@@ -30,7 +30,7 @@ from ..lens.plan import make_plan
 from ..params import Config, FMCWChirp
 from ..presets import preset
 from ..topo.insar_geometry import ZHAO_LOOK_ANGLE_RAD
-from .model import Scene, Targets
+from .model import MAX_GRID_POINTS, Scene, Targets
 
 HeightFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -260,6 +260,8 @@ def surface_scene(
     surface does not return; amplitude circular complex Gaussian of unit power.
     ``bright_points``: extra (x_m, y_m, amplitude) scatterers on the surface (retro-reflectors).
     The scene simulates lines + N - 1 pulses, so the engine focuses exactly ``lines`` lines.
+    A grid of more than rtsar.scene.model.MAX_GRID_POINTS points is refused (ValueError)
+    before it is made.
     """
     g = cfg.geometry
     if not g.platform_height_m > 0:
@@ -287,6 +289,15 @@ def surface_scene(
     margin = 5e-3
     y_lo = math.sqrt(max(r_lo - margin, big_h) ** 2 - big_h**2) - y_c
     y_hi = math.sqrt((r_hi + margin) ** 2 - big_h**2) - y_c
+    # The grid's points (np.arange's counts), known before it is made; NaN or inf fail too.
+    nx, ny = (2 * x_half + dx) / dx, (y_hi - y_lo) / dy
+    if nx <= MAX_GRID_POINTS and ny <= MAX_GRID_POINTS:
+        nx, ny = math.ceil(nx), max(math.ceil(ny), 0)
+    if not nx * ny <= MAX_GRID_POINTS:
+        raise ValueError(
+            f"a surface grid of {nx:.4g} x {ny:.4g} scatterers exceeds {MAX_GRID_POINTS:,} "
+            "points: fewer lines or a wider spacing (a lower scatterers_per_cell)"
+        )
     xg, yg = np.meshgrid(
         np.arange(-x_half, x_half + dx, dx), np.arange(y_lo, y_hi, dy), indexing="ij"
     )

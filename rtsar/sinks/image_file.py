@@ -19,10 +19,13 @@ import numpy as np
 
 from .. import __version__
 from ..params import Config, config_from_dict
+from .declared import check_read, stored_rows
 from .h5_output import H5Output
 from .io import FORMAT_VERSION, IMAGE_FORMAT, open_checked
 from .live_file import LiveFile
 from .name_claim import NameClaim
+
+HEIGHT_DATASETS = ("height_m", "height_valid", "coherence")  # [azimuth, range] each
 
 
 def write_image(
@@ -64,20 +67,23 @@ def image_config(attrs: dict, path) -> Config:
 
 
 def read_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
-    """(image, azimuth_m, range_m, attributes).  Of a file still being written (SWMR), the
-    lines both the image and its azimuth axis hold: the writer grows them one after the
-    other, and a reader may come between.
+    """(image, azimuth_m, range_m, attributes).
 
     What the file holds is checked first (ValueError ``PATH: …`` in one line): ``image`` a
     complex 2-D dataset without NaN/Inf (rtsar zeroes such pulses, so a non-finite pixel is
-    damage), the axes 1-D, finite and strictly increasing, ``range_m`` one entry per column and
-    ``azimuth_m`` at least as many as the lines."""
+    damage), the axes 1-D, finite and strictly increasing, ``range_m`` one entry per column,
+    ``azimuth_m`` one per line, the height datasets (if any) one value per column, and every
+    dataset's declared size one its file can hold and the machine's memory take
+    (rtsar.sinks.declared).  Of a file still being written (``complete`` False: a live
+    stream's, or one whose writer was killed), the lines both the image and its azimuth axis
+    hold, and that the file stores: the writer grows them one after the other, and a reader
+    may come between."""
     with open_checked(path, IMAGE_FORMAT) as f:
         try:
             image = _dataset(f, "image", 2, np.complexfloating, "complex")
             azimuth = _dataset(f, "azimuth_m", 1, np.floating, "float")
             range_ = _dataset(f, "range_m", 1, np.floating, "float")
-            rows = min(image.shape[0], azimuth.shape[0])
+            rows = _lines(image, azimuth, growing=not f.attrs.get("complete", True))
             if rows == 0 or image.shape[1] == 0:
                 raise ValueError(f"an image of {rows} lines x {image.shape[1]} columns: nothing")
             if range_.shape[0] != image.shape[1]:
@@ -85,6 +91,9 @@ def read_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, di
                     f"range_m has {range_.shape[0]} entries for the image's {image.shape[1]} "
                     "columns"
                 )
+            _check_heights(f, image.shape[1])
+            for ds, n in ((image, rows), (azimuth, rows), (range_, None)):
+                check_read(ds, n)
             out = image[:rows], azimuth[:rows], range_[...], dict(f.attrs)
         except (KeyError, TypeError, OSError) as exc:  # h5py on a damaged file
             raise ValueError(f"{path}: {exc}") from None
@@ -100,6 +109,34 @@ def read_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, di
     return out
 
 
+def _lines(image, azimuth, growing: bool) -> int:
+    """The image lines to read: all of them, ``azimuth_m`` holding one entry per line (an axis
+    of another length is damage, never cut to fit); of a file still being written, the lines
+    both hold that its storage backs (rtsar.sinks.declared.stored_rows)."""
+    if growing:
+        return min(stored_rows(image), stored_rows(azimuth))
+    if azimuth.shape[0] != image.shape[0]:
+        raise ValueError(
+            f"azimuth_m has {azimuth.shape[0]} entries for the image's {image.shape[0]} lines"
+        )
+    return image.shape[0]
+
+
+def _check_heights(f, columns: int) -> None:
+    """The height strips (``--height``), where the file has them: ``height_m``,
+    ``height_valid`` and (where kept) ``coherence`` 2-D, of the image's columns (their rows may
+    differ from the image's: a row the strips did not reach is not valid)."""
+    if "height_m" not in f:
+        return
+    for name in HEIGHT_DATASETS:
+        ds = f.get(name)
+        if ds is None and name == "coherence":
+            continue
+        if ds is None or not hasattr(ds, "dtype") or ds.ndim != 2 or ds.shape[1] != columns:
+            shape = getattr(ds, "shape", "missing")
+            raise ValueError(f"{name} must be [line, {columns} columns] as the image, got {shape}")
+
+
 def _dataset(f, name: str, ndim: int, kind, said: str):
     """Dataset ``name``, checked: present, ``ndim``-D, of the ``kind`` of numbers."""
     ds = f.get(name)
@@ -113,15 +150,26 @@ def _dataset(f, name: str, ndim: int, kind, said: str):
 def read_heights(path: str | Path) -> tuple[np.ndarray, np.ndarray] | None:
     """(height_m float32 [azimuth, range], valid bool) of an image file; None without heights.
 
-    Rows the height strips have not reached yet (a stream cut short) are invalid."""
+    Rows the height strips have not reached yet (a stream cut short) are invalid.  The rows
+    are the image's that :func:`read_image` reads, checked as it checks them (ValueError
+    ``PATH: …``)."""
     with open_checked(path, IMAGE_FORMAT) as f:
         if "height_m" not in f:
             return None
-        rows = f["image"].shape[0]
-        h = np.zeros(f["image"].shape, np.float32)
-        v = np.zeros(f["image"].shape, bool)
-        n = min(rows, f["height_m"].shape[0])
-        h[:n], v[:n] = f["height_m"][:n], f["height_valid"][:n] != 0
+        try:
+            image = _dataset(f, "image", 2, np.complexfloating, "complex")
+            azimuth = _dataset(f, "azimuth_m", 1, np.floating, "float")
+            rows = _lines(image, azimuth, growing=not f.attrs.get("complete", True))
+            _check_heights(f, image.shape[1])
+            check_read(image, rows)  # (the 5 bytes a pixel made here: under its 8)
+            n = min(rows, f["height_m"].shape[0], f["height_valid"].shape[0])
+            for name in ("height_m", "height_valid"):
+                check_read(f[name], n)
+            h = np.zeros((rows, image.shape[1]), np.float32)
+            v = np.zeros((rows, image.shape[1]), bool)
+            h[:n], v[:n] = f["height_m"][:n], f["height_valid"][:n] != 0
+        except (ValueError, KeyError, TypeError, OSError) as exc:
+            raise ValueError(f"{path}: {exc}") from None
         return h, v
 
 

@@ -5,14 +5,13 @@ Recording (``rtsar simulate``):  /shots complex64 [pulse, sample], /pulse_index 
 /channels/NAME complex64 [pulse, sample] per auxiliary channel of the shot (second receiver,
 reference interferometer, HCN cell, reference-region receivers, modulation channels), and
 /position_m float64 [pulse, 3] (x along track, y cross-track, z above the reference plane)
-where the geometry has a platform height;
-attributes format="rtsar-recording", format_version, config (JSON of the effective
-configuration), scene (JSON), channels (JSON list of {name, samples_per_shot, sample_rate_hz,
-dtype}; version 2), rtsar_version.  Version 1 files (main channel only) still read.
+where the geometry has a platform height; attributes format="rtsar-recording", format_version,
+config (JSON of the effective configuration), scene (JSON), channels (JSON list of {name,
+samples_per_shot, sample_rate_hz, dtype}; version 2), rtsar_version.  Version 1 files (main
+channel only) still read.  A size declared is checked before a read (rtsar.sinks.declared).
 
-Image files are rtsar.sinks.image_file; the helpers both share (file checks, the temporary name
-of an output until it is complete) are here.
-Complex values are HDF5 compounds of two floats named r and i (h5py's convention).
+Image files are rtsar.sinks.image_file; the helpers both share (file checks, an output's
+temporary name until complete) are here.  Complex values: HDF5 compounds of floats r and i.
 """
 
 from __future__ import annotations
@@ -34,6 +33,7 @@ from ..params import Config, config_from_dict
 from ..scene.model import Scene, recorded_scene
 from ..sources.formats.foreign import telemetry_problem
 from ..sources.formats.timebase import format_utc, parse_utc, utc_now
+from .declared import check_read, read_checked, stored_rows
 from .h5_output import H5Output, WriteFailed, is_write_error, reason
 from .name_claim import NameClaim
 from .partials import partial_prefix
@@ -291,10 +291,10 @@ class Recording:
         """A live recording's per-pulse flags (uint8 [pulse]; rtsar.sinks.raw_record: 1 a zero
         pulse ingest inserted, 2 a shot ingest zeroed, 4 not recorded); None where not kept."""
         flags = self._file.get("pulse_flags")
-        flags = None if flags is None else np.asarray(flags[: self.pulses], np.uint8)
+        flags = None if flags is None else read_checked(flags, self.pulses, self.path)
         if flags is not None and len(flags) != self.pulses:
             raise ValueError(f"{self.path}: pulse_flags has {len(flags)} rows, not {self.pulses}")
-        return flags
+        return None if flags is None else np.asarray(flags, np.uint8)
 
     @property
     def position_m(self) -> np.ndarray | None:
@@ -309,14 +309,14 @@ class Recording:
 
     def batches(self, size: int) -> Iterator[np.ndarray]:
         """Shots in blocks of ``size`` pulses (the last block may be shorter)."""
-        shots = self._file["shots"]
+        shots = self.shots  # (a recording cut short: its whole rows, not the rows beyond)
         for i in range(0, self.pulses, size):
             yield shots[i : i + size]
 
     def batches_with_aux(self, size: int, names=()) -> Iterator[tuple[np.ndarray, dict]]:
         """(shots, {channel: samples}) in blocks of ``size`` pulses; only the channels
         ``names`` are read (an oversampled HCN channel is 8× the shots' bytes)."""
-        shots = self._file["shots"]
+        shots = self.shots
         for i in range(0, self.pulses, size):
             yield shots[i : i + size], {n: self.channels[n][i : i + size] for n in names}
 
@@ -404,7 +404,7 @@ def open_recording(path: str | Path) -> Recording:
         cut_short = not f.attrs.get("complete", True)  # a live recording cut short, or growing
         if cut_short:
             pulses = _whole_rows(f, meta)
-        meta = {name: ds[:pulses] for name, ds in meta.items()}
+        meta = {name: read_checked(ds, pulses) for name, ds in meta.items()}
         for name, values in meta.items():
             if len(values) != pulses:
                 raise ValueError(f"{name} has {len(values)} entries for {pulses} shots")
@@ -415,6 +415,7 @@ def open_recording(path: str | Path) -> Recording:
             pos = _dataset(f, "position_m", 2, "float")
             if pos.shape != (pulses, 3):
                 raise ValueError(f"position_m must be [{pulses}, 3], got {pos.shape}")
+            check_read(pos)  # (its property reads it whole)
         problem = telemetry_problem(cfg, meta["pulse_index"], meta["along_track_m"])
         if problem:
             raise ValueError(problem)
@@ -442,12 +443,11 @@ def _whole_rows(f: h5py.File, meta: dict) -> int:
     """The rows of a live recording (rtsar.sinks.raw_record) written whole: its writer killed
     (or still writing) may have grown some datasets further than others, and rows it had not
     finished read as zeros; ``pulse_index``, written last and counting 0, 1, 2, … there,
-    says which rows are complete."""
-    group = f.get("channels")
-    datasets = [f["shots"], *meta.values()]
-    datasets += list(group.values()) if isinstance(group, h5py.Group) else []
-    rows = min(d.shape[0] for d in datasets)
-    index = meta["pulse_index"][:rows]
+    says which rows are complete; a row its file does not store is not."""
+    group = f["channels"] if isinstance(f.get("channels"), h5py.Group) else {}
+    datasets = [f["shots"], *meta.values(), *group.values()]
+    rows = min(stored_rows(meta["pulse_index"]), *(d.shape[0] for d in datasets))
+    index = read_checked(meta["pulse_index"], rows)
     wrong = np.flatnonzero(index != index[0] + np.arange(rows)) if rows else []
     return int(wrong[0]) if len(wrong) else rows
 

@@ -54,6 +54,9 @@ from .platform import PulseProcess, _non_negative, check_seed
 
 CHANNELS = REFERENCE_CHANNELS
 _BEAM_REACH = 1.5  # scatterers within ±1.5 F of the beam centre (field below e^-9 beyond)
+# A tile's scatterers (two tiles are in the beam at once): rtsar.scene.model.MAX_TARGETS's
+# figure, checked when the effect is made, before any tile is.
+MAX_TILE_SCATTERERS = 100_000
 
 
 class ReferenceRegion(Effect):
@@ -164,7 +167,14 @@ class ReferenceRegion(Effect):
         # Scatterers: Poisson-free fixed count per tile, density from scatterers_per_cell.
         self.tile_m = 4.0 * self.beam_diameter_m
         per_m2 = self.scatterers_per_cell / (rho * self.beam_diameter_m)
-        self.per_tile = max(1, int(round(per_m2 * self.tile_m * self.region_depth_m)))
+        per_tile = per_m2 * self.tile_m * self.region_depth_m
+        if not per_tile <= MAX_TILE_SCATTERERS:  # (inf too)
+            raise ValueError(
+                f"reference_region: {per_tile:.4g} scatterers a tile ({4 * self.beam_diameter_m:g}"
+                f" m along track) exceed {MAX_TILE_SCATTERERS:,}: a lower scatterers_per_cell or "
+                "region_depth_m"
+            )
+        self.per_tile = max(1, int(round(per_tile)))
         self.scatterer_rms = self.amplitude / math.sqrt(self.scatterers_per_cell)
         self._tiles: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 

@@ -6,6 +6,9 @@ import sys
 import numpy as np
 import pytest
 
+# Under CI=true a skip is a failure (tests/ci_rule.py): its hooks, registered for this suite.
+from ci_rule import in_ci, pytest_make_collect_report, pytest_runtest_makereport  # noqa: F401
+
 
 def _ephemeral_ports() -> range:
     """The ports the system gives outgoing connections (Linux's range; the usual elsewhere)."""
@@ -69,8 +72,7 @@ def opencl_unavailable_here() -> str | None:
 def opencl_required() -> bool:
     """In CI (CI=true, as CI services set it) or with RTSAR_REQUIRE_OPENCL=1, the OpenCL lens
     must run: a test of it that cannot build its kernels fails instead of skipping."""
-    ci = os.environ.get("CI", "").strip().lower() in ("true", "1", "yes")
-    return ci or os.environ.get("RTSAR_REQUIRE_OPENCL") == "1"
+    return in_ci() or os.environ.get("RTSAR_REQUIRE_OPENCL") == "1"
 
 
 def skip_or_fail_without_opencl(reason: str):

@@ -8,15 +8,13 @@ import sys
 import numpy as np
 import pytest
 
-pytest.importorskip("pyopencl")
-
-from rtsar.app.cli import main  # noqa: E402
-from rtsar.lens import auto, base, cl_devices, cl_probe, cl_vendors, make_plan  # noqa: E402
-from rtsar.lens.cache import read_json  # noqa: E402
-from rtsar.lens.cl_probe import DeviceReport  # noqa: E402
-from rtsar.lens.numpy_lens import NumpyLens  # noqa: E402
-from rtsar.lens.opencl import KERNELS, AOLens  # noqa: E402
-from rtsar.presets import preset  # noqa: E402
+from rtsar.app.cli import main  # pyopencl is a core dependency: never skipped for it
+from rtsar.lens import auto, base, cl_devices, cl_probe, cl_vendors, make_plan
+from rtsar.lens.cache import read_json
+from rtsar.lens.cl_probe import DeviceReport
+from rtsar.lens.numpy_lens import NumpyLens
+from rtsar.lens.opencl import KERNELS, AOLens
+from rtsar.presets import preset
 
 PRESETS = ("psaltis-max", "psaltis-jpl", "crouch-sal", "zhao-insal", "tiny")
 
@@ -350,8 +348,8 @@ def test_auto_takes_the_next_device_where_the_fastest_cannot_build_the_plan(monk
     """The survey builds complex64 on psaltis-max; a run's own plan may need what the fastest
     device lacks (double precision, local memory): the next device that builds it runs it."""
     ok = cl_devices.ranked(cl_devices.survey())
-    if len(ok) < 2:
-        pytest.skip("needs two OpenCL devices that build the lens")
+    if len(ok) < 2:  # a failure under CI=true (ci_rule.py); .ci/run installs Debian's PoCL
+        pytest.skip("needs two OpenCL devices that build the lens (Debian's PoCL is one more)")
     devices, real = cl_devices.list_devices(), auto.AOLens
 
     def picky(plan, device=None, precision="complex64"):

@@ -33,3 +33,15 @@ def test_an_unknown_preset_is_answered_about_the_preset(capsys):
     err = capsys.readouterr().err.splitlines()[-1]  # the line after the usage
     assert "--preset" in err and "nope" in err and "--serial" not in err
     assert all(name in err for name in PRESETS)
+
+
+def test_an_allocation_no_check_foresaw_is_one_line_not_a_traceback(monkeypatch, capsys):
+    from rtsar.app.cli import files
+
+    def exhausted(args):
+        raise MemoryError("Unable to allocate 128. GiB")
+
+    monkeypatch.setattr(files, "cmd_presets", exhausted)  # bound when the parser is built
+    assert main(["presets"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not enough memory" in err and "128. GiB" in err

@@ -284,3 +284,19 @@ def test_pictures_stop_at_the_first_that_takes_the_scene_past_its_bound(
     said = _one_line_error(capsys, "many.toml")
     assert "898478 scatterers by pictures[0] exceed 100000" in said, said
     assert len(built) == 1
+
+
+def test_an_absurd_receiver_count_is_refused_before_building(tmp_path, capsys):
+    """From the readers' round (issue 36, item 6): `receivers = 1e9` died with a 7.45 GiB
+    allocation traceback."""
+    from rtsar.app.cli import main
+
+    scene = tmp_path / "many.toml"
+    scene.write_text(
+        'preset = "zhao-insal"\n[geometry]\nplatform_height_m = 1.0\n'
+        "[[targets]]\nalong_track_m = 0.0\nrange_m = 2.4\n"
+        '[[effects]]\nname = "interferometric_receivers"\nreceivers = 1000000000\n'
+    )
+    assert main(["simulate", str(scene), "-o", str(tmp_path / "x.h5")]) == 2
+    err = capsys.readouterr().err
+    assert "receivers must be at most 16" in err and "Traceback" not in err

@@ -134,6 +134,8 @@ def main(argv=None) -> int:
         return 0
     except (ValueError, OSError, RuntimeError) as exc:
         return die(str(exc))
+    except MemoryError as exc:  # a size no check foresaw: one line, not numpy's traceback
+        return die(f"not enough memory for this request ({exc or 'allocation failed'})")
     except KeyboardInterrupt as exc:
         print(f"\nrtsar: {signals.describe(exc)}", file=sys.stderr)
         return signals.exit_status(exc)

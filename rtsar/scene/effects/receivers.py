@@ -41,6 +41,7 @@ import numpy as np
 from .base import Effect
 
 MODES = ("one_pass", "two_pass")
+MAX_RECEIVERS = 16  # phase centres; the papers' interferometers have two
 
 
 def receiver_offsets_m(
@@ -91,6 +92,11 @@ class InterferometricReceivers(Effect):
             raise ValueError("interferometric_receivers.piston_step_rad must be >= 0")
         if not (isinstance(receivers, int) and not isinstance(receivers, bool) and receivers >= 2):
             raise ValueError("interferometric_receivers.receivers must be an integer >= 2")
+        if receivers > MAX_RECEIVERS:  # each one is a channel as long as the main one
+            raise ValueError(
+                f"interferometric_receivers.receivers must be at most {MAX_RECEIVERS} (each is "
+                f"a channel of its own), got {receivers:,}"
+            )
         if mode not in MODES:
             raise ValueError(f"interferometric_receivers.mode must be one of {MODES}, got {mode!r}")
         if mode == "one_pass" and (piston_step_rad or along_track_offset_m):

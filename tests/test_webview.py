@@ -166,7 +166,8 @@ def test_status_carries_rate_latency_drops_and_link_counters():
     (msg,) = frames.updates(Cursor())
     status = json.loads(msg)  # strict JSON: NaN becomes null
     assert status["pulse_rate_hz"] == 1600.0 and "latency_recent_p99_ms" not in status
-    assert "dropped 4" in status["problems"] and "link lost 1" in status["problems"]
+    assert status["lost"] == ["4 shot(s) dropped (the processing queue was full)"]
+    assert status["link"]["text"].endswith("; lost 1 time(s)")
     assert status["viewer"]["missed_strips"] == 1
 
 

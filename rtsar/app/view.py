@@ -7,6 +7,7 @@ import sys
 import numpy as np
 
 from ..sinks.client import StripSubscriber
+from . import signals
 from .quicklook import save_quicklook, to_db
 
 
@@ -48,7 +49,9 @@ def view(
     true_aspect: bool = False,
 ) -> int:
     """Live waterfall window, or with ``png`` a snapshot once ``lines`` lines have arrived
-    (``true_aspect``: equal metres on both axes, see save_quicklook)."""
+    (``true_aspect``: equal metres on both axes, see save_quicklook).  A snapshot stopped by
+    Ctrl-C or a signal holds the lines that arrived, and the exit status is the signal's
+    (rtsar.app.signals: 130 for Ctrl-C), as for every command."""
     stream = stream or sys.stderr
     sub = StripSubscriber(endpoint, curve_server_key, curve_client_key, hwm_messages=64)
     fall = Waterfall(lines)
@@ -61,8 +64,9 @@ def view(
 
 
 def _snapshot(sub, fall, png, dynamic_range_db, timeout_s, stream, true_aspect=False) -> int:
-    print(f"view: waiting for {fall.lines} lines from {sub.endpoint} …", file=stream)
-    try:
+    interrupted = None
+    try:  # the line said inside: a Ctrl-C right after it is this block's
+        print(f"view: waiting for {fall.lines} lines from {sub.endpoint} …", file=stream)
         while fall.filled < fall.lines:
             msg = sub.recv(timeout_s)
             if msg is None:
@@ -72,11 +76,12 @@ def _snapshot(sub, fall, png, dynamic_range_db, timeout_s, stream, true_aspect=F
                 fall.add(msg.header, msg.lines)
             elif msg.topic == "end":
                 break
-    except KeyboardInterrupt:
-        pass
+    except KeyboardInterrupt as exc:
+        interrupted = exc
+        print(f"view: {signals.describe(exc)}", file=stream)
     if fall.filled == 0:
         print("view: no lines received; no snapshot written", file=stream)
-        return 1
+        return 1 if interrupted is None else signals.exit_status(interrupted)
     k = fall.filled
     save_quicklook(
         png,
@@ -88,7 +93,7 @@ def _snapshot(sub, fall, png, dynamic_range_db, timeout_s, stream, true_aspect=F
         true_aspect=true_aspect,
     )
     print(f"wrote {png}: {k} lines", file=stream)
-    return 0
+    return 0 if interrupted is None else signals.exit_status(interrupted)
 
 
 def _window(sub, fall, dynamic_range_db, stream) -> int:

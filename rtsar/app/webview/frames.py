@@ -16,7 +16,11 @@ for it here.  Memory: two rings of ``rows × columns`` floats, whatever the run'
 Messages for the page (rtsar.app.webview.server sends them over a WebSocket):
 
 * text, JSON ``{"type": "stream", …}``: the stream's id and axes (sent when it starts or a
-  publisher restarts with a new ``stream_id``); ``{"type": "status", …}``: the run's counters;
+  publisher restarts with a new ``stream_id``); ``{"type": "status", …}``: the run's counters,
+  and in words (:func:`losses`, :func:`notes`, :func:`link_words`) what the page shows: ``lost``
+  (painted red: shots, frames, lines or messages that are missing), ``noted`` (counters that say
+  something happened but nothing is missing: late releases, flagged lines …), ``link`` (the
+  source's link: ``text`` and ``alarm``, red while the source is silent);
 * binary: a uint32 little-endian length ``L``, a JSON header of ``L`` bytes (``kind`` "image"
   or "height", ``newest`` row, ``count``, ``columns``), padded with spaces to a multiple of 8,
   then ``count`` float64 row numbers and ``count × columns`` float32 values (dB, or metres of
@@ -198,6 +202,7 @@ class LiveFrames:
             self.strips += 1
             counters = header.get("counters", {})
             self.status.update(state="live", stream_id=header["stream_id"], counters=counters)
+            self._heard(header)
             self._status_tick = self._tick
 
     def add_height(self, header: dict, height_m: np.ndarray, valid: np.ndarray) -> None:
@@ -216,11 +221,24 @@ class LiveFrames:
                 c = pool_columns(v[a:b].sum(axis=0, keepdims=True), per_col, "sum")
                 self._put(self._height, g, np.stack([s, c])[:, 0], "sum")
 
+    def _heard(self, header: dict) -> None:
+        """A message from the publisher: it is not quiet; one of a stream other than the one
+        that ended (a new run) means the stream is no longer ended.  Either way the state said
+        for it (publisher silent, stream ended) no longer holds: live."""
+        ended = self.status.get("ended_stream")
+        new_run = ended is not None and header.get("stream_id") != ended
+        if self.status.get("publisher_quiet") or new_run:
+            self.status["state"] = "live"
+        self.status["publisher_quiet"] = False
+        if new_run:
+            self.status["ended_stream"] = None
+
     def add_status(self, topic: str, header: dict, subscriber_counters: dict) -> None:
         """A ``stats`` or ``end`` message, or only the subscriber's own counters (topic "")."""
         with self._lock:
             self._tick += 1
             if topic in ("stats", "end"):
+                self._heard(header)
                 keep = ("pulse_rate_hz", "elapsed_s", "latency_recent_median_ms")
                 keep += ("latency_recent_p99_ms", "latency_median_ms", "latency_p99_ms")
                 for key in keep:
@@ -234,6 +252,7 @@ class LiveFrames:
                     self.status["link_silent"] = _silence(header["link"])
                 if topic == "end":
                     self.status["state"] = "stream ended"
+                    self.status["ended_stream"] = str(header.get("stream_id", ""))
             self.status["viewer"] = dict(subscriber_counters)
             self.status["updated_unix_s"] = time.time()
             self._status_tick = self._tick
@@ -242,6 +261,16 @@ class LiveFrames:
         with self._lock:
             self._tick += 1
             self.status["state"] = state
+            self._status_tick = self._tick
+
+    def publisher_quiet(self, silence_s: float) -> None:
+        """No message for ``silence_s``: said in the state unless the stream has ended (then
+        silence is what the end said), and the link's last word no longer holds."""
+        with self._lock:
+            self._tick += 1
+            self.status["publisher_quiet"] = True
+            if self.status.get("ended_stream") is None:
+                self.status["state"] = f"no message for {silence_s:g} s: publisher silent"
             self._status_tick = self._tick
 
     # ---- from the server's event loop ------------------------------------------------------
@@ -279,17 +308,130 @@ class LiveFrames:
                     out.append(encode_rows("height", ring.newest, ring.tag[slots], mean))
                 cursor.image_tick = cursor.height_tick = tick
             if self._status_tick > cursor.status_tick:
-                status = dict(self.status, type="status")
-                status["problems"] = problems(status.get("counters", {}))
-                out.append(json.dumps(_finite(status), allow_nan=False, default=str))
+                status = page_status(dict(self.status, type="status"))
+                out.append(json.dumps(status, allow_nan=False))
                 cursor.status_tick = tick
         return out
 
     def snapshot_status(self) -> dict:
         """The status as the page gets it (``/status.json``)."""
         with self._lock:
-            status = dict(self.status, problems=problems(self.status.get("counters", {})))
-            return _finite(json.loads(json.dumps(status, default=str)))
+            return page_status(self.status)
+
+
+# Counters that say something is missing (red on the page), and those that say something
+# happened with nothing missing (noted in black), each in words that say what it counts.  The
+# link's own counters are told in the link's row (link_words); gap_pulses: see losses.
+LOST_WORDS = {
+    "dropped_pulses": "{n} shot(s) dropped (the processing queue was full)",
+    "stray_pulses": "{n} stray shot(s) dropped (numbered outside the run and any restart)",
+    "nonfinite_pulses": "{n} shot(s) zeroed (NaN/Inf samples)",
+    "wrong_length_pulses": "{n} shot(s) zeroed (the wrong number of samples)",
+    "marked_pulses": "{n} shot(s) with no data (marked so in the recording)",
+    "payload_crc_errors": "{n} frame(s) discarded (payload CRC)",
+    "bad_headers": "{n} frame(s) discarded (a header of an unknown kind)",
+    "wrong_length": "{n} frame(s) or message(s) discarded (another shape than the stream's)",
+    "truncated_frames": "{n} frame(s) cut short when the link ended",
+    "oversized_messages": "{n} oversized message(s) refused",
+    "messages_missed_by_stalled": "{n} message(s) sent while a stalled subscriber was cut off",
+    "record_dropped": "{n} shot(s) not recorded",
+    "record_unconfirmed": "{n} shot(s) not confirmed in the recording (it may lack them)",
+    "image_lines_lost": "{n} line(s) not written to -o",
+}
+NOTED_WORDS = {
+    "late_releases": "{n} late release(s): chunks of simulated shots sent over 1 ms after "
+    "their time (no shot lost by it; the wait is in the latency)",
+    "flagged_lines": "{n} flagged line(s): lines whose aperture holds a zero-filled, zeroed "
+    "or marked shot",
+    "duplicates": "{n} duplicate shot(s) set aside (a copy of one already in)",
+    "late_pulses": "{n} late shot(s) set aside (their place was already zero-filled)",
+    "discontinuities": "{n} restart(s) of the shot count",
+    "pulses_before_start": "{n} shot(s) of the scan before the first one received",
+    "header_crc_errors": "{n} sync word(s) without a valid header",
+    "bytes_skipped": "{n} byte(s) skipped looking for frames",
+    "layout_changes": "{n} change(s) of the stream's layout",
+    "subscriber_stalls": "{n} stalled subscriber(s) cut off",
+    "swath_refused_messages": "{n} swath message(s) refused (malformed or of no worker)",
+}
+LINK_COUNTERS = ("link_silences", "link_silent_ms", "link_drops", "reconnects")
+
+
+def _count(counters: dict, key: str) -> int:
+    value = counters.get(key, 0)
+    return int(value) if isinstance(value, (int, float)) and math.isfinite(value) else 0
+
+
+def losses(counters: dict) -> list[str]:
+    """What is missing, in words, from the run's counters: what the page paints red.
+
+    ``gap_pulses`` counts the zero shots put in for numbers that never came (``gaps`` such
+    jumps) and those put in at a restart of the count (``discontinuities``, no shot missing):
+    a loss when there was a gap."""
+    out = []
+    gaps, filled = _count(counters, "gaps"), _count(counters, "gap_pulses")
+    if gaps and filled:
+        restarts = _count(counters, "discontinuities")
+        out.append(
+            f"{filled} zero shot(s) in place of {gaps} gap(s) in the shot count"
+            + (f" and {restarts} restart(s)" if restarts else "")
+        )
+    for key, words in LOST_WORDS.items():
+        if n := _count(counters, key):
+            out.append(words.format(n=n))
+    return out
+
+
+def notes(counters: dict) -> list[str]:
+    """Every other counter that is not zero (nothing missing), in words: shown, not red."""
+    out = []
+    if not _count(counters, "gaps") and (filled := _count(counters, "gap_pulses")):
+        out.append(f"{filled} zero shot(s) clearing the picture at a restart of the shot count")
+    for key, value in counters.items():
+        if key in LOST_WORDS or key in LINK_COUNTERS or key in ("gaps", "gap_pulses"):
+            continue
+        if key in NOTED_WORDS:
+            if n := _count(counters, key):
+                out.append(NOTED_WORDS[key].format(n=n))
+        else:  # normal work is left out; any other counter in the run's own words
+            out.extend(problems({key: value}))
+    return out
+
+
+def link_words(status: dict) -> dict:
+    """The source's link, as the page's row says it: ``text``, and ``alarm`` (red) while the
+    source is silent.  After the stream's end, or while this viewer hears nothing from the
+    publisher, the last word of a stats message (shots arriving) no longer holds."""
+    quiet = status.get("link_silent")
+    alarm = False
+    if status.get("ended_stream") is not None:
+        text = "the stream ended: no more shots"
+    elif status.get("publisher_quiet"):
+        text = "not known: no message from the publisher"
+    elif quiet:
+        alarm = True
+        since = quiet["since_pulse"]
+        text = f"SILENT for {quiet['silent_s']:.1f} s since " + (
+            "the start (no pulse yet)" if since is None else f"pulse {since}"
+        )
+    elif "link_silent" in status:
+        text = "shots arriving"
+    else:
+        text = "not told by the publisher (yet)"
+    c = status.get("counters", {})
+    if n := _count(c, "link_silences"):
+        text += f"; silent {n} time(s), {_count(c, 'link_silent_ms') / 1e3:.1f} s in all"
+    if n := _count(c, "link_drops"):
+        text += f"; lost {n} time(s)"
+    if n := _count(c, "reconnects"):
+        text += f"; reconnected {n} time(s)"
+    return {"text": text, "alarm": alarm}
+
+
+def page_status(status: dict) -> dict:
+    """``status`` with the words the page shows (module docstring), as strict JSON allows."""
+    counters = status.get("counters", {})
+    out = dict(status, lost=losses(counters), noted=notes(counters), link=link_words(status))
+    return _finite(json.loads(json.dumps(out, default=str)))
 
 
 def _finite(value):

@@ -26,13 +26,16 @@ import contextlib
 import math
 import secrets
 import socket
+import struct
 import sys
 import threading
 import time
+import zlib
 from collections import deque
 from dataclasses import dataclass, field
 from importlib import resources
 
+import numpy as np
 from aiohttp import WSMsgType, web
 
 from ...sinks.client import StripSubscriber
@@ -83,6 +86,28 @@ class Said:
         self._last[kind] = now
         unsaid = self._unsaid.pop(kind, 0)
         self.say(line + (f" (and {unsaid} more since the last such line)" if unsaid else ""))
+
+
+def icon_png(size: int = 16) -> bytes:
+    """The page's icon, drawn here: a grey PNG of ``size`` × ``size`` pixels, a waterfall's
+    rows brighter towards the newest (the bottom) and one bright point target with its
+    sidelobes.  Served as /favicon.ico, so a browser's request for it is answered."""
+    y, x = np.mgrid[0:size, 0:size]
+    grey = 30 + (90 * y) // max(size - 1, 1)
+    cy, cx = size * 3 // 8, size * 5 // 8
+    grey = np.where((y == cy) ^ (x == cx), 150, grey)  # the sidelobes: a cross
+    grey = np.where((abs(y - cy) <= 1) & (abs(x - cx) <= 1), 255, grey).astype(np.uint8)
+    raw = b"".join(b"\0" + row.tobytes() for row in grey)  # filter type 0 on each row
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        body = kind + data
+        return struct.pack(">I", len(data)) + body + struct.pack(">I", zlib.crc32(body))
+
+    header = struct.pack(">IIBBBBB", size, size, 8, 0, 0, 0, 0)  # 8-bit grey, no interlace
+    return b"".join(
+        [b"\x89PNG\r\n\x1a\n", chunk(b"IHDR", header), chunk(b"IDAT", zlib.compress(raw))]
+        + [chunk(b"IEND", b"")]
+    )
 
 
 def _stderr(message: str) -> None:
@@ -152,6 +177,7 @@ class ViewServer:
         self._changed: asyncio.Event | None = None
         self._runner: web.AppRunner | None = None
         self.failure: str | None = None
+        self._icon_png = icon_png()
 
     # ---- the subscriber thread -----------------------------------------------------------------
     def _receive(self) -> None:
@@ -163,7 +189,7 @@ class ViewServer:
                 now = time.monotonic()
                 if msg is None:
                     if now - last > SILENCE_S and not said_silent:
-                        self.frames.set_state(f"no message for {SILENCE_S:g} s: publisher silent")
+                        self.frames.publisher_quiet(SILENCE_S)
                         said_silent = True
                         self._notify()
                     continue
@@ -228,6 +254,13 @@ class ViewServer:
             text=text,
             content_type=_CONTENT_TYPES[suffix],
             headers={"Cache-Control": "no-store", "Referrer-Policy": "no-referrer"},
+        )
+
+    async def _icon(self, request: web.Request) -> web.Response:
+        return web.Response(
+            body=self._icon_png,
+            content_type="image/png",
+            headers={"Cache-Control": "max-age=86400"},
         )
 
     async def _status(self, request: web.Request) -> web.Response:
@@ -333,6 +366,7 @@ class ViewServer:
         app.router.add_get("/", self._page)
         app.router.add_get("/static/{name}", self._static)
         app.router.add_get("/status.json", self._status)
+        app.router.add_get("/favicon.ico", self._icon)
         app.router.add_get("/ws", self._socket)
         return app
 

@@ -2,11 +2,13 @@
 "use strict";
 (function () {
   const FLOOR_DB = -250; // at or below: a pixel that holds no line
+  const WAITING = "waiting for the first strip";
+  const IMAGE_TITLE = "|image| in dB re the peak of the lines shown";
   const VIRIDIS = [[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]];
   const S = {
     stream: null, tags: null, image: null, htags: null, heights: null,
-    newest: -1, hnewest: -1, status: {}, connected: false, messages: 0, rendered: null,
-    heightRendered: null,
+    newest: -1, hnewest: -1, first: Infinity, hfirst: Infinity, // rows: newest, oldest received
+    status: {}, connected: false, messages: 0, rendered: null, heightRendered: null,
   };
   window.rtsarView = S; // for tests and the curious: the page's state
 
@@ -50,6 +52,7 @@
       S.htags = new Float64Array(m.rows).fill(-1);
       S.heights = new Float32Array(n).fill(NaN);
       S.newest = S.hnewest = -1;
+      S.first = S.hfirst = Infinity;
       $("height-plot").hidden = true;
       $("stream").textContent = "stream " + m.stream_id + ": " + m.lines_per_row +
         " line(s) per row, " + m.bins_per_column + " bin(s) per column (largest |x|)";
@@ -76,9 +79,13 @@
       tags[slot] = rows[i];
       data.set(vals.subarray(i * C, (i + 1) * C), slot * C);
     }
-    if (image) S.newest = Math.max(S.newest, head.newest);
-    else {
+    const oldest = rows.reduce((a, b) => Math.min(a, b), Infinity);
+    if (image) {
+      S.newest = Math.max(S.newest, head.newest);
+      S.first = Math.min(S.first, oldest);
+    } else {
       S.hnewest = Math.max(S.hnewest, head.newest);
+      S.hfirst = Math.min(S.hfirst, oldest);
       $("height-plot").hidden = false;
     }
   }
@@ -130,7 +137,14 @@
       }
     }
     ctx.putImageData(out, 0, 0);
-    axes("image", S.newest);
+    if (S.newest < 0) { // a stream but no line yet: no axis to tell, no scale
+      $("image-title").textContent = WAITING;
+      for (const id of ["image-xticks", "image-yticks", "image-barticks"]) $(id).replaceChildren();
+      S.rendered = null;
+      return;
+    }
+    $("image-title").textContent = IMAGE_TITLE;
+    axes("image", S.newest, S.first);
     greyBar(range);
     S.rendered = { newest: S.newest, peak_db: peak, dynamic_range_db: range, rows: R, columns: C };
   }
@@ -169,7 +183,7 @@
       }
     }
     ctx.putImageData(out, 0, 0);
-    axes("height", S.hnewest);
+    axes("height", S.hnewest, S.hfirst);
     colourBar(1e3 * lo, 1e3 * hi);
     S.heightRendered = { newest: S.hnewest, low_m: lo, high_m: hi };
   }
@@ -208,9 +222,11 @@
     return (Math.abs(v) < step * 1e-6 ? 0 : v).toFixed(digits);
   }
 
-  function ticks(box, from, to, count, vertical) {
+  // Ticks along from…to (0…100 %), labelled only where lines are: within lo…hi.
+  function ticks(box, from, to, count, vertical, lo = from, hi = to) {
     const t = niceTicks(from, to, count);
-    box.replaceChildren(...t.values.map((v) => {
+    const a = Math.min(lo, hi) - 1e-9 * t.step, b = Math.max(lo, hi) + 1e-9 * t.step;
+    box.replaceChildren(...t.values.filter((v) => v >= a && v <= b).map((v) => {
       const s = document.createElement("span");
       s.textContent = label(v, t.step);
       s.style[vertical ? "top" : "left"] = (100 * (v - from)) / (to - from) + "%";
@@ -218,14 +234,16 @@
     }));
   }
 
-  function axes(kind, newest) {
+  // first: the oldest row received; the rows above it hold no line and get no label.
+  function axes(kind, newest, first) {
     const st = S.stream;
     const left = st.column0_m - 0.5 * st.column_step_m;
     const right = st.column0_m + (st.columns - 0.5) * st.column_step_m;
     ticks($(kind + "-xticks"), left, right, 6, false);
     const top = st.row0_m + (newest - st.rows + 0.5) * st.row_step_m;
     const bottom = st.row0_m + (newest + 0.5) * st.row_step_m;
-    ticks($(kind + "-yticks"), top, bottom, 8, true);
+    const held = st.row0_m + (Math.max(first, newest - st.rows + 1) - 0.5) * st.row_step_m;
+    ticks($(kind + "-yticks"), top, bottom, 8, true, held, bottom);
   }
 
   function greyBar(range) {
@@ -260,28 +278,25 @@
         fixed(m.latency_recent_p99_ms, 2, " ms")],
       ["pulses processed, lines", (c.pulses_processed ?? "–") + ", " + (c.lines_out ?? "–")],
     ];
-    // The link: silent now (since which pulse), else shots arriving; its counters in words.
-    const quiet = m.link_silent;
-    const linkParts = [quiet ? "SILENT for " + quiet.silent_s.toFixed(1) + " s since " +
-      (quiet.since_pulse === null ? "the start (no pulse yet)" : "pulse " + quiet.since_pulse)
-      : "shots arriving"];
-    if (c.link_silences) linkParts.push("silent " + c.link_silences + " time(s), " +
-      ((c.link_silent_ms || 0) / 1000).toFixed(1) + " s in all");
-    if (c.link_drops) linkParts.push("lost " + c.link_drops + " time(s)");
-    if (c.reconnects) linkParts.push("reconnected " + c.reconnects + " time(s)");
-    rows.push(["link", linkParts.join("; ")]);
-    const problems = m.problems || [];
-    rows.push(["drops, gaps", problems.length ? problems.join(", ") : "no drops/gaps"]);
+    // The words and what is red come from the server (frames.py: losses, notes, link_words):
+    // red only for what is missing, and for a source silent now.
+    const link = m.link || { text: "–", alarm: false };
+    const lost = m.lost || [], noted = m.noted || [];
+    const red = new Set();
+    rows.push(["link", link.text]);
+    if (link.alarm) red.add("link");
+    rows.push(["lost", lost.length ? lost.join("; ") : Object.keys(c).length ? "nothing" : "–"]);
+    if (lost.length) red.add("lost");
+    if (noted.length) rows.push(["noted, nothing lost", noted.join("; ")]);
     const v = m.viewer || {};
     rows.push(["this viewer", "strips " + (v.strips ?? 0) + ", missed strips " +
       (v.missed_strips ?? 0) + ", bad messages " + (v.bad_messages ?? 0) + "; browsers " +
       (m.browsers ?? 1)]);
+    if (v.missed_strips) red.add("this viewer");
     const body = $("status").tBodies[0];
     body.replaceChildren(...rows.map(([k, val], i) => {
       const tr = document.createElement("tr");
-      if ((k === "drops, gaps" && problems.length) || (k === "link" && quiet)) {
-        tr.className = "problem";
-      }
+      if (red.has(k)) tr.className = "problem";
       tr.id = "status-" + i;
       for (const text of [k, val]) {
         const td = document.createElement("td");

@@ -1,0 +1,76 @@
+"""``rtsar view --png``: Ctrl-C or a signal ends it with the signal's exit status (130 for
+Ctrl-C), like every other command, keeping the lines that arrived (issue 37, item 6)."""
+
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from conftest import free_port
+from test_webview import strip_header
+
+from rtsar.app import signals
+from rtsar.app.view import Waterfall, _snapshot
+from rtsar.sinks.wire import Message
+
+
+def test_ctrl_c_before_any_line_exits_130_in_one_line(tmp_path):
+    png = tmp_path / "v.png"
+    endpoint = f"tcp://127.0.0.1:{free_port()}"  # no publisher: it waits
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "rtsar", "view", endpoint, "--png", str(png)],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        first = proc.stderr.readline()
+        assert first.startswith("view: waiting for"), first
+        proc.send_signal(signal.SIGINT)
+        rest = proc.communicate(timeout=30)[1]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, rest
+    assert rest.splitlines() == [
+        "view: interrupted",
+        "view: no lines received; no snapshot written",
+    ]
+    assert not png.exists()
+
+
+class Interrupted:
+    """A subscriber that delivers ``strips`` then is interrupted by ``exc``."""
+
+    endpoint = "tcp://test:1"
+
+    def __init__(self, strips, exc):
+        self.strips, self.exc = list(strips), exc
+
+    def recv(self, timeout_s):
+        if self.strips:
+            return self.strips.pop(0)
+        raise self.exc
+
+
+@pytest.mark.parametrize(
+    "exc, status", [(KeyboardInterrupt(), 130), (signals.Terminated(signal.SIGTERM), 143)]
+)
+def test_a_stopped_snapshot_holds_the_lines_that_arrived_and_exits_with_the_signal(
+    tmp_path, exc, status
+):
+    lines = np.ones((16, 32), np.complex64)
+    strips = [Message("strip", strip_header("s", k, 16 * k, 16, 32), lines) for k in range(3)]
+    said = []
+
+    class Stream:
+        def write(self, text):
+            said.append(text)
+
+    png = tmp_path / "v.png"
+    assert _snapshot(Interrupted(strips, exc), Waterfall(1024), str(png), 50.0, 5, Stream()) == (
+        status
+    )
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert f"wrote {png}: 48 lines" in "".join(said)

@@ -74,3 +74,27 @@ def test_a_stopped_snapshot_holds_the_lines_that_arrived_and_exits_with_the_sign
     )
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert f"wrote {png}: 48 lines" in "".join(said)
+
+
+def test_the_page_server_stopped_by_ctrl_c_exits_130(tmp_path):
+    """`view --http` too: Ctrl-C is 130, as every command (it said 0)."""
+    endpoint = f"tcp://127.0.0.1:{free_port()}"  # no publisher needed to serve the page
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "rtsar", "view", endpoint, "--http", "127.0.0.1:0"],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        lines = []
+        while not any("http://" in ln for ln in lines):  # serving: the page's URL is told
+            line = proc.stderr.readline()
+            assert line, "".join(lines)
+            lines.append(line)
+        proc.send_signal(signal.SIGINT)
+        rest = proc.communicate(timeout=30)[1]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, rest
+    assert "view: interrupted" in rest

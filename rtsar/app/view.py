@@ -140,6 +140,6 @@ def _window(sub, fall, dynamic_range_db, stream) -> int:
                     f"missed strips {sub.counters['missed_strips']}"
                 )
             plt.pause(0.05)
-    except KeyboardInterrupt:
-        pass
+    except KeyboardInterrupt as exc:  # the window closed by Ctrl-C: 130, as every command
+        return signals.exit_status(exc)
     return 0

@@ -39,6 +39,7 @@ import numpy as np
 from aiohttp import WSMsgType, web
 
 from ...sinks.client import StripSubscriber
+from .. import signals
 from .access import origin_refusal, token_refusal
 from .frames import Cursor, LiveFrames
 
@@ -415,9 +416,10 @@ def serve(
     allowed_origins=(),
     token: str | None = None,
 ) -> int:
-    """Serve the page until Ctrl-C or a signal (exit status 0), or until the subscriber fails
-    (1).  ``say`` prints the page's URL (with its token), the refusals and drops, and the end.
-    ``allowed_origins``, ``token``: as for :class:`ViewServer`."""
+    """Serve the page until Ctrl-C or a signal (exit status 128 + its number: 130 for Ctrl-C),
+    or until the subscriber fails (1).  ``say`` prints the page's URL (with its token), the
+    refusals and drops, and the end.  ``allowed_origins``, ``token``: as for
+    :class:`ViewServer`."""
 
     async def main() -> int:
         server = ViewServer(
@@ -450,6 +452,6 @@ def serve(
 
     try:
         return asyncio.run(main())
-    except KeyboardInterrupt:
-        say("view: stopped")
-        return 0
+    except KeyboardInterrupt as exc:  # 130 for Ctrl-C, 128 + N for a signal: as every command
+        say(f"view: {signals.describe(exc)}")
+        return signals.exit_status(exc)

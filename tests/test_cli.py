@@ -428,3 +428,24 @@ def test_an_hdf5_output_named_like_a_picture_is_refused(tmp_path, capsys):
         assert main(args) == 2, args
         assert "writes an HDF5 file (.h5)" in capsys.readouterr().err, args
     assert list(tmp_path.iterdir()) == []
+
+
+def test_quicklook_chooses_its_aspect_and_says_any_stretch():
+    """Issue 37: a short run's quicklook was stretched ~13:1 into streaks, unsaid.  By default
+    the picture is drawn 1:1 where that fits a figure; where it does not, the title gives the
+    stretch, measured on the drawn axes."""
+    from rtsar.app.quicklook import image_axes, quicklook_figure, vertical_stretch
+
+    img = np.ones((40, 10), np.complex64)
+    tall = quicklook_figure(img, np.arange(40) * 1.0, 100.0 + np.arange(10), title="t")
+    k = vertical_stretch(tall, tall.axes[0], image_axes(np.arange(40.0), np.arange(10.0)))
+    assert k < 0.9 and f"{k:.2g}x" in tall.axes[0].get_title()  # 40 m by 10 m: 1:1 is 29 in
+    short_az, rg = np.arange(40) * 0.05, 1000.0 + np.arange(300) * 3.0  # 2 m by 900 m
+    wide = quicklook_figure(np.ones((40, 300), np.complex64), short_az, rg, title="short run")
+    ax = wide.axes[0]
+    k = vertical_stretch(wide, ax, image_axes(short_az, rg))
+    assert k > 10  # filled, not a 1:450 sliver ...
+    assert f"{k:.2g}x" in ax.get_title() and ax.get_title().startswith("short run")  # ... said
+    square = quicklook_figure(img[:10], np.arange(10) * 1.0, 100.0 + np.arange(10), title="sq")
+    assert square.axes[0].get_title() == "sq"  # 10 m by 10 m: drawn 1:1, nothing to say
+    assert vertical_stretch(square, square.axes[0], image_axes(np.arange(10.0), np.arange(10.0)))

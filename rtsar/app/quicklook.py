@@ -134,7 +134,7 @@ def quicklook_figure(
     range_m,
     dynamic_range_db: float = 50.0,
     title: str = "",
-    true_aspect: bool = False,
+    true_aspect: bool | None = None,
     spotlight: bool = False,
 ):
     """The figure of :func:`save_quicklook` (the caller closes it)."""
@@ -152,6 +152,8 @@ def quicklook_figure(
         )
     db = to_db(image, dynamic_range_db)
     axes = image_axes(azimuth_m, range_m, spotlight)
+    if true_aspect is None:  # true aspect where it fits a figure, else fill it and say so
+        true_aspect = _true_aspect_fits(axes)
     fig, ax = plt.subplots(figsize=(8, _figure_height(axes, image.shape, true_aspect)), dpi=100)
     im = ax.imshow(
         axes.shown(db),
@@ -168,7 +170,34 @@ def quicklook_figure(
     ax.set_title(title)
     fig.colorbar(im, ax=ax, label="dB re peak")
     fig.tight_layout()
+    if not true_aspect and not 0.9 <= vertical_stretch(fig, ax, axes) <= 1.1:
+        # Say how far the picture is from one metre = one metre: the two-line title moves the
+        # axes, so the figure is laid out with it first, then the stretch read on the result.
+        def said(k: float) -> str:
+            return f"{title}\n(vertical axis drawn {k:.2g}x the horizontal's scale; " + (
+                "--true-aspect for 1:1)"
+            )
+
+        ax.set_title(said(vertical_stretch(fig, ax, axes)), fontsize=9)
+        fig.tight_layout()
+        ax.set_title(said(vertical_stretch(fig, ax, axes)).lstrip("\n"), fontsize=9)
     return fig
+
+
+def _true_aspect_fits(axes: ImageAxes) -> bool:
+    """Whether one metre = one metre gives a figure between 3 and 12 inches tall (8 wide)."""
+    e = axes.extent
+    ratio = abs(e[2] - e[3]) / max(abs(e[1] - e[0]), 1e-30)
+    return 3.0 <= 7.0 * ratio + 1.0 <= 12.0
+
+
+def vertical_stretch(fig, ax, axes: ImageAxes) -> float:
+    """Inches per unit down the drawn image over inches per unit across: 1 at true aspect."""
+    box = ax.get_position()
+    width_in, height_in = box.width * fig.get_figwidth(), box.height * fig.get_figheight()
+    e = axes.extent
+    across, down = abs(e[1] - e[0]), abs(e[3] - e[2])
+    return (height_in / max(down, 1e-30)) / (width_in / max(across, 1e-30))
 
 
 def save_quicklook(
@@ -178,13 +207,14 @@ def save_quicklook(
     range_m,
     dynamic_range_db: float = 50.0,
     title: str = "",
-    true_aspect: bool = False,
+    true_aspect: bool | None = None,
     spotlight: bool = False,
 ) -> None:
     """Write a PNG: range across, azimuth (along track) down, grey scale in dB.
 
-    ``true_aspect``: one metre is as long on both axes, so a focused point looks round (the
-    default fills the figure; the axes' metres say how much one axis is stretched).
+    ``true_aspect``: True, one metre is as long on both axes, so a focused point looks round;
+    False, the image fills the figure; None (default), true aspect where that gives a figure
+    3 to 12 inches tall, else filled, with the title saying how far one axis is stretched.
     ``spotlight``: an image[x, y] of rtsar spotlight, drawn cross-range x across, down-range y
     up (image_axes).
     """
@@ -218,7 +248,7 @@ def height_figure(
     title: str = "",
     limits_mm: tuple[float, float] | None = None,
     cmap: str = "viridis",
-    true_aspect: bool = True,
+    true_aspect: bool | None = True,
 ):
     """The figure of :func:`save_height_quicklook` (the caller closes it)."""
     plt = file_pyplot()
@@ -235,6 +265,8 @@ def height_figure(
         raise ValueError("height map holds non-finite values on valid pixels")
     lo, hi = limits_mm or height_colour_limits_mm(h, v)
     axes = image_axes(azimuth_m, range_m)  # the amplitude image's axes (quicklook_figure)
+    if true_aspect is None:  # as quicklook_figure decides it, so the two pictures agree
+        true_aspect = _true_aspect_fits(axes)
     colours = plt.get_cmap(cmap).with_extremes(bad=MASKED_GREY)
     shown = np.ma.array(h * 1e3, mask=~v)
     fig_h = _figure_height(axes, h.shape, true_aspect)
@@ -266,7 +298,7 @@ def save_height_quicklook(
     title: str = "",
     limits_mm: tuple[float, float] | None = None,
     cmap: str = "viridis",
-    true_aspect: bool = True,
+    true_aspect: bool | None = True,
 ) -> None:
     """Write a PNG of a height map on the amplitude image's axes (slant range across, along
     track down, in the unit of the span; height colour, mm).

@@ -92,8 +92,17 @@ def simulate_to(scene, output) -> None:
     """Simulate every shot of ``scene`` (all its channels) into the recording ``output``,
     written under a temporary name until complete; progress on stderr, a summary line."""
     from ...scene import Simulator  # numba's simulator kernels: for simulate only
+    from ...scene.tones import kernels_compiled
 
     sim = Simulator(scene)
+    t_prepare = time.perf_counter()
+    sim.prepare()  # compiled (first run) or loaded now: not in the first batch the ETA reads
+    if kernels_compiled():
+        print(
+            f"simulate: numba compiled the simulator's kernels in "
+            f"{time.perf_counter() - t_prepare:.1f} s (once: cached for later runs)",
+            file=sys.stderr,
+        )
     prog = Progress(scene.pulses, "simulate")
     batch = scene.config.processor.micro_batch
     t0 = time.perf_counter()
@@ -362,7 +371,9 @@ def add_parsers(sub) -> None:
     s.add_argument(
         "--true-aspect",
         action="store_true",
+        default=None,
         help="one metre as long on both axes, so a focused point looks like a point (default: "
-        "the image fills the figure; the axes' metres give the stretch)",
+        "so where that gives a figure 3-12 inches tall; otherwise the image fills the figure "
+        "and its title says how far the vertical axis is stretched)",
     )
     s.set_defaults(func=cmd_quicklook)

@@ -23,6 +23,7 @@ from ..params import Processor
 from ..presets import preset
 from ..sinks.io import check_writable, replace_when_complete
 from .bench_alone import CorrelatorAlone, LensAlone
+from .bench_latency import plot_latency
 from .bench_pipeline import bench_pipeline, with_correlator
 from .bench_record import bench_recording, recording_lines
 
@@ -176,6 +177,12 @@ def add_arguments(parser) -> None:
     )
     parser.add_argument("--device", help="OpenCL platform/device name substring")
     parser.add_argument(
+        "--plot",
+        metavar="PNG",
+        help="also draw the latency against the offered rate, every preset measured (default: "
+        "none)",
+    )
+    parser.add_argument(
         "--record-dir",
         metavar="DIR",
         help="where the raw recording row writes (a temporary folder in DIR, removed after; "
@@ -194,8 +201,9 @@ def run_bench(args) -> int:
     seconds = args.seconds
     if args.repeats < 1:
         raise ValueError(f"--repeats must be >= 1, got {args.repeats}")
-    if args.json:
-        check_writable(args.json)  # before the minutes of measuring
+    for path in (args.json, getattr(args, "plot", None)):
+        if path:
+            check_writable(path)  # before the minutes of measuring
     reason = None if args.device else opencl_unavailable()
     if reason is None:
         from ..lens.cl_loader import default_device, device_info
@@ -304,6 +312,9 @@ def run_bench(args) -> int:
     )
     for line in recording_lines(rec_name, recording):
         print(line, file=out, flush=True)
+    if getattr(args, "plot", None):
+        plot_latency(pipeline_rows, args.plot)
+        print(f"wrote {args.plot}", file=out)
     if args.json:
         with replace_when_complete(args.json) as tmp, open(tmp, "w") as f:
             json.dump(

@@ -12,7 +12,9 @@ Not a test.  For a preset it measures, on the same simulated shots held in memor
 * the CCD stage's rate inside the pipeline (its busy time) as a fraction of the same correlator
   alone (CorrelatorAlone: one measurement, shared with the bench's correlator table);
 * placement: lens and CCD in two worker processes, a range half each (``--swath-workers 2``),
-  at max rate and paced, for the partitioned and the nonuniform correlators.
+  at max rate and paced, for the partitioned and the nonuniform correlators;
+* latency against the offered rate, 25-150 % of the PRF, the granularity a live run chooses
+  at each (rtsar.app.bench_latency).
 
 Strips go to a ZeroMQ publisher on a loopback port with no subscriber (publication is part of
 the measured path), or, with ``stalled_subscriber``, with a subscriber that never reads.
@@ -30,10 +32,11 @@ from ..lens.plan import make_plan
 from ..params import Config
 from ..scene import Simulator, point_scene
 from ..sinks.publish import ZmqPublisher
-from ..sources.replay import ReplaySource
+from ..sources.replay import ReplaySource, parse_rate
 from ..stream.pipeline import Pipeline, PipelineSettings
 from . import bench_alone
 from .bench_alone import ABOVE_ONE, CorrelatorAlone, LensAlone, against_ideal
+from .bench_latency import latency_against_rate
 
 
 class Cyclic:
@@ -99,10 +102,12 @@ def stream_run(
     endpoint_ctx=None,
     stalled_subscriber: bool = False,
 ) -> dict:
-    """One pipeline run on ``shots`` (repeated) for about ``seconds`` of source time."""
+    """One pipeline run on ``shots`` (repeated) for about ``seconds`` of source time; ``rate``
+    "max", "real" or a factor of the PRF (paced)."""
     prf = cfg.geometry.prf_hz
     live = rate != "max"
-    total = int(seconds * prf) if live else int(seconds * prf * 3)
+    factor = parse_rate(rate) or 1.0
+    total = int(seconds * prf * factor) if live else int(seconds * prf * 3)
     batch = settings.max_batch or cfg.processor.micro_batch
     src = _source(cfg, shots, total, rate, batch, live)
     pub = ZmqPublisher("tcp://127.0.0.1:*", "drop", context=endpoint_ctx)
@@ -147,7 +152,7 @@ def stream_run(
     if live:  # paced: what the instrument-like source offered, and how much of it was kept
         out.update(paced_figures(total, done, c["gap_pulses"]))
         out["achieved_prf_hz"] = src.achieved_rate_hz()
-        out["prf_error"] = out["achieved_prf_hz"] / prf - 1
+        out["prf_error"] = out["achieved_prf_hz"] / (prf * factor) - 1
         del out["real_time_factor"]  # the source sets the rate: not a measure of capacity
     ccd_busy = d["stage_busy_s"].get("ccd")
     if ccd_busy:
@@ -316,6 +321,12 @@ def bench_pipeline(
                 round_,
                 swath_workers=2,
             )
+    # Latency against the offered rate, the granularity chosen at each (rtsar.app.bench_latency).
+    kind = "nonuniform" if "nonuniform" in kinds else base_kind
+    capacity = summarize_runs(result["runs"])[f"{kind}: max rate"]["real_time_factor"][0]
+    result["latency_against_rate"] = latency_against_rate(
+        with_correlator(cfg, kind), shots, min(real_seconds, 5.0), capacity, log, stream_run
+    )
     result["stalled_subscriber_over_none"] = float(np.median(stalled_ratios))
     rd = bench_numpy_range_doppler(cfg, np.concatenate([shots] * 2))
     result["numpy_range_doppler_pulses_per_s"] = rd

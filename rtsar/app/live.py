@@ -297,6 +297,7 @@ def run_stream(
     record: str | None = None,
     scene: dict | None = None,
     link_timeout_s: float | None = None,
+    granularity=None,
 ) -> int:
     """Run until the source ends, Ctrl-C or a signal; print status lines and a summary.
 
@@ -308,7 +309,8 @@ def run_stream(
     ``expected_rate_hz``: the rate the source should deliver (a simulation's PRF, a paced
     replay's): a stream processed slower is warned about.
     ``channel_fix(missing)``: how to give the source the auxiliary channels a stage reads and it
-    lacks (check_source_channels, before anything starts).
+    lacks (check_source_channels, before anything starts).  ``granularity``: a
+    rtsar.app.live_granularity.GranularityRequest (the blocks chosen at the start), or None.
     """
     try:
         check_source_channels(source, corrections, height, channel_fix)
@@ -376,6 +378,12 @@ def run_stream(
             )
         if hasattr(source, "prepare"):  # a simulated source readies its kernels too
             source.prepare()
+        chosen = None
+        if granularity is not None:
+            note = lambda m: print(f"rtsar: {m}", file=stream, flush=True)  # noqa: E731
+            config, settings, _, chosen = granularity.apply(
+                config, settings, physical, height, note
+            )
         pipe = Pipeline(
             config,
             source,
@@ -413,6 +421,8 @@ def run_stream(
         )
         if getattr(pipe.engine.lens, "choice", None):
             print(f"rtsar: lens: {pipe.engine.lens.choice}", file=stream, flush=True)
+        if chosen:
+            print(f"rtsar: {chosen}", file=stream, flush=True)
         if wait_subscribers:
             print(
                 f"waiting for {wait_subscribers} subscriber(s) on {endpoint} …",

@@ -18,9 +18,10 @@ slice each (rtsar.stream.swath).
 
 Latency of an image line: from the arrival of the last pulse that contributes to it (pulse
 j + N - 1 for line j, Psaltis & Wagner 1981: the row leaves the CCD after N shifts) to the
-publication of the strip holding it.  The pieces: rtsar.stream.queue, ingest, engine, hold,
-timing, height, strips, swath, link (silences), stats and settings.
-"""
+publication of its strip: a strip goes out when it holds ``strip_lines`` (with every line then
+waiting, up to ``strip_most_lines``), or its oldest line waited ``strip_deadline_s``
+(rtsar.stream.granularity chooses them).  The pieces: rtsar.stream.queue, ingest, engine, hold,
+timing, height, strips, swath, link (silences), stats, settings."""
 
 from __future__ import annotations
 
@@ -46,12 +47,8 @@ from .swath import SwathWorkers
 from .timing import LineTiming
 
 OWN_COUNTERS = (
-    "dropped_pulses",
-    "pulses_processed",
-    "lines_out",
-    "flagged_lines",
-    "strips_published",
-)
+    "dropped_pulses", "pulses_processed", "lines_out", "flagged_lines", "strips_published"
+)  # fmt: skip
 
 
 class Pipeline:
@@ -349,24 +346,27 @@ class Pipeline:
 
     def _strip_stage(self) -> None:
         last_stats = time.perf_counter()
-        strip_lines = self.settings.strip_lines
-        prf = self.config.geometry.prf_hz
+        s, prf = self.settings, self.config.geometry.prf_hz
+        strip_lines, deadline_s = s.strip_lines, s.strip_deadline_s
         strip_period_s = min(max(strip_lines / prf, 1e-3), self.stats_every_s / 4)
         strips = self.strips
         try:
             while True:
-                blocks = self.q_image.get_batch(8 * strip_lines, timeout=strip_period_s)
+                wait_s = strips.wait_s(time.perf_counter(), deadline_s)  # the deadline's turn
+                take = max(8 * strip_lines, s.strip_most_lines)
+                blocks = self.q_image.get_batch(take, timeout=min(wait_s, strip_period_s))
                 if blocks is None:
                     break
-                if not blocks and strips.held:  # no new line for a strip's time: send what is held
+                if not blocks and strips.held:  # no new line for a strip's time (or a deadline)
                     self._publish(strips.held)
+                now = time.perf_counter()
                 for b in blocks:
                     if isinstance(b, HeightBatch):
                         self._publish_heights(b)
                     else:
-                        strips.add(b)
-                while strips.held >= strip_lines:
-                    self._publish(strip_lines)
+                        strips.add(b, now)
+                while count := strips.due(now, strip_lines, s.strip_most_lines, deadline_s):
+                    self._publish(count)
                 now = time.perf_counter()
                 if now - last_stats >= self.stats_every_s:
                     last_stats = now

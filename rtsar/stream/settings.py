@@ -15,6 +15,8 @@ class PipelineSettings:
     device: str | None = None
     stages: str = "split"  # split: lens and CCD threads; fused, overlapped: one (STAGE_LAYOUTS)
     strip_lines: int = 16  # lines per published strip
+    strip_most_lines: int = 0  # > strip_lines: lines waiting go out together, up to this many
+    strip_deadline_s: float | None = None  # a partial strip goes out once a line waited this long
     queue_pulses: int = 0  # capacity of each queue (0: 8 apertures of pulses)
     max_batch: int = 0  # most pulses per lens launch / CCD push (0: config micro_batch)
     max_gap_pulses: int = 0  # longest zero-filled gap; beyond it a restart (0: one aperture)
@@ -28,5 +30,7 @@ class PipelineSettings:
             raise ValueError(f"stages must be one of {STAGE_LAYOUTS}, got {self.stages!r}")
         if self.strip_lines < 1:
             raise ValueError("strip_lines must be >= 1")
+        if self.strip_deadline_s is not None and not self.strip_deadline_s >= 0:
+            raise ValueError(f"strip_deadline_s must be >= 0, got {self.strip_deadline_s!r}")
         if self.swath_workers and self.stages != "split":
             raise ValueError(f"--swath-workers runs lens and CCD in the workers: not {self.stages}")

@@ -7,6 +7,7 @@ the four methods of :class:`StripSink`.
 
 from __future__ import annotations
 
+import math
 import uuid
 from dataclasses import dataclass, field
 
@@ -138,33 +139,56 @@ class StripSink:
 
 
 class StripAssembler:
-    """Collects line blocks in order and cuts them into strips of any length."""
+    """Collects line blocks in order and cuts them into strips of any length; knows when the
+    oldest line held came (``due``: the strip deadline)."""
 
     def __init__(self, info: StreamInfo):
         self.info = info
         self._pending: list[LineBlock] = []
+        self._came_s: list[float] = []  # when each pending block came (the strip stage's clock)
         self.held = 0  # lines pending
         self.seq = 0  # the next strip's number
 
-    def add(self, block: LineBlock) -> None:
+    def add(self, block: LineBlock, now_s: float = 0.0) -> None:
+        """A block of lines, come at ``now_s`` (seconds on the caller's clock)."""
         self._pending.append(block)
+        self._came_s.append(float(now_s))
         self.held += len(block)
+
+    def due(self, now_s: float, lines: int, most: int, deadline_s: float | None) -> int:
+        """Lines to publish now as one strip (0: none yet).  ``lines`` or more held: all of
+        them, at most max(lines, ``most``) (``most`` <= ``lines``: strips of exactly ``lines``);
+        fewer: all of them once the oldest has waited ``deadline_s`` (None: never)."""
+        if self.held >= lines:
+            return min(self.held, max(lines, most))
+        if self.held and deadline_s is not None and now_s - self._came_s[0] >= deadline_s:
+            return self.held
+        return 0
+
+    def wait_s(self, now_s: float, deadline_s: float | None) -> float:
+        """Seconds until the oldest line held reaches ``deadline_s`` (inf: no line held, or no
+        deadline)."""
+        if not self.held or deadline_s is None:
+            return math.inf
+        return max(0.0, self._came_s[0] + deadline_s - now_s)
 
     def take(self, count: int, counters: dict) -> tuple[Strip, np.ndarray]:
         """The first ``count`` pending lines as one strip, and the arrival of the last pulse of
         each of its lines (the latency reference)."""
-        parts, rest, need = [], [], count
-        for b in self._pending:
+        parts, rest, came, need = [], [], [], count
+        for b, came_s in zip(self._pending, self._came_s, strict=True):
             if need == 0:
                 rest.append(b)
+                came.append(came_s)
             elif len(b) <= need:
                 parts.append(b)
                 need -= len(b)
             else:
                 parts.append(b.slice(0, need))
                 rest.append(b.slice(need, len(b)))
+                came.append(came_s)
                 need = 0
-        self._pending = rest
+        self._pending, self._came_s = rest, came
         self.held -= count
         first = parts[0].first_line
         lines = parts[0].lines if len(parts) == 1 else np.concatenate([p.lines for p in parts])

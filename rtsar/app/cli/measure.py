@@ -105,8 +105,9 @@ def add_parsers(sub) -> None:
         description="Not a test: measures pulses/s of the AO lens (OpenCL vs the same plan on "
         "NumPy's and SciPy's FFT, and one bare FFT of the batch) and of the correlators, and "
         "the live pipeline end to end (real-time factor, drops, latency; threads and two "
-        "swath processes), in one run, as ratios.  About 5 minutes on 2 cores (--preset P: "
-        "about half).",
+        "swath processes; latency against the offered rate, 25-150 %% of the PRF, with the "
+        "granularity a live run chooses), in one run, as ratios.  About 6 minutes on 2 cores "
+        "(--preset P: about half).",
     )
     bench.add_arguments(s)
     s.set_defaults(func=bench.run_bench)

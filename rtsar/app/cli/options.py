@@ -82,7 +82,8 @@ def add_correlator_option(g) -> None:
         type=int,
         metavar="L",
         help="block of the partitioned correlator, head block of the nonuniform one: lines "
-        "leave in blocks of L (power of two; default: the configuration's, 16 in the presets)",
+        "leave in blocks of L (power of two; default: the configuration's, 16 in the presets; "
+        "a live run at a rate chooses it from 1 up to that by the work measured)",
     )
     g.add_argument(
         "--tail-block-lines",
@@ -250,7 +251,13 @@ def add_pipeline_options(s, delivery: str) -> None:
         help="drop: a slow subscriber loses strips, the pipeline never waits; "
         f"lossless: the pipeline waits for the slowest subscriber (default {delivery})",
     )
-    g.add_argument("--strip-lines", type=int, default=16, help="lines per strip (default 16)")
+    g.add_argument(
+        "--strip-lines",
+        type=int,
+        help="lines per strip (default: chosen with the correlator's block from the work "
+        "measured at the run's rate, said on the banner's granularity: line, a partial strip "
+        "going out after 1 ms; 16 for a replay at --rate max)",
+    )
     g.add_argument(
         "--strip-ms",
         type=float,
@@ -433,7 +440,7 @@ def pipeline_settings(args, deadline: bool = False) -> PipelineSettings:
         lens_backend=args.lens,
         device=args.device,
         stages=args.stages,
-        strip_lines=args.strip_lines,
+        strip_lines=args.strip_lines or PipelineSettings.strip_lines,
         max_batch=args.max_batch or 0,
         max_gap_pulses=args.max_gap_pulses or 0,
         deadline=deadline,
@@ -444,12 +451,12 @@ def pipeline_settings(args, deadline: bool = False) -> PipelineSettings:
 
 
 def strip_lines(args, prf_hz: float) -> None:
-    """--strip-ms → lines at the PRF (at least one)."""
+    """--strip-ms → lines at the PRF (at least one); neither given: None (chosen)."""
     if args.strip_ms is not None:
         if args.strip_ms <= 0:
             raise ValueError(f"--strip-ms must be > 0, got {args.strip_ms}")
         args.strip_lines = max(1, round(args.strip_ms * 1e-3 * prf_hz))
-    if args.strip_lines < 1:
+    if args.strip_lines is not None and args.strip_lines < 1:
         raise ValueError(f"--strip-lines must be >= 1, got {args.strip_lines}")
 
 

@@ -34,6 +34,7 @@ from ..live import (
     serial_channel_fix,
     zmq_channel_fix,
 )
+from ..live_granularity import request_of
 from ..subscribe import subscribe
 from .files import simulate_to
 from .inputs import open_input
@@ -166,6 +167,7 @@ def cmd_run(args) -> int:
             record=args.record,
             scene=None if described is None else described.to_dict(),
             link_timeout_s=args.link_timeout,
+            granularity=request_of(args, cfg.geometry.prf_hz),
         )
 
     if args.preset or getattr(args, "instrument", None):
@@ -201,6 +203,7 @@ def cmd_run(args) -> int:
         record=args.record,
         scene=scene.to_dict(),
         link_timeout_s=args.link_timeout,
+        granularity=request_of(args, scene.config.geometry.prf_hz),
     )
 
 
@@ -214,6 +217,7 @@ def cmd_replay(args) -> int:
         heights = height_stage(args, cfg, scene)
         channels = check_channels(rec, chain, heights)
         source = ReplaySource.from_recording(rec, args.rate, batch, channels)
+        rate_hz = None if source.factor is None else cfg.geometry.prf_hz * source.factor
         return run_stream(
             cfg,
             source,
@@ -225,12 +229,13 @@ def cmd_replay(args) -> int:
             args.curve_key,
             wait_subscribers=args.wait_subscribers,
             total_pulses=rec.pulses,
-            expected_rate_hz=None if source.factor is None else cfg.geometry.prf_hz * source.factor,
+            expected_rate_hz=rate_hz,
             corrections=chain,
             height=heights,
             physical=physical_ccd(args),
             stall_timeout_s=args.stall_timeout,
             curve_clients=args.curve_clients,
+            granularity=request_of(args, rate_hz),
         )
 
 

@@ -1,0 +1,162 @@
+"""A live run's granularity: the lines of a correlator block and of a strip, the pulses of a
+lens call, chosen from the measured cost of each at the run's own rate (issue 38).
+
+A line's latency (rtsar.stream.pipeline) is mostly the wait for the lines released with it:
+lines leave the correlator in blocks of B (rtsar.ccd: the head block of the partitioned and
+nonuniform correlators) and go out in strips, so a line waits on average (B - 1) / 2 pulse
+periods before any work is done on it.  A small block waits less and costs more: each block
+pays a fixed cost (a push's kernel calls, a strip's header and message) that a large one
+shares among more lines.  So the block is the smallest whose work leaves the machine headroom
+at the rate the source delivers, and a strip is one block (``choose_granularity``).
+
+Costs are seconds per call, measured on this machine at the start of the run
+(rtsar.app.live_granularity); the choice is a pure function of them, so a test checks the rule,
+not the machine.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+TARGET_UTILISATION = 0.5  # the work measured may take this share of the stream's time
+STRIP_DEADLINE_S = 1e-3  # a partial strip waits at most this long for its other lines
+MOST_STRIP_LINES = 64  # lines that wait (a backlog) go out together, at most this many a strip
+
+
+@dataclass(frozen=True)
+class StageCosts:
+    """Seconds of work per call, each timed with calls made back to back.
+
+    ``lens_s``: pulses in one lens call → seconds a call; ``block_s``: lines in one correlator
+    block (the candidates) → seconds to push one block; ``strip_s``: seconds to cut one strip
+    and encode its message (any size: the header dominates).
+    """
+
+    lens_s: dict[int, float]
+    block_s: dict[int, float]
+    strip_s: float
+
+
+@dataclass(frozen=True)
+class Granularity:
+    """What a live run releases together, and why (``reason``, said on the banner)."""
+
+    block_lines: int  # the correlator's block: its lines leave together
+    strip_lines: int  # a strip is published once it holds this many lines …
+    strip_most_lines: int  # … with every line then waiting, up to this many
+    strip_deadline_s: float | None  # a partial strip goes out once a line waited this long
+    lens_batch: int  # most pulses a lens call takes (when behind)
+    lens_call_pulses: int  # pulses a lens call takes while keeping up (the model's)
+    utilisation: float  # modelled share of the stream's time the work measured takes
+    rate_hz: float  # the pulse rate it was chosen for
+    reason: str
+
+
+def lens_call(rate_hz: float, lens_s: dict[int, float]) -> tuple[int, float]:
+    """(pulses a lens call takes while keeping up, the lens's share of the stream's time).
+
+    The lens takes every pulse waiting: while a call of b pulses takes less than the b pulse
+    periods in which the next b arrive (``lens_s[b] <= b / rate_hz``), it keeps up at b pulses
+    a call; the smallest such b is where it settles, its share ``rate_hz * lens_s[b] / b``.
+    When no b keeps up, the b of least time a pulse (a share over 1: it cannot keep up).
+    """
+    sizes = sorted(lens_s)
+    keeping_up = [b for b in sizes if lens_s[b] <= b / rate_hz]
+    b = keeping_up[0] if keeping_up else min(sizes, key=lambda s: lens_s[s] / s)
+    return b, rate_hz * lens_s[b] / b
+
+
+def utilisation(rate_hz: float, costs: StageCosts, block: int, strip_lines: int) -> float:
+    """Share of the stream's time the work measured takes with blocks of ``block`` lines and
+    strips of ``strip_lines``: rate · (lens a pulse + block / block lines + strip / strip
+    lines) (lens_call for the lens)."""
+    _, lens_share = lens_call(rate_hz, costs.lens_s)
+    per_line_s = costs.block_s[block] / block + costs.strip_s / strip_lines
+    return lens_share + rate_hz * per_line_s
+
+
+def auto_strip_lines(block: int) -> int:
+    """A strip per block (at most MOST_STRIP_LINES lines): lines never wait for a strip to
+    fill beyond the wait for their block."""
+    return min(block, MOST_STRIP_LINES)
+
+
+def choose_granularity(
+    rate_hz: float,
+    costs: StageCosts,
+    lens_batch: int,
+    strip_lines: int | None = None,
+    target: float = TARGET_UTILISATION,
+    fixed_block: str = "",
+) -> Granularity:
+    """The granularity of a run at ``rate_hz`` pulses/s whose work costs ``costs``.
+
+    The rule: of the candidate blocks (the keys of ``costs.block_s``), the smallest B whose
+    utilisation (``utilisation``, strips of auto_strip_lines(B)) is at most ``target``; where
+    none is, the largest (a block's fixed cost shared by the most lines: latency grows with
+    the rate, larger blocks before any drop).  Strips: one per block, lines that wait (a
+    backlog) going out together up to MOST_STRIP_LINES, a partial strip after
+    STRIP_DEADLINE_S; ``strip_lines`` given (the command line's): strips of exactly that
+    many, no deadline (as before auto).  The lens takes every pulse waiting up to
+    ``lens_batch`` (lens_call: how many while keeping up).  ``fixed_block``: why there is one
+    candidate only (said as the reason), or "".
+    """
+    if not rate_hz > 0:
+        raise ValueError(f"rate must be > 0 pulses/s, got {rate_hz!r}")
+    if not costs.block_s or not costs.lens_s:
+        raise ValueError("costs need at least one block and one lens call measured")
+    blocks = sorted(costs.block_s)
+
+    def strips(b: int) -> int:
+        return strip_lines if strip_lines else auto_strip_lines(b)
+
+    u = {b: utilisation(rate_hz, costs, b, strips(b)) for b in blocks}
+    fitting = [b for b in blocks if u[b] <= target]
+    block = fitting[0] if fitting else blocks[-1]
+    if fixed_block:
+        reason = f"the block is fixed ({fixed_block})"
+    elif fitting:
+        reason = f"the smallest block (1, 2, 4, … lines) whose work stays under {target:.0%}"
+    else:
+        reason = f"no block of {blocks[0]}-{blocks[-1]} lines keeps the work under {target:.0%}"
+        reason += ": the largest"
+    if u[block] > 1:
+        reason += "; over this machine's capacity at this rate: expect drops"
+    calls, _ = lens_call(rate_hz, costs.lens_s)
+    s = strips(block)
+    return Granularity(
+        block_lines=block,
+        strip_lines=s,
+        strip_most_lines=s if strip_lines else max(s, MOST_STRIP_LINES),
+        strip_deadline_s=None if strip_lines else STRIP_DEADLINE_S,
+        lens_batch=int(lens_batch),
+        lens_call_pulses=calls,
+        utilisation=u[block],
+        rate_hz=float(rate_hz),
+        reason=reason,
+    )
+
+
+def _us(seconds: float) -> str:
+    return f"{seconds * 1e6:,.0f} µs"
+
+
+def granularity_words(g: Granularity, costs: StageCosts) -> str:
+    """The banner's line: what was chosen, for which rate, and why (the costs it read)."""
+
+    def lines(n: int) -> str:
+        return f"{n} line{'s' if n != 1 else ''}"
+
+    strips = f"strips of {lines(g.strip_lines)}"
+    if g.strip_most_lines > g.strip_lines:
+        strips += f" (lines that wait go out together, up to {g.strip_most_lines})"
+    if g.strip_deadline_s is not None:
+        strips += f", a partial strip after {g.strip_deadline_s * 1e3:g} ms"
+    return (
+        f"granularity: correlator blocks of {lines(g.block_lines)}, {strips}, lens calls of "
+        f"{g.lens_call_pulses} pulse{'s' if g.lens_call_pulses != 1 else ''} (up to "
+        f"{g.lens_batch} when behind), for {g.rate_hz:,.0f} pulses/s: {g.reason}; the work "
+        f"measured takes {g.utilisation:.0%} of the time (lens "
+        f"{_us(costs.lens_s[g.lens_call_pulses])} a call, correlator "
+        f"{_us(costs.block_s[g.block_lines])} a block, strip {_us(costs.strip_s)})"
+    )

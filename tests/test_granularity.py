@@ -1,0 +1,265 @@
+"""The live run's granularity (issue 38, goal 1): the chosen block, strips and lens calls are the
+documented function of the measured costs (rtsar.stream.granularity), a partial strip goes out
+at its deadline (a fake clock), the command line's options stay fixed, and the banner says what
+was chosen and why.  No verdict here depends on this machine's speed: the costs are given."""
+
+import io
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rtsar.app import bench_latency, live, live_granularity
+from rtsar.app.cli import build_parser
+from rtsar.app.cli.options import pipeline_settings, processor_changes, strip_lines
+from rtsar.app.live_granularity import GranularityRequest, block_candidates, request_of
+from rtsar.presets import preset
+from rtsar.sources.replay import ReplaySource
+from rtsar.stream.granularity import (
+    MOST_STRIP_LINES,
+    STRIP_DEADLINE_S,
+    TARGET_UTILISATION,
+    StageCosts,
+    choose_granularity,
+    granularity_words,
+    lens_call,
+)
+from rtsar.stream.pipeline import Pipeline, PipelineSettings
+from rtsar.stream.strips import LineBlock, StreamInfo, StripAssembler
+
+ROOT = Path(__file__).resolve().parents[1]
+US = 1e-6
+# A machine where each block costs 100 µs plus 10 µs a line, a strip 100 µs, a lens call
+# 100 µs plus 5 µs a pulse (the shape measured on the development machine: a fixed cost a call).
+COSTS = StageCosts(
+    lens_s={b: (100 + 5 * b) * US for b in (1, 2, 4, 8, 16)},
+    block_s={b: (100 + 10 * b) * US for b in (1, 2, 4, 8, 16)},
+    strip_s=100 * US,
+)
+
+
+def by_hand(rate_hz: float, block: int) -> float:
+    """The docstring's utilisation, written out: lens a pulse at the smallest call that keeps
+    up + (block + strip) / block lines, times the rate (strips of one block)."""
+    calls = next(b for b in (1, 2, 4, 8, 16) if (100 + 5 * b) * US <= b / rate_hz)
+    lens = (100 + 5 * calls) * US / calls
+    return rate_hz * (lens + ((100 + 10 * block) * US + 100 * US) / block)
+
+
+@pytest.mark.parametrize(
+    "rate_hz, block",
+    [(400, 1), (1500, 1), (1600, 2), (3000, 4), (3500, 8), (4000, 16), (8000, 16), (20000, 16)],
+)
+def test_the_block_is_the_smallest_whose_work_stays_under_the_target(rate_hz, block):
+    """The documented mapping: the smallest block whose utilisation is at most 50 %, else the
+    largest; a strip per block, a partial one after 1 ms, lines that wait merged up to 64."""
+    g = choose_granularity(rate_hz, COSTS, lens_batch=64)
+    fitting = [b for b in (1, 2, 4, 8, 16) if by_hand(rate_hz, b) <= TARGET_UTILISATION]
+    assert g.block_lines == block == (fitting[0] if fitting else 16)
+    assert g.utilisation == pytest.approx(by_hand(rate_hz, block), rel=1e-12)
+    assert (g.strip_lines, g.strip_most_lines) == (block, MOST_STRIP_LINES)
+    assert g.strip_deadline_s == STRIP_DEADLINE_S == 1e-3
+    assert g.lens_batch == 64 and g.rate_hz == rate_hz
+    assert ("over this machine's capacity" in g.reason) == (by_hand(rate_hz, block) > 1)
+    assert ("the largest" in g.reason) == (not fitting)
+
+
+def test_blocks_grow_with_the_rate_never_shrink():
+    """Graceful: a higher rate never gets a smaller block (latency grows before drops)."""
+    chosen = [choose_granularity(r, COSTS, 64).block_lines for r in np.geomspace(10, 1e5, 60)]
+    assert chosen == sorted(chosen) and chosen[0] == 1 and chosen[-1] == 16
+
+
+def test_the_lens_settles_at_the_smallest_call_that_keeps_up():
+    assert lens_call(1000, COSTS.lens_s) == (1, pytest.approx(1000 * 105 * US))
+    # at 15 kHz a call of 1 (105 µs) or 2 (110 µs) outlasts its pulses' 67 or 133 µs … of 2
+    assert lens_call(15000, COSTS.lens_s)[0] == 2
+    # none keeps up: the call of least time a pulse, its share over 1
+    slow = {1: 1e-3, 2: 1.5e-3}
+    assert lens_call(5000, slow) == (2, pytest.approx(5000 * 0.75e-3))
+
+
+def test_options_stay_fixed():
+    """--strip-lines: strips of exactly that many, no deadline, no merging; one candidate
+    block (--partition-lines, the fft correlator's): its reason; strips of a huge block capped."""
+    g = choose_granularity(1600, COSTS, 64, strip_lines=8)
+    assert (g.strip_lines, g.strip_most_lines, g.strip_deadline_s) == (8, 8, None)
+    one = StageCosts(COSTS.lens_s, {4: 140 * US}, COSTS.strip_s)
+    g = choose_granularity(1600, one, 64, fixed_block="--partition-lines")
+    assert g.block_lines == 4 and g.reason.startswith("the block is fixed (--partition-lines)")
+    fft = StageCosts(COSTS.lens_s, {513: 20e-3}, COSTS.strip_s)
+    g = choose_granularity(1600, fft, 64, fixed_block="the fft correlator's M - N + 1")
+    assert (g.block_lines, g.strip_lines) == (513, MOST_STRIP_LINES)
+    with pytest.raises(ValueError, match="rate"):
+        choose_granularity(0.0, COSTS, 64)
+
+
+def test_the_candidates_follow_the_correlator():
+    p = preset("psaltis-jpl").processor
+    assert block_candidates(p) == ([513], "the fft correlator's M - N + 1")
+    nonuniform = preset("psaltis-jpl").with_processor(correlator="nonuniform").processor
+    assert block_candidates(nonuniform) == ([1, 2, 4, 8, 16], "")
+    assert block_candidates(nonuniform, given=4) == ([4], "--partition-lines")
+
+
+# ---- the strip deadline, on a fake clock ------------------------------------------------------
+def _block(first: int, count: int) -> LineBlock:
+    z = np.zeros(count)
+    return LineBlock(first, np.zeros((count, 2), np.complex64), z, z, np.zeros(count, bool))
+
+
+@pytest.fixture
+def assembler():
+    cfg = preset("tiny")
+    return StripAssembler(StreamInfo("t", cfg, "test", "numpy", np.arange(2.0), 0.0, 0.0))
+
+
+def test_a_partial_strip_goes_out_at_its_deadline(assembler):
+    """Strips of 16, a deadline D of 2**-10 s (about 1 ms; times in exact binary fractions):
+    3 lines come at t = 10 s; nothing is due before 10 s + D, all three are then; the next
+    line's wait counts from its own arrival."""
+    a, d, q = assembler, 2.0**-10, 2.0**-12  # q: a quarter of the deadline
+    a.add(_block(0, 3), now_s=10.0)
+    assert a.due(10.0 + 3 * q, 16, 64, d) == 0
+    assert a.wait_s(10.0 + q, d) == 3 * q
+    assert a.due(10.0 + d, 16, 64, d) == 3
+    a.add(_block(3, 1), now_s=10.0 + 2 * q)
+    a.take(3, {})
+    assert a.due(10.0 + d + q, 16, 64, d) == 0  # the line left waits from 10 s + 2q
+    assert a.due(10.0 + d + 2 * q, 16, 64, d) == 1
+    assert a.due(99.0, 16, 64, None) == 0  # no deadline: a partial strip waits
+    assert a.wait_s(99.0, None) == np.inf
+
+
+def test_lines_that_wait_go_out_together(assembler):
+    """A backlog (held >= strip_lines) goes out as one strip of up to ``most`` lines; with
+    ``most`` at most strip_lines, strips of exactly strip_lines (as before)."""
+    a = assembler
+    a.add(_block(0, 100), now_s=0.0)
+    assert a.due(0.0, 1, 64, 1e-3) == 64
+    assert a.due(0.0, 16, 0, None) == 16
+    strip, _ = a.take(64, {})
+    assert (strip.first_line, len(strip.lines)) == (0, 64)
+    assert a.due(0.0, 16, 64, None) == 36
+
+
+# ---- the choice applied: the command line, the run, its banner ---------------------------------
+def _fake_measure(costs):
+    def measure(config, settings, rate_hz, blocks, copies=1, physical=None, request=None):
+        return StageCosts(costs.lens_s, {b: costs.block_s[b] for b in blocks}, costs.strip_s)
+
+    return measure
+
+
+def test_the_run_gets_the_documented_choice_of_the_measured_costs(monkeypatch):
+    """The request applied (measurement replaced by given costs): the configuration's head
+    block and the pipeline's strips are choose_granularity's, and the line says it."""
+    monkeypatch.setattr(live_granularity, "measure_costs", _fake_measure(COSTS))
+    cfg = preset("tiny").with_processor(correlator="nonuniform")
+    for rate_hz, block in ((1500, 1), (3000, 4), (20000, 16)):
+        new_cfg, settings, g, words = GranularityRequest(rate_hz).apply(cfg, PipelineSettings())
+        assert g == choose_granularity(rate_hz, COSTS, cfg.processor.micro_batch)
+        assert new_cfg.processor.partition_lines == g.block_lines == block
+        assert (settings.strip_lines, settings.strip_most_lines) == (block, MOST_STRIP_LINES)
+        assert settings.strip_deadline_s == STRIP_DEADLINE_S
+        assert words == granularity_words(g, COSTS)
+
+
+def test_the_banner_words():
+    g = choose_granularity(1500, COSTS, 64)
+    assert granularity_words(g, COSTS) == (
+        "granularity: correlator blocks of 1 line, strips of 1 line (lines that wait go out "
+        "together, up to 64), a partial strip after 1 ms, lens calls of 1 pulse (up to 64 when "
+        "behind), for 1,500 pulses/s: the smallest block (1, 2, 4, … lines) whose work stays "
+        "under 50%; the work measured takes 47% of the time (lens 105 µs a call, correlator "
+        "110 µs a block, strip 100 µs)"
+    )
+
+
+def _args(*argv):
+    args = build_parser("replay").parse_args(["replay", "rec.h5", *argv])
+    strip_lines(args, 1600.0)
+    return args
+
+
+def test_the_command_line_fixes_what_it_names():
+    """Neither --strip-lines nor --partition-lines: both chosen; each given stays; no rate
+    (--rate max) or swath workers: no choice; the pipeline's fixed default stays 16."""
+    assert request_of(_args(), 1600.0) == GranularityRequest(1600.0, None, None)
+    assert request_of(_args("--strip-lines", "8"), 1600.0).strip_lines == 8
+    assert request_of(_args("--strip-ms", "5"), 1600.0).strip_lines == 8
+    assert request_of(_args("--partition-lines", "4"), 1600.0).block_lines == 4
+    assert request_of(_args(), None) is None
+    assert request_of(_args("--swath-workers", "2"), 1600.0) is None
+    assert pipeline_settings(_args()).strip_lines == PipelineSettings().strip_lines == 16
+    cfg = processor_changes(_args("--partition-lines", "4"), preset("tiny"))
+    assert cfg.processor.partition_lines == 4
+
+
+def test_a_live_run_says_its_granularity_and_runs_with_it(monkeypatch, tmp_path):
+    """run_stream with a request: the banner's granularity line, and the pipeline built with
+    the chosen configuration and strips (the measurement itself runs: tiny preset)."""
+    seen = {}
+
+    class Spy(Pipeline):
+        def __init__(self, config, source, sinks, settings, *args, **kw):
+            seen["block"], seen["settings"] = config.processor.partition_lines, settings
+            super().__init__(config, source, sinks, settings, *args, **kw)
+
+    monkeypatch.setattr(live, "Pipeline", Spy)
+    cfg = preset("tiny").with_processor(correlator="nonuniform")
+    shots = np.zeros((300, cfg.waveform.samples_per_shot), np.complex64)
+    seq = np.arange(300)
+    source = ReplaySource(shots, seq, seq / 500.0, 500.0, "max", 16)
+    stream = io.StringIO()
+    settings = PipelineSettings(lens_backend="numpy")
+    request = GranularityRequest(500.0)
+    endpoint = "ipc://" + str(tmp_path / "pub")
+    assert live.run_stream(cfg, source, settings, endpoint, "drop", stream=stream,
+                           granularity=request) == 0  # fmt: skip
+    said = [line for line in stream.getvalue().splitlines() if "granularity: " in line]
+    assert len(said) == 1 and said[0].startswith("rtsar: granularity: correlator blocks of ")
+    block = seen["block"]
+    assert f"blocks of {block} line" in said[0] and block in (1, 2, 4, 8, 16)
+    s = seen["settings"]
+    assert (s.strip_lines, s.strip_most_lines, s.strip_deadline_s) == (
+        block,
+        MOST_STRIP_LINES,
+        STRIP_DEADLINE_S,
+    )
+
+
+# ---- rtsar bench: latency against the offered rate ----------------------------------------------
+def test_bench_runs_each_offered_rate_the_capacity_allows_with_its_granularity(monkeypatch):
+    """25/50/100/150 % of the PRF, those up to the capacity; each run with the granularity
+    chosen for its own rate (measurement replaced by given costs), its goal read from its rate."""
+    monkeypatch.setattr(live_granularity, "measure_costs", _fake_measure(COSTS))
+    cfg = preset("tiny").with_processor(correlator="nonuniform")  # PRF 500 Hz
+    runs, said = [], []
+
+    def stream_run(c, shots, seconds, rate, settings):
+        runs.append((rate, c.processor.partition_lines, settings.strip_lines))
+        median = {0.25: 1.0, 0.5: 9.0}[rate]  # the goal at 250 Hz: 1 ms + 4 ms
+        return {"kept_fraction": 1.0, "dropped_pulses": 0, "latency_median_ms": median,
+                "latency_p99_ms": 2.5 * median}  # fmt: skip
+
+    rows = bench_latency.latency_against_rate(cfg, None, 1.0, 0.8, said.append, stream_run)
+    expect = [choose_granularity(500 * f, COSTS, 16).block_lines for f in (0.25, 0.5)]
+    assert runs == [(0.25, expect[0], expect[0]), (0.5, expect[1], expect[1])]
+    assert [r["offered_hz"] for r in rows] == [125.0, 250.0]
+    assert [r["meets_goal"] for r in rows] == [True, False]  # 9 ms > 1 + 4 ms
+    assert sum("over the capacity measured (0.80x)" in line for line in said) == 2
+    assert bench_latency.goal_median_ms(1600.0) == 1.625
+
+
+def test_the_figures_live_md_states_are_the_code_s():
+    """docs/pages/guide/live.md states the target (50 %), the deadline (1 ms) and the most
+    lines a strip merges (64): the constants the rule uses."""
+    text = " ".join((ROOT / "docs/pages/guide/live.md").read_text().split())
+    target = re.search(r"smallest B with u\(B\) ≤ (\d+) %", text)
+    deadline = re.search(r"partial strip goes out once its oldest line has waited (\d+) ms", text)
+    most = re.search(r"go out together, up to (\d+) a strip", text)
+    assert int(target.group(1)) / 100 == TARGET_UTILISATION
+    assert int(deadline.group(1)) * 1e-3 == STRIP_DEADLINE_S
+    assert int(most.group(1)) == MOST_STRIP_LINES

@@ -205,19 +205,42 @@ def test_parse_rate():
             parse_rate(bad)
 
 
-def test_paced_replay_follows_an_absolute_schedule(tiny):
+class FakeClock:
+    """perf_counter and sleep for the pacing module: time moves only when slept, and the
+    sleeps listed in ``oversleep_s`` (by call number) overshoot, as a busy machine's do."""
+
+    def __init__(self, oversleep_s: dict):
+        self.now, self.calls, self.oversleep_s = 100.0, 0, oversleep_s
+
+    def perf_counter(self) -> float:
+        return self.now
+
+    def sleep(self, s: float) -> None:
+        self.now += s + self.oversleep_s.get(self.calls, 0.0)
+        self.calls += 1
+
+
+def test_paced_replay_follows_an_absolute_schedule(tiny, monkeypatch):
+    """Each chunk leaves when its last shot is due (t0 + n / PRF), never early; an oversleep
+    (a busy machine) delays the chunks due during it, never the ones after (no drift).  On a
+    scripted clock: what the code controls, not the machine's load."""
+    from rtsar.sources import pacing, replay
+
     cfg, _, shots = tiny
     prf, n = 3000.0, 300
+    clock = FakeClock({5: 0.020})  # the sixth sleep overshoots by 20 ms
+    monkeypatch.setattr(pacing.time, "perf_counter", clock.perf_counter)
+    monkeypatch.setattr(pacing.time, "sleep", clock.sleep)
+    monkeypatch.setattr(replay.time, "perf_counter", clock.perf_counter)
     src = ReplaySource(shots[:n], np.arange(n), np.arange(n) / prf, prf, "real")
-    t0 = time.perf_counter()
-    released = []
-    for b in src:
-        released.append((b.seq[-1], time.perf_counter()))
-    # Each chunk leaves when its last shot is due (t0 + n / PRF), never early, and not late.
+    t0 = clock.now
+    released = [(int(b.seq[-1]), clock.now) for b in src]
     due = np.array([t0 + s / prf for s, _ in released])
     late = np.array([t for _, t in released]) - due
-    assert late.min() > -1e-3 and np.median(late) < 2e-3
-    assert (released[-1][1] - t0) == pytest.approx((n - 1) / prf, abs=0.02)
+    assert late.min() >= 0.0  # never early
+    assert np.count_nonzero(late > 1e-9) <= 0.020 * prf  # only the shots due in the 20 ms
+    assert late.max() == pytest.approx(0.020, abs=1 / prf)
+    assert abs(late[-1]) < 1e-9 and released[-1][0] == n - 1  # back on the absolute schedule
 
 
 class AuxSource(Source):

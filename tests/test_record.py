@@ -375,7 +375,7 @@ while True:  # each shot holds its pulse number + 1 everywhere: a torn row is vi
     rec.pulses(PulseBlock(n, x, np.zeros(16), np.zeros(16, bool), {}, seq, seq / 500.0,
                           np.zeros(16, bool)), None)
     n += 16
-    print(n, flush=True)
+    print(n, rec.written, flush=True)  # handed, and confirmed saved by the recorder
     time.sleep(0.002)
 """
 
@@ -390,12 +390,13 @@ def _alive(pid: int) -> bool:
 
 def _note(pipe, written: list) -> None:
     for text in pipe:
-        written.append((time.monotonic(), int(text)))
+        written.append(tuple(int(v) for v in text.split()))
 
 
 def test_a_recorder_killed_at_random_moments_leaves_a_readable_recording(tmp_path):
     """SIGKILL at random moments: every file opens as a recording, marked incomplete, with only
-    whole rows and every shot handed 1 s before the kill (flushes every 0.5 s)."""
+    whole rows and every shot the recorder had confirmed saved before the kill (what the code
+    promises whatever the machine's load; a loaded machine only confirms fewer)."""
     rng = random.Random(29)
     for k in range(2):
         path = tmp_path / f"raw{k}.h5"
@@ -404,11 +405,13 @@ def test_a_recorder_killed_at_random_moments_leaves_a_readable_recording(tmp_pat
         )
         written = []
         recorder_pid = int(proc.stdout.readline())
-        assert proc.stdout.readline().strip() == "16"
+        assert proc.stdout.readline().split()[0] == "16"
         reader = threading.Thread(target=_note, args=(proc.stdout, written), daemon=True)
         reader.start()
         time.sleep(rng.uniform(1.1, 1.8))
-        killed_at = time.monotonic()
+        deadline = time.monotonic() + 30  # a flush confirmed first (every 0.5 s when idle)
+        while not any(saved for _, saved in written) and time.monotonic() < deadline:
+            time.sleep(0.05)
         proc.send_signal(signal.SIGKILL)
         proc.wait(10)
         reader.join(10)
@@ -423,8 +426,10 @@ def test_a_recorder_killed_at_random_moments_leaves_a_readable_recording(tmp_pat
             np.testing.assert_array_equal(rec.shots[...][:, 0].real, np.arange(1, rows + 1))
             np.testing.assert_array_equal(rec.pulse_index, np.arange(rows))
             assert not rec.attrs["complete"] and rec.attrs["record_written"] == rows
-        due = max((n for t, n in written if t <= killed_at - 1.0), default=0)
-        assert rows >= due > 0, (k, rows, due)
+        confirmed = max((saved for _, saved in written), default=0)
+        handed = max((n for n, _ in written), default=0)
+        # (the kill may fall between a block's hand-over and its line: one block more)
+        assert 0 < confirmed <= rows <= handed + 16, (k, confirmed, rows, handed)
         hidden = [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
         assert [n for n in hidden if not n.endswith("-writing")] == []
 

@@ -408,7 +408,8 @@ def run_stream(
                 if settings.swath_workers
                 else f"{settings.stages} stages, "
             )
-            + f"strips of {settings.strip_lines} lines on {endpoint} ({delivery})"
+            + f"strips of {settings.strip_lines} line{'s' * (settings.strip_lines != 1)} on "
+            f"{endpoint} ({delivery})"
             + (f"; corrections: {', '.join(corrections.names)}" if corrections else "")
             + (f"; physical CCD, carrier in {physical.carrier}" if physical else "")
             + (f"; height strips of {height.strip_lines} lines" if height is not None else "")

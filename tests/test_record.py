@@ -390,7 +390,9 @@ def _alive(pid: int) -> bool:
 
 def _note(pipe, written: list) -> None:
     for text in pipe:
-        written.append(tuple(int(v) for v in text.split()))
+        values = text.split()
+        if len(values) == 2:  # (a line the kill cut short is not a whole report)
+            written.append((int(values[0]), int(values[1])))
 
 
 def test_a_recorder_killed_at_random_moments_leaves_a_readable_recording(tmp_path):
@@ -423,9 +425,15 @@ def test_a_recorder_killed_at_random_moments_leaves_a_readable_recording(tmp_pat
         assert not _alive(recorder_pid)
         with open_recording(path) as rec:
             rows = rec.pulses
-            np.testing.assert_array_equal(rec.shots[...][:, 0].real, np.arange(1, rows + 1))
+            # A block the recorder's queue could not take (a loaded machine) is a row of zeros
+            # marked "not recorded" (flag 4); every other row holds its own shot.
+            flags = rec.pulse_flags
+            lost = np.zeros(rows, bool) if flags is None else (flags & 4) != 0
+            want = np.where(lost, 0.0, np.arange(1, rows + 1))
+            np.testing.assert_array_equal(rec.shots[...][:, 0].real, want)
             np.testing.assert_array_equal(rec.pulse_index, np.arange(rows))
-            assert not rec.attrs["complete"] and rec.attrs["record_written"] == rows
+            assert not rec.attrs["complete"]
+            assert rec.attrs["record_written"] == rows - lost.sum()
         confirmed = max((saved for _, saved in written), default=0)
         handed = max((n for n, _ in written), default=0)
         # (the kill may fall between a block's hand-over and its line: one block more)

@@ -444,3 +444,26 @@ def test_the_default_endpoint_comes_from_rtsar_endpoint(tmp_path):
         check=True,
     ).stdout
     assert "default tcp://127.0.0.1:6123" in out
+
+
+def test_a_strip_header_encodes_its_config_once_and_reads_back_whole(monkeypatch):
+    """The config (one dict for the stream) is encoded once, not in every strip's header; the
+    header a subscriber parses is the same object either way."""
+    import json
+    import types
+
+    from rtsar.presets import preset
+    from rtsar.sinks import publish
+
+    config = preset("tiny").to_dict()
+    me = types.SimpleNamespace(_config_obj=None, _config_json="")
+    calls = []
+    real = json.dumps
+    monkeypatch.setattr(publish.json, "dumps", lambda o: calls.append(o) or real(o))
+    for seq in range(3):
+        header = {"format": "rtsar-strip", "seq": seq, "config": config, "counters": {"a": 1}}
+        text = publish.ZmqPublisher._encode(me, header)
+        assert json.loads(text) == header
+    assert sum(1 for o in calls if o is config) == 1
+    assert json.loads(publish.ZmqPublisher._encode(me, {"config": config})) == {"config": config}
+    assert json.loads(publish.ZmqPublisher._encode(me, {"x": 1})) == {"x": 1}

@@ -103,6 +103,7 @@ class ZmqPublisher(StripSink):
         self.stall_timeout_s = float(stall_timeout_s)
         self.subscribers = 0
         self.sent = {"strip": 0, "stats": 0, "end": 0}
+        self._config_obj, self._config_json = None, ""  # the stream's config, encoded once
         self.subscriber_stalls = 0  # times a subscriber that read nothing was cut off
         self.dropped_for_stalled = 0  # messages sent while a stalled subscriber was cut off
         self._left_out = 0  # subscribers at the last cut-off (> 0: one may still be left out)
@@ -175,7 +176,7 @@ class ZmqPublisher(StripSink):
 
     def send(self, topic: str, header: dict, payload=None) -> None:
         """Send one message; ``payload`` a complex array (strips) or a list of typed arrays."""
-        frames = [topic.encode("ascii"), json.dumps(header).encode()]
+        frames = [topic.encode("ascii"), self._encode(header)]
         if isinstance(payload, list):
             frames.extend(np.ascontiguousarray(a).data for a in payload)
         elif payload is not None:
@@ -190,6 +191,19 @@ class ZmqPublisher(StripSink):
             if self._left_out:  # a cut-off subscriber may still be left out (module docstring)
                 self.dropped_for_stalled += 1
         self.sent[topic] = self.sent.get(topic, 0) + 1
+
+    def _encode(self, header: dict) -> bytes:
+        """The header as JSON; a strip's ``config`` (one dict for the whole stream, 0.8 kB)
+        is encoded once and spliced in, not again for every strip."""
+        config = header.get("config")
+        if not isinstance(config, dict):
+            return json.dumps(header).encode()
+        if config is not self._config_obj:
+            self._config_obj, self._config_json = config, json.dumps(config)
+        rest = json.dumps({k: v for k, v in header.items() if k != "config"})
+        return (
+            f'{{"config": {self._config_json}' + (", " + rest[1:] if rest != "{}" else "}")
+        ).encode()
 
     def _send_lossless(self, frames) -> None:
         """Wait for the slowest subscriber, at most ``stall_timeout_s`` (less when hurrying)."""

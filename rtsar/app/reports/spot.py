@@ -190,7 +190,7 @@ def _figures(folder: Path, bench, bistatic_images, progressive, projective) -> N
     folder.mkdir(parents=True, exist_ok=True)
 
     def show(ax, img, plan, title, db=40):
-        ax.imshow(
+        art = ax.imshow(
             to_db(img, db).T,
             origin="lower",
             cmap="gray",
@@ -200,10 +200,15 @@ def _figures(folder: Path, bench, bistatic_images, progressive, projective) -> N
         ax.set_xlabel("cross-range x (mm)")
         ax.set_ylabel("down-range y (mm)")
         ax.set_title(title, fontsize=9)
+        return art
 
     plan, img = bench["plan"], bench["image"]
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.6))
-    show(axes[0], img, plan, "spotlight PFA, 5° sweep: four points (40 dB)")
+    fig.colorbar(
+        show(axes[0], img, plan, "spotlight PFA, 5° sweep: four points (40 dB)"),
+        ax=axes[0],
+        label="dB re peak",
+    )
     i = int(np.argmin(np.abs(plan.x_m)))
     j = int(np.argmin(np.abs(plan.y_m)))
     sl = (slice(i - 25, i + 26), slice(j - 10, j + 11))
@@ -227,7 +232,7 @@ def _figures(folder: Path, bench, bistatic_images, progressive, projective) -> N
     fig.savefig(folder / "spot_points.png", dpi=100)
     plt.close(fig)
 
-    fig, axes = plt.subplots(1, 2, figsize=(9, 4.2))
+    fig, axes = plt.subplots(1, 2, figsize=(9.6, 4.2), layout="constrained")
     for ax, look, title in zip(
         axes,
         ("monostatic", "exact"),
@@ -235,16 +240,18 @@ def _figures(folder: Path, bench, bistatic_images, progressive, projective) -> N
         strict=True,
     ):
         im, pl = bistatic_images[look]
-        show(ax, im, pl, title)
-    fig.tight_layout()
+        art = show(ax, im, pl, title)
+    fig.colorbar(art, ax=list(axes), shrink=0.8, label="dB re each image's peak")
     fig.savefig(folder / "spot_bistatic.png", dpi=100)
     plt.close(fig)
 
     plan, snaps = progressive
-    fig, axes = plt.subplots(1, len(snaps), figsize=(3 * len(snaps), 3.4))
+    fig, axes = plt.subplots(
+        1, len(snaps), figsize=(3 * len(snaps) + 0.8, 3.4), layout="constrained"
+    )
     for ax, (c, im) in zip(axes, snaps, strict=True):
-        show(ax, im, plan, f"after {c} shots")
-    fig.tight_layout()
+        art = show(ax, im, plan, f"after {c} shots")
+    fig.colorbar(art, ax=list(axes), shrink=0.8, label="dB re each image's peak")
     fig.savefig(folder / "spot_progressive.png", dpi=100)
     plt.close(fig)
 

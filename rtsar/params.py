@@ -4,9 +4,10 @@ Conventions (used everywhere in rtsar)
 --------------------------------------
 * SI units; names carry the unit where it could be doubted (``prf_hz``, ``slant_range_m``).
 * Complex baseband with carrier ``exp(+i 2π f0 t)``; a return from slant range R carries the
-  two-way phase ``-4π R / λ`` with λ = c / f0 and f0 the *centre* frequency of the chirp, for both
-  waveforms (pulsed radar after heterodyne and matched filter; FMCW lidar after dechirp on
-  receive, the local oscillator delayed to ``reference_range_m``).
+  two-way phase ``-4π R / λ`` with λ = c / f0 and f0 the *centre* frequency of the chirp (pulsed
+  radar, after heterodyne and matched filter); FMCW lidar, after dechirp on receive against a
+  local oscillator delayed to ``reference_range_m`` = R_ref, carries ``-4π (R - R_ref) / λ``
+  (Crouch eq. 3.4: the delay counts from the LO path), a constant offset that focusing ignores.
 * Array axes: ``echo[pulse, sample]``, ``line[pulse, range_bin]``, ``image[azimuth, range]``.
 * Along-track: pulse ``p`` is taken at ``x_p = p * along_track_step_m`` (stop-and-hop).
 """

@@ -94,6 +94,8 @@ def test_the_page_runs_as_written(page, tmp_path):
         reason = block.directives.get("skip")
         if reason is None and "needs" in block.directives:
             reason = REQUIREMENTS[block.directives["needs"]]()
+            if reason and ci():  # CI installs what a block needs (.ci/run): none may go unrun
+                pytest.fail(f"{block.where}: {reason} (CI=true: .ci/run installs it)")
         if reason:
             OUTCOMES.append((block.where, "skipped", reason))
             continue
@@ -108,6 +110,38 @@ def test_the_page_runs_as_written(page, tmp_path):
                 f"{done.stdout[-3000:]}"
             )
         OUTCOMES.append((block.where, "ran", f"{seconds:.1f} s"))
+
+
+def test_blocks_not_run_still_name_real_commands_options_and_extras():
+    """A skipped block is checked without running it (tests/docs_unrun.py): its rtsar command
+    lines parse, its pip extras exist, its scripts and modules are there."""
+    from docs_unrun import problems, simple_commands
+
+    found, checked = [], 0
+    for page in pages():
+        for block in parse_blocks(page):
+            if block.lang != "sh" or not set(block.directives) & {"skip", "needs"}:
+                continue
+            for words in simple_commands(block.text):
+                checked += 1
+                found += [f"{block.where}: {p}" for p in problems(words, build_parser)]
+    assert checked >= 10, f"only {checked} commands in blocks not run: the parser lost them?"
+    assert not found, "\n".join(found)
+
+
+def test_the_unrun_check_catches_a_wrong_extra_option_and_script():
+    from docs_unrun import problems, simple_commands
+
+    block = (
+        'python3 -m venv .venv && .venv/bin/pip install ".[opencl-gpu]" && .venv/bin/rtsar run\n'
+        "rtsar view --http 8080 --no-such-option   # comment\n"
+        "rtsar run --preset nope &\n"
+        "python tools/no_such_tool.py --x 2>&1 | tail\n"
+    )
+    said = [p for words in simple_commands(block) for p in problems(words, build_parser)]
+    assert len(said) == 4, said
+    assert "opencl-gpu" in said[0] and "--no-such-option" in said[1]
+    assert "nope" in said[2] and "no_such_tool.py" in said[3]
 
 
 def test_the_readme_fits_a_screen_and_keeps_the_two_commands():

@@ -161,3 +161,19 @@ def test_the_lens_alone_is_the_lens_tables_figure_and_each_ideal_sits_under_its_
         k = next(i for i, ln in enumerate(lines) if ln.strip().startswith(f"{kind}: max rate "))
         assert lines[k + 1].strip().startswith(f"{kind}: max rate: ")
         assert "of its stages' two-core ideal" in lines[k + 1]
+
+
+def test_the_lens_rows_carry_the_two_thread_fft_pair_yardstick():
+    """Issue 38: the bench prints each lens's share of a bare two-thread FFT pair of its size."""
+    from rtsar.app.bench import _fft_pair, bench_lens
+    from rtsar.lens import make_plan
+    from rtsar.presets import preset
+
+    cfg = preset("tiny")
+    (row,) = bench_lens(cfg, batches=(4,), seconds=0.05, rounds=1, opencl=False)
+    pair = row["fft_pair_two_threads_pulses_per_s"]
+    assert pair > 0 and row["numpy_share_of_fft_pair"] == row["numpy_fft_pulses_per_s"] / pair
+    assert row["opencl_share_of_fft_pair"] is None  # no OpenCL lens asked for
+    nfft = make_plan(cfg).nfft
+    x = np.arange(8, dtype=np.complex64).reshape(2, 4)
+    np.testing.assert_allclose(_fft_pair(x, nfft)[:, :4], x, atol=1e-5)  # the pair round-trips

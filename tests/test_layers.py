@@ -60,6 +60,7 @@ LAZY_ALLOWED = {
     ("rtsar.ccd", "rtsar.ccd.physical"): "the physical CCD's numba kernels, physical mode only",
     ("rtsar.scene", "rtsar.scene.simulator"): "numba loads in ~0.4 s: only when simulating",
     ("rtsar.app.cli.files", "rtsar.scene"): "the simulator (numba) for simulate only",
+    ("rtsar.app.cli.files", "rtsar.scene.tones"): "its kernels' compile count, simulate only",
     ("rtsar.app.cli.options", "rtsar.focus.chain"): "the corrections load with --correct only",
     ("rtsar.app.cli.options", "rtsar.scene.correction_context"): "with --correct, --height",
     ("rtsar.app.cli.options", "rtsar.stream.engine"): "a first pass for a bare --correct pra",

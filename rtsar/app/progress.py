@@ -1,4 +1,10 @@
-"""Progress of long work on stderr: in place on a terminal, a line every few seconds in logs."""
+"""Progress of long work on stderr: in place on a terminal, a line every few seconds in logs.
+
+The rate and the ETA are measured from the first update on: the first batch can carry what
+only a first batch costs (a kernel numba compiles on first use, a file opened, an FFT planned;
+``rtsar simulate demo`` on a busy machine printed ``eta 124.6 s`` from a first batch that held
+the simulator's compilation), so its line is not printed and its time is not extrapolated.
+"""
 
 from __future__ import annotations
 
@@ -15,16 +21,24 @@ class Progress:
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
         self.every_s = 0.2 if self.tty else every_s
         self.t0 = time.perf_counter()
+        self._first: tuple[int, float] | None = None  # (done, time) at the first update
         self._last = -1e9
 
-    def update(self, done: int, extra: str = "") -> None:
+    def update(self, done: int, extra: str = "", *, final: bool = False) -> None:
         now = time.perf_counter()
         if self._last == float("inf"):
             return
-        if now - self._last < self.every_s and done < self.total:
+        last = final or done >= self.total
+        if self._first is None and not last:
+            self._first = (done, now)  # the rate is measured from here on
+            return
+        if now - self._last < self.every_s and not last:
             return
         self._last = now
-        rate = done / max(now - self.t0, 1e-9)
+        since, t_since = self._first if self._first is not None else (0, self.t0)
+        if done <= since:  # nothing measured after the first batch: the whole run's rate
+            since, t_since = 0, self.t0
+        rate = (done - since) / max(now - t_since, 1e-9)
         eta = (self.total - done) / rate if rate > 0 else float("inf")
         msg = (
             f"{self.label}: {done}/{self.total} {self.unit} ({100 * done / self.total:5.1f} %), "
@@ -37,7 +51,6 @@ class Progress:
 
     def done(self, done: int, extra: str = "") -> None:
         if self._last != float("inf"):  # in logs update() may have printed the final line
-            self._last = -1e9
-            self.update(done, extra)
+            self.update(done, extra, final=True)
         if self.tty:
             self.stream.write("\n")

@@ -10,8 +10,16 @@ from scipy import fft as sfft
 from .base import Correlator
 from .fft import FFT_WORKERS
 
+# Multiply-adds of one block (2·N·range bins, padded) from which the groups are shared among
+# numba's threads: below, one thread keeps up (psaltis-jpl, 0.33 M: a push of 64 pulses in
+# 1.1 ms here), and the threaded kernel would cost a first run more than it saves (2.6-3.2 s
+# of CPU to compile against 1.2-1.7 s for one thread's).  psaltis-max (1.2 M) uses threads.
+PARALLEL_MACS = 1 << 20
 
-@numba.njit(nogil=True, cache=True)
+
+# _mac_group and _enter_group are inlined into the kernels that call them (numba's IR): one
+# compilation a kernel, 2/3 of the CPU time of compiling the three apart on a first run.
+@numba.njit(nogil=True, cache=True, inline="always")
 def _mac_group(h, d, newest, y):  # pragma: no cover - compiled
     # One group of range columns:  y = Σ_{p<P} H_p · X_{newest-p},  h[p, :] = H_p and
     # d[k mod P, :] = X_k (the delay line), the G columns' 2L frequencies side by side.
@@ -33,28 +41,43 @@ def _mac_group(h, d, newest, y):  # pragma: no cover - compiled
             y[f] += h0[f] * x0[f]
 
 
-@numba.njit(parallel=True, nogil=True, cache=True)
-def _enter_and_correlate(H, fdl, spec, first, acc):  # pragma: no cover - compiled
+@numba.njit(nogil=True, cache=True, inline="always")
+def _enter_group(H, fdl, spec, first, acc, g):  # pragma: no cover - compiled
     # For new block k = first + b: X_k = spec[b] enters the delay line at slot k mod P (over
     # X_{k-P}, which no output needs any more), then acc[b] = Y_k = Σ_{p<P} H_p · X_{k-p}.
     # H[g, p, :] and fdl[g, slot, :] hold group g of G range columns (G·2L values per
-    # partition): each thread streams its own groups, whose data serve all the blocks of a call
-    # from cache, and the inner loop runs over G·2L values, not 2L.
+    # partition): the group's data serve all the blocks of a call from cache, and the inner
+    # loop runs over G·2L values, not 2L.
     parts = H.shape[1]
-    for g in numba.prange(H.shape[0]):
-        for b in range(spec.shape[0]):
-            k = first + b
-            fdl[g, k % parts] = spec[b, g]
-            _mac_group(H[g], fdl[g], k, acc[b, g])
+    for b in range(spec.shape[0]):
+        k = first + b
+        slot, x = fdl[g, k % parts], spec[b, g]
+        for f in range(x.shape[0]):  # a loop: a slice copy would compile a shape-error message
+            slot[f] = x[f]
+        _mac_group(H[g], fdl[g], k, acc[b, g])
+
+
+@numba.njit(nogil=True, cache=True)
+def _enter_and_correlate(H, fdl, spec, first, acc):  # pragma: no cover - compiled
+    # _enter_group over the groups on this thread (small plans: see PARALLEL_MACS).
+    for g in range(H.shape[0]):
+        _enter_group(H, fdl, spec, first, acc, g)
 
 
 @numba.njit(parallel=True, nogil=True, cache=True)
+def _enter_and_correlate_threads(H, fdl, spec, first, acc):  # pragma: no cover - compiled
+    # The same, each thread streaming its own groups.
+    for g in numba.prange(H.shape[0]):
+        _enter_group(H, fdl, spec, first, acc, g)
+
+
+@numba.njit(nogil=True, cache=True)
 def _gather_lines(acc, first, out):  # pragma: no cover - compiled
     # out[j, :] = output line first + j of the blocks: acc[b, r, L:2L] holds the L outputs of
     # block b (the last half of its inverse transform).  One output line per iteration: the
-    # writes are contiguous.
+    # writes are contiguous.  (A copy: one thread keeps up, and compiles and loads faster.)
     step = acc.shape[2] // 2
-    for j in numba.prange(out.shape[0]):
+    for j in range(out.shape[0]):
         b, i = divmod(first + j, step)
         y = acc[b]
         line = out[j]
@@ -113,6 +136,8 @@ class PartitionedCorrelator(Correlator):
         self._spec = np.zeros((max_blocks, groups * group, width), self.dtype)
         self._acc = np.zeros_like(self._spec)
         self._group_shape = (groups, group * width)
+        self.threaded = self._H.size >= PARALLEL_MACS
+        self._kernel = _enter_and_correlate_threads if self.threaded else _enter_and_correlate
         # Many short transforms (1200 of 32 points: 70 µs) run faster on one thread than on two,
         # which would also meet numba's worker still spinning after the previous kernel.
         self._workers = FFT_WORKERS if width >= 256 else 1
@@ -131,9 +156,7 @@ class PartitionedCorrelator(Correlator):
         np.copyto(spec[:, : self.range_bins], self._windows[:count])
         sfft.fft(spec, axis=-1, workers=self._workers, overwrite_x=True)  # X_k, in place
         grouped = (count, *self._group_shape)
-        _enter_and_correlate(
-            self._H, self._fdl, spec.reshape(grouped), self._blocks, acc.reshape(grouped)
-        )
+        self._kernel(self._H, self._fdl, spec.reshape(grouped), self._blocks, acc.reshape(grouped))
         return sfft.ifft(acc, axis=-1, norm="forward", workers=self._workers, overwrite_x=True)
 
     def _emit(self, acc: np.ndarray, stop: int) -> np.ndarray:

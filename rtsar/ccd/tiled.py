@@ -282,7 +282,7 @@ def run_blocks(
     for t in numba.prange(ring_re.shape[0]):
         for e in range(events.shape[0]):
             _block(
-                t,
+                np.int64(t),  # prange's index is unsigned after the parfor pass: one _block
                 events[e, 1],
                 valid_end,
                 segs[events[e, 0]],

@@ -83,10 +83,10 @@ def resample(
     Returns (y complex128[P, K], outside bool[P, K]).
     """
     check_resampler(taps, beta)
-    x = np.ascontiguousarray(samples)
-    if x.dtype not in (np.complex64, np.complex128):
-        x = x.astype(np.complex128)
-    u = np.ascontiguousarray(index, np.float64)
+    # One specialisation of the kernel whatever the caller holds (complex64 shots, complex128
+    # spectra, read-only views): the products were complex128 in the kernel either way.
+    x = np.require(samples, np.complex128, ["C", "W"])
+    u = np.require(index, np.float64, ["C", "W"])
     if x.ndim != 2 or u.ndim != 2 or len(u) != len(x):
         raise ValueError(f"samples [P, S] and index [P, K] expected, got {x.shape}, {u.shape}")
     out = np.empty(u.shape, np.complex128)

@@ -13,9 +13,10 @@ so on small plans and batches NumPy's FFT can win):
    bit) even where two backends' timings are close enough to swap places between measurements.
 
 The timings are kept in the cache folder (:mod:`rtsar.lens.cache`) per plan shape, device and
-survey, so a run pays them once (about 0.4 s).  The choice and its figures are the lens's
-``choice`` line, which the run's banner prints.  A device asked for (``--device``,
-``RTSAR_OPENCL_DEVICE``) is used as asked, never replaced.
+survey, so a run pays them once (about 0.4 s); where they say NumPy, later runs build no
+OpenCL lens at all.  The choice and its figures are the lens's ``choice`` line, which the
+run's banner prints.  A device asked for (``--device``, ``RTSAR_OPENCL_DEVICE``) is used as
+asked, never replaced.
 """
 
 from __future__ import annotations
@@ -63,8 +64,31 @@ def _key(plan: LensPlan, precision: str, sizes, device_label: str, survey_key: s
     return hashlib.sha256(json.dumps(shape).encode()).hexdigest()[:24]
 
 
+class _Refused(Exception):
+    """The device did not build this plan's lens (the cause: the driver's error)."""
+
+
+class _Deferred:
+    """One device's OpenCL lens, built when first needed: where the cached figures of the plan
+    say NumPy is faster, no OpenCL context is made and no kernel is built (0.05-0.25 s a run
+    on this machine's three CPU drivers, 2.5 s on PoCL with its kernel cache empty)."""
+
+    def __init__(self, plan: LensPlan, device, precision: str):
+        self._args, self.built = (plan, device, precision), None
+
+    def lens(self) -> AOLens:
+        if self.built is None:
+            plan, device, precision = self._args
+            try:
+                self.built = AOLens(plan, device=device, precision=precision)
+            except (RuntimeError, ValueError) as exc:  # the survey's plan built, this not
+                raise _Refused(str(exc).splitlines()[0]) from exc
+        return self.built
+
+
 def plan_rates(cl_lens, np_lens, sizes, key: str | None = None) -> dict:
-    """``{"opencl": {b: pulses/s}, "numpy": {b: pulses/s}}`` for the two lenses (cached by key)."""
+    """``{"opencl": {b: pulses/s}, "numpy": {b: pulses/s}}`` for the two lenses (cached by key;
+    ``cl_lens`` may be a deferred lens, built only to be measured)."""
     if key in _memo:  # one choice per plan in a process, even where nothing can be cached
         return _memo[key]
     cache = read_json(_CACHE) if key else {}
@@ -74,6 +98,8 @@ def plan_rates(cl_lens, np_lens, sizes, key: str | None = None) -> dict:
         if all(v is not None for v in found.values()):
             _memo[key] = found
             return found
+    if isinstance(cl_lens, _Deferred):
+        cl_lens = cl_lens.lens()
     rates = best_rates({"opencl": cl_lens, "numpy": np_lens}, sizes, _SECONDS, _ROUNDS)
     if key:
         cache = read_json(_CACHE)
@@ -97,7 +123,8 @@ def choose(plan: LensPlan, precision: str = "complex64", batch: int | None = Non
     """The lens for ``--lens auto`` (see the module docstring).
 
     Returns a lens whose ``choice`` says what runs and why; ``fallback_reason`` is set (and a
-    RuntimeWarning given by the caller) only where OpenCL could not run at all.
+    RuntimeWarning given by the caller) only where OpenCL could not run at all.  The OpenCL
+    lens is built only where it runs or is measured (:class:`_Deferred`).
     """
     if device is not None or os.environ.get(cl_devices.ENV_DEVICE, "").strip():
         lens = AOLens(plan, device=device, precision=precision)  # never replaced: errors raise
@@ -107,29 +134,31 @@ def choose(plan: LensPlan, precision: str = "complex64", batch: int | None = Non
         best, why = cl_devices.default_device()
     except RuntimeError as exc:  # no platform at all
         best, why = None, str(exc)
-    cl_lens = None
+    np_lens = NumpyLens(plan, precision=precision)
+    sizes = batch_sizes(batch)
     if best is not None:  # the fastest device that builds this plan (double, local memory)
         devices, refused = cl_devices.list_devices(), []
         for report in cl_devices.ranked(cl_devices.survey()):
+            cl_lens = _Deferred(plan, devices[report.index], precision)
+            key = _key(plan, precision, sizes, report.full_label, cl_devices.survey_fingerprint())
             try:
-                cl_lens = AOLens(plan, device=devices[report.index], precision=precision)
-            except (RuntimeError, ValueError) as exc:  # the survey's plan built, this not
-                refused.append(f"{report.short_label}: {str(exc).splitlines()[0]}")
+                rates = plan_rates(cl_lens, np_lens, sizes, key)
+                if _mean_time(rates["opencl"]) <= _mean_time(rates["numpy"]):
+                    cl_lens.lens()  # it runs: built now (where it was not to be measured)
+            except _Refused as exc:
+                refused.append(f"{report.short_label}: {exc}")
                 continue
             if report.index != best.index:
                 why = f"the fastest that builds this plan ({'; '.join(refused)})"
-            best = report
-            break
-        else:
-            why = f"no OpenCL device builds this plan ({'; '.join(refused)})"
-    np_lens = NumpyLens(plan, precision=precision)
-    if cl_lens is None:
-        np_lens.fallback_reason = why
-        np_lens.choice = f"NumPy lens (no OpenCL: {why})"
-        return np_lens
-    sizes = batch_sizes(batch)
-    key = _key(plan, precision, sizes, best.full_label, cl_devices.survey_fingerprint())
-    rates = plan_rates(cl_lens, np_lens, sizes, key)
+            return _chosen(cl_lens.built, np_lens, report, why, rates, sizes)
+        why = f"no OpenCL device builds this plan ({'; '.join(refused)})"
+    np_lens.fallback_reason = why
+    np_lens.choice = f"NumPy lens (no OpenCL: {why})"
+    return np_lens
+
+
+def _chosen(cl_lens, np_lens, best, why: str, rates: dict, sizes):
+    """The faster of the two lenses by ``rates``, its ``choice`` line set."""
     cl_us, np_us = 1e6 * _mean_time(rates["opencl"]), 1e6 * _mean_time(rates["numpy"])
     figures = (
         f"mean {{}} µs per pulse against {{}}'s {{}} µs over batch{'es' if len(sizes) > 1 else ''} "

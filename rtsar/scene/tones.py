@@ -75,13 +75,13 @@ def _tone_sum(out, lo, hi, alpha, beta, gain_re, gain_im, anchor):
 
 
 @numba.njit(nogil=True, cache=True)
-def _pulsed_tones(r, t_open_s, fs_hz, k_hz_per_s, tp_s, lam_m, c_m_per_s, samples):
-    """Window and tone of each pulsed return (see pulsed_returns), float64 throughout."""
+def _pulsed_tones(
+    r, t_open_s, fs_hz, k_hz_per_s, tp_s, lam_m, c_m_per_s, samples, lo, hi, alpha, beta
+):
+    """Window and tone of each pulsed return (see pulsed_returns), float64 throughout, into
+    lo, hi, alpha and beta (allocated by the caller: numba's allocation code is ~0.3 s more to
+    compile on a first run)."""
     m = r.shape[0]
-    lo = np.empty(m, np.int64)
-    hi = np.empty(m, np.int64)
-    alpha = np.empty(m)
-    beta = np.empty(m)
     for j in range(m):
         tau = 2.0 * r[j] / c_m_per_s
         lo[j] = max(0, math.ceil((tau - t_open_s) * fs_hz))
@@ -94,7 +94,6 @@ def _pulsed_tones(r, t_open_s, fs_hz, k_hz_per_s, tp_s, lam_m, c_m_per_s, sample
         alpha[j] = al - math.floor(al)
         be = k_hz_per_s * a / fs_hz
         beta[j] = be - math.floor(be)
-    return lo, hi, alpha, beta
 
 
 def pulsed_returns(
@@ -116,17 +115,12 @@ def pulsed_returns(
     g · exp i2π[−2R/λ + K/2 (t_n − τ − Tp/2)²], as the factored tone of the module docstring;
     ``chirp_phasor`` is quadratic_phasor(samples, K/(2 fs²)).  complex128[samples].
     """
-    r = np.ascontiguousarray(range_m, np.float64)
-    lo, hi, alpha, beta = _pulsed_tones(
-        r,
-        t_open_s,
-        sample_rate_hz,
-        chirp_rate_hz_per_s,
-        pulse_duration_s,
-        wavelength_m,
-        c_m_per_s,
-        samples,
-    )
+    r = np.require(range_m, np.float64, ["C", "W"])  # (a read-only array: another specialisation)
+    lo, hi = np.empty(len(r), np.int64), np.empty(len(r), np.int64)
+    alpha, beta = np.empty(len(r)), np.empty(len(r))
+    # Every scalar cast here: an int or float32 would compile another specialisation.
+    figures = (t_open_s, sample_rate_hz, chirp_rate_hz_per_s, pulse_duration_s, wavelength_m)
+    _pulsed_tones(r, *map(float, figures), float(c_m_per_s), int(samples), lo, hi, alpha, beta)
     g = np.asarray(gain, np.complex128)
     out = np.zeros(samples, np.complex128)
     _tone_sum(out, lo, hi, alpha, beta, g.real.copy(), g.imag.copy(), ANCHOR)
@@ -160,9 +154,7 @@ def tone_sum(
     complex128[samples]
     """
     out = np.zeros(samples, np.complex128)
-    if len(gain) == 0:
-        return out
-    g = np.asarray(gain, np.complex128)
+    g = np.asarray(gain, np.complex128)  # (none: the kernel still runs, so a warm-up compiles it)
     _tone_sum(
         out,
         np.clip(np.asarray(lo, np.int64), 0, samples),
@@ -174,6 +166,13 @@ def tone_sum(
         ANCHOR,
     )
     return out
+
+
+def kernels_compiled() -> int:
+    """How many of this module's kernel specialisations numba compiled in this process rather
+    than loaded from its cache (``cache=True``: 0 after the first run of an installation)."""
+    stats = [getattr(k, "stats", None) for k in (_phasor, _tone_sum, _pulsed_tones)]
+    return sum(sum(s.cache_misses.values()) for s in stats if s is not None)  # None: no JIT
 
 
 def quadratic_phasor(samples: int, cycles_per_sample2: float) -> np.ndarray:

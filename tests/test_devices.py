@@ -288,6 +288,13 @@ def test_auto_takes_opencl_only_where_it_is_faster(monkeypatch, opencl):
             "opencl": dict.fromkeys(sizes, 1.0e5), "numpy": dict.fromkeys(sizes, 1.15e5)}
     )  # fmt: skip
     assert base.make_lens(plan, "auto", batch=8).backend == "numpy"
+    # Issue 38: within 10 % of NumPy's time (1.08x here) the design's OpenCL lens runs, said so
+    monkeypatch.setattr(
+        auto, "plan_rates", lambda a, b, sizes, key=None: {
+            "opencl": dict.fromkeys(sizes, 1.0e5), "numpy": dict.fromkeys(sizes, 1.08e5)}
+    )  # fmt: skip
+    lens = base.make_lens(plan, "auto", batch=8)
+    assert lens.backend == "opencl" and "within 10 % of NumPy's time" in lens.choice
     # each wins at one size: the mean time per pulse decides, and the line says who wins where
     monkeypatch.setattr(
         auto, "plan_rates", lambda a, b, sizes, key=None: {
@@ -308,7 +315,7 @@ def test_auto_choice_agrees_with_its_own_measurement(monkeypatch, opencl, tmp_pa
     assert len(cached) == 1
     (measured,) = cached.values()
     per_pulse = {k: np.mean([1 / v for v in d.values()]) for k, d in measured.items()}
-    numpy_wins = per_pulse["numpy"] < per_pulse["opencl"]
+    numpy_wins = per_pulse["numpy"] * 1.10 < per_pulse["opencl"]  # OpenCL keeps a 10 % tie
     assert lens.backend == ("numpy" if numpy_wins else "opencl")
     assert set(measured["opencl"]) == {"16", "32"}
 

@@ -148,7 +148,7 @@ def test_survey_is_cached_per_machine_and_measured_again_when_devices_change(
     said = []
     first = cl_devices.survey(say=said.append)
     assert calls == [len(first)] and said and "probing" in said[0]
-    assert read_json("opencl-devices.json")["fingerprint"] == cl_devices.survey_fingerprint()
+    assert list(read_json("opencl-devices.json")["surveys"]) == [cl_devices.survey_fingerprint()]
     monkeypatch.setattr(cl_devices, "_survey", None)  # a new process: from the file
     cl_devices.survey(say=said.append)
     assert calls == [len(first)] and len(said) == 1
@@ -162,6 +162,12 @@ def test_survey_is_cached_per_machine_and_measured_again_when_devices_change(
     monkeypatch.setattr(cl_devices, "_survey", None)
     cl_devices.survey()
     assert len(calls) == 2
+    # Issue 37: two checkouts (two fingerprints) sharing a cache folder each keep their
+    # survey: the first one's comes back from the file, not from probing again.
+    monkeypatch.setattr(cl_devices, "describe", real)
+    monkeypatch.setattr(cl_devices, "_survey", None)
+    cl_devices.survey()
+    assert len(calls) == 2 and len(read_json("opencl-devices.json")["surveys"]) == 2
 
 
 def test_a_driver_that_crashes_while_probing_is_refused_not_fatal(monkeypatch):
@@ -348,7 +354,29 @@ def test_the_hint_tells_a_user_whose_vendors_folder_hides_the_pip_driver(monkeyp
     assert "OCL_ICD_VENDORS=/my/vendors hides it" in hint and lib in hint
     ours = cl_vendors.Registration({"rtsar-intel-cpu.icd": lib}, "/my/vendors", "", True)
     monkeypatch.setattr(cl_vendors, "_done", ours)
-    assert cl_devices.install_hint().startswith("Intel's CPU runtime is installed but refused")
+    refused = cl_devices.install_hint(all_refused=True)
+    assert refused.startswith("Intel's CPU runtime is installed but refused")
+    # Issue 37: where devices may still run (a PoCL build failure's advice), Intel's runtime
+    # is not called refused: it may be the very device that runs the lens.
+    assert (
+        "refused" not in cl_devices.install_hint() and "rtsar devices" in cl_devices.install_hint()
+    )
+
+
+def test_a_summary_of_refusals_says_the_install_advice_once():
+    """Issue 37: without the extra, the warning line was 1,027 characters and repeated the pip
+    command: each device's build failure carried the advice, and the summary again."""
+    from rtsar.lens.cl_loader import _build_hint
+    from rtsar.lens.cl_probe import DeviceReport
+
+    log = "error: unknown target CPU 'generic'"
+    reason = f"building lens on x failed: {log}{_build_hint(log)}".replace("\n", " ")
+    reports = [
+        DeviceReport(i, "PoCL", "3.0", f"cpu{i}", "3.0", "CPU", reason=reason) for i in range(2)
+    ]
+    line = cl_devices.refusal_summary(reports)
+    assert line.count("pip install") <= 1 and line.count("This OpenCL driver") == 0
+    assert line.count("unknown target CPU") == 2 and len(line) < 600
 
 
 def test_auto_takes_the_next_device_where_the_fastest_cannot_build_the_plan(monkeypatch, opencl):

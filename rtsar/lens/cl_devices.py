@@ -64,6 +64,7 @@ __all__ = [
 
 ENV_DEVICE = "RTSAR_OPENCL_DEVICE"
 _CACHE = "opencl-devices.json"
+KEEP_SURVEYS = 8  # fingerprints kept (checkouts, driver versions): the newest
 
 
 def list_devices() -> list[cl.Device]:
@@ -173,22 +174,25 @@ def measure(
         if say is not None:
             say(
                 f"probing {len(reports)} OpenCL device{'s' if len(reports) != 1 else ''} "
-                f"with the lens of {preset_name} (a second or two each; kept for later runs)"
+                f"with the lens of {preset_name} (one yardstick plan for every run, whatever "
+                "its own; a second or two each; kept for later runs)"
             )
         measured, numpy_rates = probe_all(reports, preset_name, batches, seconds)
         hung = any("no answer within" in (r.reason or r.note or "") for r in measured)
         if preset_name == SURVEY_PRESET and SURVEY_BATCH in [int(b) for b in batches]:
             key = fingerprint(reports)
             if not hung:  # a hang may be this moment's: the next run asks again
-                write_json(
-                    _CACHE,
-                    {
-                        "fingerprint": key,
-                        "measured_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-                        "preset": SURVEY_PRESET,
-                        "devices": [asdict(r) for r in measured],
-                    },
-                )
+                kept = _surveys(read_json(_CACHE))
+                kept[key] = {
+                    "fingerprint": key,
+                    "measured_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                    "preset": SURVEY_PRESET,
+                    "devices": [asdict(r) for r in measured],
+                }
+                newest = sorted(kept, key=lambda k: str(kept[k].get("measured_at", "")))
+                for old_key in newest[:-KEEP_SURVEYS]:
+                    del kept[old_key]
+                write_json(_CACHE, {"surveys": kept})
             _keep(measured, key)
         return measured, numpy_rates
 
@@ -202,7 +206,7 @@ def survey(say=None) -> list[DeviceReport]:
         key = fingerprint(reports)
         if _survey is not None and _survey_key == key:
             return _survey
-        cached = read_json(_CACHE)
+        cached = _surveys(read_json(_CACHE)).get(key, {})
         if cached.get("fingerprint") == key:
             try:
                 found = [DeviceReport(**d) for d in cached["devices"]]
@@ -213,6 +217,18 @@ def survey(say=None) -> list[DeviceReport]:
             if found and [identity(r) for r in found] == [identity(r) for r in reports]:
                 return _keep(found, key)
         return measure(say=say)[0]
+
+
+def _surveys(cache: dict) -> dict:
+    """The cached surveys by fingerprint (one per checkout and machine that shares the cache
+    folder, so two checkouts of one account do not probe again each time the other ran);
+    the older one-survey file reads as one entry."""
+    found = cache.get("surveys")
+    if isinstance(found, dict):
+        return {k: v for k, v in found.items() if isinstance(v, dict)}
+    if isinstance(cache.get("fingerprint"), str):
+        return {cache["fingerprint"]: cache}
+    return {}
 
 
 def survey_fingerprint() -> str:
@@ -260,12 +276,23 @@ def refusal_summary(reports: list[DeviceReport]) -> str:
     """Why no device runs the lens, with what to install (one line)."""
     if not reports:
         return f"{NO_PLATFORM}; {install_hint()}"
-    parts = "; ".join(f"{r.label}: {r.reason}" for r in reports)
-    return f"no OpenCL device builds the lens ({parts}); {install_hint()}"
+    parts = "; ".join(f"{r.label}: {_without_hint(r.reason)}" for r in reports)
+    return f"no OpenCL device builds the lens ({parts}); {install_hint(all_refused=True)}"
 
 
-def install_hint() -> str:
-    """Exactly what to install for a working OpenCL CPU device on this machine (one phrase)."""
+def _without_hint(reason: str | None) -> str:
+    """A device's refusal without the advice a build failure carries (said once, at the end)."""
+    text = str(reason or "")
+    cut = text.find(BUILD_HINT_START)
+    return text[:cut].rstrip() if cut >= 0 else text
+
+
+BUILD_HINT_START = "  This OpenCL driver's compiler"  # where cl_loader's advice begins
+
+
+def install_hint(all_refused: bool = False) -> str:
+    """Exactly what to install for a working OpenCL CPU device on this machine (one phrase);
+    ``all_refused``: said where every device was refused (Intel's runtime, if installed, too)."""
     machine = _platform.machine().lower()
     # The interpreter in full: `python3 -m pip` in a shell without the environment activated
     # would install outside it, where rtsar never looks.
@@ -284,10 +311,15 @@ def install_hint() -> str:
                     f"{cl_vendors.ENV_VENDORS}={own} hides it from the ICD loader: unset it, "
                     f"or add an .icd file there naming {lib}"
                 )
-            if found:
+            if found and all_refused:
                 return (
                     "Intel's CPU runtime is installed but refused (see `rtsar devices`); "
                     f"install the system's PoCL: {apt}"
+                )
+            if found:  # it may well be the device that runs: point to it, don't judge it
+                return (
+                    "Intel's CPU runtime is installed here (`rtsar devices` lists what it "
+                    f"builds); where it refuses too, the system's PoCL: {apt}"
                 )
             return (
                 f"install Intel's CPU OpenCL runtime into this environment: {pip} "

@@ -143,7 +143,7 @@ def build_program(
         text = str(exc)
         errors = [ln.strip() for ln in text.splitlines() if ln.strip().startswith("error:")]
         first = errors[0] if errors else (text.strip().splitlines() or ["no build log"])[0]
-        hint = _build_hint(text).replace("\n", " ")
+        hint = _build_hint(text).replace("\n", " ")  # "  This OpenCL driver's compiler …"
         raise RuntimeError(
             f"building {name} on {context.devices[0].name.strip()} failed: {first}{hint}"
         ) from exc
@@ -154,8 +154,8 @@ def build_program(
 def _build_hint(log: str) -> str:
     """What a user can do about a build failure the driver, not the kernel, caused."""
     if "unknown target CPU" in log:
-        return (
-            "\nThis OpenCL driver's compiler (PoCL 3.0's LLVM) does not know this CPU model, so "
+        return (  # begins with cl_devices.BUILD_HINT_START once its newlines are spaces
+            "\n\nThis OpenCL driver's compiler (PoCL 3.0's LLVM) does not know this CPU model, so "
             "it cannot build any kernel here.  Pick another device (`rtsar devices` lists them; "
             f"RTSAR_OPENCL_DEVICE or --device), or {install_hint()}."
         )

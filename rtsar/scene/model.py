@@ -98,9 +98,15 @@ class Scene:
     seed: int = 0
     effects: tuple = ()  # ((name, {params}), ...)
     name: str = "scene"
+    # A surface's speckle is laid out a few bins past the range window on purpose (the edge
+    # bins then see a whole neighbourhood): those scatterers are not "outside the swath".
+    extends_past_window: bool = False
 
     def targets_outside_swath(self) -> list[int]:
-        """Indices of targets whose range lies outside the processor's range window."""
+        """Indices of targets whose range lies outside the processor's range window (none for
+        a surface, whose scatterers reach past it on purpose: ``extends_past_window``)."""
+        if self.extends_past_window:
+            return []
         rm = range_axis_m(self.config)
         margin = self.config.waveform.range_resolution_m
         r = self.targets.slant_range_m

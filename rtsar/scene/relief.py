@@ -326,5 +326,6 @@ def surface_scene(
         seed,
         tuple((e, dict(p)) for e, p in effects),
         name or surface.name,
+        extends_past_window=True,  # the 3 bins and the margin above, on purpose
     )
     return SurfaceScene(scene, surface, y_c)

@@ -76,3 +76,5 @@ def test_help_prints_for_every_command(capsys):
         assert done.value.code == 0
         out = capsys.readouterr().out
         assert out.startswith("usage: rtsar " + " ".join(path[1:]))
+        # a description is printed as written (only option help is %-formatted): no "%%"
+        assert "%%" not in out, f"{' '.join(path)}: '%%' printed in its --help"

@@ -103,9 +103,10 @@ def add_parsers(sub) -> None:
     s = sub.add_parser(
         "bench",
         description="Not a test: measures pulses/s of the AO lens (OpenCL vs the same plan on "
-        "NumPy's and SciPy's FFT, and one bare FFT of the batch) and of the correlators, and "
+        "NumPy's and SciPy's FFT, one bare FFT of the batch, and the plan's bare FFT pair on two "
+        "threads as the yardstick) and of the correlators, and "
         "the live pipeline end to end (real-time factor, drops, latency; threads and two "
-        "swath processes; latency against the offered rate, 25-150 %% of the PRF, with the "
+        "swath processes; latency against the offered rate, 25-150 % of the PRF, with the "
         "granularity a live run chooses), in one run, as ratios.  About 6 minutes on 2 cores "
         "(--preset P: about half).",
     )

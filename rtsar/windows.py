@@ -1,7 +1,9 @@
 """Amplitude tapers for the range spectrum and the azimuth mask.
 
-``taylor`` is the Taylor window with n̄ = 4 and -35 dB design sidelobes (scipy's implementation),
-the usual SAR choice; ``hann`` and ``hamming`` are the textbook raised cosines (Crouch eq. 2.15).
+``taylor`` is the Taylor window with n̄ = 4 and -35 dB design sidelobes, the usual SAR choice
+(Carrara, Goodman & Majewski, Spotlight SAR, eqs. D.1-D.5: the same definition and normalisation
+as scipy.signal.windows.taylor, written out here because scipy.signal takes over a second to
+load); ``hann`` and ``hamming`` are the textbook raised cosines (Crouch eq. 2.15).
 """
 
 from __future__ import annotations
@@ -22,17 +24,31 @@ def window(name: str, n: int) -> np.ndarray:
         raise ValueError("window length must be >= 1")
     if name == "rect":
         return np.ones(n)
-    # Imported here: scipy.signal takes about a second to load, and the rectangular window (and
-    # every command that never builds a taper) does without it.
-    from scipy.signal import windows as _sw
-
+    k = np.arange(n, dtype=np.float64)
     if name == "hann":
-        return _sw.hann(n, sym=True) if n > 2 else np.ones(n)
+        return 0.5 - 0.5 * np.cos(2.0 * np.pi * k / (n - 1)) if n > 2 else np.ones(n)
     if name == "hamming":
-        return _sw.hamming(n, sym=True)
+        return 0.54 - 0.46 * np.cos(2.0 * np.pi * k / (n - 1)) if n > 1 else np.ones(n)
     if name == "taylor":
-        return _sw.taylor(n, nbar=TAYLOR_NBAR, sll=TAYLOR_SLL_DB, norm=True, sym=True)
+        return taylor(n, TAYLOR_NBAR, TAYLOR_SLL_DB)
     raise ValueError(f"unknown window {name!r}; choose one of {WINDOWS}")
+
+
+def taylor(n: int, nbar: int, sll_db: float) -> np.ndarray:
+    """Taylor window of length n: n̄ - 1 cosine terms whose coefficients F_m put the first
+    n̄ - 1 sidelobes at -``sll_db`` (Carrara et al. eqs. D.1-D.5), scaled to 1 at the centre."""
+    a = np.arccosh(10.0 ** (sll_db / 20.0)) / np.pi
+    sigma2 = nbar**2 / (a**2 + (nbar - 0.5) ** 2)  # the stretch that joins the two zero sets
+    m = np.arange(1, nbar, dtype=np.float64)
+    f = np.empty(m.size)
+    for i, mi in enumerate(m):
+        numerator = np.prod(1.0 - mi**2 / sigma2 / (a**2 + (m - 0.5) ** 2))
+        others = m[m != mi]
+        denominator = 2.0 * np.prod(1.0 - mi**2 / others**2)
+        f[i] = (-1.0) ** (mi + 1) * numerator / denominator
+    x = (np.arange(n) - n / 2.0 + 0.5) / n  # sample positions about the centre, in lengths
+    w = 1.0 + 2.0 * np.cos(2.0 * np.pi * np.outer(x, m)) @ f
+    return w / (1.0 + 2.0 * f.sum())  # 1 at the centre, (n - 1) / 2
 
 
 def window_at(name: str, u: np.ndarray) -> np.ndarray:

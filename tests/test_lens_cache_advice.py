@@ -99,3 +99,19 @@ def test_a_damaged_device_survey_is_probed_again(monkeypatch, tmp_path, bad):
     found = cl_devices.survey()
     assert probed == [1]
     assert found[0].rate() == 1000.0
+
+
+def test_where_a_cache_lives_is_not_a_new_survey(monkeypatch):
+    """From the cold-start work: NUMBA_CACHE_DIR made a new fingerprint (a full new probe);
+    a speed setting (threads) still does."""
+    from rtsar.lens import cl_devices
+    from rtsar.lens.cl_probe import DeviceReport
+
+    one = [DeviceReport(0, "P", "OpenCL 3.0", "cpu", "1.0", "CPU")]
+    monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
+    base = cl_devices.fingerprint(one)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", "/somewhere/else")
+    monkeypatch.setenv("POCL_CACHE_DIR", "/another")
+    assert cl_devices.fingerprint(one) == base
+    monkeypatch.setenv("NUMBA_NUM_THREADS", "1")
+    assert cl_devices.fingerprint(one) != base

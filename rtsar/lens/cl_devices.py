@@ -88,6 +88,7 @@ def _cpu_model() -> str:
 _HOST_SOURCES = ("opencl.py", "cl_launch.py", "plan.py", "cl_probe_child.py", "cl_loader.py")
 # what sets how fast a driver runs besides the driver itself
 _SPEED_ENV = ("POCL_", "OMP_", "NUMBA_", "KMP_", "CL_CONFIG_", "TBB_")
+_NOT_SPEED = ("_CACHE_DIR", "_DEBUG_CACHE")  # where caches live: no device runs faster for it
 
 
 def _driver_files() -> list:
@@ -136,7 +137,11 @@ def fingerprint(reports: list[DeviceReport]) -> str:
                 host.append(f.read())
         except OSError:
             host.append(name)
-    speed = sorted((k, v) for k, v in os.environ.items() if k.startswith(_SPEED_ENV))
+    speed = sorted(
+        (k, v)
+        for k, v in os.environ.items()
+        if k.startswith(_SPEED_ENV) and not k.endswith(_NOT_SPEED)
+    )
     h = hashlib.sha256()
     for part in (
         json.dumps([identity(r) for r in reports]),

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_pipeline import Collect  # the in-process sink that keeps every strip
 
 from rtsar.app import live
 from rtsar.app.cli import build_parser
@@ -25,7 +26,6 @@ from rtsar.app.cli.options import pipeline_settings
 from rtsar.presets import preset
 from rtsar.sources.replay import ReplaySource
 from rtsar.stream.pipeline import Pipeline, PipelineSettings
-from rtsar.stream.strips import StripSink
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = ROOT / "docs" / "pages"
@@ -67,20 +67,6 @@ def default_settings() -> PipelineSettings:
     )
     assert run == replay
     return run
-
-
-class Collect(StripSink):
-    def __init__(self):
-        self.strips, self.final = [], None
-
-    def strip(self, strip, pipeline):
-        self.strips.append(strip)
-
-    def stats(self, d, pipeline):
-        pass
-
-    def end(self, d, pipeline):
-        self.final = d
 
 
 def replay_of(cfg, seq) -> ReplaySource:

@@ -73,6 +73,7 @@ LAZY_ALLOWED = {
     ("rtsar.ccd", "rtsar.ccd.nonuniform"): "numba loads in ~0.4 s: only the correlators using it",
     ("rtsar.ccd", "rtsar.ccd.partitioned"): "numba loads in ~0.4 s: only the correlators using it",
     ("rtsar.app.cli.formats", "rtsar.sinks.exports.sicd"): "sarpy loads in ~1 s; --sicd only",
+    ("rtsar.app.cli.formats", "rtsar.app.measure_image"): "the measure's theory: --scene only",
     ("rtsar.app.cli.streaming", "rtsar.sinks.exports.sicd"): "sarpy loads in ~1 s; --sicd only",
     ("rtsar.app.cli.view", "rtsar.app.webview.server"): "aiohttp loads in ~0.2 s; --http only",
     ("rtsar.app.entry", "rtsar.app.cli"): "a Ctrl-C during the command's imports is one line",

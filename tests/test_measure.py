@@ -312,6 +312,20 @@ def test_azimuth_theory_is_the_correlators_response_to_the_scenes_beam(tmp_path,
     assert any("no azimuth sidelobe above -100 dB" in n for n in notes)
     assert "antenna pattern" in report["method"]["azimuth_theory"]
     assert "no azimuth sidelobe" in capsys.readouterr().out
+    # Issue 37: the SICD export declares the same theory when told the scene (it declared the
+    # beamless band's width, 34.8 m on the demo, where the pixels measure 33).
+    from sarpy.io.complex.converter import open_complex
+
+    for extra, expected in (([], None), (["--scene", str(scene)], th["irw_azimuth_m"])):
+        out = tmp_path / f"beam{len(extra)}.nitf"
+        assert main(["export", str(path), "--sicd", str(out), *extra]) == 0
+        declared = open_complex(str(out)).get_sicds_as_tuple()[0].Grid.Col.ImpRespWid
+        if expected is None:
+            assert declared > 1.03 * th["irw_azimuth_m"]  # the band alone: not the beam's
+        else:
+            assert declared == pytest.approx(expected, rel=1e-6)
+            assert declared == pytest.approx(p["irw_azimuth_m"], rel=0.005)  # what it measures
+    assert main(["export", str(path), "--cphd", str(tmp_path / "x.cphd"), "--scene", "demo"]) == 2
 
 
 def test_a_scene_of_another_instrument_is_refused(tiny_sinc_image, capsys):

@@ -218,13 +218,7 @@ def measure_image(
             "turns with the collection); measure it without --scene"
         )
     if scene is not None:
-        sc = load_scene(scene)
-        check_scene_matches(sc.config, cfg, scene, path)
-        named = dict(sc.effects)
-        if "antenna_pattern" in named:
-            gain = antenna_gain(
-                load_effects([("antenna_pattern", named["antenna_pattern"])], cfg)[0]
-            )
+        gain = scene_antenna_gain(scene, cfg, path)
         targets = load_point_targets(scene)
     if spot:
         try:
@@ -340,6 +334,18 @@ def measure_image(
         report["truth"] = truth
         report["height"] = _height(path, scene, az, rg)
     return report
+
+
+def scene_antenna_gain(scene, cfg, path):
+    """The two-way antenna gain the scene simulated (None where it has no antenna_pattern),
+    after checking that the scene is of the image's instrument (one theory for ``measure``
+    and the SICD export's declared azimuth width)."""
+    sc = load_scene(scene)
+    check_scene_matches(sc.config, cfg, scene, path)
+    named = dict(sc.effects)
+    if "antenna_pattern" not in named:
+        return None
+    return antenna_gain(load_effects([("antenna_pattern", named["antenna_pattern"])], cfg)[0])
 
 
 def _nearest(targets, x: float, r: float, rho_a: float, rho_r: float) -> dict | None:

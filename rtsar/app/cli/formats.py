@@ -8,8 +8,10 @@ import math
 import sys
 import time
 
+from ...analysis.azimuth_response import azimuth_theory
 from ...sinks.exports.cphd import write_cphd
 from ...sinks.exports.sigmf_export import write_sigmf
+from ...sinks.image_file import image_config, read_image
 from ...sinks.io import check_writable
 from ...sources.formats.geometry import DEFAULT_HEADING_DEG, LocalFrame
 from .inputs import open_input
@@ -46,6 +48,18 @@ def _note_zeroed(nonfinite: dict, rec, out: str) -> None:
         )
 
 
+def _scene_azimuth_irw(args):
+    """With --scene: the azimuth width to declare, the correlator's response to the scene's
+    antenna beam (the theory `rtsar measure --scene` holds the image to)."""
+    if args.scene is None:
+        return None
+    from ..measure_image import scene_antenna_gain  # the measure's own theory (--scene only)
+
+    cfg = image_config(read_image(args.input)[3], args.input)
+    gain = scene_antenna_gain(args.scene, cfg, args.input)
+    return lambda config, range_m: azimuth_theory(config, range_m, gain).irw_m
+
+
 def cmd_export(args) -> int:
     outputs = [o for o in (args.cphd, args.sigmf, args.sicd) if o]
     if not outputs:
@@ -54,13 +68,15 @@ def cmd_export(args) -> int:
         check_writable(out)
     frame = _frame(args.origin)
     t0 = time.perf_counter()
+    if args.scene is not None and not args.sicd:
+        return die("--scene goes with --sicd (an image's declared azimuth width)")
     if args.sicd:
         if args.cphd or args.sigmf:
             return die("--sicd takes an image file; --cphd and --sigmf take a recording")
         # Here, not above: sarpy takes ~1 s to load and only --sicd needs it.
         from ...sinks.exports.sicd import write_sicd
 
-        info = write_sicd(args.input, args.sicd, frame)
+        info = write_sicd(args.input, args.sicd, frame, _scene_azimuth_irw(args))
         print(
             f"wrote {args.sicd}: SICD {info['version']}, {info['rows']} × {info['cols']} "
             f"pixels ({time.perf_counter() - t0:.1f} s)"
@@ -115,6 +131,13 @@ def add_parsers(sub) -> None:
         "auxiliary channel)",
     )
     s.add_argument("--sicd", metavar="OUT.nitf", help="write the image file as SICD 1.3 (NITF)")
+    s.add_argument(
+        "--scene",
+        help="with --sicd: the scene file or built-in name the image was simulated from, so the "
+        "declared azimuth width (ImpRespWid) is the correlator's response to its antenna beam, "
+        "the theory `rtsar measure --scene` uses (default: none, the processor's weighted "
+        "band alone)",
+    )
     s.add_argument(
         "--origin",
         default="0,0",

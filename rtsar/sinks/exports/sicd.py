@@ -53,9 +53,13 @@ def sicd_structure(
     frame: LocalFrame,
     core_name: str,
     collection_start: datetime.datetime | None = None,
+    azimuth_irw=None,
 ):
     """The SICD metadata (sarpy SICDType, derived) of an image [azimuth, range];
-    ``collection_start`` (UTC) is the time of the recording's pulse 0 (None: unknown)."""
+    ``collection_start`` (UTC) is the time of the recording's pulse 0 (None: unknown);
+    ``azimuth_irw(cfg, range_m)``, where given, the azimuth -3 dB width to declare (the
+    correlator's response to the scene's antenna beam: rtsar.analysis.azimuth_response),
+    else the processor's weighted band alone (resolution.py)."""
     geo, wf, proc = cfg.geometry, cfg.waveform, cfg.processor
     naz, nrg = image_shape
     speed = geo.speed_mps
@@ -119,7 +123,13 @@ def sicd_structure(
             "Type": "RGZERO",
             "TimeCOAPoly": {"Coefs": [[t_scp, 1.0 / speed]]},
             "Row": _direction(u_row, d_rg, range_resolution(cfg), 2.0 * f0 / C_M_PER_S),
-            "Col": _direction(u_col, d_az, azimuth_resolution(cfg, r_scp), 0.0),
+            "Col": _direction(
+                u_col,
+                d_az,
+                azimuth_resolution(cfg, r_scp),
+                0.0,
+                None if azimuth_irw is None else float(azimuth_irw(cfg, r_scp)),
+            ),
         },
         "Timeline": {
             "CollectStart": np.datetime64(collection_start or UNKNOWN_EPOCH, "us"),
@@ -201,8 +211,9 @@ def sicd_structure(
     return sicd
 
 
-def _direction(u, ss, res: Resolution, kctr) -> dict:
-    """A Grid direction (Row or Col) of sample spacing ``ss`` and resolution ``res``."""
+def _direction(u, ss, res: Resolution, kctr, irw_m: float | None = None) -> dict:
+    """A Grid direction (Row or Col) of sample spacing ``ss`` and resolution ``res`` (its
+    declared -3 dB width ``irw_m`` where given)."""
     bw = res.bandwidth_cycles_per_m
     if not (0 < bw < np.inf and 0 < ss < np.inf):
         raise ValueError(f"an impulse-response bandwidth of {bw:g} cycles/m: no SICD grid")
@@ -213,7 +224,7 @@ def _direction(u, ss, res: Resolution, kctr) -> dict:
     return {
         "UVectECF": {"X": u[0], "Y": u[1], "Z": u[2]},
         "SS": ss,
-        "ImpRespWid": res.irw_m,
+        "ImpRespWid": res.irw_m if irw_m is None else irw_m,
         "Sgn": -1,
         "ImpRespBW": min(bw, 2.0 * dk),
         "KCtr": kctr,
@@ -267,8 +278,11 @@ def _area_corners(frame: LocalFrame, azimuth_m, range_m, height_m: float) -> lis
     ]
 
 
-def write_sicd(image_path: str | Path, path: str | Path, frame: LocalFrame | None = None) -> dict:
-    """Write the rtsar image file ``image_path`` as SICD (NITF) at ``path``."""
+def write_sicd(
+    image_path: str | Path, path: str | Path, frame: LocalFrame | None = None, azimuth_irw=None
+) -> dict:
+    """Write the rtsar image file ``image_path`` as SICD (NITF) at ``path``
+    (``azimuth_irw``: see :func:`sicd_structure`)."""
     require_formats(SICDType, "SICD export")
     image, azimuth_m, range_m, attrs = read_image(image_path)
     if "spotlight" in attrs:  # rtsar.app.spotlight.write_spot_image: an arc, not a track
@@ -301,7 +315,14 @@ def write_sicd(image_path: str | Path, path: str | Path, frame: LocalFrame | Non
     sarpy_log.setLevel(logging.CRITICAL)
     try:
         sicd = sicd_structure(
-            image.shape, azimuth_m, range_m, cfg, frame or LocalFrame(), Path(path).stem, start
+            image.shape,
+            azimuth_m,
+            range_m,
+            cfg,
+            frame or LocalFrame(),
+            Path(path).stem,
+            start,
+            azimuth_irw,
         )
     except ValueError as exc:
         raise ValueError(f"{image_path}: {exc}") from None

@@ -87,3 +87,13 @@ def test_markdown_carries_the_figures(ridge):
     mcf = rep["rows"][0]
     assert f"| geometry | mcf | {mcf['rms_um']:.1f} | " in text
     assert "* baseline: 1.6 mm" in text and "* strips_out: 4" in text
+
+
+def test_a_range_window_the_shot_cannot_hold_is_one_line_exit_2(capsys):
+    """`tools/insal_report.py --range-bins 192` died with a traceback (found re-running 3d.md)."""
+    from rtsar.app.reports import insal
+
+    with pytest.raises(SystemExit) as stop:
+        insal.main(["--range-bins", "192", "--no-rate"])
+    assert stop.value.code == 2
+    assert "--range-bins 192" in capsys.readouterr().err

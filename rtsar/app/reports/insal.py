@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...lens.plan import make_plan
 from ...scene.relief import default_spacing_m, ridge, sphere_cap, surface_scene, zhao_config
 from ...scene.simulator import Simulator
 from ...stream.engine import StreamProcessor
@@ -278,6 +279,10 @@ def main(argv=None) -> int:
     ap.add_argument("-o", "--output", help="write the Markdown here too")
     args = ap.parse_args(argv)
     cfg = zhao_config(sample_rate_hz=1280.0, aperture_pulses=160, range_bins=args.range_bins)
+    try:  # a range window the 1280 Hz shot cannot hold is a usage error, not a traceback
+        make_plan(cfg)
+    except ValueError as exc:
+        ap.error(f"--range-bins {args.range_bins}: {exc}")
     geo = InsalGeometry.from_config(cfg, 1.6e-3)
     png_dir = None
     if args.png:

@@ -119,11 +119,15 @@ def spotlight_words(channel: str, look: str, method: str = "") -> str:
     return f"spotlight {how}channel {channel} in its bistatic geometry (corrected)"
 
 
-def _figure_height(axes: ImageAxes, shape, true_aspect: bool) -> float:
+def _true_aspect_height(axes: ImageAxes) -> float:
+    """The figure height (inches, 8 wide) at one metre = one metre, before any clamping."""
     e = axes.extent
+    return 7.0 * abs(e[2] - e[3]) / max(abs(e[1] - e[0]), 1e-30) + 1.0
+
+
+def _figure_height(axes: ImageAxes, shape, true_aspect: bool) -> float:
     if true_aspect:
-        ratio = abs(e[2] - e[3]) / max(abs(e[1] - e[0]), 1e-30)
-        return min(12.0, max(3.0, 7.0 * ratio + 1.0))
+        return min(12.0, max(3.0, _true_aspect_height(axes)))
     rows, cols = shape[::-1] if axes.transpose else shape
     return min(12.0, max(3.0, 8.0 * rows / max(cols, 1)))
 
@@ -186,9 +190,7 @@ def quicklook_figure(
 
 def _true_aspect_fits(axes: ImageAxes) -> bool:
     """Whether one metre = one metre gives a figure between 3 and 12 inches tall (8 wide)."""
-    e = axes.extent
-    ratio = abs(e[2] - e[3]) / max(abs(e[1] - e[0]), 1e-30)
-    return 3.0 <= 7.0 * ratio + 1.0 <= 12.0
+    return 3.0 <= _true_aspect_height(axes) <= 12.0
 
 
 def vertical_stretch(fig, ax, axes: ImageAxes) -> float:

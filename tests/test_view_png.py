@@ -15,24 +15,33 @@ from rtsar.app.view import Waterfall, _snapshot
 from rtsar.sinks.wire import Message
 
 
-def test_ctrl_c_before_any_line_exits_130_in_one_line(tmp_path):
-    png = tmp_path / "v.png"
-    endpoint = f"tcp://127.0.0.1:{free_port()}"  # no publisher: it waits
+def interrupt_view(args: list[str], ready) -> tuple[int, list[str], str]:
+    """Start `rtsar view ARGS`, read stderr lines until ``ready(line)``, send Ctrl-C (SIGINT):
+    (exit status, the lines read, the rest of stderr)."""
     proc = subprocess.Popen(
-        [sys.executable, "-m", "rtsar", "view", endpoint, "--png", str(png)],
-        stderr=subprocess.PIPE,
-        text=True,
+        [sys.executable, "-m", "rtsar", "view", *args], stderr=subprocess.PIPE, text=True
     )
+    lines: list[str] = []
     try:
-        first = proc.stderr.readline()
-        assert first.startswith("view: waiting for"), first
+        while not (lines and ready(lines[-1])):
+            line = proc.stderr.readline()
+            assert line, "".join(lines)  # it ended before it was ready
+            lines.append(line)
         proc.send_signal(signal.SIGINT)
         rest = proc.communicate(timeout=30)[1]
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    assert proc.returncode == 130, rest
+    return proc.returncode, lines, rest
+
+
+def test_ctrl_c_before_any_line_exits_130_in_one_line(tmp_path):
+    png = tmp_path / "v.png"
+    endpoint = f"tcp://127.0.0.1:{free_port()}"  # no publisher: it waits
+    status, lines, rest = interrupt_view([endpoint, "--png", str(png)], lambda line: True)
+    assert lines[0].startswith("view: waiting for"), lines[0]
+    assert status == 130, rest
     assert rest.splitlines() == [
         "view: interrupted",
         "view: no lines received; no snapshot written",
@@ -79,22 +88,7 @@ def test_a_stopped_snapshot_holds_the_lines_that_arrived_and_exits_with_the_sign
 def test_the_page_server_stopped_by_ctrl_c_exits_130(tmp_path):
     """`view --http` too: Ctrl-C is 130, as every command (it said 0)."""
     endpoint = f"tcp://127.0.0.1:{free_port()}"  # no publisher needed to serve the page
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "rtsar", "view", endpoint, "--http", "127.0.0.1:0"],
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        lines = []
-        while not any("http://" in ln for ln in lines):  # serving: the page's URL is told
-            line = proc.stderr.readline()
-            assert line, "".join(lines)
-            lines.append(line)
-        proc.send_signal(signal.SIGINT)
-        rest = proc.communicate(timeout=30)[1]
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    assert proc.returncode == 130, rest
+    serving = lambda line: "http://" in line  # noqa: E731 - the page's URL is told
+    status, _, rest = interrupt_view([endpoint, "--http", "127.0.0.1:0"], serving)
+    assert status == 130, rest
     assert "view: interrupted" in rest

@@ -137,9 +137,13 @@ def run_point_targets(
         rho_a = cfg.azimuth_resolution_m(r)
         az_theory = azimuth_theory(cfg, r, gain)
         az_irw = az_theory.irw_m
-        # Room for ±12 IRW of sidelobes in azimuth (the ISLR extent is ±10 IRW).
+        rg_irw = SINC_IRW * rho_r * theoretical_irw_factor(rw)
+        # Room for ±12 IRW of sidelobes on each axis (the ISLR extent is ±10 IRW), at least 64
+        # pixels.  Per axis: psaltis-max's azimuth chip is 5,400 lines, and one as wide in range
+        # made each evaluation of the 2-D interpolant 9x the work for nothing it measures.
         chip = max(64, int(np.ceil(12 * az_irw / step)))
         image, az, rg = _focus_one(cfg, x, r, effects, lens_backend, chip + 8)
+        chip_rg = max(64, int(np.ceil(12 * rg_irw / abs(rg[1] - rg[0]))))
         rep = analyse_point_target(
             image,
             az,
@@ -147,7 +151,7 @@ def run_point_targets(
             near_azimuth_m=x,
             near_range_m=r,
             search_radius_m=(3 * rho_a, 3 * rho_r),
-            chip=chip,
+            chip=(chip, chip_rg),
             azimuth_centre_cycles=azimuth_carrier_cycles(cfg),
         )
         results.append(
@@ -160,7 +164,7 @@ def run_point_targets(
                 rep.azimuth.irw_m,
                 az_irw,
                 rep.range.irw_m,
-                SINC_IRW * rho_r * theoretical_irw_factor(rw),
+                rg_irw,
                 rep.azimuth.pslr_db,
                 rep.range.pslr_db,
                 az_theory.pslr_db,

@@ -135,6 +135,7 @@ def _die_and_count(counter: str, output: str):
         os._exit(3)
 
 
+@pytest.mark.slow
 def test_a_dead_workers_row_says_how_it_ended_and_a_raised_error_is_carried(tmp_path):
     """--retries counts the retries of a task whose worker died (Dask's KilledWorker, not
     Dask's default of 3).  From a cold review: the row read only "KilledWorker: Attempted to run
@@ -188,6 +189,7 @@ def _start_then_wait(options, recording, output):
     return batch_.process_one(options, recording, output)
 
 
+@pytest.mark.slow
 def test_an_interrupted_batch_lists_every_file_and_prints_no_noise(recordings, tmp_path, capfd):
     """From a cold review: Ctrl-C with 2 workers printed Dask/tornado tracebacks, and when it
     came during the cluster's close, no table (only `rtsar: interrupted`).  Now: r1 done, r2

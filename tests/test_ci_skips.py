@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 TESTS = Path(__file__).resolve().parent
 
 SKIPPING = {
@@ -42,6 +44,7 @@ def session(tmp_path: Path, ci: str | None) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow
 def test_a_skip_fails_under_ci_and_skips_elsewhere(tmp_path):
     done = session(tmp_path, "true")
     summary = [line for line in done.stdout.splitlines() if line.startswith(("FAILED", "ERROR"))]

@@ -175,6 +175,7 @@ def test_resample_has_one_specialisation_whatever_the_samples_type():
     assert len(rs._resample_rows.signatures) == 1
 
 
+@pytest.mark.slow
 def test_the_nonuniform_tiles_call_their_block_kernel_with_one_index_type(monkeypatch):
     """run_blocks compiled afresh (not from numba's cache) compiles _block once: before, once
     for the prange index as int64 and again as uint64, 3-13 s each on a first run here."""

@@ -58,6 +58,7 @@ def _note_lines(pipe, written: list) -> None:
         written.append((time.monotonic(), int(text)))
 
 
+@pytest.mark.slow
 def test_a_writer_killed_at_random_moments_leaves_a_readable_file(tmp_path):
     """20 SIGKILLs at random moments: every file opens, is marked incomplete, holds only whole
     lines, and has every line that was written 1 s before the kill (flushes every 0.5 s)."""
@@ -174,6 +175,7 @@ def _rtsar(*args, **kw):
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kill", [signal.SIGKILL, signal.SIGTERM])
 def test_run_output_survives_the_death_of_the_run(tmp_path, kill):
     out, ep = tmp_path / "live.h5", "ipc://" + str(tmp_path / "pub")
@@ -190,6 +192,7 @@ def test_run_output_survives_the_death_of_the_run(tmp_path, kill):
         assert rc == 128 + signal.SIGTERM and attrs["complete"]
 
 
+@pytest.mark.slow
 def test_subscribe_output_survives_sigkill(tmp_path):
     out, ep = tmp_path / "sub.h5", "ipc://" + str(tmp_path / "pub")
     pub = _rtsar("run", "--duration", "60", "--endpoint", ep, "--lens", "numpy")

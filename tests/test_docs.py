@@ -41,10 +41,13 @@ README = ROOT / "README.md"
 COMMANDS_PAGE = PAGES_DIR / "reference" / "commands.md"
 TWO_COMMANDS = (
     'python3 -m venv .venv && .venv/bin/pip install ".[opencl-cpu]" && .venv/bin/rtsar run',
-    'python3 -m venv .venv && .venv/bin/pip install ".[test]" && .venv/bin/python -m pytest -q',
+    'python3 -m venv .venv && .venv/bin/pip install ".[test]"'
+    " && .venv/bin/python -m pytest -q -n auto",
 )
-# (block, outcome, seconds or reason) of this session, for the summary (tests/conftest.py)
-OUTCOMES: list[tuple[str, str, str]] = []
+# Each block's (where, outcome, seconds or reason) goes into its test's report under this key,
+# for the summary (tests/conftest.py): in the report, it reaches the summary from a worker of
+# pytest -n too.
+DOCS_BLOCK = "docs_block"
 
 
 def ci() -> bool:
@@ -74,8 +77,9 @@ def test_there_are_blocks_to_run():
     assert len(runnable) >= 8 and any(b.page == README for b in runnable)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("page", runnable_pages(), ids=page_name)
-def test_the_page_runs_as_written(page, tmp_path):
+def test_the_page_runs_as_written(page, tmp_path, record_property):
     """The page's blocks in order, in one folder: a block may use what an earlier one made."""
     run = PageRun(page, tmp_path)
     for block in parse_blocks(page):
@@ -97,19 +101,19 @@ def test_the_page_runs_as_written(page, tmp_path):
             if reason and ci():  # CI installs what a block needs (.ci/run): none may go unrun
                 pytest.fail(f"{block.where}: {reason} (CI=true: .ci/run installs it)")
         if reason:
-            OUTCOMES.append((block.where, "skipped", reason))
+            record_property(DOCS_BLOCK, (block.where, "skipped", reason))
             continue
         t0 = time.perf_counter()
         done = run.run_sh(block)
         seconds = time.perf_counter() - t0
         if done.returncode != 0:
-            OUTCOMES.append((block.where, "FAILED", f"exit status {done.returncode}"))
+            record_property(DOCS_BLOCK, (block.where, "FAILED", f"exit status {done.returncode}"))
             pytest.fail(
                 f"{block.where} failed as written (exit status {done.returncode}):\n"
                 f"{block.text}\n--- its output (last 3000 characters) ---\n"
                 f"{done.stdout[-3000:]}"
             )
-        OUTCOMES.append((block.where, "ran", f"{seconds:.1f} s"))
+        record_property(DOCS_BLOCK, (block.where, "ran", f"{seconds:.1f} s"))
 
 
 def test_blocks_not_run_still_name_real_commands_options_and_extras():
@@ -160,7 +164,9 @@ def test_what_ci_runs_is_what_the_two_commands_install_and_run():
 
     ci_lines = (ROOT / ".ci" / "run").read_text(encoding="utf-8").splitlines()
     assert 'python -m pip install --quiet ".[test]"' in ci_lines
-    assert ci_lines[-1] == "python -m pytest -q" and TWO_COMMANDS[1].endswith(" -m pytest -q")
+    assert ci_lines[-1] == "python -m pytest -q -n auto" and TWO_COMMANDS[1].endswith(
+        " -m pytest -q -n auto"
+    )
     extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"][
         "optional-dependencies"
     ]

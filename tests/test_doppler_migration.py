@@ -77,6 +77,7 @@ def test_streaming_equals_one_block(scene):
     assert np.array_equal(a, b)
 
 
+@pytest.mark.slow
 def test_doppler_domain_focuses_as_the_exact_time_domain_mask(scene):
     cfg, sc, shots, xs, rs = scene
     step, cell = cfg.geometry.along_track_step_m, C / (2 * cfg.waveform.sample_rate_hz)

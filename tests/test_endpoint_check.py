@@ -11,7 +11,7 @@ from rtsar.sinks.endpoint import DEFAULT_ENDPOINT, endpoint_error
 from rtsar.sources.serial import SerialSource
 
 GOOD = [
-    DEFAULT_ENDPOINT,
+    pytest.param(DEFAULT_ENDPOINT, id="the-default"),  # no random port in the test ID
     "tcp://127.0.0.1:5555",
     "tcp://*:5555",
     "tcp://127.0.0.1:*",

@@ -199,6 +199,7 @@ def test_every_correlator_has_a_memory_estimate_and_runs_in_the_pipeline():
     assert got.shape == ref.shape and relative_rms(got, ref) < TOL
 
 
+@pytest.mark.slow
 def test_a_process_that_never_closes_it_exits_cleanly():
     """Its tail thread used to die in the OpenMP runtime at interpreter exit (SIGABRT: 4 runs in
     10 of `rtsar run --correlator nonuniform`; this pattern, pushes from a non-main thread as the

@@ -27,6 +27,7 @@ def test_the_pga_rows_are_defined(scenes):
         assert s.extra_targets == ()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("key", ["pga crouch-sal", "pga zhao-insal", "pga psaltis-jpl"])
 def test_pga_row_refocuses(scenes, key):
     """Uncorrected the targets are smeared (worst azimuth PSLR above -8 dB); the pga row is back

@@ -292,6 +292,7 @@ def _done_line(out: str) -> dict:
     }
 
 
+@pytest.mark.slow
 def test_a_slow_recording_disk_never_stalls_the_image_file(tmp_path):
     """h5py serialises every HDF5 call of a process: a recording written by a thread of the run
     held that lock through each slow write, and `-o`'s image writer waited behind it.  Here

@@ -91,6 +91,7 @@ def _block(first: int, n: int, s: int) -> PulseBlock:
     )
 
 
+@pytest.mark.slow
 def test_a_stop_ends_a_run_whose_recorder_is_frozen(tmp_path):
     """Item 1: the recorder process frozen (SIGSTOP, a hung disk's stand-in), then Ctrl-C.
     Before: Ctrl-C, Ctrl-C and SIGTERM over 40 s did nothing (the end joined the recorder's

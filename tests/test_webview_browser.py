@@ -93,6 +93,7 @@ def letters_mask(azimuth_m: np.ndarray, range_m: np.ndarray):
     return inside, inside & glyphs[ia, ir]
 
 
+@pytest.mark.slow
 def test_the_page_shows_the_published_strips_of_a_live_run(tmp_path):
     webdriver, Service, options = browser_or_skip()
     from PIL import Image

@@ -144,6 +144,7 @@ def _targeted() -> list[bytes]:
     ]
 
 
+@pytest.mark.slow
 def test_decoder_fuzz_100k_messages_raises_nothing_and_holds_one_shot_at_most():
     rng = np.random.default_rng(SEED)
     src = _source()

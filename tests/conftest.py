@@ -49,6 +49,33 @@ def _free_loopback_endpoint() -> str:
 # (rtsar.sinks.endpoint reads $RTSAR_ENDPOINT), not on 5555: a demo running on this machine, or
 # a second test session, would make them fail with "Address already in use". Set before any
 # rtsar module is imported; child processes inherit it.
+def _own_cache_dir() -> None:
+    """The tests' rtsar cache: a copy of the user's, in a folder of this test run.  The suite
+    runs the device survey and --lens auto's choice itself, on a machine it loads: written to
+    the user's cache, those figures chose the user's next lens (a PoCL survey taken beside
+    four test workers made `rtsar run` leave Intel's runtime).  Read from the copy, the user's
+    cached choices still spare the run a survey.  Set before workers start: they share it."""
+    import atexit
+    import shutil
+    import tempfile
+
+    from rtsar.lens.cache import cache_dir
+
+    users = cache_dir()
+    ours = tempfile.mkdtemp(prefix="rtsar-test-cache-")
+    atexit.register(shutil.rmtree, ours, True)
+    try:
+        for entry in os.scandir(users):  # choices and cached scenes; no file of 64 MB or more
+            if entry.is_file() and entry.stat().st_size < 64 << 20:
+                shutil.copy2(entry.path, ours)
+    except OSError:  # no cache yet
+        pass
+    os.environ["RTSAR_CACHE_DIR"] = ours
+
+
+if not os.environ.get("PYTEST_XDIST_WORKER"):  # the controller, or a run without -n
+    _own_cache_dir()
+
 # Under pytest -n each worker takes its own (they inherit the controller's environment).
 if os.environ.get("PYTEST_XDIST_WORKER") or "RTSAR_ENDPOINT" not in os.environ:
     os.environ["RTSAR_ENDPOINT"] = _free_loopback_endpoint()

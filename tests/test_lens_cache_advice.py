@@ -115,3 +115,18 @@ def test_where_a_cache_lives_is_not_a_new_survey(monkeypatch):
     assert cl_devices.fingerprint(one) == base
     monkeypatch.setenv("NUMBA_NUM_THREADS", "1")
     assert cl_devices.fingerprint(one) != base
+
+
+def test_the_test_run_measures_into_a_cache_of_its_own_not_the_users():
+    """The suite surveys devices and chooses lenses on a machine it loads: those figures stay
+    in a copy of the user's cache, made for this run (tests/conftest.py), and the user's next
+    `rtsar run` chooses from the user's own."""
+    import os
+    import tempfile
+    from pathlib import Path
+
+    from rtsar.lens.cache import cache_dir
+
+    here = cache_dir()
+    assert here.name.startswith("rtsar-test-cache-"), here
+    assert Path(os.path.commonpath([here, tempfile.gettempdir()])) == Path(tempfile.gettempdir())

@@ -53,6 +53,7 @@ LAZY_ALLOWED = {
     ("rtsar.lens.base", "rtsar.lens.cl_loader"): "pyopencl loads slowly; probed for --lens auto",
     ("rtsar.app.bench", "rtsar.lens.cl_loader"): "bench runs without pyopencl where OpenCL fails",
     ("rtsar.lens.base", "rtsar.lens.auto"): "pyopencl loads slowly; --lens auto only",
+    ("rtsar.app.cli.files", "rtsar.lens.auto"): "pyopencl loads slowly; --lens auto only",
     ("rtsar.lens.base", "rtsar.lens.cl_devices"): "pyopencl loads slowly; OpenCL lenses only",
     ("rtsar.app.devices", "rtsar.lens.cl_devices"): "pyopencl may fail to load: said in one line",
     ("rtsar.app.devices", "rtsar.lens.cl_vendors"): "imported with cl_devices, after pyopencl",

@@ -151,3 +151,43 @@ def test_lens_option_offers_auto_by_default(capsys):
         main(["process", "--help"])
     out = capsys.readouterr().out
     assert "{auto,opencl,numpy}" in out and "auto (default" in out
+
+
+def test_a_small_recording_is_not_worth_a_first_device_survey(monkeypatch):
+    """Issue 37, item 2: the first `rtsar process` of 2,048 demo shots took 11.5 s, of which
+    the OpenCL survey was most; its lens work on NumPy is a fraction of a second.  Unsurveyed,
+    a job under SURVEY_WORTH_S of NumPy time runs on NumPy and says why; a big job, a known
+    survey or a device asked for choose as before."""
+    from rtsar.lens import auto, cl_devices
+
+    monkeypatch.delenv(cl_devices.ENV_DEVICE, raising=False)
+    plan = make_plan(preset("psaltis-jpl"))
+    monkeypatch.setattr(cl_devices, "survey_is_known", lambda: False)
+    why = auto.survey_not_worth(plan, "complex64", 64, 2048)
+    assert why.startswith("NumPy lens: this job's range compression takes it about")
+    assert "2,048 shots" in why and "`rtsar devices`" in why and "--lens opencl" in why
+    assert auto.survey_not_worth(plan, "complex64", 64, 10**9) is None  # hours on NumPy
+    monkeypatch.setenv(cl_devices.ENV_DEVICE, "anything")
+    assert auto.survey_not_worth(plan, "complex64", 64, 2048) is None
+    monkeypatch.delenv(cl_devices.ENV_DEVICE)
+    monkeypatch.setattr(cl_devices, "survey_is_known", lambda: True)
+    assert auto.survey_not_worth(plan, "complex64", 64, 2048) is None
+
+
+def test_process_of_a_small_recording_on_a_new_machine_surveys_nothing(
+    tmp_path, capsys, monkeypatch
+):
+    """In an empty cache (a new machine), `process` of a small recording runs the NumPy lens,
+    says why, and leaves no survey behind (nothing was probed)."""
+    from rtsar.lens import cl_devices
+
+    (tmp_path / "s.toml").write_text('preset = "tiny"\npulses = 96\n')
+    assert main(["simulate", str(tmp_path / "s.toml"), "-o", str(tmp_path / "r.h5")]) == 0
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("RTSAR_CACHE_DIR", str(cache))
+    monkeypatch.delenv(cl_devices.ENV_DEVICE, raising=False)
+    monkeypatch.setattr(cl_devices, "_survey", None)  # this process's survey forgotten
+    assert main(["process", str(tmp_path / "r.h5"), "-o", str(tmp_path / "i.h5")]) == 0
+    err = capsys.readouterr().err
+    assert "rtsar: lens: NumPy lens: this job's range compression takes it about" in err
+    assert not (cache / "opencl-devices.json").exists()

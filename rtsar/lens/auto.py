@@ -31,12 +31,19 @@ import numpy as np
 
 from . import cl_devices
 from .cache import rates_or_none, read_json, write_json
-from .cl_probe import best_rates
+from .cl_probe import best_rates, throughput
 from .numpy_lens import NumpyLens
 from .opencl import AOLens
 from .plan import LensPlan
 
-__all__ = ["SMALL_BATCH", "batch_sizes", "choose", "plan_rates"]
+__all__ = [
+    "SMALL_BATCH",
+    "SURVEY_WORTH_S",
+    "batch_sizes",
+    "choose",
+    "plan_rates",
+    "survey_not_worth",
+]
 
 SMALL_BATCH = 16
 _CACHE = "lens-choice.json"
@@ -166,6 +173,32 @@ def choose(plan: LensPlan, precision: str = "complex64", batch: int | None = Non
     np_lens.fallback_reason = why
     np_lens.choice = f"NumPy lens (no OpenCL: {why})"
     return np_lens
+
+
+SURVEY_WORTH_S = 2.0  # a job whose whole lens work takes NumPy less runs on it unsurveyed
+
+
+def survey_not_worth(plan: LensPlan, precision: str, batch: int | None, pulses: int):
+    """Why a job of ``pulses`` shots (a recording to process) runs on the NumPy lens without
+    surveying the OpenCL devices first; None: choose as :func:`choose` does.
+
+    The first OpenCL choice on a machine probes every device (a second or two each, after
+    pyopencl's start: 5-10 s here for three CPU drivers).  A recording whose whole range
+    compression takes NumPy under SURVEY_WORTH_S cannot win that back (the first `rtsar
+    process` of 2,048 demo shots took 11.5 s, 1.6 s once the survey was cached).  Where a
+    survey is known, or a device is asked for, the choice is the usual one."""
+    if os.environ.get(cl_devices.ENV_DEVICE, "").strip() or cl_devices.survey_is_known():
+        return None
+    rate = throughput(NumpyLens(plan, precision=precision), max(1, int(batch or 64)), 0.02)
+    seconds = pulses / rate
+    if seconds >= SURVEY_WORTH_S:
+        return None
+    return (
+        f"NumPy lens: this job's range compression takes it about {seconds:.1f} s ({pulses:,} "
+        f"shots at {rate:,.0f} pulses/s), less than the survey of the OpenCL devices that a "
+        "first choice of one costs (a few seconds, once: `rtsar devices` runs it, and later "
+        "runs choose from it); `--lens opencl` to use OpenCL now"
+    )
 
 
 def _chosen(cl_lens, np_lens, best, why: str, rates: dict, sizes):

@@ -207,21 +207,33 @@ def survey(say=None) -> list[DeviceReport]:
     cache when it still describes this machine; ``say`` gets a line before any probing (the
     first run on a machine takes about a second a device)."""
     with _lock:
-        reports = [describe(i, d) for i, d in enumerate(list_devices())]
-        key = fingerprint(reports)
-        if _survey is not None and _survey_key == key:
-            return _survey
-        cached = _surveys(read_json(_CACHE)).get(key, {})
-        if cached.get("fingerprint") == key:
-            try:
-                found = [DeviceReport(**d) for d in cached["devices"]]
-            except (KeyError, TypeError):
-                found = None
-            if found and any(r.rates and rates_or_none(r.rates) is None for r in found):
-                found = None  # a damaged rate (NaN, negative, not a number) is measured again
-            if found and [identity(r) for r in found] == [identity(r) for r in reports]:
-                return _keep(found, key)
-        return measure(say=say)[0]
+        known = _known_survey()
+        return known if known is not None else measure(say=say)[0]
+
+
+def survey_is_known() -> bool:
+    """Whether :func:`survey` would answer without probing (this process's, or the cache's
+    survey of these devices): what the first run on a machine would pay is known here."""
+    with _lock:
+        return _known_survey() is not None
+
+
+def _known_survey() -> list[DeviceReport] | None:
+    reports = [describe(i, d) for i, d in enumerate(list_devices())]
+    key = fingerprint(reports)
+    if _survey is not None and _survey_key == key:
+        return _survey
+    cached = _surveys(read_json(_CACHE)).get(key, {})
+    if cached.get("fingerprint") == key:
+        try:
+            found = [DeviceReport(**d) for d in cached["devices"]]
+        except (KeyError, TypeError):
+            found = None
+        if found and any(r.rates and rates_or_none(r.rates) is None for r in found):
+            found = None  # a damaged rate (NaN, negative, not a number) is measured again
+        if found and [identity(r) for r in found] == [identity(r) for r in reports]:
+            return _keep(found, key)
+    return None
 
 
 def _surveys(cache: dict) -> dict:

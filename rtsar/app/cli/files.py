@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ...lens import range_axis_m
+from ...lens.plan import make_plan
 from ...presets import PRESETS, preset
 from ...scene import load_scene
 from ...sinks.image_file import ImageWriter, read_heights, read_image
@@ -166,20 +167,37 @@ def process_setup(args, rec, retro_from=None):
     return cfg, chain, heights, channels
 
 
+def lens_for_the_job(args, cfg, pulses: int) -> tuple[str, str | None]:
+    """``--lens`` for a recording of ``pulses`` shots to compress: "auto" becomes "numpy",
+    with the reason, where the job is too small to pay for a first survey of the OpenCL
+    devices (rtsar.lens.auto.survey_not_worth)."""
+    if args.lens != "auto" or args.device is not None:
+        return args.lens, None
+    try:
+        from ...lens.auto import survey_not_worth
+    except ImportError:  # no pyopencl: auto says so itself
+        return args.lens, None
+    p = cfg.processor
+    why = survey_not_worth(make_plan(cfg), p.precision, p.micro_batch, pulses)
+    return ("numpy", why) if why else (args.lens, None)
+
+
 def cmd_process(args) -> int:
     with open_input(args.recording) as rec:
         # Before the lens is built: a wrong request fails at once; only ``channels`` are read.
         cfg, chain, heights, channels = process_setup(args, rec, rec)
         physical = physical_ccd(args)
+        compressed = 1 + (len(heights.channels) if heights is not None else 0)  # receivers
+        lens, why = lens_for_the_job(args, cfg, rec.pulses * compressed)
         receivers = {}  # each auxiliary receiver's lens and CCD, in step with the main ones
         if heights is not None:
             receivers = {
-                c: StreamProcessor(cfg, args.lens, args.device, rec.start_along_track_m)
+                c: StreamProcessor(cfg, lens, args.device, rec.start_along_track_m)
                 for c in heights.channels
             }
-        eng = StreamProcessor(cfg, args.lens, args.device, rec.start_along_track_m, chain, physical)
+        eng = StreamProcessor(cfg, lens, args.device, rec.start_along_track_m, chain, physical)
         if args.lens != "numpy":  # which lens runs, on which device, and why
-            print(f"rtsar: lens: {eng.lens.choice}", file=sys.stderr)
+            print(f"rtsar: lens: {why or eng.lens.choice}", file=sys.stderr)
         prog = Progress(rec.pulses, "process")
         # A live recording's zero pulses (gaps, zeroed shots, shots not recorded): the lines
         # whose aperture holds one are flagged, as the live run flagged them.

@@ -342,8 +342,16 @@ def test_a_stage_that_holds_pulses_keeps_lines_and_flags_exact(tiny, stages):
     chain = CorrectionChain([("delay", Delay())])
     Pipeline(cfg, replay(cfg, shots[keep], seq=keep), [delayed], settings, corrections=chain).run()
     np.testing.assert_array_equal(delayed.image(), ref)
-    flags = [s.flagged_lines for s in delayed.strips if s.flagged_lines]
-    assert flags == [s.flagged_lines for s in plain.strips if s.flagged_lines] != []
+
+    # The flagged lines themselves, not how strips cut their runs: a strip leaves early when no
+    # line came for a strip's time, which a loaded machine makes happen (seen beside a second
+    # test run: [(137, 7)] and [(137, 11)], the same lines cut at another strip's edge).
+    def flagged(collect):
+        return sorted(
+            i for s in collect.strips for a, n in s.flagged_lines for i in range(a, a + n)
+        )
+
+    assert flagged(delayed) == flagged(plain) != []
 
 
 def test_correction_without_a_domain_is_refused():

@@ -139,7 +139,10 @@ def test_messages_carry_the_documented_header_and_payload(tiny_shots):
         "counters",
     ):
         assert key in h
-    assert strips[0].lines.shape == (h["line_count"], h["range_bins"]) == (4, 64)
+    # Strips of 4 lines (run_pipeline), one cut short where no line came for a strip's time
+    # (a loaded machine: seen beside a second test run, a first strip of 2 lines).
+    assert strips[0].lines.shape == (h["line_count"], h["range_bins"])
+    assert 1 <= h["line_count"] <= 4 and h["range_bins"] == 64
     assert h["first_pulse_arrival_unix_s"] <= h["last_pulse_arrival_unix_s"] <= h["publish_unix_s"]
     assert [m.header["seq"] for m in strips] == list(range(len(strips)))
     assert sum(m.header["line_count"] for m in strips) == msgs[-1].header["counters"]["lines_out"]
@@ -296,18 +299,25 @@ def test_a_subscriber_that_left_is_not_counted():
 
 
 def test_hurry_ends_a_lossless_wait_at_once():
-    pub = ZmqPublisher("tcp://127.0.0.1:*", "lossless", hwm_messages=2, stall_timeout_s=30)
+    pub = ZmqPublisher("tcp://127.0.0.1:*", "lossless", hwm_messages=2, stall_timeout_s=60)
     stalled = zmq.Context.instance().socket(zmq.SUB)
     stalled.setsockopt(zmq.RCVHWM, 2)
     stalled.setsockopt(zmq.RCVBUF, 1024)
     stalled.setsockopt(zmq.SUBSCRIBE, b"")
     stalled.connect(pub.endpoint)
     assert pub.wait_for_subscribers(1, timeout_s=10)
-    threading.Timer(0.3, pub.hurry).start()
-    t0 = time.perf_counter()
-    for _ in range(2000):  # fills every buffer on the way, then would wait 30 s
+    hurried = []
+
+    def hurry():
+        hurried.append(time.perf_counter())
+        pub.hurry()
+
+    threading.Timer(0.3, hurry).start()
+    for _ in range(2000):  # fills every buffer on the way, then would wait 60 s
         pub.send("stats", {"x": "y" * 1000})
-    assert time.perf_counter() - t0 < 3.0 and pub.subscriber_stalls == 1
+    # Timed from the hurry, not from the first send: 2,000 sends took 3.8 s beside a second
+    # test run.  Without the hurry the wait is 60 s.
+    assert time.perf_counter() - hurried[0] < 10.0 and pub.subscriber_stalls == 1
     stalled.close(0)
     pub.close()
 

@@ -252,7 +252,11 @@ def test_a_consumer_waiting_downstream_is_not_a_stalled_worker(rng):
     s.start()
     time.sleep(1.5)  # five timeouts, the pipe full
     assert errors == [] and 0 < sent[0] < 4000
-    workers.downstream_since = None  # it reads again
+    # It reads again.  From here a worker's silence counts; 0.3 s of it is within what a loaded
+    # machine makes (beside a second test run the echo worker fell that far behind once):
+    # the limit is a real one's again, what is checked is that the run goes on.
+    workers.timeout_s = 10.0
+    workers.downstream_since = None
     lines = 0
     while s.is_alive() or lines < 16 * sent[0]:
         out = workers.receive(0.05)

@@ -146,8 +146,11 @@ def test_lines_that_wait_go_out_together(assembler):
 
 # ---- the choice applied: the command line, the run, its banner ---------------------------------
 def _fake_measure(costs):
-    def measure(config, settings, rate_hz, blocks, copies=1, physical=None, request=None):
-        return StageCosts(costs.lens_s, {b: costs.block_s[b] for b in blocks}, costs.strip_s)
+    def measure(
+        config, settings, rate_hz, blocks, copies=1, physical=None, request=None, source_s=0.0
+    ):
+        block_s = {b: costs.block_s[b] for b in blocks}
+        return StageCosts(costs.lens_s, block_s, costs.strip_s, source_s)
 
     return measure
 
@@ -164,6 +167,55 @@ def test_the_run_gets_the_documented_choice_of_the_measured_costs(monkeypatch):
         assert (settings.strip_lines, settings.strip_most_lines) == (block, MOST_STRIP_LINES)
         assert settings.strip_deadline_s == STRIP_DEADLINE_S
         assert words == granularity_words(g, COSTS)
+
+
+def test_the_source_s_own_work_counts_against_the_target():
+    """A simulated source's synthesis shares the machine with the stages: its seconds a pulse
+    add rate · source_s to every block's utilisation, so a block that fits alone may not
+    (the demo chose blocks of 2 without it and fell behind its PRF: 1,340-1,555 of 1,600)."""
+    from dataclasses import replace
+
+    alone = choose_granularity(1500, COSTS, 64)
+    with_source = replace(COSTS, source_s=200 * US)  # 30 % of the time at 1,500 pulses/s
+    g = choose_granularity(1500, with_source, 64)
+    assert alone.block_lines == 1 and g.block_lines > alone.block_lines
+    fitting = [b for b in (1, 2, 4, 8, 16) if by_hand(1500, b) + 0.3 <= TARGET_UTILISATION]
+    assert g.block_lines == (fitting[0] if fitting else 16)
+    assert g.utilisation == pytest.approx(by_hand(1500, g.block_lines) + 0.3, rel=1e-12)
+    assert granularity_words(g, with_source).endswith(", the source 200 µs a pulse)")
+
+
+def test_a_simulated_source_measures_its_synthesis_without_advancing_its_stream():
+    from rtsar.scene import load_scene
+    from rtsar.sources.sim import SimSource
+
+    fresh = next(iter(SimSource(load_scene("demo"), pulses=64)))
+    src = SimSource(load_scene("demo"), pulses=64)
+    cost = src.cost_per_pulse_s(places=2, shots=4)
+    assert 0 < cost < 1 and np.isfinite(cost)
+    first = next(iter(src))
+    np.testing.assert_array_equal(first.samples, fresh.samples)
+
+
+def test_a_live_run_counts_its_simulated_source(monkeypatch, tmp_path):
+    """run_stream hands the source's measured cost to the choice."""
+    seen = {}
+
+    def apply(self, config, settings, physical=None, height=None, say=None, source_s=0.0):
+        seen["source_s"] = source_s
+        return config, settings, None, "granularity: (stand-in)"
+
+    monkeypatch.setattr(GranularityRequest, "apply", apply)
+    cfg = preset("tiny").with_processor(correlator="nonuniform")
+    shots = np.zeros((200, cfg.waveform.samples_per_shot), np.complex64)
+    seq = np.arange(200)
+    source = ReplaySource(shots, seq, seq / 500.0, 500.0, "max", 16)
+    source.cost_per_pulse_s = lambda: 123e-6
+    endpoint = "ipc://" + str(tmp_path / "pub")
+    settings = PipelineSettings(lens_backend="numpy")
+    assert live.run_stream(cfg, source, settings, endpoint, "drop", stream=io.StringIO(),
+                           granularity=GranularityRequest(500.0)) == 0  # fmt: skip
+    assert seen["source_s"] == 123e-6
 
 
 def test_the_banner_words():

@@ -381,8 +381,9 @@ def run_stream(
         chosen = None
         if granularity is not None:
             note = lambda m: print(f"rtsar: {m}", file=stream, flush=True)  # noqa: E731
+            source_s = source.cost_per_pulse_s() if hasattr(source, "cost_per_pulse_s") else 0.0
             config, settings, _, chosen = granularity.apply(
-                config, settings, physical, height, note
+                config, settings, physical, height, note, source_s
             )
         pipe = Pipeline(
             config,

@@ -52,16 +52,25 @@ class GranularityRequest:
     strip_lines: int | None = None  # --strip-lines, --strip-ms
 
     def apply(
-        self, config: Config, settings: PipelineSettings, physical=None, height=None, say=None
+        self,
+        config: Config,
+        settings: PipelineSettings,
+        physical=None,
+        height=None,
+        say=None,
+        source_s: float = 0.0,
     ):
         """(config, settings, Granularity, the banner's line) with the chosen granularity;
-        ``say`` (a message) is told when the measuring starts."""
+        ``say`` (a message) is told when the measuring starts; ``source_s``: the source's own
+        work a pulse in this process (StageCosts)."""
         if say is not None:
             say(f"measuring the work at {self.rate_hz:,.0f} pulses/s to choose the granularity …")
         copies = 1 + (len(height.channels) if height is not None else 0)
         lens_batch = settings.max_batch or config.processor.micro_batch
         blocks, fixed = block_candidates(config.processor, physical, self.block_lines)
-        costs = measure_costs(config, settings, self.rate_hz, blocks, copies, physical, self)
+        costs = measure_costs(
+            config, settings, self.rate_hz, blocks, copies, physical, self, source_s
+        )
         g = choose_granularity(self.rate_hz, costs, lens_batch, self.strip_lines, fixed_block=fixed)
         words = granularity_words(g, costs)
         return chosen_config(config, g), chosen_settings(settings, g), g, words
@@ -110,7 +119,9 @@ def per_call_s(call) -> float:
     return float(np.median([1.0 / rate_per_s(call, 1, ROUND_S) for _ in range(3)]))
 
 
-def measure_costs(config, settings, rate_hz, blocks, copies=1, physical=None, request=None):
+def measure_costs(
+    config, settings, rate_hz, blocks, copies=1, physical=None, request=None, source_s=0.0
+):
     """StageCosts of the run (module docstring), each call's figure times ``copies``; the
     blocks measured smallest first, up to the first within TARGET_UTILISATION."""
     p = config.processor
@@ -137,11 +148,11 @@ def measure_costs(config, settings, rate_hz, blocks, copies=1, physical=None, re
     fixed_strips = request.strip_lines if request is not None else None
     for block in blocks:
         block_s[block] = copies * push_s(config, plan.range_m, physical, block, noise)
-        costs = StageCosts(lens_s, dict(block_s), strip_s)
+        costs = StageCosts(lens_s, dict(block_s), strip_s, source_s)
         strips = fixed_strips or auto_strip_lines(block)
         if utilisation(rate_hz, costs, block, strips) <= TARGET_UTILISATION:
             break
-    return StageCosts(lens_s, block_s, strip_s)
+    return StageCosts(lens_s, block_s, strip_s, source_s)
 
 
 def push_s(config: Config, range_m, physical, block: int, noise) -> float:

@@ -209,13 +209,18 @@ def first_eta_s(text: str) -> float:
     return float(line.split("eta")[1].split()[0])
 
 
-def test_the_first_progress_line_does_not_extrapolate_a_first_batch(monkeypatch):
-    """A first batch of 100 s (a compilation), then 1 s a batch of 100: 8 batches remain at the
-    first line, so its ETA is 8 s (before: 900 s, from the first batch)."""
+def on_a_fake_clock(monkeypatch, total: int):
+    """(clock, Progress of ``total`` pulses named "x", its output) with time on ``clock``."""
     clock = FakeClock()
     monkeypatch.setattr(progress, "time", SimpleNamespace(perf_counter=clock))
     out = io.StringIO()
-    prog = progress.Progress(1000, "x", stream=out)
+    return clock, progress.Progress(total, "x", stream=out), out
+
+
+def test_the_first_progress_line_does_not_extrapolate_a_first_batch(monkeypatch):
+    """A first batch of 100 s (a compilation), then 1 s a batch of 100: 8 batches remain at the
+    first line, so its ETA is 8 s (before: 900 s, from the first batch)."""
+    clock, prog, out = on_a_fake_clock(monkeypatch, 1000)
     clock.t += 100.0
     prog.update(100)
     for k in range(2, 11):
@@ -229,10 +234,7 @@ def test_the_first_progress_line_does_not_extrapolate_a_first_batch(monkeypatch)
 
 
 def test_one_batch_gives_one_line_with_the_whole_runs_rate(monkeypatch):
-    clock = FakeClock()
-    monkeypatch.setattr(progress, "time", SimpleNamespace(perf_counter=clock))
-    out = io.StringIO()
-    prog = progress.Progress(64, "x", stream=out)
+    clock, prog, out = on_a_fake_clock(monkeypatch, 64)
     clock.t += 2.0
     prog.update(64)
     prog.done(64)

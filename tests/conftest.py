@@ -96,6 +96,18 @@ def pytest_collection_modifyitems(config, items):
         items.sort(key=lambda item: item.get_closest_marker("slow") is None)
 
 
+def pytest_xdist_make_scheduler(config, log):
+    """Under ``pytest -n``, idle workers take tests queued for busy ones (xdist's worksteal).
+    The default ``load`` scheduling hands each worker a quarter of the suite up front and never
+    takes it back: one worker, given several long tests, ran alone for the last 110 s of a
+    333 s run.  An explicit ``--dist`` on the command line is kept."""
+    if any(arg.startswith("--dist") for arg in config.invocation_params.args):
+        return None  # xdist's own hook chooses what was asked
+    from xdist.scheduler import WorkStealingScheduling
+
+    return WorkStealingScheduling(config, log)
+
+
 def pytest_xdist_auto_num_workers(config):
     """``pytest -n auto``: two workers a core.  Many tests wait on a subprocess, a socket or
     a paced clock, so a second worker per core keeps the cores busy (measured on 2 cores, the

@@ -153,7 +153,10 @@ def imports(name: str) -> list[tuple[str, bool, int]]:
     return found
 
 
-GRAPH = {name: imports(name) for name in MODULES}
+@pytest.fixture(scope="module")
+def graph() -> dict[str, list[tuple[str, bool, int]]]:
+    """Every module's imports, parsed when a test asks (not at collection, in every worker)."""
+    return {name: imports(name) for name in MODULES}
 
 
 def test_every_module_sits_on_a_floor():
@@ -161,17 +164,17 @@ def test_every_module_sits_on_a_floor():
         floor(name)
 
 
-def test_no_module_imports_a_floor_above_its_own():
+def test_no_module_imports_a_floor_above_its_own(graph):
     upward = [
         f"{name}:{line} imports {target} (floor {floor(target)} > {floor(name)})"
-        for name, edges in GRAPH.items()
+        for name, edges in graph.items()
         for target, _, line in edges
         if floor(target) > floor(name)
     ]
     assert not upward, "\n".join(upward)
 
 
-def test_no_import_cycles():
+def test_no_import_cycles(graph):
     state: dict[str, int] = {}  # 1: on the current path, 2: done
     stack: list[str] = []
     cycles = []
@@ -179,7 +182,7 @@ def test_no_import_cycles():
     def walk(name):
         state[name] = 1
         stack.append(name)
-        for target, _, _ in GRAPH.get(name, []):
+        for target, _, _ in graph.get(name, []):
             if target not in MODULES or target == name:
                 continue
             if state.get(target) == 1:
@@ -195,10 +198,10 @@ def test_no_import_cycles():
     assert not cycles, "\n".join(cycles)
 
 
-def test_imports_inside_functions_are_only_the_listed_ones():
+def test_imports_inside_functions_are_only_the_listed_ones(graph):
     lazy = {
         (name, target): line
-        for name, edges in GRAPH.items()
+        for name, edges in graph.items()
         for target, inside, line in edges
         if inside
     }
@@ -231,10 +234,10 @@ def test_only_the_application_floor_parses_prints_or_draws():
     assert not bad, bad
 
 
-def test_sinks_see_strips_not_the_pipeline():
+def test_sinks_see_strips_not_the_pipeline(graph):
     bad = [
         f"{name} imports {target}"
-        for name, edges in GRAPH.items()
+        for name, edges in graph.items()
         if name.startswith("rtsar.sinks")
         for target, _, _ in edges
         if target.startswith("rtsar.stream") and target != "rtsar.stream.strips"

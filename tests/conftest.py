@@ -96,6 +96,7 @@ def pytest_collection_modifyitems(config, items):
         items.sort(key=lambda item: item.get_closest_marker("slow") is None)
 
 
+@pytest.hookimpl(optionalhook=True)  # a hook of xdist: unknown under -p no:xdist
 def pytest_xdist_make_scheduler(config, log):
     """Under ``pytest -n``, idle workers take tests queued for busy ones (xdist's worksteal).
     The default ``load`` scheduling hands each worker a quarter of the suite up front and never
@@ -108,6 +109,7 @@ def pytest_xdist_make_scheduler(config, log):
     return WorkStealingScheduling(config, log)
 
 
+@pytest.hookimpl(optionalhook=True)
 def pytest_xdist_auto_num_workers(config):
     """``pytest -n auto``: two workers a core.  Many tests wait on a subprocess, a socket or
     a paced clock, so a second worker per core keeps the cores busy (measured on 2 cores, the

@@ -101,6 +101,9 @@ def test_a_correlator_alone_is_measured_once_and_printed_as_one_number(stand_ins
         assert f"{kind} alone, batches of 16: {figure} pulses/s" in ratio_line
         assert "the correlator table above" in ratio_line
     row = data["correlator"][0]
+    for top, bottom in (("fft", "direct"), ("partitioned", "fft"), ("nonuniform", "partitioned")):
+        quotient = row[f"{top}_pulses_per_s"] / row[f"{bottom}_pulses_per_s"]
+        assert row[f"{top}_over_{bottom}"] == pytest.approx(quotient, rel=1e-12)
     runs = data["pipeline"][0]["runs"]
     for kind in ("partitioned", "nonuniform", "fft"):
         top = next(r for r in runs if r["label"] == f"{kind}: max rate")

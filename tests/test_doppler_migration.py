@@ -109,3 +109,27 @@ def test_doppler_domain_needs_the_fft_correlator():
         Processor(8, 8, correlator="direct", range_migration_domain="doppler")
     with pytest.raises(ValueError, match="range_migration_domain"):
         Processor(8, 8, range_migration_domain="frequency")
+
+
+@pytest.mark.parametrize("squint_sin", [0.0277, 0.4])
+def test_secondary_range_compression_is_cumming_and_wongs_at_any_squint(squint_sin):
+    """The lens's SRC filter exp(-iπ f² / K_src), K_src = 2 V² f0³ D³ / (c R f_η²),
+    D = sqrt(1 - (λ f_η / 2V)²) (Cumming & Wong 2005, sec. 6.2), over the chirp's band, at
+    RADARSAT-1's squint (D = 0.9996) and at a squint of 24° (D = 0.917: a D² in place of D³
+    moves the band edge's phase by radians there, by a thousandth of one at RADARSAT-1's)."""
+    from dataclasses import replace
+
+    from rtsar.lens.plan import secondary_range_compression
+
+    cfg = preset("radarsat1")
+    g = cfg.geometry
+    speed = g.along_track_step_m * g.prf_hz
+    f_eta = -squint_sin * 2.0 * speed / g.wavelength_m
+    cfg = replace(cfg, geometry=replace(g, doppler_centroid_hz=f_eta))
+    f0 = 299_792_458.0 / g.wavelength_m
+    d = math.sqrt(1.0 - (g.wavelength_m * f_eta / (2.0 * speed)) ** 2)
+    k_src = 2.0 * speed**2 * f0**3 * d**3 / (299_792_458.0 * g.slant_range_m * f_eta**2)
+    f = np.linspace(-0.5, 0.5, 101) * cfg.waveform.bandwidth_hz
+    expected = np.exp(-1j * np.mod(math.pi * f**2 / k_src, 2.0 * math.pi))
+    assert cfg.processor.range_centre_m is None  # R: the geometry's slant range
+    np.testing.assert_allclose(secondary_range_compression(cfg, f), expected, atol=1e-9)

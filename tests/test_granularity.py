@@ -132,6 +132,18 @@ def test_a_partial_strip_goes_out_at_its_deadline(assembler):
     assert a.wait_s(99.0, None) == np.inf
 
 
+def test_the_deadline_counts_from_the_oldest_line_held(assembler):
+    """A line that came later does not restart the wait of the lines before it: with blocks at
+    t and t + D/2, all the lines held are due at t + D (a steady trickle of lines would
+    otherwise hold a partial strip for ever)."""
+    a, d = assembler, 2.0**-10
+    a.add(_block(0, 2), now_s=10.0)
+    a.add(_block(2, 1), now_s=10.0 + d / 2)
+    assert a.due(10.0 + d / 2, 16, 64, d) == 0
+    assert a.wait_s(10.0 + d / 2, d) == d / 2
+    assert a.due(10.0 + d, 16, 64, d) == 3
+
+
 def test_lines_that_wait_go_out_together(assembler):
     """A backlog (held >= strip_lines) goes out as one strip of up to ``most`` lines; with
     ``most`` at most strip_lines, strips of exactly strip_lines (as before)."""

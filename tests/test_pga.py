@@ -348,3 +348,22 @@ def test_anchor_gate_takes_only_clutter_like_coherence():
         assert st.doppler_anchored is anchored
         expected = slope * np.arange(n // 2) if anchored else np.zeros(n // 2)
         np.testing.assert_allclose(phase, expected, atol=1e-12)  # the first block: whole slope
+
+
+@pytest.mark.parametrize("second_bin, inside", [(4, True), (5, True), (6, False), (9, False)])
+def test_the_window_keeps_the_bins_within_half_its_width(second_bin, inside):
+    """Crouch eq. 4.14: rect(n / W) about the brightest bin keeps |n| <= W / 2.  Two points, the
+    brightest at bin 0 and a second (half its amplitude) at bin d, W = 10: with d inside the
+    window the second point's beat with the first reads as a phase error (about ±0.5 rad);
+    outside, the estimate is the brightest alone, a constant phase: exactly zero once its
+    constant and slope are removed (eq. 4.17)."""
+    from rtsar.focus.pga.estimator import _pga_step
+
+    p = np.arange(64)[:, None]
+    cycles = np.mod(second_bin * p / 64.0, 1.0)
+    g0 = np.repeat(1.0 + 0.5 * np.exp(2j * math.pi * cycles), 4, axis=1)  # image bins 0 and d
+    phi = _pga_step(g0, np.zeros(64), 10.0)
+    if inside:
+        assert np.max(np.abs(phi)) > 0.1
+    else:
+        assert np.max(np.abs(phi)) < 1e-9

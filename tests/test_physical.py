@@ -319,6 +319,22 @@ def test_adc_codes_and_clipping():
     assert dev.adc_clipped > 0
 
 
+def test_the_adc_has_two_to_the_bits_levels_and_counts_clips_at_both_ends():
+    """A b-bit ADC spanning 0 … full scale F has 2^b codes, 0 … 2^b − 1, a step F / (2^b − 1);
+    a charge that rounds below code 0 or above the top is clipped, and counted, at either end.
+    The read-out step alone, on charges placed here about those codes (bits 6, F = 1e5 e-)."""
+    cfg = small_config(n=32, bins=8)
+    rm = make_plan(cfg).range_m
+    dev = PhysicalCCD(cfg, rm, PhysicalSettings(ccd=(Quantization(bits=6, full_scale_e=1e5),)))
+    lsb = 1e5 / 63
+    steps = np.array([-2.0, -0.4, 0.4, 10.3, 62.6, 63.4, 65.0])  # in steps of the true lsb
+    codes = np.array([0, 0, 0, 10, 63, 63, 63])  # rint, then 0 … 63
+    charge = np.tile(steps[:, None] * lsb, (1, dev.ccd_columns))
+    out = dev._read(charge) + dev.bias_e  # the read-out step, its bias frame added back
+    np.testing.assert_allclose(out, np.tile(codes[:, None] * lsb, (1, dev.ccd_columns)))
+    assert dev.adc_clipped == 2 * dev.ccd_columns  # -2 and 65 steps: one below, one above
+
+
 def test_a_target_above_the_well_is_counted_not_hidden():
     cfg = small_config(n=64, bins=16)
     lines, rm = point_lines(cfg)

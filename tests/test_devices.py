@@ -399,3 +399,32 @@ def test_auto_takes_the_next_device_where_the_fastest_cannot_build_the_plan(monk
     lens = base.make_lens(make_plan(preset("tiny")), "auto")
     assert lens.backend == "opencl" and lens.device.int_ptr == devices[ok[1].index].int_ptr
     assert f"{ok[0].short_label}: no double precision here" in lens.choice
+
+
+def test_the_devices_are_probed_at_once_then_timed_together(monkeypatch):
+    """The build-and-check probes (nothing timed) run at the same time, a child process each;
+    the timing child comes after all of them, alone.  Each stand-in probe waits at a barrier
+    for the other two: probes one after another would break it."""
+    import threading
+
+    from rtsar.lens import cl_probe
+    from rtsar.lens.cl_probe import DeviceReport, probe_all
+
+    reports = [DeviceReport(i, "P", "OpenCL 3.0", f"dev{i}", "1", "CPU") for i in range(3)]
+    barrier = threading.Barrier(3, timeout=10)
+    calls = []
+
+    def child(args, timeout_s):
+        calls.append(args[0])
+        if args[0] == "probe":
+            barrier.wait()
+            answer = {**reports[int(args[1])].__dict__, "error": 1e-7}
+            return answer, None
+        assert calls.count("probe") == 3  # every probe finished before the timing
+        return {str(i): {"64": 1e5 * (i + 1)} for i in range(3)} | {"numpy": {"64": 5e4}}, None
+
+    monkeypatch.setattr(cl_probe, "_child", child)
+    out, numpy_rates = probe_all(reports, "tiny", (64,), 0.1)
+    assert [r.index for r in out] == [0, 1, 2] and all(r.reason is None for r in out)
+    assert [r.rates for r in out] == [{"64": 1e5}, {"64": 2e5}, {"64": 3e5}]
+    assert numpy_rates == {"64": 5e4} and calls == ["probe"] * 3 + ["time"]

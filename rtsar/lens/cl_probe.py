@@ -17,6 +17,7 @@ import signal
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import pyopencl as cl
@@ -212,11 +213,14 @@ def probe_all(
     reports: list[DeviceReport], preset_name: str, batches, seconds: float
 ) -> tuple[list[DeviceReport], dict]:
     """Every device probed in a child process of its own, then the passing ones timed together
-    with the NumPy lens in one more; returns the reports and the NumPy lens's rates."""
+    with the NumPy lens in one more; returns the reports and the NumPy lens's rates.  The
+    probes (a build and a check each, no timing) run at once, one child a device: a first
+    survey of three CPU devices took 2.2 s of probes one after another, 0.8 s together."""
+    jobs = [["probe", str(r.index), json.dumps(identity(r)), preset_name] for r in reports]
+    with ThreadPoolExecutor(max_workers=max(1, len(jobs))) as pool:
+        answers = list(pool.map(lambda args: _child(args, _TIMEOUT_S), jobs))
     out = []
-    for r in reports:
-        args = ["probe", str(r.index), json.dumps(identity(r)), preset_name]
-        answer, why = _child(args, _TIMEOUT_S)
+    for r, (answer, why) in zip(reports, answers, strict=True):
         if answer is None:
             r.reason = f"{why} while building the lens"
             out.append(r)

@@ -4,8 +4,9 @@ Each mutant in ``tools/mutants.toml`` is one edit of one file (``before`` → ``
 must occur exactly once).  For each, the probe writes the edit into a scratch git worktree of
 the committed HEAD, runs the mutant's ``tests`` there with pytest (``-x``, one process, CI=true,
 PYTHONPATH set so that in-process imports and the ``rtsar`` commands the tests start both load
-the worktree's code), and calls the mutant *caught* when a test fails, *survived* when all
-pass.  Exit status 1 if any survived.  Prints a Markdown table (``--out`` writes it too).
+the worktree's code), and calls the mutant *caught* when a test fails that passes again once
+the file is restored, *survived* when all pass.  Exit status 1 if any survived.  Prints a
+Markdown table (``--out`` writes it too).
 
     python tools/mutation_probe.py                       # every mutant of the list
     python tools/mutation_probe.py --only sicd-row-sgn   # one (or several) by name
@@ -94,6 +95,9 @@ def probe(mutants: list[dict], full_suite: bool, say=print) -> list[dict]:
             ["git", "-C", str(ROOT), "worktree", "add", "--detach", "-q", str(tree), "HEAD"],
             check=True,
         )
+        shared = ROOT.parent / "shared"  # the papers and data beside the checkout
+        if shared.is_dir():
+            (Path(scratch) / "shared").symlink_to(shared)  # else its tests fail under CI=true
         try:
             sanity_file, line = SANITY
             (tree / sanity_file).write_text(line, encoding="utf-8")
@@ -121,6 +125,11 @@ def probe(mutants: list[dict], full_suite: bool, say=print) -> list[dict]:
                         seconds += more
                         detail = detail or "the whole suite passed"
                     restore(tree, m["file"])
+                    if verdict == "caught" and "::" in detail:  # and not without the mutant
+                        again, _, more = run_tests(tree, [detail])
+                        seconds += more
+                        if again != "survived":
+                            verdict, detail = "error", f"{detail} fails without the mutant too"
                     row = dict(m, verdict=verdict, detail=detail, seconds=seconds)
                 rows.append(row)
                 say(f"[{i}/{len(mutants)}] {m['name']}: {row['verdict']} {row['detail']}")

@@ -375,3 +375,20 @@ def test_a_dead_workers_row_waits_for_the_nannys_line():
     why = batch._why(exc, deaths, 1)
     timer.join()
     assert why == "its worker process died on each of 2 tries; the last exited with status 3"
+
+
+def test_without_dask_distributed_batch_says_what_to_install_before_any_work(
+    tmp_path, monkeypatch, capsys
+):
+    """README command 1 installs no cluster extra: there `rtsar batch` gave its banner and then
+    a traceback (ModuleNotFoundError: distributed).  Now one line, exit status 2, nothing made."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed: ImportError
+    rec = tmp_path / "rec.h5"
+    rec.write_bytes(b"")
+    out = tmp_path / "imgs"
+    assert main(["batch", str(rec), "--out-dir", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ['rtsar: error: rtsar batch needs Dask distributed: pip install "rtsar[cluster]"']
+    assert not out.exists()

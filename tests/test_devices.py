@@ -428,3 +428,26 @@ def test_the_devices_are_probed_at_once_then_timed_together(monkeypatch):
     assert [r.index for r in out] == [0, 1, 2] and all(r.reason is None for r in out)
     assert [r.rates for r in out] == [{"64": 1e5}, {"64": 2e5}, {"64": 3e5}]
     assert numpy_rates == {"64": 5e4} and calls == ["probe"] * 3 + ["time"]
+
+
+@pytest.mark.parametrize("same", [False, True], ids=["changed", "kept"])
+def test_devices_says_when_its_survey_changes_the_default_of_later_runs(
+    capsys, tmp_path, monkeypatch, same
+):
+    """`rtsar devices` on the survey's preset replaces the survey later runs choose from: the
+    walkthrough saw Intel's runtime measured at 131k pulses/s one time and 38.5k the next, and
+    every later run left it without a word.  Now the command says what later runs will use."""
+    monkeypatch.setenv("RTSAR_CACHE_DIR", str(tmp_path))
+    old, new = _report(0, 131_000.0, name="intel"), _report(2, 56_000.0, name="pocl")
+    after = [old if same else new, _report(1, 40_000.0)]
+    defaults = iter([(old, "kept"), (after[0], "measured")])
+    monkeypatch.setattr(cl_devices, "survey_is_known", lambda: True)
+    monkeypatch.setattr(cl_devices, "default_device", lambda say=None: next(defaults))
+    monkeypatch.setattr(cl_devices, "measure", lambda *a, **k: (after, {"64": 30_000.0}))
+    assert main(["devices", "--batches", "64", "--seconds", "0.05"]) == 0
+    out = capsys.readouterr().out
+    line = next(ln for ln in out.splitlines() if ln.startswith("this survey replaces"))
+    if same:
+        assert line.endswith("their default stays [0] " + old.short_label)
+    else:
+        assert f"their default was [0] {old.short_label}, is now [2] {new.short_label}" in line

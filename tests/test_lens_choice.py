@@ -1,5 +1,6 @@
 """--lens auto: the OpenCL lens where a kernel builds, else the NumPy lens, said out loud."""
 
+import re
 import warnings
 
 import numpy as np
@@ -166,6 +167,9 @@ def test_a_small_recording_is_not_worth_a_first_device_survey(monkeypatch):
     why = auto.survey_not_worth(plan, "complex64", 64, 2048)
     assert why.startswith("NumPy lens: this job's range compression takes it about")
     assert "2,048 shots" in why and "`rtsar devices`" in why and "--lens opencl" in why
+    assert " 0.0 s" not in why  # a job of 50 ms says so (the walkthrough read "about 0.0 s")
+    tiny = auto.survey_not_worth(plan, "complex64", 64, 2)
+    assert re.search(r"takes it about \d+ ms \(2 shots", tiny), tiny
     assert auto.survey_not_worth(plan, "complex64", 64, 10**9) is None  # hours on NumPy
     monkeypatch.setenv(cl_devices.ENV_DEVICE, "anything")
     assert auto.survey_not_worth(plan, "complex64", 64, 2048) is None

@@ -222,6 +222,19 @@ def quiet_dask_logs():
 
 
 # ---- the cluster ----------------------------------------------------------------------------
+NEEDS_DISTRIBUTED = 'rtsar batch needs Dask distributed: pip install "rtsar[cluster]"'
+
+
+def missing_requirement() -> str | None:
+    """Why ``rtsar batch`` cannot run here (None: Dask distributed imports).  Asked before any
+    work: README command 1's environment has no cluster extra."""
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        return NEEDS_DISTRIBUTED
+    return None
+
+
 def start_client(workers: int, scheduler: str | None, retries: int = 2):
     """A Dask client: on ``scheduler`` (``tcp://HOST:PORT``) or a LocalCluster of ``workers``
     single-threaded processes (the lens and the correlator use their own threads).
@@ -236,9 +249,7 @@ def start_client(workers: int, scheduler: str | None, retries: int = 2):
         import dask
         from distributed import Client, LocalCluster
     except ImportError as exc:
-        raise RuntimeError(
-            'rtsar batch needs Dask distributed: pip install "rtsar[cluster]"'
-        ) from exc
+        raise RuntimeError(NEEDS_DISTRIBUTED) from exc
     if scheduler:
         return Client(scheduler, timeout="10s"), None
     settings = {

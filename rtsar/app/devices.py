@@ -69,6 +69,8 @@ def run(args) -> int:
     reg = cl_vendors.registration()
     if reg is not None:
         print(f"drivers installed with pip: {reg.note}", file=out)
+    replaces = args.preset == cl_devices.SURVEY_PRESET  # the survey later runs choose from
+    kept = cl_devices.default_device()[0] if replaces and cl_devices.survey_is_known() else None
     try:
         reports, numpy_rates = cl_devices.measure(
             args.preset, batches, args.seconds, say=lambda m: print(m + " …", file=out, flush=True)
@@ -106,9 +108,16 @@ def run(args) -> int:
             f"the survey is kept in {cache_dir()} and measured again when devices change",
             file=out,
         )
-    if reports and args.preset == cl_devices.SURVEY_PRESET:
+    if reports and replaces:
         # --lens auto's per-plan timings were made against the old survey: measure them again
         write_json("lens-choice.json", {})
+        if kept is not None:  # say what changes for later runs
+            now = "the NumPy lens" if best is None else f"[{best.index}] {best.short_label}"
+            if best is not None and best.full_label == kept.full_label:
+                change = f"their default stays {now}"
+            else:
+                change = f"their default was [{kept.index}] {kept.short_label}, is now {now}"
+            print(f"this survey replaces the one later runs chose from: {change}", file=out)
     if args.json:
         default_index = None if best is None else best.index
         doc = {

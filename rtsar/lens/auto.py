@@ -193,8 +193,9 @@ def survey_not_worth(plan: LensPlan, precision: str, batch: int | None, pulses: 
     seconds = pulses / rate
     if seconds >= SURVEY_WORTH_S:
         return None
+    took = f"{seconds:.1f} s" if seconds >= 0.1 else f"{1e3 * seconds:.0f} ms"  # never "0.0 s"
     return (
-        f"NumPy lens: this job's range compression takes it about {seconds:.1f} s ({pulses:,} "
+        f"NumPy lens: this job's range compression takes it about {took} ({pulses:,} "
         f"shots at {rate:,.0f} pulses/s), less than the survey of the OpenCL devices that a "
         "first choice of one costs (a few seconds, once: `rtsar devices` runs it, and later "
         "runs choose from it); `--lens opencl` to use OpenCL now"

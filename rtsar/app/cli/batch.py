@@ -192,6 +192,9 @@ def cmd_batch(args) -> int:
     for spec in args.correct or []:
         parse_spec(spec)  # an unknown correction stops here, as in process (exit status 2)
     out_dir = Path(args.out_dir)
+    missing = batch.missing_requirement()
+    if missing:
+        return die(missing)
     made = not out_dir.exists()
     try:
         return _batch(args, options, out_dir)

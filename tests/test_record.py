@@ -255,14 +255,17 @@ def test_a_slow_disk_costs_recorded_shots_never_the_imaging(tmp_path, monkeypatc
     for key, value in _slow_disk_env(1e6).items():  # the recorder process's disk: 1 MB/s
         monkeypatch.setenv(key, value)
     rec = ShotRecorder(path, cfg, queue_bytes=4 * 16 * s * 8)  # four blocks of 16
-    longest = 0.0
+    handed = []
     for first in range(0, 1600, 16):
         t = time.perf_counter()
         rec.pulses(_block(first, 16, s), None)
-        longest = max(longest, time.perf_counter() - t)
+        handed.append(time.perf_counter() - t)
         time.sleep(0.001)
     rec.finish({"pulses_received": 1600})
-    assert longest < 0.05  # never waited for the disk (25 ms a block)
+    # Never waited for the disk: a hand-over that waited would take a block's 25 ms at this
+    # disk's rate, every time once the queue is full.  The median, not the longest: beside
+    # another test run one hand-over took 61 ms, the scheduler's, not the disk's.
+    assert np.median(handed) < 0.005, sorted(handed)[-5:]
     assert rec.dropped > 0 and rec.written > 0 and rec.written + rec.dropped == 1600
     with h5py.File(path, "r") as f:
         flags, shots = f["pulse_flags"][...], f["shots"][...]
@@ -324,7 +327,7 @@ def test_a_killed_recorder_process_is_told_and_counted_and_the_run_goes_on(tmp_p
     said = []
     rec = ShotRecorder(tmp_path / "raw.h5", cfg, notify=said.append)
     handed = 0
-    longest = 0.0
+    times = []
     for first in range(0, 3200, 16):
         if first == 1600:
             deadline = time.monotonic() + 10
@@ -334,11 +337,13 @@ def test_a_killed_recorder_process_is_told_and_counted_and_the_run_goes_on(tmp_p
             os.kill(rec._proc.pid, signal.SIGKILL)
         t = time.perf_counter()
         rec.pulses(_block(first, 16, s), None)
-        longest = max(longest, time.perf_counter() - t)
+        times.append(time.perf_counter() - t)
         handed += 16
         time.sleep(0.002)
     rec.finish({})
-    assert longest < 0.05
+    # never waits: the median hand-over is short, and none waited the way a blocked one would
+    # (a dead process answers nothing: seconds); a busy machine may delay a few by ~50 ms
+    assert np.median(times) < 0.005 and max(times) < 1.0, sorted(times)[-5:]
     assert len(said) == 1 and "the recorder process ended (signal 9)" in said[0], said
     assert "the image goes on" in said[0] and str(rec.failure) in said[0]
     # (issue 36 item 2: written counts the rows confirmed on disk; what the process never

@@ -214,8 +214,9 @@ def probe_all(
 ) -> tuple[list[DeviceReport], dict]:
     """Every device probed in a child process of its own, then the passing ones timed together
     with the NumPy lens in one more; returns the reports and the NumPy lens's rates.  The
-    probes (a build and a check each, no timing) run at once, one child a device: a first
-    survey of three CPU devices took 2.2 s of probes one after another, 0.8 s together."""
+    probes (a build and a check each, no timing) run at once, one child a device: on a shared
+    2-core machine, three CPU devices' probes took 2.0-2.9 s together against 2.3-3.5 s one
+    after another (two pairs of runs)."""
     jobs = [["probe", str(r.index), json.dumps(identity(r)), preset_name] for r in reports]
     with ThreadPoolExecutor(max_workers=max(1, len(jobs))) as pool:
         answers = list(pool.map(lambda args: _child(args, _TIMEOUT_S), jobs))

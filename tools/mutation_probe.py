@@ -5,11 +5,11 @@ must occur exactly once).  For each, the probe writes the edit into a scratch gi
 the committed HEAD, runs the mutant's ``tests`` there with pytest (``-x``, one process, CI=true,
 PYTHONPATH set so that in-process imports and the ``rtsar`` commands the tests start both load
 the worktree's code), and calls the mutant *caught* when a test fails that passes again once
-the file is restored, *survived* when all pass.  Exit status 1 if any survived.  Prints a
+the file is restored, *survived* when all pass.  Exit status 1 if any was not caught.  Prints a
 Markdown table (``--out`` writes it too).
 
     python tools/mutation_probe.py                       # every mutant of the list
-    python tools/mutation_probe.py --only sicd-row-sgn   # one (or several) by name
+    python tools/mutation_probe.py --only sicd-sgn       # one (or several) by name
     python tools/mutation_probe.py --full-suite          # survivors again on all of tests/ (-n 2)
 
 Before the mutants run, a sanity mutant (the package's ``__init__`` raising) must fail the

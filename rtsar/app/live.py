@@ -120,9 +120,9 @@ def lens_label(lens) -> str:
     return "OpenCL lens" if lens.backend == "opencl" else "NumPy lens"
 
 
-LATE_RELEASES_NOTE = (
-    "noted: late releases {n}, chunks of simulated shots sent over 1 ms after their time while "
-    "the machine was busy (no shot lost; the wait is in the latency figures)"
+LATE_RELEASES_MEANING = (  # the summary's words and the web view's (webview/frames.py)
+    "chunks of simulated shots sent over 1 ms after their time (no shot lost by it; the wait is "
+    "in the latency)"
 )
 
 
@@ -471,7 +471,7 @@ def run_stream(
     if bad:
         print("counted: " + ", ".join(bad), file=stream)
     if c.get("late_releases"):  # no loss: said apart from the counters that are
-        print(LATE_RELEASES_NOTE.format(n=c["late_releases"]), file=stream)
+        print(f"noted: late releases {c['late_releases']}, {LATE_RELEASES_MEANING}", file=stream)
     silent = pipe.link.state() if pipe.link is not None else None
     if silent:  # the stream ended in a silence that had been told
         why = end_reason(source, pipe.link, interrupted)

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..live import problems
+from ..live import LATE_RELEASES_MEANING, problems
 
 FLOOR_DB = -300.0  # an empty pixel (no line there): below any dynamic range shown
 MAX_ROWS = 1024  # display rows: the page's canvas height in pixels
@@ -339,8 +339,7 @@ LOST_WORDS = {
     "image_lines_lost": "{n} line(s) not written to -o",
 }
 NOTED_WORDS = {
-    "late_releases": "{n} late release(s): chunks of simulated shots sent over 1 ms after "
-    "their time (no shot lost by it; the wait is in the latency)",
+    "late_releases": "{n} late release(s): " + LATE_RELEASES_MEANING,
     "flagged_lines": "{n} flagged line(s): lines whose aperture holds a zero-filled, zeroed "
     "or marked shot",
     "duplicates": "{n} duplicate shot(s) set aside (a copy of one already in)",

@@ -22,6 +22,11 @@ class Pacer:
         """When shot n is due (perf_counter seconds)."""
         return self.t0 + n / self.rate_hz
 
+    def behind(self, n: int, now: float | None = None) -> int:
+        """Shots from n on already due at ``now`` (0 when shot n is not yet due)."""
+        now = time.perf_counter() if now is None else now
+        return max(0, int((now - self.t0) * self.rate_hz) + 1 - n)
+
     def wait(self, n: int, stop=lambda: False) -> float:
         """Sleep until shot n is due (in short naps so ``stop()`` is honoured); return its time."""
         t = self.due(n)
@@ -31,6 +36,16 @@ class Pacer:
                 break
             time.sleep(min(left, 0.05))
         return t
+
+
+CATCH_UP_MOST = 64  # shots a late source releases together, at most
+
+
+def next_release(pacer: Pacer, n: int, chunk: int, left: int, most: int = CATCH_UP_MOST) -> int:
+    """Shots to release from shot n on: ``chunk`` while on time; once behind, every shot
+    already due (up to ``most``), so a source that fell behind catches up in a few large
+    releases instead of paying its per-release cost for each small one late."""
+    return max(1, min(left, max(chunk, min(pacer.behind(n), most))))
 
 
 def release_chunk(rate_hz: float, max_wait_s: float = 0.001, most: int = 8) -> int:

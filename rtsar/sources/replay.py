@@ -13,7 +13,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from .base import ShotBatch, Source
-from .pacing import Pacer, release_chunk
+from .pacing import Pacer, next_release, release_chunk
 
 
 def parse_rate(text: str | float) -> float | None:
@@ -32,6 +32,9 @@ def parse_rate(text: str | float) -> float | None:
     if not (np.isfinite(value) and value > 0):
         raise ValueError(f"rate factor must be > 0, got {text!r}")
     return value
+
+
+READ_AHEAD_PULSES = 64  # a replay reads its recording this many pulses at a time
 
 
 class ReplaySource(Source):
@@ -108,10 +111,12 @@ class ReplaySource(Source):
 
     def __iter__(self) -> Iterator[ShotBatch]:
         pacer = None if self.factor is None else Pacer(self.prf_hz * self.factor)
+        ahead = ReadAhead(self.shots, self.aux)
         p = 0
         while p < self.total and not self._stop:
-            n = min(self.chunk, self.total - p)
-            samples = np.asarray(self.shots[p : p + n], np.complex64)
+            left = self.total - p
+            n = min(self.chunk, left) if pacer is None else next_release(pacer, p, self.chunk, left)
+            samples, aux = ahead.take(p, n)
             if pacer is None:
                 arrival = np.full(n, time.perf_counter())
             else:
@@ -120,7 +125,6 @@ class ReplaySource(Source):
             self.last_release = (p + n, time.perf_counter())
             if self.first_release is None:
                 self.first_release = self.last_release
-            aux = {k: np.asarray(v[p : p + n], np.complex64) for k, v in self.aux.items()}
             flagged = None if self.flagged is None else self.flagged[p : p + n]
             yield ShotBatch(
                 self.pulse_index[p : p + n], self.time_s[p : p + n], arrival, samples, aux,
@@ -135,6 +139,28 @@ class ReplaySource(Source):
             return float("nan")
         (n0, t0), (n1, t1) = self.first_release, self.last_release
         return (n1 - n0) / (t1 - t0)
+
+
+class ReadAhead:
+    """A recording's shots (and auxiliary channels) read ``block`` pulses at a time and
+    handed out in the smaller releases of a paced replay: one read of a file (h5py: ~0.1 ms of
+    holding the interpreter a call) serves many releases, not one each."""
+
+    def __init__(self, shots, aux: dict, block: int = READ_AHEAD_PULSES):
+        self.shots, self.aux, self.block = shots, aux, int(block)
+        self.first = self.stop = 0
+        self.samples = np.zeros((0, 0), np.complex64)
+        self.aux_samples: dict = {}
+
+    def take(self, p: int, n: int) -> tuple[np.ndarray, dict]:
+        """Pulses p … p + n - 1: (shots, auxiliary channels), complex64 views."""
+        if not (self.first <= p and p + n <= self.stop):
+            end = min(len(self.shots), p + max(n, self.block))
+            self.samples = np.asarray(self.shots[p:end], np.complex64)
+            self.aux_samples = {k: np.asarray(v[p:end], np.complex64) for k, v in self.aux.items()}
+            self.first, self.stop = p, end
+        a, b = p - self.first, p - self.first + n
+        return self.samples[a:b], {k: v[a:b] for k, v in self.aux_samples.items()}
 
 
 def _rate_words(rate) -> str:

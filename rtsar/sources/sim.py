@@ -10,7 +10,7 @@ import numpy as np
 
 from ..scene import Scene, Simulator
 from .base import ShotBatch, Source
-from .pacing import Pacer, release_chunk
+from .pacing import Pacer, next_release, release_chunk
 
 
 class SimSource(Source):
@@ -19,7 +19,9 @@ class SimSource(Source):
     Shots are generated ahead and released in chunks (up to 8 pulses, at most 1 ms); arrival
     is when the instrument would have delivered it, so the wait for its chunk counts as latency.
     If generation falls behind the schedule, shots go out late (their arrival stays the
-    scheduled time) and ``counters["late_releases"]`` counts the chunks.
+    scheduled time) and ``counters["late_releases"]`` counts the chunks; the next release then
+    holds every shot already due, up to 64 (rtsar.sources.pacing.next_release), so the source
+    catches up rather than staying behind one small chunk at a time.
     """
 
     live = True
@@ -74,7 +76,7 @@ class SimSource(Source):
         pacer = Pacer(self.prf_hz)
         p = 0
         while p < self.total and not self._stop:
-            n = min(self.chunk, self.total - p)
+            n = next_release(pacer, p, self.chunk, self.total - p)
             samples, aux = self.sim.block_with_aux(n)
             due = pacer.wait(p + n - 1, lambda: self._stop)
             if time.perf_counter() - due > 1e-3:

@@ -34,6 +34,14 @@ _MAX_LANES = 8
 # "changes the ABI" warnings and then fails to create the kernel, so double stops at double4.
 _MAX_LANES_DOUBLE = 4
 _MAX_GROUP = 256
+# Intel's CPU runtime reads a USE_HOST_PTR buffer in place only where the host array starts on
+# a 4096-byte page; NumPy's arrays start 16 or 64 bytes past one, and then each launch read the
+# shots at 0.4x the speed (psaltis-max plan, batch 64: 54k against 142k pulses/s, this machine,
+# 2026-11-28; by chance one array in a few was aligned: the runtime's "bimodal" figures).  PoCL
+# reads any alignment at one speed.  So on Intel's runtime misaligned shots are first copied
+# into page-aligned staging arrays (``_Staging``).
+PAGE_BYTES = 4096
+STAGING_PLATFORMS = ("Intel",)
 
 
 def supports_double(device: cl.Device) -> bool:
@@ -60,6 +68,38 @@ class LensJob:
             self._event.wait()
             self._event = self._keep = None
         return self._out
+
+
+class _Staging:
+    """Two page-aligned host arrays, each wrapped once as a USE_HOST_PTR buffer, that take
+    turns holding a batch's shots (PAGE_BYTES); one is reused only once the job that last read
+    it has finished."""
+
+    def __init__(self, context, dtype, samples: int):
+        self.context, self.dtype, self.samples = context, np.dtype(dtype), int(samples)
+        self.slots: list[list] = [[None, None, None], [None, None, None]]  # array, buffer, event
+        self.turn = 0
+
+    def take(self, x: np.ndarray):
+        """(buffer, its array holding ``x``): the slot whose turn it is, grown if too small."""
+        slot = self.slots[self.turn]
+        self.turn ^= 1
+        array, buf, event = slot
+        if event is not None:
+            event.wait()  # its last job has read it (the GIL released)
+            slot[2] = None
+        pulses = x.shape[0]
+        if array is None or array.shape[0] < pulses:
+            rows = max(pulses, 2 * (0 if array is None else array.shape[0]))
+            nbytes = rows * self.samples * self.dtype.itemsize
+            raw = np.empty(nbytes + PAGE_BYTES, np.uint8)
+            start = -raw.ctypes.data % PAGE_BYTES
+            array = raw[start : start + nbytes].view(self.dtype).reshape(rows, self.samples)
+            flags = cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR
+            buf = cl.Buffer(self.context, flags, hostbuf=array)
+            slot[0], slot[1] = array, buf
+        array[:pulses] = x
+        return slot, buf, array[:pulses]
 
 
 class AOLens:
@@ -222,6 +262,12 @@ class AOLens:
         self._zero_copy = bool(
             self.device.type & cl.device_type.CPU and self.device.host_unified_memory
         )
+        platform = self.device.platform.name
+        self._staging = (
+            _Staging(self.context, self.dtype, S)
+            if self._zero_copy and any(name in platform for name in STAGING_PLATFORMS)
+            else None
+        )
         self._capacity = 0
         self._shots_buf = self._lines_buf = None
         self._args_lines = None  # the output buffer the kernel's fixed arguments were set with
@@ -311,7 +357,10 @@ class AOLens:
         groups = -(-pulses // self.lanes)
         with self._lock:
             self._ensure(pulses)
-            if self._zero_copy:
+            slot = None
+            if self._staging is not None and x.ctypes.data % PAGE_BYTES:
+                slot, shots_buf, x = self._staging.take(x)
+            elif self._zero_copy:
                 shots_buf = cl.Buffer(
                     self.context, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=x
                 )
@@ -338,6 +387,8 @@ class AOLens:
             # In-order queue: this copy follows the kernel, and a later kernel (which reuses
             # the lines buffer) follows this copy.
             done = cl.enqueue_copy(self.queue, out, self._lines_buf, is_blocking=False)
+            if slot is not None:
+                slot[2] = done  # the staging array is free again once this job is done
         return LensJob(done, out, (x, shots_buf))
 
     __call__ = compress

@@ -23,7 +23,7 @@ import pyopencl as cl
 
 from ..samples import precision_dtype
 from . import cl_loader
-from .cl_launch import gil_free_enqueue
+from .cl_launch import gil_free_calls, gil_free_enqueue
 from .plan import LensPlan
 
 __all__ = ["KERNELS", "AOLens", "LensJob", "supports_double"]
@@ -55,19 +55,31 @@ def supports_double(device: cl.Device) -> bool:
 
 
 class LensJob:
-    """A batch in flight on the device (:meth:`AOLens.submit`): ``wait()`` returns its lines."""
+    """A batch in flight on the device (:meth:`AOLens.submit`): ``wait()`` returns its lines.
+    ``event``: pyopencl's, or a raw handle waited for through ``calls`` (cl_launch.RawCalls),
+    which a job dropped unwaited still waits for (its lines are written into ``out``)."""
 
-    __slots__ = ("_event", "_out", "_keep")
+    __slots__ = ("_event", "_out", "_keep", "_calls", "_lock")
 
-    def __init__(self, event, out: np.ndarray, keep):
+    def __init__(self, event, out: np.ndarray, keep, calls=None):
         self._event, self._out, self._keep = event, out, keep  # keep: inputs the device reads
+        self._calls, self._lock = calls, threading.Lock()
 
     def wait(self) -> np.ndarray:
         """The lines [pulses, bins], once the device has written them (the GIL released)."""
-        if self._event is not None:
-            self._event.wait()
-            self._event = self._keep = None
+        with self._lock:
+            if self._event is not None:
+                event, self._event = self._event, None
+                if self._calls is not None:
+                    self._calls.wait(event)
+                else:
+                    event.wait()
+                self._keep = None
         return self._out
+
+    def __del__(self):
+        if getattr(self, "_event", None) is not None and self._calls is not None:
+            self.wait()
 
 
 class _Staging:
@@ -77,16 +89,16 @@ class _Staging:
 
     def __init__(self, context, dtype, samples: int):
         self.context, self.dtype, self.samples = context, np.dtype(dtype), int(samples)
-        self.slots: list[list] = [[None, None, None], [None, None, None]]  # array, buffer, event
+        self.slots: list[list] = [[None, None, None], [None, None, None]]  # array, buffer, job
         self.turn = 0
 
     def take(self, x: np.ndarray):
         """(buffer, its array holding ``x``): the slot whose turn it is, grown if too small."""
         slot = self.slots[self.turn]
         self.turn ^= 1
-        array, buf, event = slot
-        if event is not None:
-            event.wait()  # its last job has read it (the GIL released)
+        array, buf, job = slot
+        if job is not None:
+            job.wait()  # its last job has read it (the GIL released)
             slot[2] = None
         pulses = x.shape[0]
         if array is None or array.shape[0] < pulses:
@@ -272,6 +284,8 @@ class AOLens:
         self._shots_buf = self._lines_buf = None
         self._args_lines = None  # the output buffer the kernel's fixed arguments were set with
         self._enqueue = gil_free_enqueue()
+        self._calls = gil_free_calls() if self._enqueue is not None else None
+        self._pulses_arg = None  # the pulse count the kernel's argument holds
         self._lock = threading.Lock()
 
     def __repr__(self) -> str:
@@ -377,7 +391,11 @@ class AOLens:
                 for i, buf in enumerate(self._constants):
                     kernel.set_arg(2 + i, buf)
                 self._args_lines = self._lines_buf
-            kernel.set_arg(2 + len(self._constants), np.uint32(pulses))
+            if self._calls is None:
+                kernel.set_arg(2 + len(self._constants), np.uint32(pulses))
+            elif self._pulses_arg != pulses:
+                self._calls.set_uint(kernel, 2 + len(self._constants), pulses)
+                self._pulses_arg = pulses
             if self._enqueue is not None:  # the GIL released (rtsar.lens.cl_launch)
                 self._enqueue(self.queue, kernel, groups * self.group_size, self.group_size)
             else:
@@ -386,9 +404,16 @@ class AOLens:
                 )
             # In-order queue: this copy follows the kernel, and a later kernel (which reuses
             # the lines buffer) follows this copy.
-            done = cl.enqueue_copy(self.queue, out, self._lines_buf, is_blocking=False)
+            if self._calls is not None:
+                job = LensJob(
+                    self._calls.read(self.queue, self._lines_buf, out), out, (x, shots_buf),
+                    self._calls,
+                )  # fmt: skip
+            else:
+                done = cl.enqueue_copy(self.queue, out, self._lines_buf, is_blocking=False)
+                job = LensJob(done, out, (x, shots_buf))
             if slot is not None:
-                slot[2] = done  # the staging array is free again once this job is done
-        return LensJob(done, out, (x, shots_buf))
+                slot[2] = job  # the staging array is free again once this job is done
+        return job
 
     __call__ = compress

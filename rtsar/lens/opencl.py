@@ -17,6 +17,7 @@ precision (tolerance 1e-5) and about 1e-16 in double (tolerance 1e-12) on every 
 from __future__ import annotations
 
 import threading
+import weakref
 
 import numpy as np
 import pyopencl as cl
@@ -59,27 +60,37 @@ class LensJob:
     ``event``: pyopencl's, or a raw handle waited for through ``calls`` (cl_launch.RawCalls),
     which a job dropped unwaited still waits for (its lines are written into ``out``)."""
 
-    __slots__ = ("_event", "_out", "_keep", "_calls", "_lock")
+    __slots__ = ("_event", "_out", "_keep", "_calls", "_lock", "_error", "__weakref__")
 
     def __init__(self, event, out: np.ndarray, keep, calls=None):
         self._event, self._out, self._keep = event, out, keep  # keep: inputs the device reads
-        self._calls, self._lock = calls, threading.Lock()
+        self._calls, self._lock, self._error = calls, threading.Lock(), None
 
     def wait(self) -> np.ndarray:
-        """The lines [pulses, bins], once the device has written them (the GIL released)."""
+        """The lines [pulses, bins], once the device has written them (the GIL released); a
+        failed wait raises again at every later call (its lines were never written)."""
         with self._lock:
             if self._event is not None:
                 event, self._event = self._event, None
-                if self._calls is not None:
-                    self._calls.wait(event)
-                else:
-                    event.wait()
-                self._keep = None
+                try:
+                    if self._calls is not None:
+                        self._calls.wait(event)
+                    else:
+                        event.wait()
+                except Exception as exc:
+                    self._error = exc
+                finally:
+                    self._keep = None
+            if self._error is not None:
+                raise self._error
         return self._out
 
     def __del__(self):
-        if getattr(self, "_event", None) is not None and self._calls is not None:
-            self.wait()
+        if getattr(self, "_event", None) is not None:
+            try:
+                self.wait()
+            except Exception:  # nobody is left to tell (at exit, a driver already gone)
+                pass
 
 
 class _Staging:
@@ -89,17 +100,25 @@ class _Staging:
 
     def __init__(self, context, dtype, samples: int):
         self.context, self.dtype, self.samples = context, np.dtype(dtype), int(samples)
-        self.slots: list[list] = [[None, None, None], [None, None, None]]  # array, buffer, job
+        # array, buffer, weakref to the last job that reads it
+        self.slots: list[list] = [[None, None, None], [None, None, None]]
         self.turn = 0
 
     def take(self, x: np.ndarray):
-        """(buffer, its array holding ``x``): the slot whose turn it is, grown if too small."""
+        """(slot, buffer, its array holding ``x``): the slot whose turn it is, grown if too
+        small.  The slot holds its last job weakly (``submit`` sets it): a job the caller
+        dropped has waited in its ``__del__``, one still alive is waited for here.
+
+        The host writes the array between launches without mapping the buffer, which OpenCL
+        leaves to the implementation for USE_HOST_PTR; on Intel's CPU runtime (the only one
+        staged, STAGING_PLATFORMS) a page-aligned host array is the buffer's own memory."""
         slot = self.slots[self.turn]
         self.turn ^= 1
-        array, buf, job = slot
+        array, buf, last = slot
+        job = last() if last is not None else None
         if job is not None:
             job.wait()  # its last job has read it (the GIL released)
-            slot[2] = None
+        slot[2] = None
         pulses = x.shape[0]
         if array is None or array.shape[0] < pulses:
             rows = max(pulses, 2 * (0 if array is None else array.shape[0]))
@@ -404,16 +423,20 @@ class AOLens:
                 )
             # In-order queue: this copy follows the kernel, and a later kernel (which reuses
             # the lines buffer) follows this copy.
-            if self._calls is not None:
-                job = LensJob(
-                    self._calls.read(self.queue, self._lines_buf, out), out, (x, shots_buf),
-                    self._calls,
-                )  # fmt: skip
-            else:
-                done = cl.enqueue_copy(self.queue, out, self._lines_buf, is_blocking=False)
-                job = LensJob(done, out, (x, shots_buf))
+            try:
+                if self._calls is not None:
+                    job = LensJob(
+                        self._calls.read(self.queue, self._lines_buf, out), out, (x, shots_buf),
+                        self._calls,
+                    )  # fmt: skip
+                else:
+                    done = cl.enqueue_copy(self.queue, out, self._lines_buf, is_blocking=False)
+                    job = LensJob(done, out, (x, shots_buf))
+            except BaseException:
+                self.queue.finish()  # the kernel may still read the shots: let it end first
+                raise
             if slot is not None:
-                slot[2] = job  # the staging array is free again once this job is done
+                slot[2] = weakref.ref(job)  # free again once this job is done or dropped
         return job
 
     __call__ = compress

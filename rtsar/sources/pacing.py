@@ -6,6 +6,7 @@ does not, so the achieved rate over a long run is the requested one.
 
 from __future__ import annotations
 
+import math
 import time
 
 
@@ -25,7 +26,7 @@ class Pacer:
     def behind(self, n: int, now: float | None = None) -> int:
         """Shots from n on already due at ``now`` (0 when shot n is not yet due)."""
         now = time.perf_counter() if now is None else now
-        return max(0, int((now - self.t0) * self.rate_hz) + 1 - n)
+        return max(0, math.floor((now - self.t0) * self.rate_hz) + 1 - n)
 
     def wait(self, n: int, stop=lambda: False) -> float:
         """Sleep until shot n is due (in short naps so ``stop()`` is honoured); return its time."""

@@ -20,6 +20,7 @@ from ..sinks.publish import STALL_TIMEOUT_S, ZmqPublisher
 from ..sources.channel_map import ChannelMap
 from ..stream.pipeline import Pipeline, PipelineSettings
 from . import signals
+from .compile_notice import compile_notice
 from .live_outputs import LiveOutputs
 
 # Counters that describe normal work; every other counter that is not zero is shown, so nothing
@@ -364,6 +365,9 @@ def run_stream(
             stream.flush()
 
     interrupted = None
+    # numba's first compilation of a kernel is told (the whole run: a stall mid-stream too)
+    compiling = compile_notice(lambda m: print(f"rtsar: {m}", file=stream, flush=True))
+    compiling.__enter__()
     try:
         print("rtsar: preparing the lens and the correlator …", file=stream, flush=True)
         survey_devices_first(
@@ -448,6 +452,7 @@ def run_stream(
     except KeyboardInterrupt as exc:  # while waiting for subscribers: nothing was processed
         return signals.exit_status(exc)
     finally:
+        compiling.__exit__(None, None, None)
         publisher.close()
         files.release()  # (a run that never started: its claims on the names go)
     if tty:

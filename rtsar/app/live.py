@@ -21,6 +21,7 @@ from ..sources.channel_map import ChannelMap
 from ..stream.pipeline import Pipeline, PipelineSettings
 from . import signals
 from .compile_notice import compile_notice
+from .live_granularity import warm_correlator
 from .live_outputs import LiveOutputs
 
 # Counters that describe normal work; every other counter that is not zero is shown, so nothing
@@ -386,6 +387,8 @@ def run_stream(
                 file=stream,
                 flush=True,
             )
+        if getattr(source, "warming", False):  # its kernels compile elsewhere: ours here
+            warm_correlator(config, physical)
         if hasattr(source, "prepare"):  # a simulated source readies its kernels too
             source.prepare()
         chosen = None

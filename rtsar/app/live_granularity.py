@@ -172,6 +172,25 @@ def push_s(config: Config, range_m, physical, block: int, noise) -> float:
             ccd.close()
 
 
+def warm_correlator(config: Config, physical=None) -> None:
+    """Compile (or load) the run's correlator kernels now, its smallest candidate block pushed
+    twice: rtsar.app.live calls it while the simulator's kernels compile in their own process
+    (rtsar.sources.sim ``warm_from``), before any work is timed."""
+    plan = make_plan(config)
+    blocks, _ = block_candidates(config.processor, physical)
+    dtype = np.complex128 if config.processor.precision == "complex128" else np.complex64
+    cfg = config
+    if config.processor.correlator in BLOCKED_KINDS and physical is None:
+        cfg = config.with_processor(partition_lines=blocks[0])
+    ccd = make_ccd(cfg, plan.range_m, physical)
+    try:
+        for _ in range(2):
+            ccd.push(np.zeros((blocks[0], len(plan.range_m)), dtype))
+    finally:
+        if hasattr(ccd, "close"):
+            ccd.close()
+
+
 def strip_cost_s(config: Config, range_m) -> float:
     """Seconds to cut a one-line strip, record its latency and encode its message (the
     publisher's header: rtsar.sinks.wire)."""

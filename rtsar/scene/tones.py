@@ -175,6 +175,17 @@ def kernels_compiled() -> int:
     return sum(sum(s.cache_misses.values()) for s in stats if s is not None)  # None: no JIT
 
 
+def kernels_cached(pulsed: bool) -> bool | None:
+    """Whether numba's on-disk cache holds this installation's kernels for a scene of this
+    kind (``pulsed``: a pulsed chirp's three, else an FMCW chirp's two), read from the caches'
+    index files without compiling; None where that cannot be told (no JIT, another numba)."""
+    kernels = (_phasor, _tone_sum) + ((_pulsed_tones,) if pulsed else ())
+    try:
+        return all(bool(k._cache._cache_file._load_index()) for k in kernels)
+    except Exception:  # numba's private layout: not knowing is not an error
+        return None
+
+
 def quadratic_phasor(samples: int, cycles_per_sample2: float) -> np.ndarray:
     """Q[n] = exp(i2π · (c n² mod 1)), n = 0 … samples − 1 (the shared chirp factor), float64."""
     n = np.arange(samples, dtype=np.float64)

@@ -2,15 +2,21 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 from dataclasses import replace
 
 import numpy as np
 
+from ..params import PulsedChirp
 from ..scene import Scene, Simulator
+from ..scene.tones import kernels_cached
 from .base import ShotBatch, Source
 from .pacing import Pacer, next_release, release_chunk
+
+WARM_TIMEOUT_S = 300.0  # the warming process; past it, the kernels are compiled here
 
 
 class SimSource(Source):
@@ -26,8 +32,24 @@ class SimSource(Source):
 
     live = True
 
-    def __init__(self, scene: Scene, pulses: int | None = None, chunk: int | None = None):
+    def __init__(
+        self,
+        scene: Scene,
+        pulses: int | None = None,
+        chunk: int | None = None,
+        warm_from: str | None = None,
+    ):
         super().__init__()
+        # warm_from: the scene's file; where numba's cache lacks the simulator's kernels, a
+        # process of its own compiles them now (rtsar.scene.warm) while the caller prepares
+        # the rest, and prepare() waits for it.
+        self._warming = None
+        if warm_from is not None:
+            if kernels_cached(isinstance(scene.config.waveform, PulsedChirp)) is False:
+                cmd = [sys.executable, "-m", "rtsar.scene.warm", str(warm_from)]
+                self._warming = subprocess.Popen(
+                    cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+                )
         self.scene = scene
         self.sim = Simulator(scene)
         self.prf_hz = scene.config.geometry.prf_hz
@@ -46,9 +68,22 @@ class SimSource(Source):
             self._aux_names = tuple(sorted(aux))
         return self._aux_names
 
+    @property
+    def warming(self) -> bool:
+        """Whether a process is compiling the simulator's kernels (``warm_from``)."""
+        return self._warming is not None and self._warming.poll() is None
+
     def prepare(self) -> None:
         """Ready the simulator's kernels before the schedule starts (rtsar.app.live calls it
-        while it says "preparing …")."""
+        while it says "preparing …"): loaded from numba's cache once the warming process
+        (``warm_from``) has compiled them, else compiled here."""
+        if self._warming is not None:
+            try:
+                self._warming.wait(timeout=WARM_TIMEOUT_S)
+            except subprocess.TimeoutExpired:  # then compiled here, as without it
+                self._warming.kill()
+                self._warming.wait()
+            self._warming = None
         self.sim.prepare()
 
     def cost_per_pulse_s(self, places: int = 5, shots: int = 16) -> float:

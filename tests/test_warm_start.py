@@ -38,3 +38,56 @@ def test_the_simulator_kernels_compile_in_their_own_process_once(tmp_path):
         "after": True,
         "started_again": False,  # cached now: no second process
     }, got
+
+
+class _Settings:
+    lens_backend, device, swath_workers = "auto", None, 0
+
+
+def _record(calls, name, seconds=0.0):
+    import threading
+    import time
+
+    def call(*args, **kwargs):
+        start = time.perf_counter()
+        time.sleep(seconds)
+        calls.append((name, threading.current_thread().name, start, time.perf_counter()))
+
+    return call
+
+
+def test_a_first_survey_and_the_correlator_compile_run_side_by_side(monkeypatch):
+    """Where the survey must probe, the correlator compiles meanwhile in this thread; the
+    survey's failure is raised here; a known survey runs alone, then the compile only where
+    the simulator's kernels compile elsewhere."""
+    import pytest
+
+    from rtsar.app import live_granularity as lg
+
+    calls = []
+    monkeypatch.setattr(lg.cl_devices, "survey_is_known", lambda: False)
+    monkeypatch.setattr(lg, "survey_devices_first", _record(calls, "survey", 0.3))
+    monkeypatch.setattr(lg, "warm_correlator", _record(calls, "compile", 0.3))
+    lg.survey_and_compile(_Settings(), None, None, object(), print)
+    (a, b) = sorted(calls)
+    assert {a[0], b[0]} == {"survey", "compile"} and a[1] != b[1]
+    assert a[2] < b[3] and b[2] < a[3]  # their times overlap
+
+    def broken(*args):
+        raise RuntimeError("the survey failed")
+
+    monkeypatch.setattr(lg, "survey_devices_first", broken)
+    with pytest.raises(RuntimeError, match="survey failed"):
+        lg.survey_and_compile(_Settings(), None, None, object(), print)
+
+    calls.clear()
+    monkeypatch.setattr(lg.cl_devices, "survey_is_known", lambda: True)
+    monkeypatch.setattr(lg, "survey_devices_first", _record(calls, "survey"))
+
+    class Warming:
+        warming = True
+
+    lg.survey_and_compile(_Settings(), None, None, object(), print)
+    assert [c[0] for c in calls] == ["survey"]
+    lg.survey_and_compile(_Settings(), None, None, Warming(), print)
+    assert [c[0] for c in calls] == ["survey", "survey", "compile"]

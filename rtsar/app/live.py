@@ -13,7 +13,6 @@ import sys
 import time
 
 from ..focus.spec import correct_option
-from ..lens.base import survey_devices_first
 from ..params import Config
 from ..scene.effects import REGISTRY as EFFECTS
 from ..sinks.publish import STALL_TIMEOUT_S, ZmqPublisher
@@ -21,7 +20,7 @@ from ..sources.channel_map import ChannelMap
 from ..stream.pipeline import Pipeline, PipelineSettings
 from . import signals
 from .compile_notice import compile_notice
-from .live_granularity import warm_correlator
+from .live_granularity import survey_and_compile
 from .live_outputs import LiveOutputs
 
 # Counters that describe normal work; every other counter that is not zero is shown, so nothing
@@ -371,9 +370,11 @@ def run_stream(
     compiling.__enter__()
     try:
         print("rtsar: preparing the lens and the correlator …", file=stream, flush=True)
-        survey_devices_first(
-            settings.lens_backend,
-            settings.device,
+        survey_and_compile(
+            settings,
+            config,
+            physical,
+            source,
             lambda m: print(f"rtsar: {m} …", file=stream, flush=True),
         )
         if settings.swath_workers:
@@ -387,8 +388,6 @@ def run_stream(
                 file=stream,
                 flush=True,
             )
-        if getattr(source, "warming", False):  # its kernels compile elsewhere: ours here
-            warm_correlator(config, physical)
         if hasattr(source, "prepare"):  # a simulated source readies its kernels too
             source.prepare()
         chosen = None

@@ -14,6 +14,7 @@ fixed (``--partition-lines``, ``--strip-lines`` / ``--strip-ms``, ``--max-batch`
 from __future__ import annotations
 
 import json
+import threading
 import time
 from dataclasses import dataclass, replace
 
@@ -21,7 +22,8 @@ import numpy as np
 
 from ..analysis.timing import rate_per_s
 from ..ccd import make_ccd
-from ..lens import make_lens, make_plan
+from ..lens import cl_devices, make_lens, make_plan
+from ..lens.base import survey_devices_first
 from ..lens.plan import next_pow2
 from ..params import Config, Processor
 from ..sinks.wire import strip_header
@@ -170,6 +172,41 @@ def push_s(config: Config, range_m, physical, block: int, noise) -> float:
     finally:
         if hasattr(ccd, "close"):
             ccd.close()
+
+
+def survey_and_compile(settings, config, physical, source, say) -> None:
+    """The OpenCL survey (rtsar.lens.base.survey_devices_first) and the correlator's first
+    compile side by side where the survey must probe: its probes are child processes this one
+    only waits for, and a machine's first run did one, then the other.  (The survey's timing
+    child may then share the cores with the compile: every device and the NumPy lens alike,
+    its rounds interleaved.)  Where the simulator's kernels compile in their own process
+    (``source.warming``), the correlator compiles here meanwhile, as warm_correlator says."""
+    compile_here = not settings.swath_workers
+    try:
+        probing = not cl_devices.survey_is_known()
+    except RuntimeError:  # no OpenCL platform: make_lens says so
+        probing = False
+    if not (probing and compile_here):
+        survey_devices_first(settings.lens_backend, settings.device, say)
+        if compile_here and getattr(source, "warming", False):
+            warm_correlator(config, physical)
+        return
+    failed: list[BaseException] = []
+
+    def survey() -> None:
+        try:
+            survey_devices_first(settings.lens_backend, settings.device, say)
+        except BaseException as exc:  # raised here, in the caller's thread
+            failed.append(exc)
+
+    thread = threading.Thread(target=survey, name="rtsar-survey", daemon=True)
+    thread.start()
+    try:
+        warm_correlator(config, physical)
+    finally:
+        thread.join()
+    if failed:
+        raise failed[0]
 
 
 def warm_correlator(config: Config, physical=None) -> None:

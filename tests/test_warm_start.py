@@ -91,3 +91,12 @@ def test_a_first_survey_and_the_correlator_compile_run_side_by_side(monkeypatch)
     assert [c[0] for c in calls] == ["survey"]
     lg.survey_and_compile(_Settings(), None, None, Warming(), print)
     assert [c[0] for c in calls] == ["survey", "survey", "compile"]
+
+    def touched():
+        raise AssertionError("OpenCL asked about its survey for a NumPy lens")
+
+    class NumpyLens(_Settings):
+        lens_backend = "numpy"
+
+    monkeypatch.setattr(lg.cl_devices, "survey_is_known", touched)
+    lg.survey_and_compile(NumpyLens(), None, None, object(), print)

@@ -23,7 +23,7 @@ import numpy as np
 from ..analysis.timing import rate_per_s
 from ..ccd import make_ccd
 from ..lens import cl_devices, make_lens, make_plan
-from ..lens.base import survey_devices_first
+from ..lens.base import survey_devices_first, survey_wanted
 from ..lens.plan import next_pow2
 from ..params import Config, Processor
 from ..sinks.wire import strip_header
@@ -182,10 +182,12 @@ def survey_and_compile(settings, config, physical, source, say) -> None:
     its rounds interleaved.)  Where the simulator's kernels compile in their own process
     (``source.warming``), the correlator compiles here meanwhile, as warm_correlator says."""
     compile_here = not settings.swath_workers
-    try:
-        probing = not cl_devices.survey_is_known()
-    except RuntimeError:  # no OpenCL platform: make_lens says so
-        probing = False
+    probing = False  # no OpenCL touched where the lens will not survey (--lens numpy, --device)
+    if survey_wanted(settings.lens_backend, settings.device):
+        try:
+            probing = not cl_devices.survey_is_known()
+        except RuntimeError:  # no OpenCL platform: make_lens says so
+            pass
     if not (probing and compile_here):
         survey_devices_first(settings.lens_backend, settings.device, say)
         if compile_here and getattr(source, "warming", False):

@@ -86,11 +86,17 @@ def make_lens(
     raise ValueError(f"lens backend must be one of {LENS_BACKENDS}, got {backend!r}")
 
 
+def survey_wanted(backend: str, device: str | None) -> bool:
+    """Whether the lens will need the device survey: ``auto`` or ``opencl`` with no device
+    asked for (``--device``, RTSAR_OPENCL_DEVICE)."""
+    return not (backend == "numpy" or device is not None or os.environ.get("RTSAR_OPENCL_DEVICE"))
+
+
 def survey_devices_first(backend: str, device: str | None, say) -> None:
-    """Probe the OpenCL devices now where the lens will need them (``auto`` or ``opencl`` with
-    no device asked for), so the first run on a machine says what its pause is (``say``: one
-    line before the probing; nothing when the survey is cached)."""
-    if backend == "numpy" or device is not None or os.environ.get("RTSAR_OPENCL_DEVICE", ""):
+    """Probe the OpenCL devices now where the lens will need them (survey_wanted), so the
+    first run on a machine says what its pause is (``say``: one line before the probing;
+    nothing when the survey is cached)."""
+    if not survey_wanted(backend, device):
         return
     try:
         from .cl_devices import survey

@@ -366,7 +366,10 @@ def run_stream(
 
     interrupted = None
     # numba's first compilation of a kernel is told (the whole run: a stall mid-stream too)
-    compiling = compile_notice(lambda m: print(f"rtsar: {m}", file=stream, flush=True))
+    streaming = []  # once the stream runs, a line of its own beside the status line (say)
+    compiling = compile_notice(
+        lambda m: say(f"rtsar: {m}") if streaming else print(f"rtsar: {m}", file=stream, flush=True)
+    )
     compiling.__enter__()
     try:
         print("rtsar: preparing the lens and the correlator …", file=stream, flush=True)
@@ -444,6 +447,7 @@ def run_stream(
                 flush=True,
             )
             publisher.wait_for_subscribers(wait_subscribers)
+        streaming.append(True)
         pipe.start()
         try:
             stats = pipe.join()

@@ -14,7 +14,6 @@ fixed (``--partition-lines``, ``--strip-lines`` / ``--strip-ms``, ``--max-batch`
 from __future__ import annotations
 
 import json
-import threading
 import time
 from dataclasses import dataclass, replace
 
@@ -175,12 +174,12 @@ def push_s(config: Config, range_m, physical, block: int, noise) -> float:
 
 
 def survey_and_compile(settings, config, physical, source, say) -> None:
-    """The OpenCL survey (rtsar.lens.base.survey_devices_first) and the correlator's first
-    compile side by side where the survey must probe: its probes are child processes this one
-    only waits for, and a machine's first run did one, then the other.  (The survey's timing
-    child may then share the cores with the compile: every device and the NumPy lens alike,
-    its rounds interleaved.)  Where the simulator's kernels compile in their own process
-    (``source.warming``), the correlator compiles here meanwhile, as warm_correlator says."""
+    """The OpenCL survey (rtsar.lens.base.survey_devices_first), then, where the simulator's
+    kernels compile in a process of their own (``source.warming``), the correlator's compile
+    here meanwhile (warm_correlator).  The survey is timed alone: where it must probe, the
+    simulator's process is waited for first (``source.wait_warm``).  (Run beside a compile,
+    the survey's cached rates fell by a third to a half and two devices swapped places, and a
+    Ctrl-C reached its probes from a thread that then cached them as failed: a cold review.)"""
     compile_here = not settings.swath_workers
     probing = False  # no OpenCL touched where the lens will not survey (--lens numpy, --device)
     if survey_wanted(settings.lens_backend, settings.device):
@@ -188,27 +187,11 @@ def survey_and_compile(settings, config, physical, source, say) -> None:
             probing = not cl_devices.survey_is_known()
         except RuntimeError:  # no OpenCL platform: make_lens says so
             pass
-    if not (probing and compile_here):
-        survey_devices_first(settings.lens_backend, settings.device, say)
-        if compile_here and getattr(source, "warming", False):
-            warm_correlator(config, physical)
-        return
-    failed: list[BaseException] = []
-
-    def survey() -> None:
-        try:
-            survey_devices_first(settings.lens_backend, settings.device, say)
-        except BaseException as exc:  # raised here, in the caller's thread
-            failed.append(exc)
-
-    thread = threading.Thread(target=survey, name="rtsar-survey", daemon=True)
-    thread.start()
-    try:
+    if probing and hasattr(source, "wait_warm"):
+        source.wait_warm()
+    survey_devices_first(settings.lens_backend, settings.device, say)
+    if compile_here and getattr(source, "warming", False):
         warm_correlator(config, physical)
-    finally:
-        thread.join()
-    if failed:
-        raise failed[0]
 
 
 def warm_correlator(config: Config, physical=None) -> None:

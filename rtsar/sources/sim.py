@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import atexit
 import subprocess
 import sys
 import time
@@ -17,6 +18,13 @@ from .base import ShotBatch, Source
 from .pacing import Pacer, next_release, release_chunk
 
 WARM_TIMEOUT_S = 300.0  # the warming process; past it, the kernels are compiled here
+
+
+def _end(process: subprocess.Popen) -> None:
+    """Stop a warming process that is still running, and reap it."""
+    if process.poll() is None:
+        process.kill()
+        process.wait()
 
 
 class SimSource(Source):
@@ -50,6 +58,7 @@ class SimSource(Source):
                 self._warming = subprocess.Popen(
                     cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
                 )
+                atexit.register(_end, self._warming)  # a run that fails first leaves none
         self.scene = scene
         self.sim = Simulator(scene)
         self.prf_hz = scene.config.geometry.prf_hz
@@ -73,17 +82,21 @@ class SimSource(Source):
         """Whether a process is compiling the simulator's kernels (``warm_from``)."""
         return self._warming is not None and self._warming.poll() is None
 
-    def prepare(self) -> None:
-        """Ready the simulator's kernels before the schedule starts (rtsar.app.live calls it
-        while it says "preparing …"): loaded from numba's cache once the warming process
-        (``warm_from``) has compiled them, else compiled here."""
+    def wait_warm(self) -> None:
+        """Wait for the warming process (``warm_from``) to end, if there is one: what must be
+        timed alone (the OpenCL survey) is not timed beside it."""
         if self._warming is not None:
             try:
                 self._warming.wait(timeout=WARM_TIMEOUT_S)
             except subprocess.TimeoutExpired:  # then compiled here, as without it
-                self._warming.kill()
-                self._warming.wait()
+                _end(self._warming)
             self._warming = None
+
+    def prepare(self) -> None:
+        """Ready the simulator's kernels before the schedule starts (rtsar.app.live calls it
+        while it says "preparing …"): loaded from numba's cache once the warming process
+        (``warm_from``) has compiled them, else compiled here."""
+        self.wait_warm()
         self.sim.prepare()
 
     def cost_per_pulse_s(self, places: int = 5, shots: int = 16) -> float:

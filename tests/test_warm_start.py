@@ -72,7 +72,7 @@ def test_the_survey_is_timed_alone_and_the_correlator_compiles_beside_the_simula
     class Source:
         warming = True
 
-        def wait_warm(self):
+        def wait_warm(self, say=None):
             calls.append(("wait",))
             self.warming = False
 

@@ -188,7 +188,7 @@ def survey_and_compile(settings, config, physical, source, say) -> None:
         except RuntimeError:  # no OpenCL platform: make_lens says so
             pass
     if probing and hasattr(source, "wait_warm"):
-        source.wait_warm()
+        source.wait_warm(say)
     survey_devices_first(settings.lens_backend, settings.device, say)
     if compile_here and getattr(source, "warming", False):
         warm_correlator(config, physical)

@@ -82,10 +82,15 @@ class SimSource(Source):
         """Whether a process is compiling the simulator's kernels (``warm_from``)."""
         return self._warming is not None and self._warming.poll() is None
 
-    def wait_warm(self) -> None:
+    def wait_warm(self, say=None) -> None:
         """Wait for the warming process (``warm_from``) to end, if there is one: what must be
-        timed alone (the OpenCL survey) is not timed beside it."""
+        timed alone (the OpenCL survey) is not timed beside it.  ``say``: told of the wait."""
         if self._warming is not None:
+            if say is not None and self._warming.poll() is None:
+                say(
+                    "numba is compiling the simulator's kernels, in a process of their own: the "
+                    "first run of this installation (seconds; cached for later runs)"
+                )
             try:
                 self._warming.wait(timeout=WARM_TIMEOUT_S)
             except subprocess.TimeoutExpired:  # then compiled here, as without it

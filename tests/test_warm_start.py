@@ -59,10 +59,10 @@ def _record(calls, name, seconds=0.0):
 def test_the_survey_is_timed_alone_and_the_correlator_compiles_beside_the_simulator(
     monkeypatch,
 ):
-    """Where the survey must probe, the simulator's warming process is waited for first (a
-    survey timed beside a compile cached rates a third to a half low, two devices swapped); the
-    correlator compiles here only while the simulator's kernels compile elsewhere; a NumPy lens
-    asks OpenCL nothing."""
+    """The correlator compiles here only while the simulator's kernels compile elsewhere, and
+    before the survey; where the survey must probe, the simulator's process is waited for
+    first (a survey timed beside a compile cached rates a third to a half low, two devices
+    swapped); a NumPy lens asks OpenCL nothing."""
     from rtsar.app import live_granularity as lg
 
     calls = []
@@ -78,12 +78,12 @@ def test_the_survey_is_timed_alone_and_the_correlator_compiles_beside_the_simula
 
     monkeypatch.setattr(lg.cl_devices, "survey_is_known", lambda: False)
     lg.survey_and_compile(_Settings(), None, None, Source(), print)
-    assert [c[0] for c in calls] == ["wait", "survey"]  # nothing left to compile beside
+    assert [c[0] for c in calls] == ["compile", "wait", "survey"]  # the survey last, alone
 
     calls.clear()
     monkeypatch.setattr(lg.cl_devices, "survey_is_known", lambda: True)
     lg.survey_and_compile(_Settings(), None, None, Source(), print)
-    assert [c[0] for c in calls] == ["survey", "compile"]  # no wait: the survey is cached
+    assert [c[0] for c in calls] == ["compile", "survey"]  # no wait: the survey is cached
     calls.clear()
     lg.survey_and_compile(_Settings(), None, None, object(), print)
     assert [c[0] for c in calls] == ["survey"]

@@ -174,10 +174,10 @@ def push_s(config: Config, range_m, physical, block: int, noise) -> float:
 
 
 def survey_and_compile(settings, config, physical, source, say) -> None:
-    """The OpenCL survey (rtsar.lens.base.survey_devices_first), then, where the simulator's
-    kernels compile in a process of their own (``source.warming``), the correlator's compile
-    here meanwhile (warm_correlator).  The survey is timed alone: where it must probe, the
-    simulator's process is waited for first (``source.wait_warm``).  (Run beside a compile,
+    """Where the simulator's kernels compile in a process of their own (``source.warming``),
+    the correlator's compile here meanwhile (warm_correlator); then the OpenCL survey
+    (rtsar.lens.base.survey_devices_first), timed alone: where it must probe, the simulator's
+    process is waited for first (``source.wait_warm``).  (Run beside a compile,
     the survey's cached rates fell by a third to a half and two devices swapped places, and a
     Ctrl-C reached its probes from a thread that then cached them as failed: a cold review.)"""
     compile_here = not settings.swath_workers
@@ -187,11 +187,11 @@ def survey_and_compile(settings, config, physical, source, say) -> None:
             probing = not cl_devices.survey_is_known()
         except RuntimeError:  # no OpenCL platform: make_lens says so
             pass
+    if compile_here and getattr(source, "warming", False):
+        warm_correlator(config, physical)  # beside the simulator's process, before any timing
     if probing and hasattr(source, "wait_warm"):
         source.wait_warm(say)
     survey_devices_first(settings.lens_backend, settings.device, say)
-    if compile_here and getattr(source, "warming", False):
-        warm_correlator(config, physical)
 
 
 def warm_correlator(config: Config, physical=None) -> None:

@@ -195,22 +195,14 @@ def survey_and_compile(settings, config, physical, source, say) -> None:
 
 
 def warm_correlator(config: Config, physical=None) -> None:
-    """Compile (or load) the run's correlator kernels now, its smallest candidate block pushed
-    twice: rtsar.app.live calls it while the simulator's kernels compile in their own process
-    (rtsar.sources.sim ``warm_from``), before any work is timed."""
-    plan = make_plan(config)
+    """Compile (or load) the run's correlator kernels now: push_s on its smallest candidate
+    block of zeros.  rtsar.app.live calls it while the simulator's kernels compile in their
+    own process (rtsar.sources.sim ``warm_from``), before the work is timed."""
     blocks, _ = block_candidates(config.processor, physical)
     dtype = np.complex128 if config.processor.precision == "complex128" else np.complex64
-    cfg = config
-    if config.processor.correlator in BLOCKED_KINDS and physical is None:
-        cfg = config.with_processor(partition_lines=blocks[0])
-    ccd = make_ccd(cfg, plan.range_m, physical)
-    try:
-        for _ in range(2):
-            ccd.push(np.zeros((blocks[0], len(plan.range_m)), dtype))
-    finally:
-        if hasattr(ccd, "close"):
-            ccd.close()
+    push_s(
+        config, make_plan(config).range_m, physical, blocks[0], lambda r, c: np.zeros((r, c), dtype)
+    )
 
 
 def strip_cost_s(config: Config, range_m) -> float:

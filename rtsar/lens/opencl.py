@@ -303,7 +303,7 @@ class AOLens:
         self._shots_buf = self._lines_buf = None
         self._args_lines = None  # the output buffer the kernel's fixed arguments were set with
         self._enqueue = gil_free_enqueue()
-        self._calls = gil_free_calls() if self._enqueue is not None else None
+        self._calls = gil_free_calls()  # None exactly where _enqueue is (cl_launch._resolve)
         self._pulses_arg = None  # the pulse count the kernel's argument holds
         self._lock = threading.Lock()
 
@@ -425,13 +425,10 @@ class AOLens:
             # the lines buffer) follows this copy.
             try:
                 if self._calls is not None:
-                    job = LensJob(
-                        self._calls.read(self.queue, self._lines_buf, out), out, (x, shots_buf),
-                        self._calls,
-                    )  # fmt: skip
+                    done = self._calls.read(self.queue, self._lines_buf, out)
                 else:
                     done = cl.enqueue_copy(self.queue, out, self._lines_buf, is_blocking=False)
-                    job = LensJob(done, out, (x, shots_buf))
+                job = LensJob(done, out, (x, shots_buf), self._calls)
             except BaseException:
                 self.queue.finish()  # the kernel may still read the shots: let it end first
                 raise

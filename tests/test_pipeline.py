@@ -198,6 +198,25 @@ def test_latency_histogram_bins_every_value_as_floor_of_its_log_does(rng):
     assert stats.total == len(lat) and stats.max_s == lat.max()
 
 
+def test_latency_histogram_few_values_a_call_bin_as_many_do(rng):
+    """Strips of 1-16 lines take the one-by-one path (LatencyStats._add_few), longer ones
+    bincount: the same bins for every value, NaN, zero, negatives and infinity included."""
+    odd = [np.nan, 0.0, -1.0, 1e-6, 1e-9, 5e3, 1e7, np.inf]
+    lat = np.concatenate([rng.lognormal(np.log(2e-3), 3.0, 3000), odd])
+    rng.shuffle(lat)
+    few, many = LatencyStats(), LatencyStats()
+    sizes = rng.integers(1, LatencyStats.SMALL + 1, len(lat))
+    start = 0
+    for n in sizes:  # strips of 1 to SMALL lines
+        few.add(lat[start : start + n])
+        start += n
+        if start >= len(lat):
+            break
+    many.add(lat)  # one call: the bincount path
+    np.testing.assert_array_equal(few.counts, many.counts)
+    assert few.total == many.total == len(lat)
+
+
 def test_parse_rate():
     assert parse_rate("real") == 1.0 and parse_rate("max") is None and parse_rate("2.5") == 2.5
     for bad in ("fast", "0", "-1", "nan"):

@@ -40,7 +40,8 @@ from rtsar.app.cli import build_parser, main
 README = ROOT / "README.md"
 COMMANDS_PAGE = PAGES_DIR / "reference" / "commands.md"
 TWO_COMMANDS = (
-    'python3 -m venv .venv && .venv/bin/pip install ".[opencl-cpu]" && .venv/bin/rtsar run',
+    'python3 -m venv .venv && .venv/bin/pip install ".[opencl-cpu]" && .venv/bin/rtsar prepare'
+    " && .venv/bin/rtsar run",
     'python3 -m venv .venv && .venv/bin/pip install ".[test]"'
     " && .venv/bin/python -m pytest -q -n auto",
 )

@@ -24,6 +24,9 @@ COMMANDS = (  # in the order of ``rtsar --help``
     ("keygen", "streaming", "make a CURVE key pair for encrypted publication"),
     ("view", "view",
      "live waterfall of published strips: a window, a PNG snapshot, or a browser page"),
+    ("prepare", "prepare",
+     "once after installing: compile the kernels and survey the OpenCL devices, so that first "
+     "runs start as fast as later ones"),
     ("devices", "measure",
      "every OpenCL device: does it build the lens, is it right, how fast; the default"),
     ("measure", "measure",

@@ -1,0 +1,230 @@
+"""``rtsar prepare``: once after installing, what a first run would otherwise stop to do
+(issue 37): numba's kernels compiled into its on-disk cache, the OpenCL devices surveyed.
+
+numba compiles a kernel the first time an installation runs it (``cache=True``: later runs load
+it in a fraction of a second).  Cold, on a shared 2-core AMD EPYC (Zen 3), one interpreter:
+the nonuniform correlator's kernels 15.7 s, the threaded partitioned correlator's 4.5 s, the
+physical CCD's 3.7 s, RADARSAT-1's Doppler-domain migration 2.7 s, the partitioned 1.9 s, the
+simulator's 1.7 s, the direct 1.7 s.  So a machine's first ``rtsar run``, ``process`` or
+``demo`` paid them; here each group compiles in one of ``workers`` processes (spawned: a
+compile holds its interpreter), longest first, and then the device survey runs alone (its
+timings must not share the cores: rtsar.app.live_granularity.survey_and_compile).
+
+The kernels compiled are those of the presets' precision (complex64) and every correlator a
+preset or built-in scene uses; a complex128 run (``tradeoff``, ``--precision complex128``)
+still compiles its own on first use.  ``kernel_cache_state`` reads numba's cache index files
+(private to numba: where it cannot tell, it says so) to tell what is cached.
+"""
+
+from __future__ import annotations
+
+import importlib
+import multiprocessing
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..ccd import make_ccd
+from ..focus.resample import resample
+from ..lens import cl_devices, make_plan
+from ..physical import PhysicalSettings
+from ..presets import preset
+from ..scene import Simulator, load_scene
+
+# Every module of rtsar that holds numba kernels (tests/test_prepare.py checks the list against
+# the sources), and the task that compiles each.
+KERNEL_MODULES = {
+    "rtsar.ccd.tiled": "nonuniform",
+    "rtsar.ccd.partitioned": "partitioned",
+    "rtsar.ccd.direct": "direct",
+    "rtsar.ccd.doppler_migration": "migration",
+    "rtsar.physical.register": "physical",
+    "rtsar.scene.tones": "simulator",
+    "rtsar.focus.resample": "resampler",
+}
+
+
+@dataclass(frozen=True)
+class Task:
+    name: str  # the key of TASKS
+    words: str  # what it compiles, for its line
+
+
+TASKS = {  # longest first (cold, above): the pool starts them in this order
+    "nonuniform": Task("nonuniform", "the nonuniform correlator (psaltis-jpl, psaltis-max)"),
+    "partitioned": Task("partitioned", "the partitioned correlator, one thread and threaded"),
+    "physical": Task("physical", "the physical CCD emulation"),
+    "migration": Task("migration", "the Doppler-domain range migration (radarsat1)"),
+    "simulator": Task("simulator", "the simulator (pulsed and FMCW scenes)"),
+    "direct": Task("direct", "the direct shift-register correlator"),
+    "resampler": Task("resampler", "the band-limited resampler (chirp linearization, HCN, PFA)"),
+}
+
+
+def _push_zeros(preset_name: str, correlator: str | None = None, physical=None) -> None:
+    """Build the CCD of a preset (``correlator``: another kind) and push blocks of zeros
+    through it: its kernels compile (or load) for the shapes a run gives them."""
+    cfg = preset(preset_name)
+    if correlator is not None:
+        cfg = cfg.with_processor(correlator=correlator)
+    range_m = make_plan(cfg).range_m
+    ccd = make_ccd(cfg, range_m, physical)
+    try:
+        zeros = np.zeros((16, len(range_m)), np.complex64)
+        for _ in range(2):
+            ccd.push(zeros)
+        ccd.flush()
+    finally:
+        if hasattr(ccd, "close"):
+            ccd.close()
+
+
+def _compile(name: str) -> None:
+    if name == "nonuniform":
+        _push_zeros("psaltis-jpl", "nonuniform")
+        _push_zeros("psaltis-max", "nonuniform")
+    elif name == "partitioned":
+        _push_zeros("psaltis-jpl", "partitioned")
+        _push_zeros("psaltis-max", "partitioned")  # a large plan: the threaded kernel
+    elif name == "physical":
+        _push_zeros("psaltis-jpl", physical=PhysicalSettings())
+    elif name == "migration":
+        _push_zeros("radarsat1")
+    elif name == "simulator":
+        for scene in ("demo", "sal-demo"):  # a pulsed chirp's kernels, an FMCW chirp's
+            Simulator(load_scene(scene)).prepare()
+    elif name == "direct":
+        _push_zeros("psaltis-jpl", "direct")
+    elif name == "resampler":
+        resample(np.zeros((2, 64), np.complex64), np.tile(np.linspace(0.0, 63.0, 64), (2, 1)))
+    else:
+        raise ValueError(f"no such task: {name!r}")
+
+
+def run_task(name: str) -> tuple[str, float, int]:
+    """In a worker: (name, seconds, kernels numba compiled, not loaded from its cache)."""
+    from numba.core import event
+
+    compiled = [0]
+
+    class Count(event.Listener):
+        def on_start(self, ev) -> None:
+            compiled[0] += 1
+
+        def on_end(self, ev) -> None:
+            pass
+
+    t0 = time.perf_counter()
+    with event.install_listener("numba:compile", Count()):
+        _compile(name)
+    return name, time.perf_counter() - t0, compiled[0]
+
+
+def kernel_cache_state() -> tuple[int, int, list[str]] | None:
+    """(kernels with an entry in numba's on-disk cache for the installed source, kernels,
+    their cache folders) over KERNEL_MODULES, inlined helpers left out (they compile into their
+    callers); None where numba's private layout cannot be read."""
+    try:
+        from numba.core.registry import CPUDispatcher
+
+        cached = total = 0
+        folders = []
+        for module_name in KERNEL_MODULES:
+            module = importlib.import_module(module_name)
+            for obj in vars(module).values():
+                if not isinstance(obj, CPUDispatcher) or obj.py_func.__module__ != module_name:
+                    continue
+                if obj.targetoptions.get("inline") == "always":
+                    continue
+                total += 1
+                cache_file = obj._cache._cache_file
+                cached += bool(cache_file._load_index())
+                if cache_file._cache_path not in folders:
+                    folders.append(cache_file._cache_path)
+        return cached, total, folders
+    except Exception:  # numba's private layout changed: not knowing is not an error
+        return None
+
+
+def add_arguments(s) -> None:
+    s.add_argument(
+        "--workers",
+        type=int,
+        default=min(2, os.cpu_count() or 1),
+        help="processes compiling at once (default: 2, or 1 on a one-core machine)",
+    )
+    s.add_argument(
+        "--no-survey",
+        action="store_true",
+        help="compile only; leave the OpenCL survey to the first run that needs it",
+    )
+
+
+def run(args) -> int:
+    """``rtsar prepare``: the kernels, then the survey; exit status 1 if a task failed."""
+    if args.workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    say = print
+    t0 = time.perf_counter()
+    say(
+        f"compiling rtsar's numba kernels into numba's cache, {len(TASKS)} groups in "
+        f"{args.workers} process{'es' if args.workers != 1 else ''} (once an installation: "
+        "tens of seconds on 2 cores; then a second) …",
+        flush=True,
+    )
+    failed = []
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(args.workers, mp_context=context) as pool:
+        jobs = {pool.submit(run_task, name): name for name in TASKS}
+        for job in as_completed(jobs):
+            name = jobs[job]
+            try:
+                _, seconds, compiled = job.result()
+            except Exception as exc:  # one group's failure: said, the others go on
+                failed.append(name)
+                say(f"  {TASKS[name].words}: failed: {exc}", flush=True)
+                continue
+            what = (
+                f"{compiled} kernel{'s' if compiled != 1 else ''} compiled"
+                if compiled
+                else "in the cache already"
+            )
+            say(f"  {TASKS[name].words}: {what}, {seconds:.1f} s", flush=True)
+    state = kernel_cache_state()
+    if state is None:
+        say("kernels: numba's cache could not be read (another numba version?)")
+    else:
+        cached, total, folders = state
+        where = ", ".join(folders[:2]) + (", …" if len(folders) > 2 else "")
+        say(f"kernels: {cached} of {total} in numba's cache ({where})")
+        if cached < total:
+            failed.append("cache")
+    if not args.no_survey:
+        _survey(say)
+    say(
+        f"prepared in {time.perf_counter() - t0:.1f} s"
+        + ("" if not failed else f"; not all: {', '.join(failed)} (above)")
+    )
+    return 1 if failed else 0
+
+
+def _survey(say) -> None:
+    """The survey of the OpenCL devices a run's ``--lens auto`` chooses from, now and alone."""
+    try:
+        known = cl_devices.survey_is_known()
+        if not known:
+            cl_devices.survey(say=lambda line: say(line, flush=True))
+        report, why = cl_devices.default_device()
+    except RuntimeError as exc:  # no platform
+        say(f"OpenCL: {exc}; runs use NumPy's lens")
+        return
+    state = "surveyed before, kept" if known else "surveyed, kept for later runs"
+    if report is None:
+        say(f"OpenCL devices {state}: {why}")
+    else:
+        say(f"OpenCL devices {state}: the lens runs on {report.short_label} by default")
+    sys.stdout.flush()

@@ -1,5 +1,6 @@
 """The threaded pipeline: streaming equals batch, gaps flagged, live overload counted."""
 
+import gc
 import threading
 import time
 
@@ -12,6 +13,7 @@ from rtsar.presets import preset
 from rtsar.scene import Simulator, point_scene
 from rtsar.sources.base import ShotBatch, Source
 from rtsar.sources.replay import ReplaySource, parse_rate
+from rtsar.stream import heap
 from rtsar.stream.engine import process_block
 from rtsar.stream.pipeline import Pipeline, PipelineSettings
 from rtsar.stream.queue import BoundedQueue
@@ -154,6 +156,42 @@ def test_a_failing_stage_stops_the_pipeline_with_its_error(tiny):
 
     with pytest.raises(RuntimeError, match="sink failed"):
         Pipeline(cfg, replay(cfg, shots), [Broken()], PipelineSettings()).run()
+
+
+def test_the_heap_is_frozen_while_streams_run_and_thawed_after(tiny):
+    """Objects made before a stream are out of the collector's walks while it runs
+    (rtsar.stream.heap), and collectable again after it, a failed run included."""
+    cfg, _, shots = tiny
+    before = gc.get_freeze_count()
+    seen = []
+
+    class Looks(Collect):
+        def strip(self, strip, pipeline):
+            seen.append(gc.get_freeze_count())
+            super().strip(strip, pipeline)
+
+    Pipeline(cfg, replay(cfg, shots), [Looks()], PipelineSettings()).run()
+    assert seen and min(seen) > 0
+    assert gc.get_freeze_count() == before == 0
+
+    class Broken(Collect):
+        def strip(self, strip, pipeline):
+            raise RuntimeError("sink failed")
+
+    with pytest.raises(RuntimeError, match="sink failed"):
+        Pipeline(cfg, replay(cfg, shots), [Broken()], PipelineSettings()).run()
+    assert gc.get_freeze_count() == 0
+
+
+def test_overlapping_streams_thaw_when_the_last_ends():
+    first, second = object.__new__(Collect), object.__new__(Collect)
+    heap.freeze(first)
+    heap.freeze(second)
+    heap.thaw(first)
+    heap.thaw(first)  # twice: changes nothing
+    assert gc.get_freeze_count() > 0
+    heap.thaw(second)
+    assert gc.get_freeze_count() == 0
 
 
 def test_bounded_queue_blocks_drops_and_batches():

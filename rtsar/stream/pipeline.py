@@ -21,7 +21,7 @@ j + N - 1 for line j, Psaltis & Wagner 1981: the row leaves the CCD after N shif
 publication of its strip: a strip goes out when it holds ``strip_lines`` (with every line then
 waiting, up to ``strip_most_lines``), or its oldest line waited ``strip_deadline_s``
 (rtsar.stream.granularity chooses them).  The pieces: rtsar.stream.queue, ingest, engine, hold,
-timing, height, strips, swath, link (silences), stats, settings."""
+timing, height, strips, swath, link (silences), stats, settings, heap (the collector)."""
 
 from __future__ import annotations
 
@@ -32,6 +32,7 @@ from dataclasses import replace
 
 from ..params import Config
 from ..sources.base import Source
+from . import heap
 from .engine import Lines, StreamProcessor
 from .height import HeightBatch, HeightChannel
 from .hold import HeldPulses
@@ -113,14 +114,9 @@ class Pipeline:
         self.q_shots = BoundedQueue(capacity, "shots")
         self.q_lines = BoundedQueue(capacity, "compressed")
         self.q_image = BoundedQueue(capacity, "image lines")
-        max_gap = s.max_gap_pulses or n
-        self.ingest = Ingest(
-            config.waveform.samples_per_shot,
-            n,
-            max_gap,
-            self.engine.dtype,
-            origin_seq=getattr(source, "seq_origin", None),
-        )
+        max_gap, origin = s.max_gap_pulses or n, getattr(source, "seq_origin", None)
+        samples = config.waveform.samples_per_shot
+        self.ingest = Ingest(samples, n, max_gap, self.engine.dtype, origin_seq=origin)
         self._anchored = False  # an anchored source's start is moved once (_anchor)
         block = config.processor.fft_length or 2 * n
         self.timing = LineTiming(n, 4 * (n + block + capacity + self.max_batch))
@@ -441,6 +437,7 @@ class Pipeline:
         return run
 
     def start(self) -> None:
+        heap.freeze(self)  # the collector walks only what the stream makes (rtsar.stream.heap)
         self.stats.started_s = time.perf_counter()
         # overlapped: with no line stage holding pulses and no height channel (else fused)
         overlap = self.settings.stages == "overlapped" and not self._holding and not self.height
@@ -479,6 +476,7 @@ class Pipeline:
                         raise
             raise
         finally:
+            heap.thaw(self)
             if self.swath is not None:  # workers that were told the end finish; others go
                 reason = f"{self._errors[0]}" if self._errors else ""
                 self.swath.close(wait_s=0.0 if self._errors else 5.0, reason=reason)

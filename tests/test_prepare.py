@@ -36,7 +36,8 @@ def test_every_module_with_numba_kernels_has_a_task():
 _CHILD = """
 import json, sys
 from rtsar.app.prepare import run_task, kernel_cache_state
-name, seconds, compiled = run_task(sys.argv[1])
+name, seconds, compiled, error = run_task(sys.argv[1])
+assert error is None, error
 print(json.dumps({"compiled": compiled, "state": kernel_cache_state()}))
 """
 
@@ -76,7 +77,7 @@ def test_a_group_that_fails_is_said_and_the_status_is_1(monkeypatch, capsys):
     status = prepare.run(Namespace(workers=1, no_survey=True))
     out = capsys.readouterr().out
     assert status == 1
-    assert "a group that fails: failed: no such task" in out
+    assert "a group that fails: failed: ValueError: no such task" in out
     assert "not all: nope" in out
 
 

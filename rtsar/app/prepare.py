@@ -23,10 +23,10 @@ import multiprocessing
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 
 import numpy as np
+from numba.core import event
 
 from ..ccd import make_ccd
 from ..focus.resample import resample
@@ -105,10 +105,9 @@ def _compile(name: str) -> None:
         raise ValueError(f"no such task: {name!r}")
 
 
-def run_task(name: str) -> tuple[str, float, int]:
-    """In a worker: (name, seconds, kernels numba compiled, not loaded from its cache)."""
-    from numba.core import event
-
+def run_task(name: str) -> tuple[str, float, int, str | None]:
+    """In a worker: (name, seconds, kernels numba compiled (not loaded from its cache), the
+    error that stopped it or None)."""
     compiled = [0]
 
     class Count(event.Listener):
@@ -119,9 +118,12 @@ def run_task(name: str) -> tuple[str, float, int]:
             pass
 
     t0 = time.perf_counter()
-    with event.install_listener("numba:compile", Count()):
-        _compile(name)
-    return name, time.perf_counter() - t0, compiled[0]
+    try:
+        with event.install_listener("numba:compile", Count()):
+            _compile(name)
+    except Exception as exc:  # said by the parent; the other groups go on
+        return name, time.perf_counter() - t0, compiled[0], f"{type(exc).__name__}: {exc}"
+    return name, time.perf_counter() - t0, compiled[0], None
 
 
 def kernel_cache_state() -> tuple[int, int, list[str]] | None:
@@ -177,16 +179,13 @@ def run(args) -> int:
         flush=True,
     )
     failed = []
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(args.workers, mp_context=context) as pool:
-        jobs = {pool.submit(run_task, name): name for name in TASKS}
-        for job in as_completed(jobs):
-            name = jobs[job]
-            try:
-                _, seconds, compiled = job.result()
-            except Exception as exc:  # one group's failure: said, the others go on
+    # spawned, not forked: a fork would copy this process's threads and locks
+    pool = multiprocessing.get_context("spawn").Pool(args.workers)
+    try:
+        for name, seconds, compiled, error in pool.imap_unordered(run_task, TASKS):
+            if error is not None:
                 failed.append(name)
-                say(f"  {TASKS[name].words}: failed: {exc}", flush=True)
+                say(f"  {TASKS[name].words}: failed: {error}", flush=True)
                 continue
             what = (
                 f"{compiled} kernel{'s' if compiled != 1 else ''} compiled"
@@ -194,6 +193,10 @@ def run(args) -> int:
                 else "in the cache already"
             )
             say(f"  {TASKS[name].words}: {what}, {seconds:.1f} s", flush=True)
+        pool.close()
+    finally:
+        pool.terminate()  # Ctrl-C: the compiles stop now, not when each group is done
+        pool.join()
     state = kernel_cache_state()
     if state is None:
         say("kernels: numba's cache could not be read (another numba version?)")

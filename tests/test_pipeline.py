@@ -185,13 +185,17 @@ def test_the_heap_is_frozen_while_streams_run_and_thawed_after(tiny):
 
 def test_overlapping_streams_thaw_when_the_last_ends():
     first, second = object.__new__(Collect), object.__new__(Collect)
-    heap.freeze(first)
-    heap.freeze(second)
-    heap.thaw(first)
-    heap.thaw(first)  # twice: changes nothing
-    assert gc.get_freeze_count() > 0
-    heap.thaw(second)
-    assert gc.get_freeze_count() == 0
+    try:
+        heap.freeze(first)
+        heap.freeze(second)
+        heap.thaw(first)
+        heap.thaw(first)  # twice: changes nothing
+        assert gc.get_freeze_count() > 0
+        heap.thaw(second)
+        assert gc.get_freeze_count() == 0
+    finally:
+        heap.thaw(first)
+        heap.thaw(second)
 
 
 def test_bounded_queue_blocks_drops_and_batches():

@@ -1,20 +1,24 @@
-"""`rtsar prepare` (rtsar.app.prepare): every numba kernel module has a task, a task leaves its
-kernels in numba's cache (a fresh interpreter then compiles nothing), failures are said and
-give exit status 1."""
+"""`rtsar prepare` (rtsar.app.prepare): every numba kernel module has a group, a group leaves
+its kernels in numba's cache (a fresh interpreter then compiles nothing), failures and dead
+processes are said and give exit status 1, Ctrl-C stops it all; one survey at a time."""
 
 from __future__ import annotations
 
 import json
 import os
 import re
+import signal
 import subprocess
 import sys
+import tempfile
+import time
 from argparse import Namespace
 from pathlib import Path
 
 import pytest
 
 from rtsar.app import prepare
+from rtsar.lens.cache import measuring
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -44,9 +48,8 @@ print(json.dumps({"compiled": compiled, "state": kernel_cache_state()}))
 
 def _child(task: str, cache: Path) -> dict:
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
-    done = subprocess.run(
-        [sys.executable, "-c", _CHILD, task], env=env, capture_output=True, text=True, check=True
-    )
+    cmd = [sys.executable, "-c", _CHILD, task]
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True, timeout=300)
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
@@ -79,6 +82,81 @@ def test_a_group_that_fails_is_said_and_the_status_is_1(monkeypatch, capsys):
     assert status == 1
     assert "a group that fails: failed: ValueError: no such task" in out
     assert "not all: nope" in out
+
+
+def test_a_group_whose_process_dies_is_a_failed_group_not_a_hang(monkeypatch, capsys):
+    """A worker killed (the OOM killer, a crash in LLVM) gives its group's line and status 1;
+    the command does not wait for an answer that will never come."""
+    monkeypatch.setattr(prepare, "TASKS", {"gone": prepare.Task("gone", "a group killed")})
+    monkeypatch.setattr(prepare, "KERNEL_MODULES", {})
+
+    def start(name):
+        out = tempfile.TemporaryFile(mode="w+")
+        die = "import os, signal; os.kill(os.getpid(), signal.SIGKILL)"
+        return subprocess.Popen([sys.executable, "-c", die], stdout=out, text=True), out
+
+    monkeypatch.setattr(prepare, "_start", start)
+    t0 = time.perf_counter()
+    status = prepare.run(Namespace(workers=2, no_survey=True))
+    out = capsys.readouterr().out
+    assert status == 1 and time.perf_counter() - t0 < 60
+    assert "a group killed: failed: its process ended without an answer (killed by signal 9" in out
+
+
+def test_ctrl_c_stops_prepare_and_its_processes(tmp_path):
+    """SIGINT to the whole process group (a terminal's Ctrl-C) during a cold compile: exit
+    status 130 within seconds, no group's process left."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "nc"), RTSAR_CACHE_DIR=str(tmp_path))
+    cmd = [sys.executable, "-m", "rtsar", "prepare", "--no-survey"]
+    p = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, text=True, start_new_session=True)
+    line = p.stdout.readline()  # the first line: the groups are starting
+    assert "compiling rtsar's numba kernels" in line
+    time.sleep(1.0)
+    os.killpg(p.pid, signal.SIGINT)
+    t0 = time.perf_counter()
+    p.communicate(timeout=60)
+    assert p.returncode == 130 and time.perf_counter() - t0 < 15
+    time.sleep(0.2)
+    left = subprocess.run(["pgrep", "-g", str(p.pid)], capture_output=True, text=True).stdout
+    assert not left.strip(), f"processes left in the group: {left}"
+
+
+def test_every_group_compiles_its_modules_kernels(tmp_path):
+    """The whole of `rtsar prepare --no-survey` (README's command 1 runs it) from an empty numba
+    cache: every group succeeds and every kernel of KERNEL_MODULES is in the cache after, so a
+    module mapped to a group that does not run its kernels fails here (30-45 s of CPU)."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "nc"), RTSAR_CACHE_DIR=str(tmp_path))
+    cmd = [sys.executable, "-m", "rtsar", "prepare", "--no-survey"]
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stdout + done.stderr
+    cached = re.search(r"kernels: (\d+) of (\d+) in numba's cache", done.stdout)
+    assert cached and cached.group(1) == cached.group(2) and int(cached.group(2)) >= 18
+    assert done.stdout.count(" kernels compiled, ") + done.stdout.count(" kernel compiled, ") == (
+        len(prepare.TASKS)
+    )
+
+
+def test_one_survey_at_a_time_on_a_machine(tmp_path, monkeypatch):
+    """A process that finds another measuring (the lock of rtsar.lens.cache.measuring) says so
+    once and waits for it."""
+    monkeypatch.setenv("RTSAR_CACHE_DIR", str(tmp_path))
+    hold = (
+        "import sys, time; from rtsar.lens.cache import measuring\n"
+        "with measuring('x.json'):\n    print('held', flush=True); time.sleep(1.0)\n"
+    )
+    other = subprocess.Popen(
+        [sys.executable, "-c", hold], env=dict(os.environ), stdout=subprocess.PIPE, text=True
+    )
+    assert other.stdout.readline().strip() == "held"
+    told = []
+    t0 = time.perf_counter()
+    with measuring("x.json", lambda: told.append(1)):
+        waited = time.perf_counter() - t0
+    other.wait(timeout=30)
+    assert told == [1] and waited > 0.3
+    with measuring("x.json", lambda: told.append(2)):  # free now: no wait, nothing said
+        pass
+    assert told == [1]
 
 
 def test_prepare_refuses_no_workers():

@@ -2,13 +2,19 @@
 (issue 37): numba's kernels compiled into its on-disk cache, the OpenCL devices surveyed.
 
 numba compiles a kernel the first time an installation runs it (``cache=True``: later runs load
-it in a fraction of a second).  Cold, on a shared 2-core AMD EPYC (Zen 3), one interpreter:
-the nonuniform correlator's kernels 15.7 s, the threaded partitioned correlator's 4.5 s, the
-physical CCD's 3.7 s, RADARSAT-1's Doppler-domain migration 2.7 s, the partitioned 1.9 s, the
-simulator's 1.7 s, the direct 1.7 s.  So a machine's first ``rtsar run``, ``process`` or
-``demo`` paid them; here each group compiles in one of ``workers`` processes (spawned: a
-compile holds its interpreter), longest first, and then the device survey runs alone (its
-timings must not share the cores: rtsar.app.live_granularity.survey_and_compile).
+it in a fraction of a second).  Cold, on a shared 2-core AMD EPYC (Zen 3), one group after
+another in one interpreter: the nonuniform correlator's kernels 15.7 s (16-23 s beside another
+compile), the threaded partitioned correlator's 4.5 s, the physical CCD's 3.7 s, RADARSAT-1's
+Doppler-domain migration 2.7 s, the partitioned 1.9 s, the simulator's 1.7 s, the direct
+1.7 s.  So a machine's first ``rtsar run``, ``process`` or ``demo`` paid them.  Here each group
+compiles in a process of its own (``python -m rtsar.app.prepare GROUP``: a compile holds its
+interpreter, and a process that crashes or is killed is one failed group, not a hang),
+``workers`` at a time, longest first; then the device survey runs alone (its timings must not
+share the cores: rtsar.app.live_granularity).
+
+numba writes its cache beside the modules where the user can write there, else in its
+user-wide folder (or ``$NUMBA_CACHE_DIR``): prepare as the user, and in the environment, that
+runs rtsar.
 
 The kernels compiled are those of the presets' precision (complex64) and every correlator a
 preset or built-in scene uses; a complex128 run (``tradeoff``, ``--precision complex128``)
@@ -19,9 +25,11 @@ still compiles its own on first use.  ``kernel_cache_state`` reads numba's cache
 from __future__ import annotations
 
 import importlib
-import multiprocessing
+import json
 import os
+import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 
@@ -166,37 +174,80 @@ def add_arguments(s) -> None:
     )
 
 
+def _start(name: str) -> tuple[subprocess.Popen, object]:
+    """A process compiling group ``name``; its output goes to a temporary file (a pipe left
+    unread could fill and stall it)."""
+    out = tempfile.TemporaryFile(mode="w+")
+    cmd = [sys.executable, "-m", "rtsar.app.prepare", name]
+    return subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, text=True), out
+
+
+def _outcome(name: str, process: subprocess.Popen, out) -> tuple[float, int, str | None]:
+    """(seconds, kernels compiled, error or None) of a finished group's process."""
+    out.seek(0)
+    lines = out.read().splitlines()
+    out.close()
+    for line in reversed(lines):
+        if line.startswith("{"):
+            try:
+                answer = json.loads(line)
+                return answer["seconds"], answer["compiled"], answer["error"]
+            except (ValueError, KeyError):
+                break
+    code = process.returncode
+    why = f"killed by signal {-code}" if code < 0 else f"exit status {code}"
+    last = next((ln.strip() for ln in reversed(lines) if ln.strip()), "no output")
+    return 0.0, 0, f"its process ended without an answer ({why}; {last})"
+
+
+def _compile_all(workers: int, say) -> list[str]:
+    """Every group of TASKS in processes of its own, ``workers`` at a time, each said as it
+    ends; the groups that failed.  Ctrl-C (or any error here) kills the processes left."""
+    pending, running, failed = list(TASKS), {}, []
+    try:
+        while pending or running:
+            while pending and len(running) < workers:
+                name = pending.pop(0)
+                running[name] = _start(name)
+            for name, (process, out) in list(running.items()):
+                if process.poll() is None:
+                    continue
+                del running[name]
+                seconds, compiled, error = _outcome(name, process, out)
+                if error is not None:
+                    failed.append(name)
+                    say(f"  {TASKS[name].words}: failed: {error}", flush=True)
+                    continue
+                what = (
+                    f"{compiled} kernel{'s' if compiled != 1 else ''} compiled"
+                    if compiled
+                    else "in the cache already"
+                )
+                say(f"  {TASKS[name].words}: {what}, {seconds:.1f} s", flush=True)
+            time.sleep(0.05)
+    finally:
+        for process, out in running.values():  # Ctrl-C: the compiles stop now
+            process.kill()
+            process.wait()
+            out.close()
+    return failed
+
+
 def run(args) -> int:
-    """``rtsar prepare``: the kernels, then the survey; exit status 1 if a task failed."""
+    """``rtsar prepare``: the kernels, then the survey; exit status 1 if a group failed or a
+    kernel is not in numba's cache after."""
     if args.workers < 1:
         raise ValueError(f"--workers must be >= 1, got {args.workers}")
+    workers = min(args.workers, len(TASKS))
     say = print
     t0 = time.perf_counter()
     say(
-        f"compiling rtsar's numba kernels into numba's cache, {len(TASKS)} groups in "
-        f"{args.workers} process{'es' if args.workers != 1 else ''} (once an installation: "
-        "tens of seconds on 2 cores; then a second) …",
+        f"compiling rtsar's numba kernels (complex64, the presets' precision) into numba's "
+        f"cache, {len(TASKS)} groups, {workers} at a time (once an installation: tens of "
+        "seconds on 2 cores; a few seconds when run again) …",
         flush=True,
     )
-    failed = []
-    # spawned, not forked: a fork would copy this process's threads and locks
-    pool = multiprocessing.get_context("spawn").Pool(args.workers)
-    try:
-        for name, seconds, compiled, error in pool.imap_unordered(run_task, TASKS):
-            if error is not None:
-                failed.append(name)
-                say(f"  {TASKS[name].words}: failed: {error}", flush=True)
-                continue
-            what = (
-                f"{compiled} kernel{'s' if compiled != 1 else ''} compiled"
-                if compiled
-                else "in the cache already"
-            )
-            say(f"  {TASKS[name].words}: {what}, {seconds:.1f} s", flush=True)
-        pool.close()
-    finally:
-        pool.terminate()  # Ctrl-C: the compiles stop now, not when each group is done
-        pool.join()
+    failed = _compile_all(workers, say)
     state = kernel_cache_state()
     if state is None:
         say("kernels: numba's cache could not be read (another numba version?)")
@@ -222,8 +273,8 @@ def _survey(say) -> None:
         if not known:
             cl_devices.survey(say=lambda line: say(line, flush=True))
         report, why = cl_devices.default_device()
-    except RuntimeError as exc:  # no platform
-        say(f"OpenCL: {exc}; runs use NumPy's lens")
+    except Exception as exc:  # no platform, a driver's error: the runs will say it too
+        say(f"OpenCL: not surveyed ({exc}); runs use NumPy's lens where no device works")
         return
     state = "surveyed before, kept" if known else "surveyed, kept for later runs"
     if report is None:
@@ -231,3 +282,8 @@ def _survey(say) -> None:
     else:
         say(f"OpenCL devices {state}: the lens runs on {report.short_label} by default")
     sys.stdout.flush()
+
+
+if __name__ == "__main__":  # one group, in its own process (_start): its answer as JSON
+    _name, _seconds, _compiled, _error = run_task(sys.argv[1])
+    print(json.dumps({"seconds": _seconds, "compiled": _compiled, "error": _error}), flush=True)

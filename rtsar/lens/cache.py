@@ -3,6 +3,8 @@
 The folder is ``$RTSAR_CACHE_DIR``, else ``$XDG_CACHE_HOME/rtsar``, else ``~/.cache/rtsar``.
 Files are replaced atomically, so concurrent processes never read half a file; a file that
 cannot be read (missing, damaged, another version's) counts as empty and is measured again.
+``measuring`` lets one process at a time measure a kind (two surveys timed at once slowed each
+other, and the one kept last was the contended one).
 """
 
 from __future__ import annotations
@@ -10,9 +12,15 @@ from __future__ import annotations
 import json
 import math
 import os
+from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["cache_dir", "rates_or_none", "read_json", "write_json"]
+try:
+    import fcntl
+except ImportError:  # not POSIX: measurements are not serialised between processes
+    fcntl = None
+
+__all__ = ["cache_dir", "measuring", "rates_or_none", "read_json", "write_json"]
 
 
 def cache_dir() -> Path:
@@ -46,6 +54,32 @@ def write_json(name: str, data: dict) -> Path | None:
         tmp.unlink(missing_ok=True)
         return None
     return path
+
+
+@contextmanager
+def measuring(name: str, on_wait=None):
+    """Hold the machine-wide lock of the cached object ``name`` while measuring it: a process
+    that finds it held calls ``on_wait()`` once and waits (then reads what the other kept).
+    No lock where the folder cannot be written or the system has no flock."""
+    folder = cache_dir()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        handle = open(folder / f".{name}.lock", "a")  # noqa: SIM115 - held across the yield
+    except OSError:
+        handle = None
+    if handle is None or fcntl is None:
+        yield
+        return
+    try:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            if on_wait is not None:
+                on_wait()
+            fcntl.flock(handle, fcntl.LOCK_EX)
+        yield
+    finally:
+        handle.close()  # releases the lock
 
 
 def rates_or_none(found, sizes=None) -> dict[int, float] | None:

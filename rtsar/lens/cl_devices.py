@@ -34,7 +34,7 @@ from dataclasses import asdict
 import pyopencl as cl
 
 from . import cl_probe, cl_vendors
-from .cache import rates_or_none, read_json, write_json
+from .cache import measuring, rates_or_none, read_json, write_json
 from .cl_probe import (
     NO_PLATFORM,
     SURVEY_BATCH,
@@ -208,7 +208,16 @@ def survey(say=None) -> list[DeviceReport]:
     first run on a machine takes about a second a device)."""
     with _lock:
         known = _known_survey()
-        return known if known is not None else measure(say=say)[0]
+        if known is not None:
+            return known
+
+        def waiting() -> None:
+            if say is not None:
+                say("another rtsar is surveying the OpenCL devices: waiting for its survey")
+
+        with measuring(_CACHE, waiting):  # one survey at a time on this machine
+            known = _known_survey()
+            return known if known is not None else measure(say=say)[0]
 
 
 def survey_is_known() -> bool:

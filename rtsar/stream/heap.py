@@ -10,7 +10,8 @@ in most 4 s runs at 25-100 % of the PRF; young-generation passes of 0.3-1.9 ms a
 affected), so this trims the worst lines of long runs, not the typical p99.
 
 Pipelines may overlap in one process: the first to start freezes, the last to end thaws; a
-stream thawed twice (or never frozen) changes nothing.
+stream thawed twice (or never frozen) changes nothing.  Garbage not yet collected when a stream
+starts is frozen with the rest and freed after it (bounded: what existed at the start).
 """
 
 from __future__ import annotations
@@ -26,9 +27,10 @@ _streams: weakref.WeakSet = weakref.WeakSet()  # streams between freeze() and th
 def freeze(stream: object) -> None:
     """``stream`` starts: the objects that exist now leave the collector's walks."""
     with _lock:
-        if not _streams:
+        first = not _streams
+        _streams.add(stream)  # before the freeze: an interrupt between them leaves none frozen
+        if first:
             gc.freeze()
-        _streams.add(stream)
 
 
 def thaw(stream: object) -> None:
@@ -36,6 +38,6 @@ def thaw(stream: object) -> None:
     with _lock:
         if stream not in _streams:
             return
+        if len(_streams) == 1:  # the last: unfrozen before it leaves, so an interrupt
+            gc.unfreeze()  # between the two leaves nothing frozen behind a stream gone
         _streams.discard(stream)
-        if not _streams:
-            gc.unfreeze()

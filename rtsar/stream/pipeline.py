@@ -447,11 +447,15 @@ class Pipeline:
             stages.insert(2, self._ccd_stage if self.swath is None else self._swath_stage)
         if self.link is not None:  # the watch ends with the source (LinkWatch.ended)
             threading.Thread(target=self.link.run, name="rtsar-link", daemon=True).start()
-        for target in stages:
-            ended = threading.Event()
-            self._ended.append(ended)
-            name = f"rtsar-{target.__name__[1:]}"
-            threading.Thread(target=self._guard(target, ended), name=name, daemon=True).start()
+        try:
+            for target in stages:
+                ended = threading.Event()
+                self._ended.append(ended)
+                name = f"rtsar-{target.__name__[1:]}"
+                threading.Thread(target=self._guard(target, ended), name=name, daemon=True).start()
+        except BaseException:  # no join() will follow: the heap is thawed here
+            heap.thaw(self)
+            raise
 
     def stop(self) -> None:
         """Stop the source; what is in flight is still processed and published, promptly: the

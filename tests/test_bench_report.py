@@ -20,6 +20,7 @@ import rtsar.app.bench as bench
 import rtsar.app.bench_alone as ba
 import rtsar.app.bench_pipeline as bp
 from rtsar.lens import make_lens
+from rtsar.stream.granularity import MOST_STRIP_LINES
 
 
 @pytest.fixture
@@ -188,3 +189,22 @@ def test_the_lens_rows_carry_the_two_thread_fft_pair_yardstick():
     nfft = make_plan(cfg).nfft
     x = np.arange(8, dtype=np.complex64).reshape(2, 4)
     np.testing.assert_allclose(_fft_pair(x, nfft)[:, :4], x, atol=1e-5)  # the pair round-trips
+
+
+def test_the_pipeline_runs_cut_strips_as_a_live_run_does(stand_ins, tmp_path, capsys, monkeypatch):
+    """Every pipeline run of the bench publishes strips of 16 lines with the lines that wait
+    going out together, up to MOST_STRIP_LINES, as a live run's granularity has them
+    (rtsar.stream.granularity), not strips of exactly 16 however far behind the strip stage is."""
+    seen = []
+    fake = bp.stream_run
+
+    def stream_run(cfg, shots, seconds, rate, settings, **kw):
+        seen.append((rate, settings.strip_lines, settings.strip_most_lines))
+        return fake(cfg, shots, seconds, rate, settings, **kw)
+
+    monkeypatch.setattr(bp, "stream_run", stream_run)
+    run_bench(tmp_path, capsys)
+    warm_up = seen[0]  # the warm-up run (not recorded)
+    runs = [s for s in seen[1:] if s[1] == 16]
+    assert len(runs) >= 10 and warm_up[0] == "max"
+    assert all(most == MOST_STRIP_LINES for _, _, most in runs), runs

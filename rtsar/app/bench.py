@@ -305,7 +305,8 @@ def run_bench(args) -> int:
         "\nLive pipeline end to end (simulated shots from memory, strips published on a "
         "loopback ZeroMQ socket).\n"
         "  max rate: shots replayed as fast as the pipeline takes them; capacity = pulses/s ÷ "
-        "PRF (x real time)\n"
+        "PRF (x real time); strips of 16 lines, those waiting together up to 64, as a live "
+        "run cuts them\n"
         "  paced: shots released at the PRF as an instrument sends them (a full queue drops "
         "them): the shots kept of those offered, and the latency from a line's last pulse to "
         "its strip",

@@ -75,7 +75,7 @@ def test_prepare_says_each_group_and_the_cache_state(monkeypatch, capsys):
 
 
 def test_a_group_that_fails_is_said_and_the_status_is_1(monkeypatch, capsys):
-    monkeypatch.setattr(prepare, "TASKS", {"nope": prepare.Task("nope", "a group that fails")})
+    monkeypatch.setattr(prepare, "TASKS", {"nope": "a group that fails"})
     monkeypatch.setattr(prepare, "KERNEL_MODULES", {})
     status = prepare.run(Namespace(workers=1, no_survey=True))
     out = capsys.readouterr().out
@@ -87,7 +87,7 @@ def test_a_group_that_fails_is_said_and_the_status_is_1(monkeypatch, capsys):
 def test_a_group_whose_process_dies_is_a_failed_group_not_a_hang(monkeypatch, capsys):
     """A worker killed (the OOM killer, a crash in LLVM) gives its group's line and status 1;
     the command does not wait for an answer that will never come."""
-    monkeypatch.setattr(prepare, "TASKS", {"gone": prepare.Task("gone", "a group killed")})
+    monkeypatch.setattr(prepare, "TASKS", {"gone": "a group killed"})
     monkeypatch.setattr(prepare, "KERNEL_MODULES", {})
 
     def start(name):

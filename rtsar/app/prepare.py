@@ -31,10 +31,10 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
 
 import numpy as np
 from numba.core import event
+from numba.core.registry import CPUDispatcher
 
 from ..ccd import make_ccd
 from ..focus.resample import resample
@@ -56,20 +56,14 @@ KERNEL_MODULES = {
 }
 
 
-@dataclass(frozen=True)
-class Task:
-    name: str  # the key of TASKS
-    words: str  # what it compiles, for its line
-
-
-TASKS = {  # longest first (cold, above): the pool starts them in this order
-    "nonuniform": Task("nonuniform", "the nonuniform correlator (psaltis-jpl, psaltis-max)"),
-    "partitioned": Task("partitioned", "the partitioned correlator, one thread and threaded"),
-    "physical": Task("physical", "the physical CCD emulation"),
-    "migration": Task("migration", "the Doppler-domain range migration (radarsat1)"),
-    "simulator": Task("simulator", "the simulator (pulsed and FMCW scenes)"),
-    "direct": Task("direct", "the direct shift-register correlator"),
-    "resampler": Task("resampler", "the band-limited resampler (chirp linearization, HCN, PFA)"),
+TASKS = {  # each group: what it compiles, for its line; longest first (cold, above), as started
+    "nonuniform": "the nonuniform correlator (psaltis-jpl, psaltis-max)",
+    "partitioned": "the partitioned correlator, one thread and threaded",
+    "physical": "the physical CCD emulation",
+    "migration": "the Doppler-domain range migration (radarsat1)",
+    "simulator": "the simulator (pulsed and FMCW scenes)",
+    "direct": "the direct shift-register correlator",
+    "resampler": "the band-limited resampler (chirp linearization, HCN, PFA)",
 }
 
 
@@ -139,8 +133,6 @@ def kernel_cache_state() -> tuple[int, int, list[str]] | None:
     their cache folders) over KERNEL_MODULES, inlined helpers left out (they compile into their
     callers); None where numba's private layout cannot be read."""
     try:
-        from numba.core.registry import CPUDispatcher
-
         cached = total = 0
         folders = []
         for module_name in KERNEL_MODULES:
@@ -182,7 +174,7 @@ def _start(name: str) -> tuple[subprocess.Popen, object]:
     return subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, text=True), out
 
 
-def _outcome(name: str, process: subprocess.Popen, out) -> tuple[float, int, str | None]:
+def _outcome(process: subprocess.Popen, out) -> tuple[float, int, str | None]:
     """(seconds, kernels compiled, error or None) of a finished group's process."""
     out.seek(0)
     lines = out.read().splitlines()
@@ -213,17 +205,17 @@ def _compile_all(workers: int, say) -> list[str]:
                 if process.poll() is None:
                     continue
                 del running[name]
-                seconds, compiled, error = _outcome(name, process, out)
+                seconds, compiled, error = _outcome(process, out)
                 if error is not None:
                     failed.append(name)
-                    say(f"  {TASKS[name].words}: failed: {error}", flush=True)
+                    say(f"  {TASKS[name]}: failed: {error}", flush=True)
                     continue
                 what = (
                     f"{compiled} kernel{'s' if compiled != 1 else ''} compiled"
                     if compiled
                     else "in the cache already"
                 )
-                say(f"  {TASKS[name].words}: {what}, {seconds:.1f} s", flush=True)
+                say(f"  {TASKS[name]}: {what}, {seconds:.1f} s", flush=True)
             time.sleep(0.05)
     finally:
         for process, out in running.values():  # Ctrl-C: the compiles stop now
@@ -270,9 +262,7 @@ def _survey(say) -> None:
     """The survey of the OpenCL devices a run's ``--lens auto`` chooses from, now and alone."""
     try:
         known = cl_devices.survey_is_known()
-        if not known:
-            cl_devices.survey(say=lambda line: say(line, flush=True))
-        report, why = cl_devices.default_device()
+        report, why = cl_devices.default_device(say=lambda line: say(line, flush=True))
     except Exception as exc:  # no platform, a driver's error: the runs will say it too
         say(f"OpenCL: not surveyed ({exc}); runs use NumPy's lens where no device works")
         return
@@ -281,7 +271,6 @@ def _survey(say) -> None:
         say(f"OpenCL devices {state}: {why}")
     else:
         say(f"OpenCL devices {state}: the lens runs on {report.short_label} by default")
-    sys.stdout.flush()
 
 
 if __name__ == "__main__":  # one group, in its own process (_start): its answer as JSON

@@ -30,6 +30,7 @@ FLOORS = [
         "rtsar.phase",
         "rtsar.samples",
         "rtsar.version",
+        "rtsar.child",
     },
     {"rtsar.lens"},
     {"rtsar.physical"},

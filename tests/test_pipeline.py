@@ -183,6 +183,17 @@ def test_the_heap_is_frozen_while_streams_run_and_thawed_after(tiny):
     assert gc.get_freeze_count() == 0
 
 
+def test_the_status_lines_percentiles_agree_with_the_whole_runs_on_the_same_lines(rng):
+    """The status line's recent percentiles and the `done:` line's histogram use one rank rule:
+    over the same lines they agree to the histogram's 0.5 % bins (96 lines: a p99 of 34 and
+    of 71 ms before, interpolated against ranked)."""
+    for n in (7, 96, 3000):
+        stats = LatencyStats()
+        stats.add(rng.lognormal(np.log(5e-3), 1.0, n))
+        for q in (50, 90, 99):
+            assert stats.recent_percentile(q) == pytest.approx(stats.percentile(q), rel=0.006)
+
+
 def test_overlapping_streams_thaw_when_the_last_ends():
     first, second = object.__new__(Collect), object.__new__(Collect)
     try:

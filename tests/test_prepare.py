@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 
 from rtsar.app import prepare
+from rtsar.child import module_argv
 from rtsar.lens.cache import measuring
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -58,7 +59,8 @@ def test_a_task_fills_numba_cache_so_the_next_interpreter_compiles_nothing(tmp_p
     again = _child("resampler", tmp_path)
     assert first["compiled"] >= 1  # an empty cache: compiled here
     assert again["compiled"] == 0  # a new interpreter: loaded from the cache
-    cached, total, folders = again["state"]
+    cached, total, folders, missing = again["state"]
+    assert len(missing) == total - cached and "rtsar.ccd.tiled.run_blocks" in missing
     assert total >= 18 and 1 <= cached < total  # the resampler's kernel only
     assert all(str(tmp_path) in f for f in folders)
 
@@ -162,3 +164,36 @@ def test_one_survey_at_a_time_on_a_machine(tmp_path, monkeypatch):
 def test_prepare_refuses_no_workers():
     with pytest.raises(ValueError, match="--workers must be >= 1"):
         prepare.run(Namespace(workers=0, no_survey=True))
+
+
+def test_children_run_this_rtsar_not_a_clone_in_the_current_folder(tmp_path):
+    """README's command 1 runs from the clone: a child started there must import the rtsar its
+    parent runs (rtsar.child), not the folder's `rtsar/` (there, `rtsar prepare` compiled the
+    clone's kernels and found none in the installed cache: exit status 1)."""
+    fake = tmp_path / "rtsar"
+    fake.mkdir()
+    (fake / "__init__.py").write_text("")
+    (fake / "__main__.py").write_text("print('the folder s rtsar')\n")
+    done = subprocess.run(
+        module_argv("rtsar", "--version"), cwd=tmp_path, capture_output=True, text=True,
+        timeout=120,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "the folder s rtsar" not in done.stdout and done.stdout.startswith("rtsar ")
+    done = subprocess.run(
+        module_argv("rtsar.app.prepare", "resampler"), cwd=tmp_path, capture_output=True,
+        text=True, env=dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "nc")), timeout=300,
+    )  # fmt: skip
+    answer = json.loads(done.stdout.strip().splitlines()[-1])
+    assert answer["error"] is None and answer["compiled"] >= 1
+    assert not list(fake.rglob("*.nbi"))  # nothing compiled into the folder's rtsar
+
+
+def test_every_child_process_is_started_through_module_argv():
+    """No `python -m rtsar…` started from the current folder is left in the sources."""
+    offenders = [
+        str(p.relative_to(ROOT))
+        for p in (ROOT / "rtsar").rglob("*.py")
+        if re.search(r"sys\.executable,\s*\"-m\"", p.read_text(encoding="utf-8"))
+    ]
+    assert not offenders, offenders

@@ -37,6 +37,7 @@ from numba.core import event
 from numba.core.registry import CPUDispatcher
 
 from ..ccd import make_ccd
+from ..child import module_argv
 from ..focus.resample import resample
 from ..lens import cl_devices, make_plan
 from ..physical import PhysicalSettings
@@ -128,13 +129,13 @@ def run_task(name: str) -> tuple[str, float, int, str | None]:
     return name, time.perf_counter() - t0, compiled[0], None
 
 
-def kernel_cache_state() -> tuple[int, int, list[str]] | None:
+def kernel_cache_state() -> tuple[int, int, list[str], list[str]] | None:
     """(kernels with an entry in numba's on-disk cache for the installed source, kernels,
-    their cache folders) over KERNEL_MODULES, inlined helpers left out (they compile into their
-    callers); None where numba's private layout cannot be read."""
+    their cache folders, the names of those without) over KERNEL_MODULES, inlined helpers left
+    out (they compile into their callers); None where numba's private layout cannot be read."""
     try:
         cached = total = 0
-        folders = []
+        folders, missing = [], []
         for module_name in KERNEL_MODULES:
             module = importlib.import_module(module_name)
             for obj in vars(module).values():
@@ -144,10 +145,13 @@ def kernel_cache_state() -> tuple[int, int, list[str]] | None:
                     continue
                 total += 1
                 cache_file = obj._cache._cache_file
-                cached += bool(cache_file._load_index())
+                if cache_file._load_index():
+                    cached += 1
+                else:
+                    missing.append(f"{module_name}.{obj.py_func.__name__}")
                 if cache_file._cache_path not in folders:
                     folders.append(cache_file._cache_path)
-        return cached, total, folders
+        return cached, total, folders, missing
     except Exception:  # numba's private layout changed: not knowing is not an error
         return None
 
@@ -170,7 +174,7 @@ def _start(name: str) -> tuple[subprocess.Popen, object]:
     """A process compiling group ``name``; its output goes to a temporary file (a pipe left
     unread could fill and stall it)."""
     out = tempfile.TemporaryFile(mode="w+")
-    cmd = [sys.executable, "-m", "rtsar.app.prepare", name]
+    cmd = module_argv("rtsar.app.prepare", name)
     return subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, text=True), out
 
 
@@ -244,11 +248,16 @@ def run(args) -> int:
     if state is None:
         say("kernels: numba's cache could not be read (another numba version?)")
     else:
-        cached, total, folders = state
+        cached, total, folders, missing = state
         where = ", ".join(folders[:2]) + (", …" if len(folders) > 2 else "")
         say(f"kernels: {cached} of {total} in numba's cache ({where})")
-        if cached < total:
+        if missing:
             failed.append("cache")
+            shown = ", ".join(missing[:4]) + (", …" if len(missing) > 4 else "")
+            say(
+                f"  not in this cache: {shown} (compiled by another user, in another "
+                "environment or into another folder? run `rtsar prepare` as the runs will run)"
+            )
     if not args.no_survey:
         _survey(say)
     say(

@@ -15,13 +15,13 @@ from __future__ import annotations
 import json
 import signal
 import subprocess
-import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import pyopencl as cl
 
+from ..child import module_argv
 from . import cl_vendors
 
 # The ICD loader reads OCL_ICD_VENDORS at its first call (importing pyopencl makes none).
@@ -188,7 +188,7 @@ def best_rates(lenses: dict, batches, seconds: float, rounds: int = 3) -> dict:
 
 def _child(args: list[str], timeout_s: float) -> tuple[dict | None, str | None]:
     """Run ``python -m rtsar.lens.cl_probe_child ARGS``: (its JSON answer, None) or (None, why)."""
-    cmd = [sys.executable, "-m", "rtsar.lens.cl_probe_child", *args]
+    cmd = module_argv("rtsar.lens.cl_probe_child", *args)
     try:
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s, check=False)
     except subprocess.TimeoutExpired:

@@ -47,12 +47,12 @@ from __future__ import annotations
 import contextlib
 import os
 import subprocess
-import sys
 import threading
 import time
 from collections import deque
 from pathlib import Path
 
+from ..child import module_argv
 from ..params import Config
 from ..stream.strips import StreamInfo, StripSink
 from .h5_output import WriteFailed
@@ -158,7 +158,7 @@ class ShotRecorder(StripSink):
         from_r, from_w = os.pipe()
         widen(to_w)
         keep = (to_r, from_w) + (() if claim_fd is None else (claim_fd,))
-        argv = [sys.executable, "-m", "rtsar.sinks.raw_writer", str(to_r), str(from_w)]
+        argv = module_argv("rtsar.sinks.raw_writer", str(to_r), str(from_w))
         argv.append(str(-1 if claim_fd is None else claim_fd))
         try:
             proc = subprocess.Popen(

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import atexit
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from dataclasses import replace
 
 import numpy as np
 
+from ..child import module_argv
 from ..params import PulsedChirp
 from ..scene import Scene, Simulator
 from ..scene.tones import kernels_cached
@@ -54,7 +54,7 @@ class SimSource(Source):
         self._warming = None
         if warm_from is not None:
             if kernels_cached(isinstance(scene.config.waveform, PulsedChirp)) is False:
-                cmd = [sys.executable, "-m", "rtsar.scene.warm", str(warm_from)]
+                cmd = module_argv("rtsar.scene.warm", str(warm_from))
                 self._warming = subprocess.Popen(
                     cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
                 )

@@ -66,7 +66,12 @@ class LatencyStats:
         return self.LOW_S * 10 ** ((k - 0.5) / self.BINS_PER_DECADE)
 
     def recent_percentile(self, q: float) -> float:
-        return float(np.percentile(self.recent, q)) if self.recent else float("nan")
+        """q-th percentile (s) of the last ``recent.maxlen`` lines, by the rank rule of
+        ``percentile`` (the smallest value with q % at or under it), so the two agree, to the
+        histogram's 0.5 %, where they hold the same lines; NaN when empty."""
+        if not self.recent:
+            return float("nan")
+        return float(np.percentile(self.recent, q, method="inverted_cdf"))
 
 
 @dataclass

@@ -41,7 +41,6 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import sys
 import threading
 import time
 from collections import deque
@@ -51,6 +50,7 @@ import zmq
 
 from ..ccd import processor_correlator
 from ..ccd.base import design_mask
+from ..child import module_argv
 from ..lens import make_lens, make_plan
 from ..params import Config
 from ..samples import precision_dtype
@@ -230,7 +230,7 @@ class SwathWorkers:
         if spawn:
             count = len(self.columns)
             for k, endpoint in enumerate(self.shot_endpoints):
-                cmd = [sys.executable, "-m", "rtsar", "swath-worker", "--shots", endpoint]
+                cmd = module_argv("rtsar", "swath-worker", "--shots", endpoint)
                 cmd += ["--results", self.results_endpoint, "--index", str(k)]
                 cmd += ["--parent-pid", str(os.getpid())]
                 # A session of their own: a terminal's Ctrl-C goes to the coordinator alone,

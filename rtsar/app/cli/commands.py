@@ -19,7 +19,7 @@ COMMANDS = (  # in the order of ``rtsar --help``
     ("replay", "streaming",
      "replay a recording through the pipeline at real rate, a factor, or max"),
     ("demo", "streaming",
-     "the 3D demo: InSAL heights of Zhao's ridge, published live (15-25 s)"),
+     "the 3D demo: InSAL heights of Zhao's ridge, published live (14-16 s after `rtsar prepare`)"),
     ("subscribe", "streaming", "record published strips into an image file"),
     ("keygen", "streaming", "make a CURVE key pair for encrypted publication"),
     ("view", "view",

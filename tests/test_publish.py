@@ -9,6 +9,7 @@ import pytest
 import zmq
 from conftest import free_port as _conftest_free_port
 
+import rtsar.sinks.publish as publish
 from rtsar.app.cli import main
 from rtsar.presets import preset
 from rtsar.scene import Simulator, point_scene
@@ -477,3 +478,22 @@ def test_a_strip_header_encodes_its_config_once_and_reads_back_whole(monkeypatch
     assert sum(1 for o in calls if o is config) == 1
     assert json.loads(publish.ZmqPublisher._encode(me, {"config": config})) == {"config": config}
     assert json.loads(publish.ZmqPublisher._encode(me, {"x": 1})) == {"x": 1}
+
+
+@pytest.mark.parametrize("delivery, looks", [("drop", 1), ("lossless", 5)])
+def test_dropping_delivery_reads_subscriptions_at_most_every_poll_period(
+    monkeypatch, delivery, looks
+):
+    """Dropping delivery reads the subscriptions at most every POLL_EVERY_S (a look that finds
+    none costs a raised zmq.Again per strip); lossless reads them at every send (its cut-off
+    rule needs the count)."""
+    monkeypatch.setattr(publish, "POLL_EVERY_S", 60.0)
+    pub = ZmqPublisher("tcp://127.0.0.1:*", delivery)
+    try:
+        seen = []
+        monkeypatch.setattr(pub, "_poll_subscriptions", lambda *a: seen.append(1))
+        for _ in range(5):
+            pub.send("stats", {"n": 1})
+        assert len(seen) == looks
+    finally:
+        pub.close()

@@ -191,8 +191,9 @@ class StripAssembler:
         self._pending, self._came_s = rest, came
         self.held -= count
         first = parts[0].first_line
-        lines = parts[0].lines if len(parts) == 1 else np.concatenate([p.lines for p in parts])
-        flagged = np.concatenate([p.flagged for p in parts])
+        one = len(parts) == 1  # the low-latency case: no copies
+        lines = parts[0].lines if one else np.concatenate([p.lines for p in parts])
+        flagged = parts[0].flagged if one else np.concatenate([p.flagged for p in parts])
         strip = Strip(
             seq=self.seq,
             first_line=first,
@@ -204,7 +205,8 @@ class StripAssembler:
             counters=counters,
         )
         self.seq += 1
-        return strip, np.concatenate([p.last_arrival_s for p in parts])
+        last = parts[0].last_arrival_s if one else np.concatenate([p.last_arrival_s for p in parts])
+        return strip, last
 
 
 def flag_runs(first: int, flagged: np.ndarray) -> list[tuple[int, int]]:

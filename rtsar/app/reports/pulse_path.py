@@ -26,23 +26,10 @@ from ...presets import PRESETS, preset
 from ...sinks.publish import ZmqPublisher
 from ...sources.base import ShotBatch
 from ...stream.pipeline import Pipeline, PipelineSettings
-from ..bench_pipeline import bench_shots, with_correlator
+from ..bench_pipeline import _source, bench_shots, with_correlator
 from ..live_granularity import GranularityRequest
 
 PARTS = ("ingest", "lens", "correlator", "strips")
-
-
-class _Idle:
-    """The pipeline's source, never iterated: the shots are handed to its stages here."""
-
-    live = False
-    description = "pulse_path"
-
-    def __init__(self):
-        self.counters: dict = {}
-
-    def close(self) -> None:
-        pass
 
 
 def measure(preset_name: str, rate: float, pulses: int, lens: str, correlator: str) -> dict:
@@ -53,7 +40,8 @@ def measure(preset_name: str, rate: float, pulses: int, lens: str, correlator: s
     request = GranularityRequest(rate * prf)
     chosen, settings, g, words = request.apply(cfg, PipelineSettings(lens_backend=lens))
     pub = ZmqPublisher("tcp://127.0.0.1:*", "drop")
-    pipe = Pipeline(chosen, _Idle(), [pub], settings)
+    idle = _source(chosen, shots, len(shots), "max", 1, False)  # never iterated: fed below
+    pipe = Pipeline(chosen, idle, [pub], settings)
     clock = time.perf_counter
     warm = chosen.processor.aperture_pulses + 64
     spent = np.zeros((pulses, len(PARTS)))

@@ -227,6 +227,63 @@ def test_bounded_queue_blocks_drops_and_batches():
     assert q.get_batch(100) is None
 
 
+def test_a_batch_can_wait_for_a_number_of_units_up_to_its_hold():
+    """get_batch(at_least=k): waits (up to hold_s after the first item) until k units are
+    queued, then takes them together; a close or the hold ends the wait with what is there."""
+    q = BoundedQueue(100)
+    q.put([0])
+
+    def later():
+        for _ in range(3):
+            time.sleep(0.02)
+            q.put([1])
+
+    t = threading.Thread(target=later)
+    t.start()
+    got = q.get_batch(100, at_least=4, hold_s=5.0)
+    t.join()
+    assert [len(x) for x in got] == [1, 1, 1, 1]
+    q.put([2])
+    t0 = time.perf_counter()
+    assert [len(x) for x in q.get_batch(100, at_least=4, hold_s=0.05)] == [1]  # the hold ended
+    assert 0.04 < time.perf_counter() - t0 < 2.0
+    q.put([3])
+    threading.Timer(0.05, q.close).start()
+    assert [len(x) for x in q.get_batch(100, at_least=4, hold_s=5.0)] == [1]  # closed: at once
+
+
+def test_an_aligned_lens_takes_each_block_s_pulses_in_one_call(tiny):
+    """lens_align = B (the granularity's, with a head block): shots that come one at a time go
+    through ingest and the lens a block at a time, every call ending on a block's last pulse;
+    the image is the one of a lens that takes each pulse as it comes, bit for bit."""
+    cfg, scene, shots = tiny
+    cfg = cfg.with_processor(correlator="nonuniform", partition_lines=4)
+    shots = shots[:160]
+    images, calls = {}, {}
+    for align in (0, 4):
+        sink = Collect()
+        settings = PipelineSettings(strip_lines=4, lens_align=align, lens_backend="numpy")
+        source = replay(cfg, shots, batch=1, rate="real")  # one shot every 2 ms
+        pipe = Pipeline(cfg, source, [sink], settings, scene.start_along_track_m)
+        sizes, stage = [], pipe.engine.range_stage
+
+        def spy(samples, *args, stage=stage, sizes=sizes):
+            sizes.append(len(samples))
+            return stage(samples, *args)
+
+        pipe.engine.range_stage = spy
+        pipe.run()
+        images[align], calls[align] = sink.image(), sizes
+    assert sum(calls[4]) == sum(calls[0]) == len(shots)
+    # Each call ends on a block's last pulse, but where a shot came over two blocks' time late
+    # (a loaded machine): then the lens takes what came, and the next call ends on a block
+    # again.  Unaligned, a quarter of the one-pulse calls end on one.
+    on_block = np.cumsum(calls[4]) % 4 == 0
+    assert on_block.mean() >= 0.8 and on_block[-1]
+    assert len(calls[0]) > 2 * len(calls[4])  # paced: unaligned, the lens took what came
+    np.testing.assert_array_equal(images[4], images[0])
+
+
 def test_latency_histogram_percentiles(rng):
     lat = rng.lognormal(np.log(2e-3), 0.7, 20000)
     stats = LatencyStats()

@@ -14,6 +14,7 @@ fixed (``--partition-lines``, ``--strip-lines`` / ``--strip-ms``, ``--max-batch`
 from __future__ import annotations
 
 import json
+import math
 import time
 from dataclasses import dataclass, replace
 
@@ -25,19 +26,23 @@ from ..lens import cl_devices, make_lens, make_plan
 from ..lens.base import survey_devices_first, survey_wanted
 from ..lens.plan import next_pow2
 from ..params import Config, Processor
+from ..sinks.publish import ZmqPublisher
 from ..sinks.wire import strip_header
+from ..sources.base import ShotBatch
 from ..stream.granularity import (
-    TARGET_UTILISATION,
     Granularity,
     StageCosts,
     auto_strip_lines,
     choose_granularity,
     granularity_words,
+    modelled_latency_s,
     utilisation,
 )
+from ..stream.ingest import Ingest
 from ..stream.settings import PipelineSettings
 from ..stream.stats import LatencyStats
 from ..stream.strips import LineBlock, StreamInfo, StripAssembler
+from ..stream.timing import LineTiming
 
 ROUND_S = 0.01  # each of a figure's 3 rounds
 BLOCKED_KINDS = ("partitioned", "nonuniform")  # their block is the head block L
@@ -72,7 +77,10 @@ class GranularityRequest:
         costs = measure_costs(
             config, settings, self.rate_hz, blocks, copies, physical, self, source_s
         )
-        g = choose_granularity(self.rate_hz, costs, lens_batch, self.strip_lines, fixed_block=fixed)
+        g = choose_granularity(
+            self.rate_hz, costs, lens_batch, self.strip_lines, fixed_block=fixed,
+            aligned=aligned(config.processor, physical),
+        )  # fmt: skip
         words = granularity_words(g, costs)
         return chosen_config(config, g), chosen_settings(settings, g), g, words
 
@@ -99,6 +107,12 @@ def block_candidates(p: Processor, physical=None, given: int | None = None) -> t
     return [1 << k for k in range(largest.bit_length()) if 1 << k <= largest], ""
 
 
+def aligned(p: Processor, physical=None) -> bool:
+    """Whether the lens takes each block's pulses together (rtsar.stream.granularity): the
+    correlators with a head block."""
+    return physical is None and p.correlator in BLOCKED_KINDS
+
+
 def chosen_config(config: Config, g: Granularity) -> Config:
     """The configuration with the chosen head block (the correlators that have one)."""
     if config.processor.correlator not in BLOCKED_KINDS:
@@ -112,6 +126,7 @@ def chosen_settings(settings: PipelineSettings, g: Granularity) -> PipelineSetti
         strip_lines=g.strip_lines,
         strip_most_lines=g.strip_most_lines,
         strip_deadline_s=g.strip_deadline_s,
+        lens_align=g.lens_align,
     )
 
 
@@ -124,7 +139,10 @@ def measure_costs(
     config, settings, rate_hz, blocks, copies=1, physical=None, request=None, source_s=0.0
 ):
     """StageCosts of the run (module docstring), each call's figure times ``copies``; the
-    blocks measured smallest first, up to the first within TARGET_UTILISATION."""
+    blocks measured smallest first, until one's modelled latency exceeds a smaller one's (it
+    only grows from there).  Where the lens takes each block's pulses together (``aligned``):
+    each block's path timed in turn (path_costs_s); else the lens at 1, 2, 4, … pulses a
+    call, up to the first that keeps up, and the blocks, each alone."""
     p = config.processor
     plan = make_plan(config)
     dtype = np.complex128 if p.precision == "complex128" else np.complex64
@@ -136,24 +154,128 @@ def measure_costs(
         )
 
     lens = make_lens(plan, settings.lens_backend, settings.device, p.precision, p.micro_batch)
+    fixed_strips = request.strip_lines if request is not None else None
     lens_s: dict[int, float] = {}
+    ingest_s: dict[int, float] = {}
+    block_s: dict[int, float] = {}
+    if aligned(p, physical):
+        strip_s = None
+        for block in blocks:
+            parts = path_costs_s(config, plan, lens, block, noise)
+            ingest_s[block], lens_s[block], block_s[block] = (copies * x for x in parts[:3])
+            strip_s = parts[3] if strip_s is None else strip_s  # a strip's cost: the first's
+            costs = StageCosts(lens_s, dict(block_s), strip_s, source_s, dict(ingest_s))
+            if past_the_least(rate_hz, costs, fixed_strips, True):
+                break
+        return StageCosts(lens_s, block_s, strip_s, source_s, ingest_s)
     b = 1
     while b <= (settings.max_batch or p.micro_batch):
         shots = noise(b, plan.samples_per_shot)
         lens_s[b] = copies * per_call_s(lambda s=shots: lens.compress(s))
+        ingest_s[b] = ingest_cost_s(config, shots)
         if lens_s[b] <= b / rate_hz:
             break
         b *= 2
     strip_s = strip_cost_s(config, plan.range_m)
-    block_s: dict[int, float] = {}
-    fixed_strips = request.strip_lines if request is not None else None
     for block in blocks:
         block_s[block] = copies * push_s(config, plan.range_m, physical, block, noise)
-        costs = StageCosts(lens_s, dict(block_s), strip_s, source_s)
-        strips = fixed_strips or auto_strip_lines(block)
-        if utilisation(rate_hz, costs, block, strips) <= TARGET_UTILISATION:
+        costs = StageCosts(lens_s, dict(block_s), strip_s, source_s, ingest_s)
+        if past_the_least(rate_hz, costs, fixed_strips, False):
             break
-    return StageCosts(lens_s, block_s, strip_s, source_s)
+    return StageCosts(lens_s, block_s, strip_s, source_s, ingest_s)
+
+
+def past_the_least(rate_hz: float, costs: StageCosts, strip_lines, aligned: bool) -> bool:
+    """Whether the largest block measured has a finite modelled latency above a smaller
+    one's: the wait for a block grows with it while the share of the work only falls towards
+    its floor, so no larger block does better (the measuring stops there)."""
+    *smaller, largest = sorted(costs.block_s)
+
+    def latency(b: int) -> float:
+        strips = strip_lines or auto_strip_lines(b)
+        return modelled_latency_s(
+            rate_hz, utilisation(rate_hz, costs, b, strips, aligned), b, strips
+        )
+
+    last = latency(largest)
+    return math.isfinite(last) and any(latency(b) < last for b in smaller)
+
+
+PATH_CALLS = 24  # blocks timed through the path, after PATH_WARM_CALLS
+PATH_WARM_CALLS = 4
+
+
+def path_costs_s(
+    config: Config, plan, lens, block: int, noise
+) -> tuple[float, float, float, float]:
+    """Seconds a call of each part of a block's path, (ingest, lens, correlator, strip), each
+    the median over PATH_CALLS blocks taken through all four in turn on one thread, as the
+    pipeline takes them: ingest's checks on ``block`` shots, the lens on them, the push of
+    their lines into the run's correlator built with that head block (with the line timing),
+    then their strip cut, its latency recorded and its message sent (a publisher with no
+    subscriber).  The correlator is first filled with an aperture of zeros, so each push
+    releases its block's lines.  Timed in turn, not each part back to back: the parts evict
+    each other's data from the caches in the pipeline, and the sum is what one core spends a
+    block (issue 38: back to back, psaltis-jpl's parts summed to 264-424 µs a pulse against
+    600-760 µs in turn)."""
+    cfg = config.with_processor(partition_lines=block)
+    p = cfg.processor
+    n, samples = p.aperture_pulses, plan.samples_per_shot
+    ccd = make_ccd(cfg, plan.range_m, None)
+    ingest = Ingest(samples, n, n, noise(1, 1).dtype)
+    timing = LineTiming(n, 4 * (n + 2 * p.micro_batch))
+    info = StreamInfo("granularity", config, "calibration", "lens", plan.range_m, 0.0, 0.0)
+    strips, latency = StripAssembler(info), LatencyStats()
+    publisher = ZmqPublisher(f"inproc://rtsar-granularity-{id(strips):x}", "drop")
+    shots = noise(block, samples)
+    clock = time.perf_counter
+    try:
+        fill = -(-(n - 1) // block) * block  # the aperture, to a whole number of blocks
+        zeros = np.zeros((fill, samples), shots.dtype)
+        filled = ingest(ShotBatch(np.arange(fill), np.zeros(fill), np.zeros(fill), zeros))
+        emitted = 0  # lines out so far (the engine's numbering)
+        for pulses in filled:
+            timing.record(pulses)
+            emitted += len(ccd.push(np.zeros((len(pulses), len(plan.range_m)), shots.dtype)))
+        spent = []
+        for k in range(PATH_WARM_CALLS + PATH_CALLS):
+            seq = fill + k * block + np.arange(block)
+            t0 = clock()
+            pulses = ingest(ShotBatch(seq, seq * 1e-3, np.full(block, t0), shots))[0]
+            t1 = clock()
+            lines = lens.compress(pulses.samples)
+            t2 = clock()
+            timing.record(pulses)
+            got = ccd.push(lines)
+            out = timing.lines(emitted, got)
+            emitted += len(got)
+            t3 = clock()
+            if out is not None:
+                strips.add(out, t3)
+                strip, last_s = strips.take(strips.held, dict(ingest.counters))
+                publisher.strip(strip, info)
+                latency.add(clock() - last_s)
+            spent.append((t1 - t0, t2 - t1, t3 - t2, clock() - t3))
+        ingest_s, lens_s, push_s, strip_s = np.median(spent[PATH_WARM_CALLS:], axis=0)
+        return float(ingest_s), float(lens_s), float(push_s), float(strip_s)
+    finally:
+        publisher.close()
+        if hasattr(ccd, "close"):
+            ccd.close()
+
+
+def ingest_cost_s(config: Config, shots: np.ndarray) -> float:
+    """Seconds of ingest's checks on a call of ``shots`` (a batch continuing the stream)."""
+    p = config.processor
+    ingest = Ingest(shots.shape[1], p.aperture_pulses, p.aperture_pulses, shots.dtype)
+    b, k = len(shots), [0]
+
+    def one() -> None:
+        seq = k[0] + np.arange(b)
+        ingest(ShotBatch(seq, seq * 1e-3, np.zeros(b), shots))
+        k[0] += b
+
+    return per_call_s(one)
 
 
 def push_s(config: Config, range_m, physical, block: int, noise) -> float:

@@ -6,38 +6,48 @@ lines leave the correlator in blocks of B (rtsar.ccd: the head block of the part
 nonuniform correlators) and go out in strips, so a line waits on average (B - 1) / 2 pulse
 periods before any work is done on it.  A small block waits less and costs more: each block
 pays a fixed cost (a push's kernel calls, a strip's header and message) that a large one
-shares among more lines.  So the block is the smallest whose work leaves the machine headroom
-at the rate the source delivers, and a strip is one block (``choose_granularity``).
+shares among more lines, and work that nears the stream's time makes the blocks queue.  So
+the block is the one of least modelled latency at the rate the source delivers (the wait for
+the block, its work, and the wait behind the blocks before it: ``modelled_latency_s``), and a
+strip is one block (``choose_granularity``).
+
+Where the correlator has a head block, the lens waits for the pulses that complete a block
+and takes them in one call (``aligned``): the block's lines cannot leave before its last pulse
+anyway, so this costs them no latency, and ingest, the lens call and the queue hop are paid
+once a block, not once a pulse (psaltis-jpl at its PRF, blocks of 2, 2-core Zen 3: median
+1.5-1.9 ms aligned against 3.2-4.0 ms not, one run each of two rounds).
 
 Costs are seconds per call, measured on this machine at the start of the run
-(rtsar.app.live_granularity); the choice is a pure function of them, so a test checks the rule,
-not the machine.
+(rtsar.app.live_granularity: each part of a block's path in turn, as the pipeline runs them);
+the choice is a pure function of them, so a test checks the rule, not the machine.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
-TARGET_UTILISATION = 0.5  # the work measured may take this share of the stream's time
 STRIP_DEADLINE_S = 1e-3  # a partial strip waits at most this long for its other lines
 MOST_STRIP_LINES = 64  # lines that wait (a backlog) go out together, at most this many a strip
 
 
 @dataclass(frozen=True)
 class StageCosts:
-    """Seconds of work per call, each timed with calls made back to back.
+    """Seconds of work per call.
 
     ``lens_s``: pulses in one lens call → seconds a call; ``block_s``: lines in one correlator
-    block (the candidates) → seconds to push one block; ``strip_s``: seconds to cut one strip
-    and encode its message (any size: the header dominates); ``source_s``: seconds of the
-    source's own work a pulse in this process (a simulated scene's synthesis; 0 for a link or
-    a recording).
+    block (the candidates) → seconds to push one block (with the line timing); ``strip_s``:
+    seconds to cut one strip, record its latency and publish it (any size: the header
+    dominates); ``source_s``: seconds of the source's own work a pulse in this process (a
+    simulated scene's synthesis; 0 for a link or a recording); ``ingest_s``: pulses in one
+    call → seconds of ingest's checks (none given: not counted).
     """
 
     lens_s: dict[int, float]
     block_s: dict[int, float]
     strip_s: float
     source_s: float = 0.0
+    ingest_s: dict[int, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -50,7 +60,9 @@ class Granularity:
     strip_deadline_s: float | None  # a partial strip goes out once a line waited this long
     lens_batch: int  # most pulses a lens call takes (when behind)
     lens_call_pulses: int  # pulses a lens call takes while keeping up (the model's)
+    lens_align: int  # > 1: the lens waits for the pulses that complete a block (aligned)
     utilisation: float  # modelled share of the stream's time the work measured takes
+    latency_s: float  # modelled mean latency of a line (modelled_latency_s)
     rate_hz: float  # the pulse rate it was chosen for
     reason: str
 
@@ -69,15 +81,22 @@ def lens_call(rate_hz: float, lens_s: dict[int, float]) -> tuple[int, float]:
     return b, rate_hz * lens_s[b] / b
 
 
-def utilisation(rate_hz: float, costs: StageCosts, block: int, strip_lines: int) -> float:
+def utilisation(
+    rate_hz: float, costs: StageCosts, block: int, strip_lines: int, aligned: bool = False
+) -> float:
     """Share of the stream's time the work measured takes with blocks of ``block`` lines and
-    strips of ``strip_lines``: rate · (lens a pulse + block / block lines + strip / strip
-    lines + the source a pulse) (lens_call for the lens).  The source counts: a simulated
-    scene's synthesis shares the cores and Python's lock with the stages (left out, the demo
-    chose blocks of 2 and ran at 1,340-1,555 pulses/s of its 1,600)."""
-    _, lens_share = lens_call(rate_hz, costs.lens_s)
+    strips of ``strip_lines``: rate · (ingest and lens a pulse + block / block lines + strip /
+    strip lines + the source a pulse).  The lens: ``aligned``, one call of ``block`` pulses a
+    block; else lens_call's.  The source counts: a simulated scene's synthesis shares the
+    cores and Python's lock with the stages (left out, the demo chose blocks of 2 and ran at
+    1,340-1,555 pulses/s of its 1,600)."""
+    if aligned:
+        calls, lens_share = block, rate_hz * costs.lens_s[block] / block
+    else:
+        calls, lens_share = lens_call(rate_hz, costs.lens_s)
+    ingest_share = rate_hz * costs.ingest_s.get(calls, 0.0) / calls
     per_line_s = costs.block_s[block] / block + costs.strip_s / strip_lines + costs.source_s
-    return lens_share + rate_hz * per_line_s
+    return lens_share + ingest_share + rate_hz * per_line_s
 
 
 def auto_strip_lines(block: int) -> int:
@@ -86,25 +105,40 @@ def auto_strip_lines(block: int) -> int:
     return min(block, MOST_STRIP_LINES)
 
 
+def modelled_latency_s(rate_hz: float, u: float, block: int, strip_lines: int) -> float:
+    """A line's mean latency with blocks of ``block`` lines whose work takes the share ``u``
+    of the stream's time: the wait for the other lines of its block (or strip, the larger),
+    (B - 1) / 2 pulse periods; the block's work, S = u · B / rate; and the wait behind the
+    blocks before it, u · S / (2 (1 - u)) (Pollaczek-Khinchine for work of fixed length, the
+    M/D/1 queue: the pulses come on time but the threads that share the cores and Python's
+    lock do not run on time).  Infinite where u ≥ 1 (the queue grows without bound)."""
+    if not u < 1:
+        return math.inf
+    work_s = u * block / rate_hz
+    return (max(block, strip_lines) - 1) / 2 / rate_hz + work_s + u * work_s / (2 * (1 - u))
+
+
 def choose_granularity(
     rate_hz: float,
     costs: StageCosts,
     lens_batch: int,
     strip_lines: int | None = None,
-    target: float = TARGET_UTILISATION,
     fixed_block: str = "",
+    aligned: bool = False,
 ) -> Granularity:
     """The granularity of a run at ``rate_hz`` pulses/s whose work costs ``costs``.
 
-    The rule: of the candidate blocks (the keys of ``costs.block_s``), the smallest B whose
-    utilisation (``utilisation``, strips of auto_strip_lines(B)) is at most ``target``; where
-    none is, the largest (a block's fixed cost shared by the most lines: latency grows with
-    the rate, larger blocks before any drop).  Strips: one per block, lines that wait (a
-    backlog) going out together up to MOST_STRIP_LINES, a partial strip after
-    STRIP_DEADLINE_S; ``strip_lines`` given (the command line's): strips of exactly that
-    many, no deadline (as before auto).  The lens takes every pulse waiting up to
-    ``lens_batch`` (lens_call: how many while keeping up).  ``fixed_block``: why there is one
-    candidate only (said as the reason), or "".
+    The rule: of the candidate blocks (the keys of ``costs.block_s``), the B of least
+    modelled latency (``modelled_latency_s`` of its utilisation, ``utilisation``, strips of
+    auto_strip_lines(B)), the smaller on a tie; where every B's work exceeds the stream's
+    time, the largest (a block's fixed cost shared by the most lines: latency grows with the
+    rate, larger blocks before any drop).  Strips: one per block, lines that wait (a backlog)
+    going out together up to MOST_STRIP_LINES, a partial strip after STRIP_DEADLINE_S;
+    ``strip_lines`` given (the command line's): strips of exactly that many, no deadline (as
+    before auto).  The lens takes every pulse waiting up to ``lens_batch`` (lens_call: how
+    many while keeping up); ``aligned`` (a correlator with a head block, module docstring):
+    the lens waits for each block's pulses, one call a block.  ``fixed_block``: why there is
+    one candidate only (said as the reason), or "".
     """
     if not rate_hz > 0:
         raise ValueError(f"rate must be > 0 pulses/s, got {rate_hz!r}")
@@ -115,19 +149,21 @@ def choose_granularity(
     def strips(b: int) -> int:
         return strip_lines if strip_lines else auto_strip_lines(b)
 
-    u = {b: utilisation(rate_hz, costs, b, strips(b)) for b in blocks}
-    fitting = [b for b in blocks if u[b] <= target]
-    block = fitting[0] if fitting else blocks[-1]
+    u = {b: utilisation(rate_hz, costs, b, strips(b), aligned) for b in blocks}
+    latency = {b: modelled_latency_s(rate_hz, u[b], b, strips(b)) for b in blocks}
+    block = min(blocks, key=lambda b: (latency[b], b))
     if fixed_block:
         reason = f"the block is fixed ({fixed_block})"
-    elif fitting:
-        reason = f"the smallest block (1, 2, 4, … lines) whose work stays under {target:.0%}"
+    elif math.isfinite(latency[block]):
+        reason = (
+            f"the block (1, 2, 4, … lines) of least modelled latency, {latency[block] * 1e3:.2f} ms"
+        )
     else:
-        reason = f"no block of {blocks[0]}-{blocks[-1]} lines keeps the work under {target:.0%}"
-        reason += ": the largest"
+        block = blocks[-1]
+        reason = f"no block of {blocks[0]}-{blocks[-1]} lines keeps up: the largest"
     if u[block] > 1:
         reason += "; over this machine's capacity at this rate: expect drops"
-    calls, _ = lens_call(rate_hz, costs.lens_s)
+    calls = block if aligned else lens_call(rate_hz, costs.lens_s)[0]
     s = strips(block)
     return Granularity(
         block_lines=block,
@@ -136,7 +172,9 @@ def choose_granularity(
         strip_deadline_s=None if strip_lines else STRIP_DEADLINE_S,
         lens_batch=int(lens_batch),
         lens_call_pulses=calls,
+        lens_align=block if aligned and block > 1 else 0,
         utilisation=u[block],
+        latency_s=latency[block],
         rate_hz=float(rate_hz),
         reason=reason,
     )
@@ -157,12 +195,16 @@ def granularity_words(g: Granularity, costs: StageCosts) -> str:
         strips += f" (lines that wait go out together, up to {g.strip_most_lines})"
     if g.strip_deadline_s is not None:
         strips += f", a partial strip after {g.strip_deadline_s * 1e3:g} ms"
+    calls = f"{g.lens_call_pulses} pulse{'s' if g.lens_call_pulses != 1 else ''}"
+    if g.lens_align:
+        calls += ", each block's pulses together"
+    ingest = costs.ingest_s.get(g.lens_call_pulses)
     return (
         f"granularity: correlator blocks of {lines(g.block_lines)}, {strips}, lens calls of "
-        f"{g.lens_call_pulses} pulse{'s' if g.lens_call_pulses != 1 else ''} (up to "
-        f"{g.lens_batch} when behind), for {g.rate_hz:,.0f} pulses/s: {g.reason}; the work "
-        f"measured takes {g.utilisation:.0%} of the time (lens "
-        f"{_us(costs.lens_s[g.lens_call_pulses])} a call, correlator "
+        f"{calls} (up to {g.lens_batch} when behind), for {g.rate_hz:,.0f} pulses/s: "
+        f"{g.reason}; the work measured takes {g.utilisation:.0%} of the time ("
+        + (f"ingest {_us(ingest)}, " if ingest is not None else "")
+        + f"lens {_us(costs.lens_s[g.lens_call_pulses])} a call, correlator "
         f"{_us(costs.block_s[g.block_lines])} a block, strip {_us(costs.strip_s)}"
         + (f", the source {_us(costs.source_s)} a pulse)" if costs.source_s else ")")
     )

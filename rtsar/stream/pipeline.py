@@ -6,8 +6,8 @@ memory bounded whatever the source does); the heavy work releases the GIL, so th
 "overlapped" (one thread, the lens computing batch k + 1 while the CCD correlates batch k).
 A live source never waits: when the first queue is full its shots are dropped and counted, and
 ingest zero-fills their slots so azimuth timing holds; a replay waits; downstream stages wait
-for each other.  Every stage takes all the work waiting, up to a cap (adaptive micro-batching:
-small batches and low latency while keeping up, larger ones when behind).
+for each other.  Every stage takes all the work waiting, up to a cap (adaptive micro-batching);
+with ``lens_align`` = B the lens first waits for the pulses that complete a block of B.
 
 Corrections (rtsar.focus.chain) run in the lens thread in pulse order: "raw" stages before the
 lens, "lines" stages between lens and CCD; a line stage may hold pulses (PGA holds a block),
@@ -181,15 +181,17 @@ class Pipeline:
                 self._hurry_sinks()
 
     def _hurry_sinks(self) -> None:
-        for sink in self.sinks:
-            sink.hurry()
+        [sink.hurry() for sink in self.sinks]
 
     def _lens_stage(self) -> None:
         busy = 0.0
         key = "lens" if self.settings.stages == "split" else "lens+ccd"
         try:
+            align = self.settings.lens_align  # > 1: a block's pulses in one call (granularity)
+            hold_s = 2 * align / self.config.geometry.prf_hz  # a silence: then what came
             while True:
-                batches = self.q_shots.get_batch(self.max_batch)
+                need = align - self.ingest.next_pulse % align if align > 1 else 1
+                batches = self.q_shots.get_batch(self.max_batch, at_least=need, hold_s=hold_s)
                 t = time.perf_counter()
                 blocks = self._ingest(batches)
                 busy += time.perf_counter() - t
@@ -488,9 +490,7 @@ class Pipeline:
                 raise self._errors[0]
         return self.stats
 
-    def _wait(self) -> None:
-        # Events, not Thread.join: a Ctrl-C inside Thread.join can mark a running thread ended
-        # (CPython 3.11), and the run went on while the file was still being written.
+    def _wait(self) -> None:  # events: a Ctrl-C in Thread.join can mark a live thread ended
         for ended in self._ended:
             while not ended.wait(0.1):
                 pass

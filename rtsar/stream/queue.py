@@ -46,10 +46,14 @@ class BoundedQueue:
             self._cv.notify_all()
             return True
 
-    def get_batch(self, max_units: int, timeout: float | None = None) -> list | None:
+    def get_batch(
+        self, max_units: int, timeout: float | None = None, at_least: int = 1, hold_s: float = 0.0
+    ) -> list | None:
         """Wait for at least one item, then take items while they fit in ``max_units``.
 
-        Returns [] on timeout and None once the queue is closed and empty.
+        ``at_least`` > 1: wait, up to ``hold_s`` after the first item, for that many units (or
+        the close), then take what is there.  Returns [] on timeout and None once the queue is
+        closed and empty.
         """
         deadline = None if timeout is None else time.perf_counter() + timeout
         with self._cv:
@@ -60,6 +64,13 @@ class BoundedQueue:
                 if left is not None and left <= 0:
                     return []
                 self._cv.wait(0.1 if left is None else min(left, 0.1))
+            if at_least > 1 and self._size < at_least and not self._closed:
+                until = time.perf_counter() + hold_s
+                while self._size < at_least and not self._closed:
+                    left = until - time.perf_counter()
+                    if left <= 0:
+                        break
+                    self._cv.wait(left)
             out = [self._items.popleft()]
             taken = len(out[0])
             while self._items and taken + len(self._items[0]) <= max_units:

@@ -1,17 +1,17 @@
-"""One pulse's path through the live pipeline's own stages, one pulse at a time in one thread:
-what each part costs in the company of the others, against the granularity's own figures.
+"""One pulse's path through the live pipeline's own stages, a lens call at a time in one
+thread: what each part costs in the company of the others, against the granularity's figures.
 
     python tools/pulse_path.py [--preset psaltis-jpl] [--rate 1.0] [--pulses 2000]
 
-A live run chooses its granularity (rtsar.app.live_granularity) from its stages timed alone,
-each call back to back.  In the pipeline each part runs between the others, which evict its
-data from the caches, and the path holds more than the model counts (ingest, the line timing,
-the message).  Here a Pipeline is built as a live run at ``rate`` × the PRF builds it (the same
-granularity), and each shot goes through its ingest, lens, correlator and strip publication in
-turn (the pipeline's own methods, with its threads not started); the mean of each part a pulse
-over ``pulses`` shots after the aperture fills (a block's work falls on the pulse that
-completes it), beside the sum the granularity read.  (Issue 38, 2-core AMD EPYC Zen 3,
-psaltis-jpl at its PRF: 600-760 µs of one core a pulse here, against 264-424 µs in the model.)
+A Pipeline is built as a live run at ``rate`` × the PRF builds it (the granularity it chooses,
+rtsar.app.live_granularity), and the shots go through its ingest, lens, correlator and strip
+publication in turn, as many a call as its lens takes while keeping up (a block's, where the
+lens is aligned; else one), with the pipeline's own methods and its threads not started; the
+mean of each part a pulse over ``pulses`` shots after the aperture fills, beside the share the
+granularity's figures gave.  The granularity times a block's path the same way on synthetic
+parts (its line timing and strip outside a Pipeline); before it did (issue 38), it timed each
+part alone, back to back, and psaltis-jpl's parts summed to 264-424 µs a pulse against
+600-760 µs here (2-core AMD EPYC Zen 3, blocks of 1).
 """
 
 from __future__ import annotations
@@ -43,12 +43,14 @@ def measure(preset_name: str, rate: float, pulses: int, lens: str, correlator: s
     idle = _source(chosen, shots, len(shots), "max", 1, False)  # never iterated: fed below
     pipe = Pipeline(chosen, idle, [pub], settings)
     clock = time.perf_counter
-    warm = chosen.processor.aperture_pulses + 64
-    spent = np.zeros((pulses, len(PARTS)))
+    step = max(1, settings.lens_align)  # shots a lens call takes while keeping up
+    warm = -(-(chosen.processor.aperture_pulses + 64) // step)
+    calls = -(-pulses // step)
+    spent = np.zeros((calls, len(PARTS)))
     try:
-        for i in range(warm + pulses):
-            shot = shots[i % len(shots)][None, :]
-            batch = ShotBatch(np.array([i]), np.array([i / prf]), np.array([clock()]), shot)
+        for k in range(warm + calls):
+            i = k * step + np.arange(step)
+            batch = ShotBatch(i, i / prf, np.full(step, clock()), shots[i % len(shots)])
             t0 = clock()
             blocks = pipe._ingest([batch])
             t1 = clock()
@@ -64,8 +66,8 @@ def measure(preset_name: str, rate: float, pulses: int, lens: str, correlator: s
             ):
                 pipe._publish(count)
             t4 = clock()
-            if i >= warm:
-                spent[i - warm] = (t1 - t0, t2 - t1, t3 - t2, t4 - t3)
+            if k >= warm:
+                spent[k - warm] = np.array((t1 - t0, t2 - t1, t3 - t2, t4 - t3)) / step
     finally:
         pipe.engine.correlator.close()
         pub.close()

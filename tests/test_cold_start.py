@@ -177,11 +177,12 @@ def test_resample_has_one_specialisation_whatever_the_samples_type():
 
 @pytest.mark.slow
 def test_the_nonuniform_tiles_call_their_block_kernel_with_one_index_type(monkeypatch):
-    """run_blocks compiled afresh (not from numba's cache) compiles _block once: before, once
-    for the prange index as int64 and again as uint64, 3-13 s each on a first run here."""
+    """run_blocks compiled afresh (not from numba's cache) compiles _block once, for an int64
+    tile index: when it was a parallel kernel, its prange index compiled _block a second time
+    as uint64, 3-13 s each on a first run here."""
     from rtsar.ccd import nonuniform, tiled
 
-    fresh = numba.njit(parallel=True, nogil=True)(tiled.run_blocks.py_func)
+    fresh = numba.njit(nogil=True)(tiled.run_blocks.py_func)
     monkeypatch.setattr(tiled, "run_blocks", fresh)
     rng = np.random.default_rng(5)
     mask = (rng.standard_normal((64, 40)) + 1j * rng.standard_normal((64, 40))).astype(np.complex64)

@@ -19,7 +19,7 @@ the GIL), fed each chunk of a push before the head is computed, the blocks the h
 that chunk need first, so the rest overlaps the head's work and the next pulses' arrival.
 
 All segments run on the kernels of rtsar.ccd.tiled (split real/imaginary arrays over tiles of
-range columns, FFTs along azimuth without transposes, one parallel kernel call for all the
+range columns, FFTs along azimuth without transposes, one kernel call for all the
 blocks of a chunk).  The tail segments add their outputs into one ring of full-output rows in
 the order of the pulse that completes each block (then segment); the head's are added last when
 the line leaves.  Every stream computes the same blocks in the same order, so the output does
@@ -38,7 +38,6 @@ import threading
 import weakref
 from collections import deque
 
-import numba
 import numpy as np
 
 from . import tiled
@@ -258,8 +257,7 @@ class NonUniformCorrelator(Correlator):
     """Eq. (1) by non-uniformly partitioned overlap-save (module docstring): lines in blocks of
     ``head_lines`` L, the tail of the mask in blocks up to ``max_block_lines``.
 
-    ``threaded`` (default: True where numba's threading layer allows concurrent parallel
-    kernels, i.e. not "workqueue") runs the tail segments on their own thread; ``rule``:
+    ``threaded`` (default True) runs the tail segments on their own thread; ``rule``:
     plan_segments' "optimal" (default) or "doubling".  Relative RMS error against
     correlate_reference 1.8e-7 in complex64, 1.6e-15 in complex128 (N = 2048, 64 bins; tested
     to 1e-5 and 1e-12).
@@ -299,12 +297,7 @@ class NonUniformCorrelator(Correlator):
         self._acc = self._ring(tiles, n + chunk, real)
         self._head_out = self._ring(tiles, chunk, real)
         if threaded is None:
-            try:  # known once a parallel kernel ran
-                empty = np.zeros((0, 2 * bins), real)
-                tiled.emit_lines(*self._acc, *self._head_out, 0, 0, 0, empty)
-                threaded = numba.threading_layer() != "workqueue"
-            except ValueError:  # pragma: no cover - no parallel kernel has run
-                threaded = False
+            threaded = True
         self.threaded = bool(threaded) and tail is not None
         self._tail = _Tail(self._run_tail, self.threaded)
         self._tail.group = tail

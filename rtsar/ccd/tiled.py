@@ -254,7 +254,7 @@ def _block(
                 out_im[t, r, c] += ob_i[i, c]
 
 
-@numba.njit(parallel=True, nogil=True, cache=True)
+@numba.njit(nogil=True, cache=True)
 def run_blocks(
     events,
     valid_end,
@@ -275,14 +275,22 @@ def run_blocks(
     out_im,
     assign,
 ):  # pragma: no cover - compiled
-    """The blocks ``events`` [(segment, block k), ...] in this order on every tile (threads
-    over tiles).  segs[s] = (offset in h and d, 2B, P, delay); ring: the input lines; h, d:
-    all segments' spectra (tile_spectra) and delay lines, flat; tw: twiddles; x, y: per-tile
-    work rows; out: the rows the outputs are added to (``assign``: stored) at pulse + delay."""
-    for t in numba.prange(ring_re.shape[0]):
+    """The blocks ``events`` [(segment, block k), ...] in this order on every tile, one tile
+    after another on the calling thread.  segs[s] = (offset in h and d, 2B, P, delay); ring:
+    the input lines; h, d: all segments' spectra (tile_spectra) and delay lines, flat; tw:
+    twiddles; x, y: per-tile work rows; out: the rows the outputs are added to (``assign``:
+    stored) at pulse + delay.
+
+    Not a parallel kernel: the head's and the tail's threads (rtsar.ccd.nonuniform) already
+    keep two cores busy, and OpenMP's team for the tiles only added its hand-offs and its
+    spinning threads to a pipeline's.  On 2 cores (issue 38, Zen 3, three runs each): a push
+    of one line into psaltis-jpl's correlator 138-150 against 187-204 µs parallel, psaltis-max
+    alone 10.6-15.7k against 11.8-12.2k pulses/s, its pipeline at max rate 9.8-11.0k against
+    8.6-10.2k."""
+    for t in range(ring_re.shape[0]):
         for e in range(events.shape[0]):
             _block(
-                np.int64(t),  # prange's index is unsigned after the parfor pass: one _block
+                np.int64(t),  # one _block signature (a prange index was unsigned)
                 events[e, 1],
                 valid_end,
                 segs[events[e, 0]],
@@ -304,14 +312,15 @@ def run_blocks(
             )
 
 
-@numba.njit(parallel=True, nogil=True, cache=True)
+@numba.njit(nogil=True, cache=True)
 def emit_lines(acc_re, acc_im, head_re, head_im, first, count, skip, out):  # pragma: no cover
     """out[j - skip] = acc + head at pulse first + j for skip ≤ j < count (``out``: the output
-    lines viewed as floats, real and imaginary interleaved); those rows of acc are zeroed."""
+    lines viewed as floats, real and imaginary interleaved); those rows of acc are zeroed (one
+    thread, as run_blocks)."""
     tiles, ring, tile = acc_re.shape
     head_ring = head_re.shape[1]
     bins = out.shape[1] // 2
-    for t in numba.prange(tiles):
+    for t in range(tiles):
         width = min(tile, bins - t * tile)
         for j in range(count):
             r, h = (first + j) % ring, (first + j) % head_ring

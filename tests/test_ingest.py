@@ -35,6 +35,20 @@ def test_in_order_stream_passes_unchanged():
     assert ing.counters["pulses_accepted"] == 13 and ing.counters["gap_pulses"] == 0
 
 
+def test_a_batch_whose_numbers_span_it_but_do_not_rise_by_one_is_not_taken_as_it_came():
+    """The fast path takes a batch as it came only where its numbers rise by one each: numbers
+    spanning the batch out of order (a swap: 3 2 within 1 … 4) go through the checks, which
+    keep each shot in its own slot and drop the late one."""
+    ing = Ingest(S, aperture_pulses=4, max_gap_pulses=16)
+    x, f = stream(ing, [batch([0]), batch([1, 3, 2, 4]), batch([5, 6])])
+    np.testing.assert_array_equal(x[:, 0].real, [1, 2, 0, 4, 5, 6, 7])  # 2 came after 3: late
+    assert ing.counters["late_pulses"] == 1 and ing.counters["gap_pulses"] == 1
+    ing = Ingest(S, aperture_pulses=4, max_gap_pulses=16)
+    x, f = stream(ing, [batch([0, 1]), batch([2, 3, 4]), batch([5, 6])])  # rising by one
+    np.testing.assert_array_equal(x[:, 0].real, np.arange(1, 8))
+    assert not f.any() and ing.counters["pulses_accepted"] == 7
+
+
 def test_gap_is_zero_filled_and_flagged():
     ing = Ingest(S, aperture_pulses=4, max_gap_pulses=16)
     x, f = stream(ing, [batch([0, 1, 2, 5, 6]), batch([9])])

@@ -480,6 +480,46 @@ def test_a_strip_header_encodes_its_config_once_and_reads_back_whole(monkeypatch
     assert json.loads(publish.ZmqPublisher._encode(me, {"x": 1})) == {"x": 1}
 
 
+def test_a_strip_message_encodes_the_stream_s_fields_once_and_reads_back_as_its_header(
+    monkeypatch,
+):
+    """The header of a strip message is strip_header's (every field, the same values), its
+    stream's fixed fields encoded once per stream info: again for a new info (the pipeline
+    replaces its info when the first shot anchors the stream), and the collection start,
+    set on the info once the first shot came, read from each strip's own fields."""
+    from dataclasses import replace
+
+    from rtsar.sinks import wire
+    from rtsar.stream.strips import LineBlock, StreamInfo, StripAssembler
+
+    cfg = preset("tiny")
+    info = StreamInfo("s1", cfg, "test", "numpy", np.arange(4.0), 0.0, 0.0)
+    sent, fixed = [], []
+    pub = ZmqPublisher("inproc://strip-header-once", "drop")
+    monkeypatch.setattr(pub, "send", lambda topic, header, payload: sent.append(header))
+    real = wire.strip_fixed_fields
+    monkeypatch.setattr(publish, "strip_fixed_fields", lambda i: fixed.append(i) or real(i))
+    strips = StripAssembler(info)
+    try:
+        for k, stream in enumerate((info, info, replace(info, start_along_track_m=5.0))):
+            if k == 1:
+                stream.first_shot_at(100.0)  # the collection start: set once, on this info
+            strips.info = stream
+            flags = np.array([False, k == 2])
+            strips.add(LineBlock(2 * k, np.ones((2, 4), np.complex64), np.zeros(2),
+                                 np.zeros(2), flags))  # fmt: skip
+            strip, _ = strips.take(2, {"pulses_received": k})
+            pub.strip(strip, stream)
+            header = json.loads(sent[-1])
+            expect = json.loads(json.dumps(wire.strip_header(strip, stream)))
+            assert header.pop("publish_unix_s") <= expect.pop("publish_unix_s")
+            assert header == expect
+    finally:
+        pub.close()
+    assert len(fixed) == 2  # once for the first info, once for its replacement
+    assert json.loads(sent[1])["collection_start_utc"] is not None
+
+
 @pytest.mark.parametrize("delivery, looks", [("drop", 1), ("lossless", 5)])
 def test_dropping_delivery_reads_subscriptions_at_most_every_poll_period(
     monkeypatch, delivery, looks

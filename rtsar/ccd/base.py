@@ -190,16 +190,22 @@ class Correlator(ABC):
 
 
 def line_azimuth_m(
-    cfg: Config, start_along_track_m: float, first_line: int, count: int
+    cfg: Config,
+    start_along_track_m: float,
+    first_line: int,
+    count: int,
+    look_back_m: float | None = None,
 ) -> np.ndarray:
     """Along-track position of image lines first_line … first_line + count - 1.
 
     Line j is the line whose N-pulse aperture ends with pulse j + N - 1; it is focused at the
     aperture centre x_0 + (j + (N - 1)/2) d (module docstring, eq. 1), less the squinted
     beam's offset u_mid (aperture_offsets_m): the scatterers' closest approach, zero-Doppler
-    geometry.
+    geometry.  ``look_back_m``: u_mid where the caller keeps it (beam_look_back_m: a stream
+    asks for every strip's lines).
     """
     n = cfg.processor.aperture_pulses
-    j = first_line + np.arange(count)
+    j = np.arange(first_line, first_line + count)
     step_m = cfg.geometry.along_track_step_m
-    return start_along_track_m + (j + 0.5 * (n - 1)) * step_m - beam_look_back_m(cfg)
+    u_mid = beam_look_back_m(cfg) if look_back_m is None else look_back_m
+    return start_along_track_m + (j + 0.5 * (n - 1)) * step_m - u_mid

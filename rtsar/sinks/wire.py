@@ -30,29 +30,24 @@ STATS_FORMAT = "rtsar-stats"
 
 
 def strip_header(strip: Strip, info: StreamInfo) -> dict:
-    """The JSON header of a strip message (every field: docs/pages/reference/wire.md)."""
+    """The JSON header of a strip message (every field: docs/pages/reference/wire.md): the
+    stream's fixed fields (strip_fixed_fields) and the strip's own (strip_own_fields)."""
+    return {**strip_fixed_fields(info), **strip_own_fields(strip, info)}
+
+
+def strip_fixed_fields(info: StreamInfo) -> dict:
+    """The fields of a strip header that every strip of the stream ``info`` shares (a
+    publisher encodes them once)."""
     rng = info.range_m
-    n_lines, n_bins = strip.lines.shape
     return {
         "format": STRIP_FORMAT,
         "version": STRIP_VERSION,
         "stream_id": info.stream_id,
-        "seq": strip.seq,
-        "first_line": strip.first_line,
-        "line_count": n_lines,
-        "range_bins": n_bins,
         "dtype": "complex64",
         "byte_order": "little",
-        "azimuth_first_m": float(strip.azimuth_m[0]),
         "azimuth_step_m": info.azimuth_step_m,
         "range_first_m": float(rng[0]),
         "range_step_m": float(rng[1] - rng[0]) if len(rng) > 1 else 0.0,
-        "first_pulse_arrival_unix_s": info.unix_s(strip.first_arrival_s),
-        "last_pulse_arrival_unix_s": info.unix_s(strip.last_arrival_s),
-        "publish_unix_s": time.time(),
-        "collection_start_utc": info.collection_start_utc,
-        "flagged_lines": [list(r) for r in strip.flagged_lines],
-        "counters": strip.counters,
         "config": info.config_dict,
         "height_strips": info.heights,
         "height_kind": info.height_kind,
@@ -63,6 +58,25 @@ def strip_header(strip: Strip, info: StreamInfo) -> dict:
             "correction_specs": list(info.correction_specs),
             "physical": info.physical,
         },
+    }
+
+
+def strip_own_fields(strip: Strip, info: StreamInfo) -> dict:
+    """The fields of a strip header that are the strip's own (the collection start too: set
+    once the first shot arrives, after the stream's info is made)."""
+    n_lines, n_bins = strip.lines.shape
+    return {
+        "seq": strip.seq,
+        "first_line": strip.first_line,
+        "line_count": n_lines,
+        "range_bins": n_bins,
+        "azimuth_first_m": float(strip.azimuth_m[0]),
+        "first_pulse_arrival_unix_s": info.unix_s(strip.first_arrival_s),
+        "last_pulse_arrival_unix_s": info.unix_s(strip.last_arrival_s),
+        "publish_unix_s": time.time(),
+        "collection_start_utc": info.collection_start_utc,
+        "flagged_lines": [list(r) for r in strip.flagged_lines],
+        "counters": strip.counters,
     }
 
 

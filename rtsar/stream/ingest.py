@@ -281,8 +281,10 @@ class Ingest:
             if self.origin_seq is not None:
                 self.start_pulses = int(seq[0]) - int(self.origin_seq)
                 c["pulses_before_start"] += max(self.start_pulses, 0)
-        # Fast path: the batch continues the stream exactly (the normal case).
-        contiguous = n == 1 or np.all(np.diff(seq) == 1)
+        # Fast path: the batch continues the stream exactly (the normal case): numbers that
+        # rise strictly and span n - 1 rise by one each (for two, the span alone says so).
+        span = int(seq[-1]) - int(seq[0])
+        contiguous = n == 1 or (span == n - 1 and (n == 2 or bool(np.all(seq[1:] > seq[:-1]))))
         if self._candidate is None and seq[0] == self._next_seq and contiguous:
             c["pulses_accepted"] += n
             self._next_seq += n

@@ -10,10 +10,11 @@ from __future__ import annotations
 import math
 import uuid
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
-from ..ccd.base import line_azimuth_m
+from ..ccd.base import beam_look_back_m, line_azimuth_m
 from ..params import Config
 from ..sources.formats.timebase import format_utc, from_unix_s
 
@@ -92,9 +93,16 @@ class StreamInfo:
     def azimuth_step_m(self) -> float:
         return self.config.geometry.along_track_step_m
 
+    @cached_property
+    def look_back_m(self) -> float:
+        """The squinted beam's offset u_mid (rtsar.ccd.base.beam_look_back_m), formed once."""
+        return beam_look_back_m(self.config)
+
     def azimuth_m(self, first_line: int, count: int) -> np.ndarray:
         """Along-track position of image lines (the centre of each line's aperture)."""
-        return line_azimuth_m(self.config, self.start_along_track_m, first_line, count)
+        return line_azimuth_m(
+            self.config, self.start_along_track_m, first_line, count, self.look_back_m
+        )
 
     def unix_s(self, perf_s: float) -> float:
         """A perf_counter time as UNIX time."""

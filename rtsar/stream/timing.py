@@ -61,7 +61,7 @@ class LineTiming:
 
     def record(self, block: PulseBlock) -> None:
         """Pulses entering the CCD: keep their arrival times and remember the flagged ones."""
-        idx = block.first_pulse + np.arange(len(block))
+        idx = np.arange(block.first_pulse, block.first_pulse + len(block))
         self._arrival[idx % len(self._arrival)] = block.arrival_s
         self._flag_pulses.extend(idx[block.flagged].tolist())
 
@@ -70,7 +70,7 @@ class LineTiming:
         their flags (None for no lines)."""
         if not len(lines):
             return None
-        j = first + np.arange(len(lines))
+        j = np.arange(first, first + len(lines))
         ring = len(self._arrival)
         n = self.aperture
         while self._flag_pulses and self._flag_pulses[0] < first:
@@ -79,9 +79,9 @@ class LineTiming:
             fl = np.fromiter(self._flag_pulses, np.int64)
             k = np.searchsorted(fl, j)
             flagged = (k < len(fl)) & (fl[np.minimum(k, len(fl) - 1)] <= j + n - 1)
-        else:
+            self.flagged_lines += int(flagged.sum())
+        else:  # no flagged pulse in any window: the common case, no count to make
             flagged = np.zeros(len(j), bool)
-        self.flagged_lines += int(flagged.sum())
         return LineBlock(
             first, lines, self._arrival[j % ring], self._arrival[(j + n - 1) % ring], flagged
         )

@@ -33,9 +33,10 @@ ROOT = Path(__file__).resolve().parents[1]
 US = 1e-6
 # A machine where each block costs 100 µs plus 10 µs a line, a strip 100 µs, a lens call
 # 100 µs plus 5 µs a pulse (the shape measured on the development machine: a fixed cost a call).
+BLOCKS = (1, 2, 4, 8, 16, 32, 64)  # the candidates of the nonuniform correlator (block_candidates)
 COSTS = StageCosts(
-    lens_s={b: (100 + 5 * b) * US for b in (1, 2, 4, 8, 16)},
-    block_s={b: (100 + 10 * b) * US for b in (1, 2, 4, 8, 16)},
+    lens_s={b: (100 + 5 * b) * US for b in BLOCKS},
+    block_s={b: (100 + 10 * b) * US for b in BLOCKS},
     strip_s=100 * US,
 )
 
@@ -43,8 +44,8 @@ COSTS = StageCosts(
 def by_hand(rate_hz: float, block: int) -> float:
     """The docstring's utilisation, written out: lens a pulse at the smallest call that keeps
     up + (block + strip) / block lines, times the rate (strips of one block)."""
-    keeping_up = [b for b in (1, 2, 4, 8, 16) if (100 + 5 * b) * US <= b / rate_hz]
-    calls = keeping_up[0] if keeping_up else 16  # none: the call of least time a pulse
+    keeping_up = [b for b in BLOCKS if (100 + 5 * b) * US <= b / rate_hz]
+    calls = keeping_up[0] if keeping_up else BLOCKS[-1]  # none: the least time a pulse
     lens = (100 + 5 * calls) * US / calls
     return rate_hz * (lens + ((100 + 10 * block) * US + 100 * US) / block)
 
@@ -61,17 +62,17 @@ def latency_by_hand(rate_hz: float, block: int, u: float) -> float:
 
 @pytest.mark.parametrize(
     "rate_hz, block",
-    [(400, 1), (1500, 1), (2000, 1), (3000, 2), (3500, 2), (4000, 4), (5000, 4), (8000, 16),
-     (20000, 16)],
+    [(400, 1), (1500, 1), (2000, 1), (3000, 2), (3500, 2), (4000, 4), (5000, 4), (8000, 32),
+     (20000, 32), (40000, 64)],
 )  # fmt: skip
 def test_the_block_is_the_one_of_least_modelled_latency(rate_hz, block):
     """The documented mapping: the block of least modelled latency, else (none keeps up) the
     largest; a strip per block, a partial one after 1 ms, lines that wait merged up to 64."""
     g = choose_granularity(rate_hz, COSTS, lens_batch=64)
-    blocks = (1, 2, 4, 8, 16)
+    blocks = BLOCKS
     latency = {b: latency_by_hand(rate_hz, b, by_hand(rate_hz, b)) for b in blocks}
     finite = [b for b in blocks if math.isfinite(latency[b])]
-    least = min(finite, key=lambda b: (latency[b], b)) if finite else 16
+    least = min(finite, key=lambda b: (latency[b], b)) if finite else BLOCKS[-1]
     assert g.block_lines == block == least
     assert g.utilisation == pytest.approx(by_hand(rate_hz, block), rel=1e-12)
     assert g.latency_s == pytest.approx(latency[block], rel=1e-12)
@@ -86,7 +87,7 @@ def test_an_aligned_lens_costs_one_call_a_block():
     """Aligned (a correlator with a head block): ingest and the lens are paid once a block of
     B pulses, and the lens waits for them (lens_align = B, none for blocks of 1)."""
     costs = StageCosts(COSTS.lens_s, COSTS.block_s, COSTS.strip_s, 0.0,
-                       {b: (50 + b) * US for b in (1, 2, 4, 8, 16)})  # fmt: skip
+                       {b: (50 + b) * US for b in BLOCKS})  # fmt: skip
     for rate_hz in (400, 1600, 3000, 8000):
         g = choose_granularity(rate_hz, costs, 64, aligned=True)
         b = g.block_lines
@@ -94,7 +95,7 @@ def test_an_aligned_lens_costs_one_call_a_block():
         assert g.utilisation == pytest.approx(rate_hz * per_block / b, rel=1e-12)
         assert g.lens_call_pulses == b and g.lens_align == (b if b > 1 else 0)
         u = {k: rate_hz * (50 + k + 100 + 5 * k + 100 + 10 * k + 100) * US / k
-             for k in (1, 2, 4, 8, 16)}  # fmt: skip
+             for k in BLOCKS}  # fmt: skip
         latency = {k: latency_by_hand(rate_hz, k, u[k]) for k in u}
         assert b == min(latency, key=lambda k: (latency[k], k))
 
@@ -106,10 +107,10 @@ def test_blocks_grow_with_the_rate_never_shrink():
     choice keeps up wherever a block does."""
     rates = np.geomspace(10, 1e5, 60)
     chosen = [choose_granularity(r, COSTS, 64, aligned=True).block_lines for r in rates]
-    assert chosen == sorted(chosen) and chosen[0] == 1 and chosen[-1] == 16
+    assert chosen == sorted(chosen) and chosen[0] == 1 and chosen[-1] == BLOCKS[-1]
     for r in rates:
         g = choose_granularity(r, COSTS, 64)
-        keeps_up = any(by_hand(r, b) < 1 for b in (1, 2, 4, 8, 16))
+        keeps_up = any(by_hand(r, b) < 1 for b in BLOCKS)
         assert (g.utilisation < 1) == keeps_up
 
 
@@ -141,7 +142,9 @@ def test_the_candidates_follow_the_correlator():
     p = preset("psaltis-jpl").processor
     assert block_candidates(p) == ([513], "the fft correlator's M - N + 1")
     nonuniform = preset("psaltis-jpl").with_processor(correlator="nonuniform").processor
-    assert block_candidates(nonuniform) == ([1, 2, 4, 8, 16], "")
+    assert block_candidates(nonuniform) == ([1, 2, 4, 8, 16, 32, 64], "")
+    tiny = preset("tiny").with_processor(correlator="partitioned").processor  # N = 64
+    assert block_candidates(tiny)[0][-1] == 64  # at most the aperture
     assert block_candidates(nonuniform, given=4) == ([4], "--partition-lines")
 
 
@@ -262,7 +265,7 @@ def test_the_source_s_own_work_counts_against_the_target():
     with_source = replace(COSTS, source_s=150 * US)  # 30 % of the time at 2,000 pulses/s
     g = choose_granularity(2000, with_source, 64)
     assert alone.block_lines == 1 and g.block_lines > alone.block_lines
-    u = {b: by_hand(2000, b) + 0.3 for b in (1, 2, 4, 8, 16)}
+    u = {b: by_hand(2000, b) + 0.3 for b in BLOCKS}
     latency = {b: latency_by_hand(2000, b, u[b]) for b in u}
     assert g.block_lines == min(latency, key=lambda b: (latency[b], b))
     assert g.utilisation == pytest.approx(u[g.block_lines], rel=1e-12)
@@ -311,7 +314,7 @@ def test_the_banner_words():
         "0.46 ms; the work measured takes 47% of the time (lens 105 µs a call, correlator "
         "110 µs a block, strip 100 µs)"
     )
-    ingest = {b: 60 * US for b in (1, 2, 4, 8, 16)}
+    ingest = {b: 60 * US for b in BLOCKS}
     aligned = StageCosts(COSTS.lens_s, COSTS.block_s, COSTS.strip_s, 0.0, ingest)
     g = choose_granularity(4000, aligned, 64, aligned=True)
     assert g.block_lines == 4 and granularity_words(g, aligned).startswith(
@@ -369,7 +372,7 @@ def test_a_live_run_says_its_granularity_and_runs_with_it(monkeypatch, tmp_path)
     said = [line for line in stream.getvalue().splitlines() if "granularity: " in line]
     assert len(said) == 1 and said[0].startswith("rtsar: granularity: correlator blocks of ")
     block = seen["block"]
-    assert f"blocks of {block} line" in said[0] and block in (1, 2, 4, 8, 16)
+    assert f"blocks of {block} line" in said[0] and block in BLOCKS
     s = seen["settings"]
     assert (s.strip_lines, s.strip_most_lines, s.strip_deadline_s) == (
         block,

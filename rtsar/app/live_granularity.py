@@ -30,6 +30,7 @@ from ..sinks.publish import ZmqPublisher
 from ..sinks.wire import strip_header
 from ..sources.base import ShotBatch
 from ..stream.granularity import (
+    MOST_STRIP_LINES,
     Granularity,
     StageCosts,
     auto_strip_lines,
@@ -95,15 +96,19 @@ def request_of(args, rate_hz: float | None) -> GranularityRequest | None:
 
 def block_candidates(p: Processor, physical=None, given: int | None = None) -> tuple[list, str]:
     """(the blocks to choose among, why there is one only or ""): the partitioned and the
-    nonuniform correlators' head block L, 1, 2, 4, … up to the configuration's partition_lines
-    (16 in the presets; ``given``: --partition-lines); the fft correlator's M - N + 1; the
-    direct and physical CCDs release a line a pulse, so their block is the strip's: 1 … 16."""
+    nonuniform correlators' head block L, 1, 2, 4, … up to MOST_STRIP_LINES (64) or the
+    configuration's partition_lines where larger, at most the aperture (a rate that no block
+    of 16 keeps up with gets larger ones before it drops shots; ``given``: --partition-lines);
+    the fft correlator's M - N + 1; the direct and physical CCDs release a line a pulse, so
+    their block is the strip's: 1 … 16."""
     if physical is None and p.correlator == "fft":
         n = p.aperture_pulses
         return [(p.fft_length or next_pow2(2 * n)) - n + 1], "the fft correlator's M - N + 1"
     if physical is None and p.correlator in BLOCKED_KINDS and given:
         return [given], "--partition-lines"
-    largest = min(p.partition_lines, p.aperture_pulses) if p.correlator in BLOCKED_KINDS else 16
+    largest = 16
+    if p.correlator in BLOCKED_KINDS:
+        largest = min(max(p.partition_lines, MOST_STRIP_LINES), p.aperture_pulses)
     return [1 << k for k in range(largest.bit_length()) if 1 << k <= largest], ""
 
 
@@ -201,23 +206,26 @@ def past_the_least(rate_hz: float, costs: StageCosts, strip_lines, aligned: bool
     return math.isfinite(last) and any(latency(b) < last for b in smaller)
 
 
-PATH_CALLS = 24  # blocks timed through the path, after PATH_WARM_CALLS
+PATH_ROUNDS = 3  # rounds of blocks timed through the path, after PATH_WARM_CALLS blocks
 PATH_WARM_CALLS = 4
+PATH_LEAST_CALLS = 8  # blocks a round, at least
 
 
 def path_costs_s(
     config: Config, plan, lens, block: int, noise
 ) -> tuple[float, float, float, float]:
-    """Seconds a call of each part of a block's path, (ingest, lens, correlator, strip), each
-    the median over PATH_CALLS blocks taken through all four in turn on one thread, as the
-    pipeline takes them: ingest's checks on ``block`` shots, the lens on them, the push of
-    their lines into the run's correlator built with that head block (with the line timing),
-    then their strip cut, its latency recorded and its message sent (a publisher with no
-    subscriber).  The correlator is first filled with an aperture of zeros, so each push
-    releases its block's lines.  Timed in turn, not each part back to back: the parts evict
-    each other's data from the caches in the pipeline, and the sum is what one core spends a
-    block (issue 38: back to back, psaltis-jpl's parts summed to 264-424 µs a pulse against
-    600-760 µs in turn)."""
+    """Seconds a call of each part of a block's path, (ingest, lens, correlator, strip), for
+    blocks taken through all four in turn on one thread, as the pipeline takes them: ingest's
+    checks on ``block`` shots, the lens on them, the push of their lines into the run's
+    correlator built with that head block (with the line timing), then their strip cut, its
+    latency recorded and its message sent (a publisher with no subscriber).  The correlator is
+    first filled with an aperture of zeros, so each push releases its block's lines.  Each
+    figure: the median over PATH_ROUNDS rounds of its mean a block, a round spanning the
+    correlator's largest block (its tail's, whose work falls on one push in many and is
+    waited for there), at least PATH_LEAST_CALLS blocks.  Timed in turn, not each part back to
+    back: the parts evict each other's data from the caches in the pipeline, and the sum is
+    what one core spends a block (issue 38: back to back, psaltis-jpl's parts summed to
+    264-424 µs a pulse against 600-760 µs in turn)."""
     cfg = config.with_processor(partition_lines=block)
     p = cfg.processor
     n, samples = p.aperture_pulses, plan.samples_per_shot
@@ -237,8 +245,10 @@ def path_costs_s(
         for pulses in filled:
             timing.record(pulses)
             emitted += len(ccd.push(np.zeros((len(pulses), len(plan.range_m)), shots.dtype)))
+        largest = max([block, *(b for _, _, b in getattr(ccd, "segments", ()))])
+        per_round = max(PATH_LEAST_CALLS, -(-largest // block))
         spent = []
-        for k in range(PATH_WARM_CALLS + PATH_CALLS):
+        for k in range(PATH_WARM_CALLS + PATH_ROUNDS * per_round):
             seq = fill + k * block + np.arange(block)
             t0 = clock()
             pulses = ingest(ShotBatch(seq, seq * 1e-3, np.full(block, t0), shots))[0]
@@ -256,7 +266,8 @@ def path_costs_s(
                 publisher.strip(strip, info)
                 latency.add(clock() - last_s)
             spent.append((t1 - t0, t2 - t1, t3 - t2, clock() - t3))
-        ingest_s, lens_s, push_s, strip_s = np.median(spent[PATH_WARM_CALLS:], axis=0)
+        rounds = np.reshape(spent[PATH_WARM_CALLS:], (PATH_ROUNDS, per_round, 4)).mean(axis=1)
+        ingest_s, lens_s, push_s, strip_s = np.median(rounds, axis=0)
         return float(ingest_s), float(lens_s), float(push_s), float(strip_s)
     finally:
         publisher.close()

@@ -16,6 +16,7 @@ from ..scene import Scene, Simulator
 from ..scene.tones import kernels_cached
 from .base import ShotBatch, Source
 from .pacing import Pacer, next_release, release_chunk
+from .sim_process import ShotFeed
 
 WARM_TIMEOUT_S = 300.0  # the warming process; past it, the kernels are compiled here
 
@@ -35,7 +36,9 @@ class SimSource(Source):
     If generation falls behind the schedule, shots go out late (their arrival stays the
     scheduled time) and ``counters["late_releases"]`` counts the chunks; the next release then
     holds every shot already due, up to 64 (rtsar.sources.pacing.next_release), so the source
-    catches up rather than staying behind one small chunk at a time.
+    catches up rather than staying behind one small chunk at a time.  ``separate``: the shots
+    are made in a process of their own, as an instrument's are (rtsar.sources.sim_process;
+    ``rtsar run``), not in this one beside the stages; the same shots, bit for bit.
     """
 
     live = True
@@ -46,6 +49,7 @@ class SimSource(Source):
         pulses: int | None = None,
         chunk: int | None = None,
         warm_from: str | None = None,
+        separate: bool = False,
     ):
         super().__init__()
         # warm_from: the scene's file; where numba's cache lacks the simulator's kernels, a
@@ -68,6 +72,7 @@ class SimSource(Source):
         self.counters = {"late_releases": 0}
         self._aux_names: tuple[str, ...] | None = None
         self.description = f"simulated scene '{scene.name}' at {self.prf_hz:g} Hz"
+        self._feed = ShotFeed(scene, self.total, lambda: self._stop) if separate else None
 
     def aux_channels(self) -> tuple[str, ...]:
         """The auxiliary channels the scene's effects make (one pulse of a separate simulator
@@ -102,14 +107,20 @@ class SimSource(Source):
         while it says "preparing …"): loaded from numba's cache once the warming process
         (``warm_from``) has compiled them, else compiled here."""
         self.wait_warm()
-        self.sim.prepare()
+        if self._feed is not None:
+            self._feed.start()  # its kernels load there, from the cache the warming filled
+        else:
+            self.sim.prepare()
 
     def cost_per_pulse_s(self, places: int = 5, shots: int = 16) -> float:
         """Seconds of synthesis a shot on this machine now, the mean over ``places`` spots
         spread along the run (the cost follows the scatterers in view: the demo's is 85 µs a
         shot at its start, about 180 µs over its pass), each the best of 2 blocks of ``shots``
         by a simulator of its own (the stream's is not advanced).  The granularity counts it
-        (rtsar.stream.granularity.StageCosts)."""
+        (rtsar.stream.granularity.StageCosts).  0 where the shots are made in a process of
+        their own (``separate``): that work is not this process's, as an instrument's is not."""
+        if self._feed is not None:
+            return 0.0
         step = self.scene.config.geometry.along_track_step_m
         costs = []
         for k in range(places):
@@ -128,14 +139,23 @@ class SimSource(Source):
     def __iter__(self) -> Iterator[ShotBatch]:
         pacer = Pacer(self.prf_hz)
         p = 0
-        while p < self.total and not self._stop:
-            n = next_release(pacer, p, self.chunk, self.total - p)
-            samples, aux = self.sim.block_with_aux(n)
-            due = pacer.wait(p + n - 1, lambda: self._stop)
-            if time.perf_counter() - due > 1e-3:
-                self.counters["late_releases"] += 1
-            idx = np.arange(p, p + n)
-            times = idx / self.prf_hz
-            yield ShotBatch(idx, times, pacer.t0 + times, samples, aux)
-            p += n
-            self.released = p
+        try:
+            while p < self.total and not self._stop:
+                n = next_release(pacer, p, self.chunk, self.total - p)
+                if self._feed is None:
+                    samples, aux = self.sim.block_with_aux(n)
+                elif (made := self._feed.take(n)) is not None:
+                    samples, aux = made
+                else:  # closed while waiting for the shots
+                    break
+                due = pacer.wait(p + n - 1, lambda: self._stop)
+                if time.perf_counter() - due > 1e-3:
+                    self.counters["late_releases"] += 1
+                idx = np.arange(p, p + n)
+                times = idx / self.prf_hz
+                yield ShotBatch(idx, times, pacer.t0 + times, samples, aux)
+                p += n
+                self.released = p
+        finally:
+            if self._feed is not None:  # the shots' process ends with the stream
+                self._feed.close()

@@ -181,7 +181,7 @@ def cmd_run(args) -> int:
     strip_lines(args, scene.config.geometry.prf_hz)
     warn_slow_first_line(scene, args.scene or scene.name)
     pulses = None if args.duration is None else int(args.duration * scene.config.geometry.prf_hz)
-    source = SimSource(scene, pulses, warm_from=args.scene or DEMO_SCENE)
+    source = SimSource(scene, pulses, warm_from=args.scene or DEMO_SCENE, separate=True)
     return run_stream(
         scene.config,
         source,

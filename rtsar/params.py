@@ -264,8 +264,8 @@ class Processor:
     tail_block_lines  the largest block of the "nonuniform" correlator's tail (a power of two;
                       the block sizes up to it and their partitions are chosen by a cost model,
                       rtsar.ccd.nonuniform.plan_segments): 2·(partitions) multiply-adds per
-                      pixel and line instead of 2N/L (N = 512, L = 16, 128: 4 partitions of 16
-                      and 7 of 64, 22 instead of 64) for one more pair of transforms per block
+                      pixel and line instead of 2N/L (N = 512, L = 16, 128: 8 partitions of 16
+                      and 6 of 64, 28 instead of 64) for one more pair of transforms per block
                       size
     micro_batch       pulses per AO-lens launch
     precision         one of PRECISIONS: the sample type of the AO lens and the CCD.

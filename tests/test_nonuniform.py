@@ -37,8 +37,9 @@ def test_plan_covers_the_mask_and_every_tail_block_is_early_enough(n, head, tail
     first = 0
     for s, (d, t, b) in enumerate(segs):
         assert d == first and t >= 1
-        # A tail block completes before the last pulse of the lines it serves arrives.
-        assert s == 0 or d >= b
+        # A tail block completes a block's time before the last pulse of the lines it serves
+        # arrives: computed meanwhile, it keeps the head from waiting for it.
+        assert s == 0 or d >= 2 * b
         first += t
     assert first == n
 
@@ -49,7 +50,7 @@ def test_plan_covers_the_mask_and_every_tail_block_is_early_enough(n, head, tail
     # 40 range bins: more than one tile of columns, the last one partly used
     "n, head, tail, bins, rule",
     [
-        (64, 4, 16, 9, "optimal"),
+        (128, 4, 16, 9, "optimal"),  # a tail: 64 taps gave one segment with the lead
         (64, 4, 16, 40, "doubling"),
         (100, 8, 32, 5, "doubling"),
         (37, 2, 8, 3, "doubling"),
@@ -112,9 +113,9 @@ def test_lines_leave_in_head_blocks(rng):
 def test_fewer_multiply_adds_than_the_uniform_partition(rng):
     mask = crandn(rng, 512, 2) / 512
     doubling = NonUniformCorrelator(mask, 16, 128, rule="doubling")
-    assert doubling.partitions == 9  # 2 × (16, 32, 64) + 128 × 3 (the rest): 18 MACs per line
+    assert doubling.partitions == 10  # 4 × 16, 2 × (32, 64), 128 × 2 (the rest): 20 MACs a line
     optimal = NonUniformCorrelator(mask, 16, 128)
-    assert optimal.segments == [(0, 64, 16), (64, 448, 64)]  # 4 × 16 + 7 × 64: 22 MACs
+    assert optimal.segments == [(0, 128, 16), (128, 384, 64)]  # 8 × 16 + 6 × 64: 28 MACs
     assert PartitionedCorrelator(crandn(rng, 512, 2), 16).partitions == 32  # 2·32 = 64
 
 
@@ -130,7 +131,7 @@ def test_the_optimal_plan_costs_no_more_than_any_other(n, head, tail):
     best = cost(plan_segments(n, head, tail))
     others = [plan_segments(n, head, tail, "doubling"), [(0, n, head)]]
     for b in (2**i for i in range(20) if head < 2**i <= tail):
-        for d in range(max(b, head), n, head):
+        for d in range(max(2 * b, head), n, head):  # the tail's lead (TAIL_LEAD)
             others.append([(0, d, head), (d, n - d, b)])
     assert all(best <= cost(o) + 1e-9 for o in others)
     with pytest.raises(ValueError, match="rule"):
@@ -154,14 +155,15 @@ def test_chosen_by_the_configuration(rng):
 
 
 def test_a_failing_tail_is_reported_not_hung(rng):
-    corr = NonUniformCorrelator(crandn(rng, 64, 3) / 64, 4, 16, threaded=True)
+    corr = NonUniformCorrelator(crandn(rng, 128, 3) / 128, 4, 16, threaded=True)
+    assert len(corr.segments) > 1  # a tail to fail
 
     def broken(lines):
         raise MemoryError("no room")
 
     corr._tail._run = broken  # the kernel call of the tail's blocks
     with pytest.raises(RuntimeError, match="tail thread failed: no room"):
-        corr.push(crandn(rng, 100, 3, dtype=np.complex64))
+        corr.push(crandn(rng, 200, 3, dtype=np.complex64))
 
 
 def test_every_correlator_has_a_memory_estimate_and_runs_in_the_pipeline():

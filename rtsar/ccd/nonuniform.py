@@ -11,7 +11,14 @@ later:
 
 Segment s's output for pulse p - D_s is complete once its block ends, at most B_s - 1 pulses
 later, so a segment with D_s ≥ B_s has its part of line p ready before the line's last pulse
-arrives.  Only the head segment (D_0 = 0, block L) sits on the latency path: lines leave in
+arrives, if it is computed at once.  It is not: a tail block's transforms take time (a block
+of 64 lines at psaltis-max, 1,200 bins: about 6 ms on one core of the 2-core development
+machine, 60 pulses at 10 kHz), and with D_s = B_s the head waited for them on the line that
+follows each block (pushes of 4 lines paced at 2,500 pulses/s: p99 6.7 ms, against 1.9 ms).
+So every tail segment starts at D_s ≥ TAIL_LEAD · B_s = 2 B_s: its block is computed while
+the next B_s pulses arrive (as a real-time partitioned convolution spreads a block's work over
+the next block's time), and the head waits only where the machine cannot keep up.  Only the
+head segment (D_0 = 0, block L) sits on the latency path: lines leave in
 blocks of L, as with the uniform correlator of block L, while the long tail blocks cut the
 multiply-adds per pixel and line from 2N/L to 2·(number of partitions), at the cost of one more
 pair of transforms per segment.  The tail segments run on a worker thread (the kernels release
@@ -26,8 +33,9 @@ the line leaves.  Every stream computes the same blocks in the same order, so th
 not depend on the push sizes or on the thread's timing (tested bit for bit).
 
 Plan (``plan_segments``): by default the partition of least modelled cost (Garcia 2002;
-``transform_cost``), at psaltis-max (N = 512, L = 16) 4 partitions of 16 then 7 of 64;
-``rule="doubling"`` gives Gardner's doubling (2 partitions of L, 2L, 4L, …).
+``transform_cost``), at psaltis-max (N = 512, L = 16) 8 partitions of 16 then 6 of 64;
+``rule="doubling"`` gives Gardner's doubling (2 partitions of L, 2L, 4L, …; 4 of L, for the
+lead).
 """
 
 from __future__ import annotations
@@ -61,14 +69,18 @@ def _check_plan(n: int, head_lines: int, max_block_lines: int) -> None:
         raise ValueError(f"head_lines {head_lines} exceeds the aperture N = {n}")
 
 
+TAIL_LEAD = 2  # a tail segment of block B starts at D ≥ TAIL_LEAD · B (module docstring)
+
+
 def _segments_for(n: int, blocks: list[int]) -> list[tuple[int, int, int]] | None:
     """The segments with these block sizes, each but the last holding the fewest partitions
-    that let the next block start late enough (D ≥ B); None where the taps run out first."""
+    that let the next block start late enough (D ≥ TAIL_LEAD · B); None where the taps run
+    out first."""
     segments, first = [], 0
     for s, block in enumerate(blocks):
         if s + 1 == len(blocks):
             return [*segments, (first, n - first, block)]
-        parts = max(1, -(-(blocks[s + 1] - first) // block))
+        parts = max(1, -(-(TAIL_LEAD * blocks[s + 1] - first) // block))
         if first + parts * block >= n:
             return None
         segments.append((first, parts * block, block))
@@ -79,13 +91,15 @@ def _segments_for(n: int, blocks: list[int]) -> list[tuple[int, int, int]] | Non
 def plan_segments(
     n: int, head_lines: int, max_block_lines: int, rule: str = "optimal"
 ) -> list[tuple[int, int, int]]:
-    """(first tap D, taps T, block B) of each segment, head first; Σ T = n and D_s ≥ B_s.
+    """(first tap D, taps T, block B) of each segment, head first; Σ T = n and D_s ≥ 2 B_s
+    (TAIL_LEAD) for every tail segment.
 
     ``rule="optimal"`` (Garcia 2002): of every increasing sequence of block sizes L < B_1 < …
     ≤ ``max_block_lines`` (powers of two), each segment holding the fewest partitions that
     let the next one start, the one with the least cost per line, Σ_s transform_cost(B_s) +
-    partitions_s (fewer segments on a tie).  ``rule="doubling"`` (Gardner 1995): 2 partitions
-    of L, then 2 of each size 2L, 4L, … up to ``max_block_lines``, the last taking the rest.
+    partitions_s (fewer segments on a tie).  ``rule="doubling"`` (Gardner 1995, with the lead):
+    4 partitions of L, then 2 of each size 2L, 4L, … up to ``max_block_lines``, the last
+    taking the rest.
     """
     _check_plan(n, head_lines, max_block_lines)
     if rule == "doubling":
@@ -112,7 +126,8 @@ def _doubling(n: int, head_lines: int, max_block_lines: int) -> list[tuple[int, 
     segments, first, block = [], 0, head_lines
     while first < n:
         remaining = n - first
-        taps = remaining if block >= max_block_lines else min(2 * block, remaining)
+        parts = 2 * TAIL_LEAD if first == 0 else 2  # D of the next = 2 B (TAIL_LEAD) after
+        taps = remaining if block >= max_block_lines else min(parts * block, remaining)
         following = min(2 * block, max_block_lines)
         if remaining - taps < following:  # too few taps left for a block of the next size
             taps = remaining

@@ -181,17 +181,17 @@ class Pipeline:
                 self._hurry_sinks()
 
     def _hurry_sinks(self) -> None:
-        [sink.hurry() for sink in self.sinks]
+        for sink in self.sinks:
+            sink.hurry()
 
     def _lens_stage(self) -> None:
         busy = 0.0
         key = "lens" if self.settings.stages == "split" else "lens+ccd"
         try:
-            align = self.settings.lens_align  # > 1: a block's pulses in one call (granularity)
-            hold_s = 2 * align / self.config.geometry.prf_hz  # a silence: then what came
-            while True:
-                need = align - self.ingest.next_pulse % align if align > 1 else 1
-                batches = self.q_shots.get_batch(self.max_batch, at_least=need, hold_s=hold_s)
+            align, prf = self.settings.lens_align, self.config.geometry.prf_hz  # (granularity)
+            while True:  # align > 1: a block's pulses in one call (a silence: then what came)
+                need = min(align - self.ingest.next_pulse % align, self.max_batch) if align else 1
+                batches = self.q_shots.get_batch(self.max_batch, None, need, 2 * align / prf)
                 t = time.perf_counter()
                 blocks = self._ingest(batches)
                 busy += time.perf_counter() - t

@@ -108,7 +108,7 @@ def add_parsers(sub) -> None:
         "the live pipeline end to end (real-time factor, drops, latency; threads and two "
         "swath processes; latency against the offered rate, 25-150 % of the PRF, with the "
         "granularity a live run chooses), in one run, as ratios.  About 4 minutes on 2 "
-        "cores (248 s on 2026-11-28; --preset P: about half).",
+        "cores (268 s on 2026-11-28; --preset P: about half).",
     )
     bench.add_arguments(s)
     s.set_defaults(func=bench.run_bench)

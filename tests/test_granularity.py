@@ -83,6 +83,24 @@ def test_the_block_is_the_one_of_least_modelled_latency(rate_hz, block):
     assert ("the largest" in g.reason) == (not finite)
 
 
+def test_fixed_strips_longer_than_a_block_are_the_wait_the_model_counts():
+    """--strip-lines S: a line waits for its strip, (max(B, S) - 1) / 2 periods, not its
+    block's (B - 1) / 2; the strips stay S lines whatever the block."""
+    rate_hz, strips = 1500, 8
+    g = choose_granularity(rate_hz, COSTS, 64, strip_lines=strips)
+    u = {b: rate_hz * ((100 + 5) * US + ((100 + 10 * b) * US + 100 * US / strips * b) / b)
+         for b in BLOCKS}  # fmt: skip
+    period = 1 / rate_hz
+    latency = {}
+    for b, ub in u.items():
+        work = ub * b * period
+        wait = (max(b, strips) - 1) / 2 * period
+        latency[b] = wait + work + ub * work / (2 * (1 - ub)) if ub < 1 else math.inf
+    assert g.block_lines == min(latency, key=lambda b: (latency[b], b))
+    assert g.latency_s == pytest.approx(latency[g.block_lines], rel=1e-12)
+    assert g.strip_lines == strips and g.strip_deadline_s is None
+
+
 def test_an_aligned_lens_costs_one_call_a_block():
     """Aligned (a correlator with a head block): ingest and the lens are paid once a block of
     B pulses, and the lens waits for them (lens_align = B, none for blocks of 1)."""
@@ -226,6 +244,8 @@ def test_the_run_gets_the_documented_choice_of_the_measured_costs(monkeypatch):
         assert (settings.strip_lines, settings.strip_most_lines) == (block, MOST_STRIP_LINES)
         assert settings.strip_deadline_s == STRIP_DEADLINE_S
         assert settings.lens_align == (block if block > 1 else 0)
+        # the lens holds for a block's pulses two blocks' time at the run's rate, not the PRF's
+        assert settings.lens_hold_s == pytest.approx(2 * block / rate_hz if block > 1 else 0)
         assert words == granularity_words(g, COSTS)
 
 
@@ -243,16 +263,21 @@ def test_each_block_s_path_is_measured_part_by_part_until_past_the_least():
     figures = [*costs.block_s.values(), *costs.lens_s.values(), *costs.ingest_s.values()]
     assert all(0 < x < 1 for x in [*figures, costs.strip_s])
 
-    def upto(k: int) -> StageCosts:
-        def keep(d):
-            return {b: d[b] for b in blocks[:k]}
+    # Where the measuring stopped, by the docstring's rule written out: the first block whose
+    # modelled latency is finite and above a smaller block's (or none: every candidate).
+    rate = 2000.0
 
-        return StageCosts(keep(costs.lens_s), keep(costs.block_s), costs.strip_s, 0.0,
-                          keep(costs.ingest_s))  # fmt: skip
+    def latency(b: int) -> float:
+        u = rate * (costs.ingest_s[b] + costs.lens_s[b] + costs.block_s[b] + costs.strip_s) / b
+        return latency_by_hand(rate, b, u)
 
-    stops = [live_granularity.past_the_least(2000.0, upto(k), None, True)
-             for k in range(1, len(blocks) + 1)]  # fmt: skip
-    assert not any(stops[:-1]) and (stops[-1] or len(blocks) == len(candidates))
+    stop = next(
+        (k for k in range(1, len(candidates))
+         if candidates[k] in costs.block_s and math.isfinite(latency(candidates[k]))
+         and latency(candidates[k]) > min(latency(b) for b in candidates[:k])),
+        len(candidates) - 1,
+    )  # fmt: skip
+    assert blocks == candidates[: stop + 1]
 
 
 def test_the_source_s_own_work_counts_against_the_target():

@@ -72,9 +72,11 @@ def test_matches_the_float64_reference(n, head, tail, bins, rule, threaded, rng)
 
 @pytest.mark.parametrize("rule", ["optimal", "doubling"])
 def test_output_is_bit_identical_whatever_the_pushes_and_the_thread(rule, rng):
-    n, nr, p = 64, 7, 901
+    n, nr, p = 128, 7, 901  # a tail under both rules (64 taps: one segment, with the lead)
     mask, lines = crandn(rng, n, nr) / n, crandn(rng, p, nr, dtype=np.complex64)
-    one = _stream(NonUniformCorrelator(mask, 4, 32, threaded=False, rule=rule), lines, [p])
+    first = NonUniformCorrelator(mask, 4, 32, threaded=False, rule=rule)
+    assert len(first.segments) > 1  # a tail, whose thread and sums are what is tested
+    one = _stream(first, lines, [p])
     sizes = [1] * 40 + [5, 3, 200, 1, 7, 131] + [1] * 10
     sizes.append(p - sum(sizes))
     for threaded in (False, True):
@@ -85,10 +87,11 @@ def test_output_is_bit_identical_whatever_the_pushes_and_the_thread(rule, rng):
 
 
 def test_flush_gives_every_complete_line_and_the_stream_goes_on(rng):
-    n, nr = 64, 5
+    n, nr = 128, 5
     mask, lines = crandn(rng, n, nr) / n, crandn(rng, 500, nr, dtype=np.complex64)
     ref = correlate_reference(lines, mask)
     corr = NonUniformCorrelator(mask, 4, 16)
+    assert len(corr.segments) > 1  # the tail's part of flush, too
     assert len(corr.push(lines[: n - 1])) == 0 and len(corr.flush()) == 0
     sizes = [3, 50, 1, 1, 2, 77, 9, 300 - n + 1]
     sizes.append(len(lines) - (n - 1) - sum(sizes))
@@ -256,9 +259,10 @@ def test_tiled_transforms_and_spectra_against_numpy(rng):
 
 
 def test_complex128_reaches_the_float64_reference(rng):
-    mask = crandn(rng, 64, 5) / 64
+    mask = crandn(rng, 128, 5) / 128
     lines = crandn(rng, 300, 5)
     ref = correlate_reference(lines, mask)
     corr = NonUniformCorrelator(mask, 4, 16, precision="complex128", threaded=False)
+    assert len(corr.segments) > 1
     got = _stream(corr, lines, [7] * 42 + [6])
     assert got.dtype == np.complex128 and relative_rms(got, ref) < 1e-12

@@ -53,7 +53,7 @@ def test_a_stopped_stream_ends_the_child_and_ctrl_c_does_not():
     source = SimSource(scene, pulses=5000, separate=True)
     source.prepare()
     child = source._feed._process
-    os.kill(child.pid, signal.SIGINT)  # the terminal's Ctrl-C reaches the whole group
+    os.kill(child.pid, signal.SIGINT)  # an interrupt sent to it (its session is its own)
     batches = iter(source)
     next(batches)
     time.sleep(0.3)
@@ -71,6 +71,30 @@ def test_a_failure_in_the_child_is_raised_with_its_words():
             feed.take(1)
     finally:
         feed.close()
+
+
+def test_a_child_that_ends_before_it_is_ready_is_an_error_with_its_last_words(monkeypatch):
+    """Before, the parent's first send waited for a peer that never came: a hang."""
+    words = "import sys; sys.stderr.write('no module named numba\\n'); sys.exit(3)"
+    monkeypatch.setattr(sim_process, "module_argv", lambda *a: [sys.executable, "-c", words])
+    feed = ShotFeed(load_scene("demo"), 10)
+    t0 = time.monotonic()
+    with pytest.raises(RuntimeError, match=r"ended \(exit status 3: no module named numba\)"):
+        feed.start()
+    assert time.monotonic() - t0 < 30 and feed._process is None and feed._folder is None
+
+
+def test_the_socket_is_this_user_s_only():
+    """Both ends unpickle what they receive: the socket lies in a folder only its user may
+    enter (mkdtemp's 0700), and the folder goes with the feed."""
+    feed = ShotFeed(load_scene("demo"), 10)
+    feed.start()
+    try:
+        folder = feed._folder
+        assert folder is not None and os.stat(folder).st_mode & 0o777 == 0o700
+    finally:
+        feed.close()
+    assert not os.path.exists(folder)
 
 
 def test_the_child_ends_when_its_parent_is_gone(tmp_path):

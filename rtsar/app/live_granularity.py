@@ -80,7 +80,7 @@ class GranularityRequest:
         )
         g = choose_granularity(
             self.rate_hz, costs, lens_batch, self.strip_lines, fixed_block=fixed,
-            aligned=aligned(config.processor, physical),
+            aligned=aligned(config.processor, physical, settings.stages),
         )  # fmt: skip
         words = granularity_words(g, costs)
         return chosen_config(config, g), chosen_settings(settings, g), g, words
@@ -112,10 +112,11 @@ def block_candidates(p: Processor, physical=None, given: int | None = None) -> t
     return [1 << k for k in range(largest.bit_length()) if 1 << k <= largest], ""
 
 
-def aligned(p: Processor, physical=None) -> bool:
+def aligned(p: Processor, physical=None, stages: str = "split") -> bool:
     """Whether the lens takes each block's pulses together (rtsar.stream.granularity): the
-    correlators with a head block."""
-    return physical is None and p.correlator in BLOCKED_KINDS
+    correlators with a head block, in the split or fused stages (the overlapped stage's lens
+    takes what waits, rtsar.stream.overlap)."""
+    return physical is None and p.correlator in BLOCKED_KINDS and stages != "overlapped"
 
 
 def chosen_config(config: Config, g: Granularity) -> Config:
@@ -132,6 +133,7 @@ def chosen_settings(settings: PipelineSettings, g: Granularity) -> PipelineSetti
         strip_most_lines=g.strip_most_lines,
         strip_deadline_s=g.strip_deadline_s,
         lens_align=g.lens_align,
+        lens_hold_s=g.lens_hold_s,
     )
 
 
@@ -163,11 +165,13 @@ def measure_costs(
     lens_s: dict[int, float] = {}
     ingest_s: dict[int, float] = {}
     block_s: dict[int, float] = {}
-    if aligned(p, physical):
+    if aligned(p, physical, settings.stages):
         strip_s = None
+        lens_batch = settings.max_batch or p.micro_batch
         for block in blocks:
-            parts = path_costs_s(config, plan, lens, block, noise)
-            ingest_s[block], lens_s[block], block_s[block] = (copies * x for x in parts[:3])
+            parts = path_costs_s(config, plan, lens, block, noise, lens_batch)
+            ingest_s[block] = parts[0]  # ingest checks every channel in one call
+            lens_s[block], block_s[block] = copies * parts[1], copies * parts[2]
             strip_s = parts[3] if strip_s is None else strip_s  # a strip's cost: the first's
             costs = StageCosts(lens_s, dict(block_s), strip_s, source_s, dict(ingest_s))
             if past_the_least(rate_hz, costs, fixed_strips, True):
@@ -212,11 +216,12 @@ PATH_LEAST_CALLS = 8  # blocks a round, at least
 
 
 def path_costs_s(
-    config: Config, plan, lens, block: int, noise
+    config: Config, plan, lens, block: int, noise, lens_batch: int = 0
 ) -> tuple[float, float, float, float]:
     """Seconds a call of each part of a block's path, (ingest, lens, correlator, strip), for
     blocks taken through all four in turn on one thread, as the pipeline takes them: ingest's
-    checks on ``block`` shots, the lens on them, the push of their lines into the run's
+    checks on ``block`` shots, the lens on them (calls of ``lens_batch`` at most, as the
+    pipeline's lens stage takes them; 0: one call), the push of their lines into the run's
     correlator built with that head block (with the line timing), then their strip cut, its
     latency recorded and its message sent (a publisher with no subscriber).  The correlator is
     first filled with an aperture of zeros, so each push releases its block's lines.  Each
@@ -253,7 +258,10 @@ def path_costs_s(
             t0 = clock()
             pulses = ingest(ShotBatch(seq, seq * 1e-3, np.full(block, t0), shots))[0]
             t1 = clock()
-            lines = lens.compress(pulses.samples)
+            step = lens_batch or block
+            lines = np.concatenate(
+                [lens.compress(pulses.samples[j : j + step]) for j in range(0, block, step)]
+            )
             t2 = clock()
             timing.record(pulses)
             got = ccd.push(lines)

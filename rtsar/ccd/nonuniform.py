@@ -17,17 +17,21 @@ machine, 60 pulses at 10 kHz), and with D_s = B_s the head waited for them on th
 follows each block (pushes of 4 lines paced at 2,500 pulses/s: p99 6.7 ms, against 1.9 ms).
 So every tail segment starts at D_s ≥ TAIL_LEAD · B_s = 2 B_s: its block is computed while
 the next B_s pulses arrive (as a real-time partitioned convolution spreads a block's work over
-the next block's time), and the head waits only where the machine cannot keep up.  Only the
-head segment (D_0 = 0, block L) sits on the latency path: lines leave in
-blocks of L, as with the uniform correlator of block L, while the long tail blocks cut the
-multiply-adds per pixel and line from 2N/L to 2·(number of partitions), at the cost of one more
-pair of transforms per segment.  The tail segments run on a worker thread (the kernels release
-the GIL), fed each chunk of a push before the head is computed, the blocks the head's lines of
-that chunk need first, so the rest overlaps the head's work and the next pulses' arrival.
+the next block's time), and the head waits only where the machine cannot keep up.  The lead
+costs multiply-adds: the segments before each tail block hold twice the taps (psaltis-max,
+L = 16: 8 partitions of 16 then 6 of 64, 28 multiply-adds a pixel and line against 22; L = 2:
+28 against 18), and a 16-line push's median rose from 0.82 to 1.13 ms as its p99 fell from
+6.7 to 2.5 ms (`rtsar bench`, 2026-11-28).  Only the head segment (D_0 = 0, block L) sits
+on the latency path: lines leave in blocks of L, as with the uniform correlator of block L,
+while the long tail blocks cut the multiply-adds per pixel and line from 2N/L to
+2·(number of partitions), at the cost of one more pair of transforms per segment.  The tail
+segments run on a worker thread (the kernels release the GIL), fed each chunk of a push before
+the head is computed, the blocks the head's lines of that chunk need first, so the rest
+overlaps the head's work and the next pulses' arrival.
 
 All segments run on the kernels of rtsar.ccd.tiled (split real/imaginary arrays over tiles of
-range columns, FFTs along azimuth without transposes, one kernel call for all the
-blocks of a chunk).  The tail segments add their outputs into one ring of full-output rows in
+range columns, FFTs along azimuth without transposes, one kernel call for all the blocks of a
+chunk).  The tail segments add their outputs into one ring of full-output rows in
 the order of the pulse that completes each block (then segment); the head's are added last when
 the line leaves.  Every stream computes the same blocks in the same order, so the output does
 not depend on the push sizes or on the thread's timing (tested bit for bit).

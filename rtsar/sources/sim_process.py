@@ -6,15 +6,20 @@ Zen 3, issue 38), most of it holding the interpreter's lock: in the processor's 
 up to 40 % of that lock at 1,600 pulses/s, and the stages waited for it (the demo's line
 latency, median 6.0 ms with the simulator in process against 1.7-3.1 ms for the same shots
 replayed).  Here a child process (``python -m rtsar.sources.sim_process ENDPOINT``) receives
-the scene and the number of shots over a ZeroMQ PAIR socket, makes them in order,
-BLOCK_SHOTS a message, and sends them ahead of their time, at most AHEAD_MESSAGES queued
-(ZeroMQ's high-water mark: the memory they take is bounded).  The parent (``ShotFeed``) takes
-them as its pacer releases them; its arrival times stay the schedule's.  The shots are the
-simulator's own, bit for bit (the scene is sent whole, its seeds with it).
+the scene and the number of shots over a ZeroMQ PAIR socket, readies its kernels, says so,
+then makes the shots in order, BLOCK_SHOTS a message, and sends them ahead of their time, about
+AHEAD_MESSAGES queued at each end (ZeroMQ's high-water marks: the memory they take is
+bounded).  The parent (``ShotFeed``) takes them as its pacer releases them; its arrival times
+stay the schedule's.  The shots are the simulator's own, bit for bit (the scene is sent whole,
+its seeds with it).
 
-The child ignores Ctrl-C (the terminal's interrupt reaches the whole group; the parent ends
-it), and ends itself when its parent is gone.  A failure in it comes back as a message and is
-raised by ``ShotFeed.take`` with the child's words.
+The socket is a Unix socket in a folder only this user can enter (loopback TCP where there
+are none): both ends unpickle what they receive, so no other user may connect.  ``start``
+returns once the child is ready (its kernels loaded), and a child that ends first is an error
+with the last line it wrote; a failure later comes back as a message and is raised by
+``ShotFeed.take`` with the child's words.  The child runs in a session of its own (the
+terminal's Ctrl-C reaches the parent only, which ends it) and ends itself when its parent is
+gone.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from __future__ import annotations
 import atexit
 import os
 import pickle
+import shutil
 import signal
 import subprocess
 import sys
@@ -51,27 +57,59 @@ class ShotFeed:
         self._sock = None
         self._process: subprocess.Popen | None = None
         self._errors = None  # the child's standard error, a temporary file
+        self._folder: str | None = None  # the socket's private folder
+        self._registered = False  # close() registered to run at exit
         self._samples = np.zeros((0, 0), np.complex64)
         self._aux: dict[str, np.ndarray] = {}
         self._at = 0  # shots taken of the block held
         self.received = 0  # shots received from the child
 
     def start(self) -> None:
+        """Launch the child and wait until it is ready (seconds: it imports rtsar and loads
+        the simulator's kernels); RuntimeError where it ends first."""
         if self._process is not None:
             return
         sock = self._ctx.socket(zmq.PAIR)
         sock.setsockopt(zmq.LINGER, 0)
         sock.setsockopt(zmq.RCVHWM, AHEAD_MESSAGES)
-        port = sock.bind_to_random_port("tcp://127.0.0.1")
+        if os.name == "posix":  # a folder of this user's only (mkdtemp: mode 0700)
+            self._folder = tempfile.mkdtemp(prefix="rtsar-sim-")
+            endpoint = f"ipc://{os.path.join(self._folder, 'shots')}"
+            sock.bind(endpoint)
+        else:  # pragma: no cover - no Unix sockets
+            endpoint = f"tcp://127.0.0.1:{sock.bind_to_random_port('tcp://127.0.0.1')}"
         self._sock = sock
         self._errors = tempfile.TemporaryFile()
-        argv = module_argv("rtsar.sources.sim_process", f"tcp://127.0.0.1:{port}")
         self._process = subprocess.Popen(
-            argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=self._errors,
+            module_argv("rtsar.sources.sim_process", endpoint),
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=self._errors,
             start_new_session=True,
         )  # fmt: skip
-        atexit.register(self.close)
+        if not self._registered:
+            atexit.register(self.close)
+            self._registered = True
+        if not self._wait(zmq.POLLOUT):
+            return self.close()
         sock.send(pickle.dumps((self.scene, self.total)))
+        if not self._wait(zmq.POLLIN):
+            return self.close()
+        kind, *rest = pickle.loads(sock.recv())
+        if kind != "ready":
+            self.close()
+            raise RuntimeError(f"the simulator's process failed: {rest[0] if rest else kind}")
+
+    def _wait(self, event: int) -> bool:
+        """Wait until the socket can ``event``; False once stopped; RuntimeError where the
+        child has ended meanwhile."""
+        while not self._sock.poll(POLL_MS, event):
+            if self.stopped():
+                return False
+            code = self._process.poll()
+            if code is not None:
+                why = self._why(code)
+                self.close()
+                raise RuntimeError(f"the simulator's process ended ({why})")
+        return True
 
     def take(self, n: int) -> tuple[np.ndarray, dict[str, np.ndarray]] | None:
         """The next ``n`` shots (samples [n, S], {aux name: [n, S']}); None once stopped."""
@@ -94,12 +132,8 @@ class ShotFeed:
         """The next block of shots from the child (False: stopped while waiting)."""
         if self._process is None:
             self.start()
-        while not self._sock.poll(POLL_MS, zmq.POLLIN):
-            if self.stopped():
-                return False
-            code = self._process.poll()
-            if code is not None:
-                raise RuntimeError(f"the simulator's process ended ({self._why(code)})")
+        if not self._wait(zmq.POLLIN):
+            return False
         frames = self._sock.recv_multipart()
         kind, *rest = pickle.loads(frames[0])
         if kind == "error":
@@ -139,6 +173,9 @@ class ShotFeed:
         if self._errors is not None:
             self._errors.close()
             self._errors = None
+        if self._folder is not None:
+            shutil.rmtree(self._folder, ignore_errors=True)
+            self._folder = None
 
 
 def _send(sock, frames, parent: int) -> bool:
@@ -167,6 +204,8 @@ def serve(endpoint: str) -> int:
     try:
         sim = Simulator(scene)
         sim.prepare()
+        if not _send(sock, [pickle.dumps(("ready",))], parent):
+            return 1
         p = 0
         while p < total:
             n = min(BLOCK_SHOTS, total - p)
@@ -182,12 +221,16 @@ def serve(endpoint: str) -> int:
         _send(sock, [pickle.dumps(("error", f"{type(exc).__name__}: {exc}"))], parent)
         return 1
     _send(sock, [pickle.dumps(("end",))], parent)
-    sock.close()
+    # Stay until the parent ends this process: its last blocks may still wait in the queues
+    # (a process that exits drops what its socket had not yet delivered), and it reads them at
+    # its pulse rate.
+    while os.getppid() == parent:
+        sock.poll(POLL_MS, zmq.POLLIN)
     return 0
 
 
 def main(argv: list[str]) -> int:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent ends this process
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent ends it (were it in the group)
     if len(argv) != 1:
         sys.stderr.write("usage: python -m rtsar.sources.sim_process ENDPOINT\n")
         return 2

@@ -60,7 +60,8 @@ class Granularity:
     strip_deadline_s: float | None  # a partial strip goes out once a line waited this long
     lens_batch: int  # most pulses a lens call takes (when behind)
     lens_call_pulses: int  # pulses a lens call takes while keeping up (the model's)
-    lens_align: int  # > 1: the lens waits for the pulses that complete a block (aligned)
+    lens_align: int  # > 1: the lens waits for the pulses that complete a block (aligned) …
+    lens_hold_s: float  # … at most two blocks' time at the rate (a silence: then what came)
     utilisation: float  # modelled share of the stream's time the work measured takes
     latency_s: float  # modelled mean latency of a line (modelled_latency_s)
     rate_hz: float  # the pulse rate it was chosen for
@@ -173,6 +174,7 @@ def choose_granularity(
         lens_batch=int(lens_batch),
         lens_call_pulses=calls,
         lens_align=block if aligned and block > 1 else 0,
+        lens_hold_s=2 * block / rate_hz if aligned and block > 1 else 0.0,
         utilisation=u[block],
         latency_s=latency[block],
         rate_hz=float(rate_hz),

@@ -188,10 +188,10 @@ class Pipeline:
         busy = 0.0
         key = "lens" if self.settings.stages == "split" else "lens+ccd"
         try:
-            align, prf = self.settings.lens_align, self.config.geometry.prf_hz  # (granularity)
+            align, hold_s = self.settings.lens_align, self.settings.lens_hold_s  # granularity
             while True:  # align > 1: a block's pulses in one call (a silence: then what came)
                 need = min(align - self.ingest.next_pulse % align, self.max_batch) if align else 1
-                batches = self.q_shots.get_batch(self.max_batch, None, need, 2 * align / prf)
+                batches = self.q_shots.get_batch(self.max_batch, None, need, hold_s)
                 t = time.perf_counter()
                 blocks = self._ingest(batches)
                 busy += time.perf_counter() - t

@@ -194,7 +194,7 @@ def measure_costs(
     return StageCosts(lens_s, block_s, strip_s, source_s, ingest_s)
 
 
-def past_the_least(rate_hz: float, costs: StageCosts, strip_lines, aligned: bool) -> bool:
+def past_the_least(rate_hz: float, costs: StageCosts, strip_lines, lens_aligned: bool) -> bool:
     """Whether the largest block measured has a finite modelled latency above a smaller
     one's: the wait for a block grows with it while the share of the work only falls towards
     its floor, so no larger block does better (the measuring stops there)."""
@@ -203,7 +203,7 @@ def past_the_least(rate_hz: float, costs: StageCosts, strip_lines, aligned: bool
     def latency(b: int) -> float:
         strips = strip_lines or auto_strip_lines(b)
         return modelled_latency_s(
-            rate_hz, utilisation(rate_hz, costs, b, strips, aligned), b, strips
+            rate_hz, utilisation(rate_hz, costs, b, strips, lens_aligned), b, strips
         )
 
     last = latency(largest)

@@ -40,3 +40,22 @@ def test_a_loss_beside_them_is_still_counted(tmp_path):
         and "late releases" not in out.split("counted:")[1].splitlines()[0]
     )
     assert "noted: late releases 3" in out
+
+
+def test_the_end_s_status_line_is_not_printed_twice(tmp_path):
+    """Not on a terminal, a status line every 5 s and one at the end: where a line was just
+    printed (under 1 s before the end), the end's would repeat it (a walkthrough saw
+    `t= 6.0 s …` twice before the `done:` line)."""
+    cfg = preset("tiny")  # 500 pulses/s: 600 shots at the real rate, 1.2 s
+    seq = np.arange(600, dtype=np.int64)
+    shots = np.zeros((len(seq), cfg.waveform.samples_per_shot), np.complex64)
+    prf = cfg.geometry.prf_hz
+    source = ReplaySource(shots, seq, seq / prf, prf, "real", 16)
+    stream = io.StringIO()
+    settings = PipelineSettings(lens_backend="numpy")
+    endpoint = "ipc://" + str(tmp_path / "pub")
+    assert live.run_stream(cfg, source, settings, endpoint, "drop", stream=stream) == 0
+    status = [line for line in stream.getvalue().splitlines() if line.startswith("t=")]
+    # the first stats message (after 1 s) prints; the end's, about 0.2 s later, does not
+    assert len(status) == 1, status
+    assert "done: 600 pulses" in stream.getvalue()

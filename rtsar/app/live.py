@@ -358,7 +358,9 @@ def run_stream(
         now = time.perf_counter()
         if watch is not None and not d.get("final"):
             watch.update(d["elapsed_s"], d["counters"].get("pulses_processed", 0))
-        if d.get("final") or now - last[0] >= (0.5 if tty else 5.0):
+        final, every_s = bool(d.get("final")), 0.5 if tty else 5.0
+        # The end's line, unless a line just said the same (on a terminal it overwrites it)
+        if (final and (tty or now - last[0] >= 1.0)) or now - last[0] >= every_s:
             last[0] = now
             line = format_status(d, total_pulses)
             stream.write(("\r" + line + "  ") if tty else (line + "\n"))

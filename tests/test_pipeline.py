@@ -279,8 +279,12 @@ def test_an_aligned_lens_takes_each_block_s_pulses_in_one_call(tiny):
         pipe.run()
         images[align], calls[align] = sink.image(), sizes
     assert sum(calls[4]) == sum(calls[0]) == len(shots)
-    # Each call ends on a block's last pulse (unaligned, a quarter of the one-pulse calls do).
-    assert np.all(np.cumsum(calls[4]) % 4 == 0)
+    # No call stops short of the end of the block it started in (unaligned, three in four of
+    # the one-pulse calls do); a lens that fell behind takes every pulse waiting, past a
+    # block's end, and the next call completes that block.
+    ends = np.cumsum(calls[4])
+    starts = ends - np.array(calls[4])
+    assert np.all(ends >= (starts // 4 + 1) * 4)
     assert len(calls[0]) > 2 * len(calls[4])  # paced: unaligned, the lens took what came
     np.testing.assert_array_equal(images[4], images[0])
 

@@ -88,11 +88,13 @@ class ShotFeed:
         if not self._registered:
             atexit.register(self.close)
             self._registered = True
-        if not self._wait(zmq.POLLOUT):
-            return self.close()
-        sock.send(pickle.dumps((self.scene, self.total)))
-        if not self._wait(zmq.POLLIN):
-            return self.close()
+        ready = self._wait(zmq.POLLOUT)
+        if ready:
+            sock.send(pickle.dumps((self.scene, self.total)))
+            ready = self._wait(zmq.POLLIN)
+        if not ready:  # stopped while the child started
+            self.close()
+            return
         kind, *rest = pickle.loads(sock.recv())
         if kind != "ready":
             self.close()
@@ -132,7 +134,7 @@ class ShotFeed:
         """The next block of shots from the child (False: stopped while waiting)."""
         if self._process is None:
             self.start()
-        if not self._wait(zmq.POLLIN):
+        if self._sock is None or not self._wait(zmq.POLLIN):  # stopped (while starting)
             return False
         frames = self._sock.recv_multipart()
         kind, *rest = pickle.loads(frames[0])

@@ -279,13 +279,18 @@ def test_an_aligned_lens_takes_each_block_s_pulses_in_one_call(tiny):
         pipe.run()
         images[align], calls[align] = sink.image(), sizes
     assert sum(calls[4]) == sum(calls[0]) == len(shots)
+
     # No call stops short of the end of the block it started in (unaligned, three in four of
     # the one-pulse calls do); a lens that fell behind takes every pulse waiting, past a
     # block's end, and the next call completes that block.
-    ends = np.cumsum(calls[4])
-    starts = ends - np.array(calls[4])
-    assert np.all(ends >= (starts // 4 + 1) * 4)
-    assert len(calls[0]) > 2 * len(calls[4])  # paced: unaligned, the lens took what came
+    def whole(sizes):  # each call ends at or past the end of the block it started in
+        ends = np.cumsum(sizes)
+        return np.all(ends >= (ends - np.array(sizes)) // 4 * 4 + 4)
+
+    assert whole(calls[4])
+    # Unaligned, the lens takes what has come: some call ends inside a block. (How many calls
+    # there are depends on the machine's load, so the count is not the check.)
+    assert not whole(calls[0])
     np.testing.assert_array_equal(images[4], images[0])
 
 

@@ -157,8 +157,12 @@ def test_options_stay_fixed():
 
 
 def test_the_candidates_follow_the_correlator():
-    p = preset("psaltis-jpl").processor
-    assert block_candidates(p) == ([513], "the fft correlator's M - N + 1")
+    p = preset("psaltis-jpl").processor  # fft, N = 512, M = 1024 by default
+    # M: each power of two from the first >= N to twice the configuration's; B = M - N + 1
+    assert block_candidates(p) == ([1, 513, 1537], "")
+    assert block_candidates(p, given_fft=4096) == ([3585], "--fft-length")
+    rs1 = preset("radarsat1").processor  # N = 716, M = 2048
+    assert block_candidates(rs1) == ([1024 - 715, 2048 - 715, 4096 - 715], "")
     nonuniform = preset("psaltis-jpl").with_processor(correlator="nonuniform").processor
     assert block_candidates(nonuniform) == ([1, 2, 4, 8, 16, 32, 64], "")
     tiny = preset("tiny").with_processor(correlator="partitioned").processor  # N = 64
@@ -247,6 +251,38 @@ def test_the_run_gets_the_documented_choice_of_the_measured_costs(monkeypatch):
         # the lens holds for a block's pulses two blocks' time at the run's rate, not the PRF's
         assert settings.lens_hold_s == pytest.approx(2 * block / rate_hz if block > 1 else 0)
         assert words == granularity_words(g, COSTS)
+
+
+def test_the_fft_correlator_s_transform_length_is_the_documented_choice(monkeypatch):
+    """fft: the candidates are M - N + 1 for M = the powers of two from N (block_candidates);
+    the run gets choose_granularity's block as its transform length M = B + N - 1, and the
+    lens aligned on its blocks (overlap-save releases every B pulses), in calls of at most
+    the lens batch.  Before, the fft correlator kept the configuration's M whatever the rate
+    (RADARSAT-1: blocks of 1,333 lines, 0.5-0.8 s of latency at every rate)."""
+    n = 716
+    blocks = (1024 - n + 1, 2048 - n + 1, 4096 - n + 1)
+    costs = StageCosts(  # a block's transforms: 30 ms, 65 ms, 140 ms; the lens 50 µs a pulse
+        lens_s={b: 50 * US * b for b in blocks},
+        block_s=dict(zip(blocks, (30e-3, 65e-3, 140e-3))),
+        strip_s=1e-3,
+        ingest_s={b: 3 * US * b for b in blocks},
+    )
+    monkeypatch.setattr(live_granularity, "measure_costs", _fake_measure(costs))
+    cfg = preset("radarsat1")
+    for rate_hz in (314.0, 1257.0, 1885.0, 4000.0, 9000.0):
+        new_cfg, settings, g, words = GranularityRequest(rate_hz).apply(cfg, PipelineSettings())
+        u = {
+            b: rate_hz * (50 * US + 3 * US + (costs.block_s[b] + 1e-3 / 64 * b) / b) for b in blocks
+        }  # aligned: the lens and ingest a block; strips of 64 lines
+        latency = {b: latency_by_hand(rate_hz, b, u[b]) for b in blocks}
+        want = min(blocks, key=lambda b: (latency[b], b))
+        if not math.isfinite(latency[want]):
+            want = blocks[-1]
+        assert g.block_lines == want, rate_hz
+        assert new_cfg.processor.fft_length == want + n - 1
+        assert settings.lens_align == want and g.lens_call_pulses == cfg.processor.micro_batch
+        assert "a block's last call ending on its last pulse" in words
+    assert block_candidates(cfg.processor, given_fft=1024)[1] == "--fft-length"
 
 
 def test_each_block_s_path_is_measured_part_by_part_until_past_the_least():
@@ -348,7 +384,7 @@ def test_the_banner_words():
         "pulses together (up to 64 when behind), for 4,000 pulses/s: the block (1, 2, 4, … "
         "lines) of least modelled latency, "
     )
-    assert "of the time (ingest 60 µs, lens 120 µs a call, correlator 140 µs a block" in (
+    assert "of the time (ingest 60 µs a call, lens 120 µs a call, correlator 140 µs a block" in (
         granularity_words(g, aligned)
     )
 

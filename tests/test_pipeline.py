@@ -254,18 +254,28 @@ def test_a_batch_can_wait_for_a_number_of_units_up_to_its_hold():
     assert time.perf_counter() - t0 < 2.0  # not the 5 s hold
 
 
-def test_an_aligned_lens_takes_each_block_s_pulses_in_one_call(tiny):
-    """lens_align = B (the granularity's, with a head block): shots that come one at a time go
-    through ingest and the lens a block at a time, every call ending on a block's last pulse;
-    the image is the one of a lens that takes each pulse as it comes, bit for bit."""
+@pytest.mark.parametrize(
+    "correlator, block, batch",
+    [("nonuniform", 4, 0), ("fft", 65, 16)],  # fft at tiny: M = 128, N = 64, B = M - N + 1
+)
+def test_an_aligned_lens_takes_each_block_s_pulses_in_one_call(tiny, correlator, block, batch):
+    """lens_align = B (the granularity's, for a correlator that releases blocks): shots that
+    come one at a time go through ingest and the lens a block at a time (in calls of at most
+    the batch), the block's last call ending on its last pulse; the image is the one of a lens
+    that takes each pulse as it comes, bit for bit."""
     cfg, scene, shots = tiny
-    cfg = cfg.with_processor(correlator="nonuniform", partition_lines=4)
-    shots = shots[:160]
+    cfg = cfg.with_processor(correlator=correlator, partition_lines=4)
+    assert correlator != "fft" or cfg.processor.aperture_pulses + block - 1 == 128
+    shots = shots[:200]
     images, calls = {}, {}
-    for align in (0, 4):
+    for align in (0, block):
         sink = Collect()
         settings = PipelineSettings(
-            strip_lines=4, lens_align=align, lens_hold_s=2.0, lens_backend="numpy"
+            strip_lines=4,
+            lens_align=align,
+            lens_hold_s=2.0,
+            lens_backend="numpy",
+            max_batch=batch,
         )  # a hold far longer than a loaded machine's delays: every block whole
         source = replay(cfg, shots, batch=1, rate="real")  # one shot every 2 ms
         pipe = Pipeline(cfg, source, [sink], settings, scene.start_along_track_m)
@@ -278,20 +288,23 @@ def test_an_aligned_lens_takes_each_block_s_pulses_in_one_call(tiny):
         pipe.engine.range_stage = spy
         pipe.run()
         images[align], calls[align] = sink.image(), sizes
-    assert sum(calls[4]) == sum(calls[0]) == len(shots)
+    assert sum(calls[block]) == sum(calls[0]) == len(shots)
+    most = batch or cfg.processor.micro_batch
 
-    # No call stops short of the end of the block it started in (unaligned, three in four of
-    # the one-pulse calls do); a lens that fell behind takes every pulse waiting, past a
-    # block's end, and the next call completes that block.
-    def whole(sizes):  # each call ends at or past the end of the block it started in
+    # No call but the stream's last stops short of the end of the block it started in, or of
+    # its batch (unaligned, most one-pulse calls do); a lens that fell behind takes every pulse
+    # waiting, past a block's end, and the next call completes that block.
+    def whole(sizes):
         ends = np.cumsum(sizes)
-        return np.all(ends >= (ends - np.array(sizes)) // 4 * 4 + 4)
+        starts = ends - np.array(sizes)
+        short = ends < np.minimum(starts // block * block + block, starts + most)
+        return not np.any(short[:-1])
 
-    assert whole(calls[4])
+    assert whole(calls[block])
     # Unaligned, the lens takes what has come: some call ends inside a block. (How many calls
     # there are depends on the machine's load, so the count is not the check.)
     assert not whole(calls[0])
-    np.testing.assert_array_equal(images[4], images[0])
+    np.testing.assert_array_equal(images[block], images[0])
 
 
 def test_latency_histogram_percentiles(rng):

@@ -25,7 +25,7 @@ from ..ccd import make_ccd
 from ..lens import cl_devices, make_lens, make_plan
 from ..lens.base import survey_devices_first, survey_wanted
 from ..lens.plan import next_pow2
-from ..params import Config, Processor
+from ..params import MAX_FFT_LENGTH, Config, Processor
 from ..sinks.publish import ZmqPublisher
 from ..sinks.wire import strip_header
 from ..sources.base import ShotBatch
@@ -57,6 +57,7 @@ class GranularityRequest:
     rate_hz: float
     block_lines: int | None = None  # --partition-lines
     strip_lines: int | None = None  # --strip-lines, --strip-ms
+    fft_length: int | None = None  # --fft-length
 
     def apply(
         self,
@@ -74,7 +75,9 @@ class GranularityRequest:
             say(f"measuring the work at {self.rate_hz:,.0f} pulses/s to choose the granularity …")
         copies = 1 + (len(height.channels) if height is not None else 0)
         lens_batch = settings.max_batch or config.processor.micro_batch
-        blocks, fixed = block_candidates(config.processor, physical, self.block_lines)
+        blocks, fixed = block_candidates(
+            config.processor, physical, self.block_lines, self.fft_length
+        )
         costs = measure_costs(
             config, settings, self.rate_hz, blocks, copies, physical, self, source_s
         )
@@ -83,7 +86,7 @@ class GranularityRequest:
             aligned=aligned(config.processor, physical, settings.stages),
         )  # fmt: skip
         words = granularity_words(g, costs)
-        return chosen_config(config, g), chosen_settings(settings, g), g, words
+        return block_config(config, g.block_lines, physical), chosen_settings(settings, g), g, words
 
 
 def request_of(args, rate_hz: float | None) -> GranularityRequest | None:
@@ -91,19 +94,28 @@ def request_of(args, rate_hz: float | None) -> GranularityRequest | None:
     choose for; swath workers, which correlate in their own processes: as configured)."""
     if rate_hz is None or getattr(args, "swath_workers", 0):
         return None
-    return GranularityRequest(rate_hz, args.partition_lines, args.strip_lines)
+    return GranularityRequest(
+        rate_hz, args.partition_lines, args.strip_lines, getattr(args, "fft_length", None)
+    )
 
 
-def block_candidates(p: Processor, physical=None, given: int | None = None) -> tuple[list, str]:
+def block_candidates(
+    p: Processor, physical=None, given: int | None = None, given_fft: int | None = None
+) -> tuple[list, str]:
     """(the blocks to choose among, why there is one only or ""): the partitioned and the
     nonuniform correlators' head block L, 1, 2, 4, … up to MOST_STRIP_LINES (64) or the
     configuration's partition_lines where larger, at most the aperture (a rate that no block
     of 16 keeps up with gets larger ones before it drops shots; ``given``: --partition-lines);
-    the fft correlator's M - N + 1; the direct and physical CCDs release a line a pulse, so
-    their block is the strip's: 1 … 16."""
+    the fft correlator's block M - N + 1 for its transform length M = every power of two from
+    the first >= N up to twice the configuration's M (``given_fft``: --fft-length); the direct
+    and physical CCDs release a line a pulse, so their block is the strip's: 1 … 16."""
     if physical is None and p.correlator == "fft":
         n = p.aperture_pulses
-        return [(p.fft_length or next_pow2(2 * n)) - n + 1], "the fft correlator's M - N + 1"
+        if given_fft:
+            return [given_fft - n + 1], "--fft-length"
+        top = min(2 * (p.fft_length or next_pow2(2 * n)), MAX_FFT_LENGTH)
+        lengths = [1 << k for k in range(top.bit_length()) if n <= 1 << k <= top]
+        return [m - n + 1 for m in lengths], ""
     if physical is None and p.correlator in BLOCKED_KINDS and given:
         return [given], "--partition-lines"
     largest = 16
@@ -114,16 +126,24 @@ def block_candidates(p: Processor, physical=None, given: int | None = None) -> t
 
 def aligned(p: Processor, physical=None, stages: str = "split") -> bool:
     """Whether the lens takes each block's pulses together (rtsar.stream.granularity): the
-    correlators with a head block, in the split or fused stages (the overlapped stage's lens
-    takes what waits, rtsar.stream.overlap)."""
-    return physical is None and p.correlator in BLOCKED_KINDS and stages != "overlapped"
+    correlators that release lines in blocks (a head block; fft's overlap-save blocks, which
+    also end on multiples of their B pulses), in the split or fused stages (the overlapped
+    stage's lens takes what waits, rtsar.stream.overlap)."""
+    blocked = p.correlator in BLOCKED_KINDS or p.correlator == "fft"
+    return physical is None and blocked and stages != "overlapped"
 
 
-def chosen_config(config: Config, g: Granularity) -> Config:
-    """The configuration with the chosen head block (the correlators that have one)."""
-    if config.processor.correlator not in BLOCKED_KINDS:
+def block_config(config: Config, block: int, physical=None) -> Config:
+    """``config`` whose correlator releases its lines in blocks of ``block``: partitioned and
+    nonuniform with that head block, fft with M = block + N - 1; the others as they are."""
+    p = config.processor
+    if physical is not None:
         return config
-    return config.with_processor(partition_lines=g.block_lines)
+    if p.correlator in BLOCKED_KINDS:
+        return config.with_processor(partition_lines=block)
+    if p.correlator == "fft":
+        return config.with_processor(fft_length=block + p.aperture_pulses - 1)
+    return config
 
 
 def chosen_settings(settings: PipelineSettings, g: Granularity) -> PipelineSettings:
@@ -212,7 +232,8 @@ def past_the_least(rate_hz: float, costs: StageCosts, strip_lines, lens_aligned:
 
 PATH_ROUNDS = 3  # rounds of blocks timed through the path, after PATH_WARM_CALLS blocks
 PATH_WARM_CALLS = 4
-PATH_LEAST_CALLS = 8  # blocks a round, at least
+PATH_LEAST_CALLS = 8  # blocks a round, at least, …
+PATH_LEAST_LINES = 64  # … where they hold fewer lines than this (fft's hundreds: one a round)
 
 
 def path_costs_s(
@@ -231,10 +252,9 @@ def path_costs_s(
     back: the parts evict each other's data from the caches in the pipeline, and the sum is
     what one core spends a block (issue 38: back to back, psaltis-jpl's parts summed to
     264-424 µs a pulse against 600-760 µs in turn)."""
-    cfg = config.with_processor(partition_lines=block)
-    p = cfg.processor
+    p = config.processor
     n, samples = p.aperture_pulses, plan.samples_per_shot
-    ccd = make_ccd(cfg, plan.range_m, None)
+    ccd = make_ccd(block_config(config, block), plan.range_m, None)
     ingest = Ingest(samples, n, n, noise(1, 1).dtype)
     timing = LineTiming(n, 4 * (n + 2 * p.micro_batch))
     info = StreamInfo("granularity", config, "calibration", "lens", plan.range_m, 0.0, 0.0)
@@ -251,9 +271,10 @@ def path_costs_s(
             timing.record(pulses)
             emitted += len(ccd.push(np.zeros((len(pulses), len(plan.range_m)), shots.dtype)))
         largest = max([block, *(b for _, _, b in getattr(ccd, "segments", ()))])
-        per_round = max(PATH_LEAST_CALLS, -(-largest // block))
+        least = min(PATH_LEAST_CALLS, -(-PATH_LEAST_LINES // block))
+        per_round, warm = max(least, -(-largest // block)), min(PATH_WARM_CALLS, least)
         spent = []
-        for k in range(PATH_WARM_CALLS + PATH_ROUNDS * per_round):
+        for k in range(warm + PATH_ROUNDS * per_round):
             seq = fill + k * block + np.arange(block)
             t0 = clock()
             pulses = ingest(ShotBatch(seq, seq * 1e-3, np.full(block, t0), shots))[0]
@@ -274,7 +295,7 @@ def path_costs_s(
                 publisher.strip(strip, info)
                 latency.add(clock() - last_s)
             spent.append((t1 - t0, t2 - t1, t3 - t2, clock() - t3))
-        rounds = np.reshape(spent[PATH_WARM_CALLS:], (PATH_ROUNDS, per_round, 4)).mean(axis=1)
+        rounds = np.reshape(spent[warm:], (PATH_ROUNDS, per_round, 4)).mean(axis=1)
         ingest_s, lens_s, push_s, strip_s = np.median(rounds, axis=0)
         return float(ingest_s), float(lens_s), float(push_s), float(strip_s)
     finally:
@@ -300,10 +321,7 @@ def ingest_cost_s(config: Config, shots: np.ndarray) -> float:
 def push_s(config: Config, range_m, physical, block: int, noise) -> float:
     """Seconds to push one block of ``block`` lines into the run's correlator built with that
     head block (after a few pushes that fill its buffers)."""
-    cfg = config
-    if config.processor.correlator in BLOCKED_KINDS and physical is None:
-        cfg = config.with_processor(partition_lines=block)
-    ccd = make_ccd(cfg, range_m, physical)
+    ccd = make_ccd(block_config(config, block, physical), range_m, physical)
     lines = noise(block, len(range_m))
     try:
         for _ in range(4):

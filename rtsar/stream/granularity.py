@@ -157,14 +157,15 @@ def choose_granularity(
         reason = f"the block is fixed ({fixed_block})"
     elif math.isfinite(latency[block]):
         reason = (
-            f"the block (1, 2, 4, … lines) of least modelled latency, {latency[block] * 1e3:.2f} ms"
+            f"the block ({candidate_words(blocks)} lines) of least modelled latency, "
+            f"{latency[block] * 1e3:.2f} ms"
         )
     else:
         block = blocks[-1]
         reason = f"no block of {blocks[0]}-{blocks[-1]} lines keeps up: the largest"
     if u[block] > 1:
         reason += "; over this machine's capacity at this rate: expect drops"
-    calls = block if aligned else lens_call(rate_hz, costs.lens_s)[0]
+    calls = min(block, lens_batch) if aligned else lens_call(rate_hz, costs.lens_s)[0]
     s = strips(block)
     return Granularity(
         block_lines=block,
@@ -180,6 +181,15 @@ def choose_granularity(
         rate_hz=float(rate_hz),
         reason=reason,
     )
+
+
+def candidate_words(blocks: list[int]) -> str:
+    """The candidate blocks in words: "1, 2, 4, …" for the doubling series from 1 (the head
+    blocks), else each ("309, 1,333 or 3,381": the fft correlator's M - N + 1)."""
+    if blocks[0] == 1 and len(blocks) > 3 and all(b == 1 << k for k, b in enumerate(blocks)):
+        return "1, 2, 4, …"
+    words = [f"{b:,}" for b in blocks]
+    return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " or " + words[-1]
 
 
 def _us(seconds: float) -> str:
@@ -199,14 +209,21 @@ def granularity_words(g: Granularity, costs: StageCosts) -> str:
         strips += f", a partial strip after {g.strip_deadline_s * 1e3:g} ms"
     calls = f"{g.lens_call_pulses} pulse{'s' if g.lens_call_pulses != 1 else ''}"
     if g.lens_align:
-        calls += ", each block's pulses together"
-    ingest = costs.ingest_s.get(g.lens_call_pulses)
+        whole = g.lens_call_pulses == g.block_lines
+        calls += (
+            ", each block's pulses together"
+            if whole
+            else ", a block's last call ending on its last pulse"
+        )
+    key = g.block_lines if g.lens_align else g.lens_call_pulses  # aligned: costs a block
+    per = "a call" if key == g.lens_call_pulses else "a block"
+    ingest = costs.ingest_s.get(key)
     return (
         f"granularity: correlator blocks of {lines(g.block_lines)}, {strips}, lens calls of "
         f"{calls} (up to {g.lens_batch} when behind), for {g.rate_hz:,.0f} pulses/s: "
         f"{g.reason}; the work measured takes {g.utilisation:.0%} of the time ("
-        + (f"ingest {_us(ingest)}, " if ingest is not None else "")
-        + f"lens {_us(costs.lens_s[g.lens_call_pulses])} a call, correlator "
+        + (f"ingest {_us(ingest)} {per}, " if ingest is not None else "")
+        + f"lens {_us(costs.lens_s[key])} {per}, correlator "
         f"{_us(costs.block_s[g.block_lines])} a block, strip {_us(costs.strip_s)}"
         + (f", the source {_us(costs.source_s)} a pulse)" if costs.source_s else ")")
     )

@@ -86,6 +86,15 @@ def add_correlator_option(g) -> None:
         "a live run at a rate chooses it from 1 up to that by the work measured)",
     )
     g.add_argument(
+        "--fft-length",
+        type=int,
+        metavar="M",
+        help="transform length of the fft correlator: lines leave in blocks of M - N + 1, N "
+        "the aperture (power of two >= N; default: the configuration's, 2N rounded up to a "
+        "power of two in the presets; a live run at a rate chooses it from the powers of two "
+        "up to twice that by the work measured)",
+    )
+    g.add_argument(
         "--tail-block-lines",
         type=int,
         metavar="B",
@@ -331,7 +340,7 @@ def processor_changes(args, cfg):
         )
     if args.correlator:
         changes["correlator"] = args.correlator
-    for name in ("micro_batch", "partition_lines", "tail_block_lines"):
+    for name in ("micro_batch", "partition_lines", "fft_length", "tail_block_lines"):
         if getattr(args, name, None) is not None:
             changes[name] = getattr(args, name)
     if getattr(args, "precision", None):

@@ -25,7 +25,7 @@ from ..ccd import make_ccd
 from ..lens import cl_devices, make_lens, make_plan
 from ..lens.base import survey_devices_first, survey_wanted
 from ..lens.plan import next_pow2
-from ..params import MAX_FFT_LENGTH, Config, Processor
+from ..params import Config, Processor
 from ..sinks.publish import ZmqPublisher
 from ..sinks.wire import strip_header
 from ..sources.base import ShotBatch
@@ -107,13 +107,13 @@ def block_candidates(
     configuration's partition_lines where larger, at most the aperture (a rate that no block
     of 16 keeps up with gets larger ones before it drops shots; ``given``: --partition-lines);
     the fft correlator's block M - N + 1 for its transform length M = every power of two from
-    the first >= N up to twice the configuration's M (``given_fft``: --fft-length); the direct
+    the first >= N up to the configuration's M (``given_fft``: --fft-length); the direct
     and physical CCDs release a line a pulse, so their block is the strip's: 1 … 16."""
     if physical is None and p.correlator == "fft":
         n = p.aperture_pulses
         if given_fft:
             return [given_fft - n + 1], "--fft-length"
-        top = min(2 * (p.fft_length or next_pow2(2 * n)), MAX_FFT_LENGTH)
+        top = p.fft_length or next_pow2(2 * n)
         lengths = [1 << k for k in range(top.bit_length()) if n <= 1 << k <= top]
         return [m - n + 1 for m in lengths], ""
     if physical is None and p.correlator in BLOCKED_KINDS and given:

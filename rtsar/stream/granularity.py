@@ -185,7 +185,7 @@ def choose_granularity(
 
 def candidate_words(blocks: list[int]) -> str:
     """The candidate blocks in words: "1, 2, 4, …" for the doubling series from 1 (the head
-    blocks), else each ("309, 1,333 or 3,381": the fft correlator's M - N + 1)."""
+    blocks), else each ("309 or 1,333": the fft correlator's M - N + 1)."""
     if blocks[0] == 1 and len(blocks) > 3 and all(b == 1 << k for k, b in enumerate(blocks)):
         return "1, 2, 4, …"
     words = [f"{b:,}" for b in blocks]

@@ -91,8 +91,8 @@ def add_correlator_option(g) -> None:
         metavar="M",
         help="transform length of the fft correlator: lines leave in blocks of M - N + 1, N "
         "the aperture (power of two >= N; default: the configuration's, 2N rounded up to a "
-        "power of two in the presets; a live run at a rate chooses it from the powers of two "
-        "up to twice that by the work measured)",
+        "power of two in the presets; a live run at a rate chooses it among the powers of "
+        "two from N up to that by the work measured)",
     )
     g.add_argument(
         "--tail-block-lines",

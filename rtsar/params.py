@@ -17,6 +17,8 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field, fields, replace
 
+from .fft_lengths import is_fast_fft_length
+
 C_M_PER_S = 299_792_458.0
 
 WINDOWS = ("rect", "hann", "hamming", "taylor")
@@ -253,8 +255,8 @@ class Processor:
                       or "nonuniform" (non-uniformly partitioned: a head block of
                       partition_lines, tail blocks up to tail_block_lines in the partition of
                       least modelled cost; the partitioned latency at fewer multiply-adds)
-    fft_length        FFT correlator block transform length M (power of two >= N; None: 2N);
-                      lines leave in blocks of M - N + 1: the latency/throughput knob of "fft"
+    fft_length        FFT correlator transform length M (>= N, a product of 2, 3 and 5; None:
+                      2N to a power of two); blocks of M - N + 1 lines: "fft"'s latency knob
     partition_lines   L, the block of the "partitioned" correlator: a power of two, at most N
                       (checked when that correlator is chosen).  A line leaves at most L - 1
                       pulses after its last pulse, plus one block's compute time; each line
@@ -353,12 +355,10 @@ class Processor:
             raise ValueError(
                 f"Processor.partition_lines {lines} exceeds aperture_pulses {self.aperture_pulses}"
             )
-        if self.fft_length is not None and not (
-            isinstance(self.fft_length, int)
-            and self.fft_length >= self.aperture_pulses
-            and not self.fft_length & (self.fft_length - 1)
-        ):
-            raise ValueError("Processor.fft_length must be a power of two >= aperture_pulses")
+        m = self.fft_length
+        if m is not None and not (m >= self.aperture_pulses and is_fast_fft_length(m)):
+            why = "must be >= aperture_pulses and a product of 2, 3 and 5 (1000, 1024, 1080, …)"
+            raise ValueError(f"Processor.fft_length {why}, got {m}")
         if self.precision not in PRECISIONS:
             raise ValueError(
                 f"Processor.precision must be one of {PRECISIONS}, got {self.precision!r}"

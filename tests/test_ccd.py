@@ -50,12 +50,29 @@ def test_fft_block_length_is_a_knob(rng):
     n, nr = 32, 7
     mask, lines = crandn(rng, n, nr) / n, crandn(rng, 300, nr, dtype=np.complex64)
     ref = correlate_reference(lines, mask)
-    for m in (32, 64, 256):
+    for m in (32, 45, 48, 64, 75, 256):  # any product of 2, 3 and 5 >= N
         corr = FFTCorrelator(mask, fft_length=m)
         assert corr.block_lines == m - n + 1
         assert relative_rms(_stream(corr, lines, [300]), ref) < TOL
-    with pytest.raises(ValueError):
-        FFTCorrelator(mask, fft_length=48)
+    for m in (30, 49, 66):  # below N; 7²; 2·3·11
+        with pytest.raises(ValueError, match="product of 2, 3 and 5"):
+            FFTCorrelator(mask, fft_length=m)
+
+
+@pytest.mark.parametrize("m", [32, 45, 64])
+def test_fft_skip_zeros_is_pushing_zeros_without_the_transforms(m, rng):
+    """skip_zeros(k) (the granularity's fill): the counters and the lines that follow are
+    push(zeros(k))'s, bit for bit, in pieces of any size; refused once real lines came."""
+    n, nr = 32, 5
+    mask, lines = crandn(rng, n, nr) / n, crandn(rng, 90, nr, dtype=np.complex64)
+    pushed, skipped = FFTCorrelator(mask, fft_length=m), FFTCorrelator(mask, fft_length=m)
+    want = [len(pushed.push(np.zeros((k, nr), np.complex64))) for k in (7, 1, 33, 19)]
+    assert [skipped.skip_zeros(k) for k in (7, 1, 33, 19)] == want
+    assert (skipped.pulses_in, skipped.lines_out) == (pushed.pulses_in, pushed.lines_out)
+    np.testing.assert_array_equal(skipped.push(lines), pushed.push(lines))
+    np.testing.assert_array_equal(skipped.flush(), pushed.flush())
+    with pytest.raises(RuntimeError, match="other than zeros"):
+        skipped.skip_zeros(1)
 
 
 def test_no_line_before_the_aperture_is_full(rng):

@@ -158,11 +158,18 @@ def test_options_stay_fixed():
 
 def test_the_candidates_follow_the_correlator():
     p = preset("psaltis-jpl").processor  # fft, N = 512, M = 1024 by default
-    # M: each power of two from the first >= N to the configuration's; B = M - N + 1
-    assert block_candidates(p) == ([1, 513], "")
+    # M: the least product of 2, 3 and 5 >= N - 1 + b for b = 1, 2, 4, …, each once, below
+    # the configuration's M, then that M; B = M - N + 1.  Written out: 512 = 2^9; 513-518 →
+    # 540 = 2^2·3^3·5; 526 → 540; 542 → 576 = 2^6·3^2; 574 → 576; 638 → 640 = 2^7·5;
+    # 766 → 768 = 2^8·3; 1022 → 1024, the configuration's.
+    assert block_candidates(p) == ([m - 511 for m in (512, 540, 576, 640, 768, 1024)], "")
     assert block_candidates(p, given_fft=4096) == ([3585], "--fft-length")
     rs1 = preset("radarsat1").processor  # N = 716, M = 2048
-    assert block_candidates(rs1) == ([1024 - 715, 2048 - 715], "")
+    # 716 → 720 = 2^4·3^2·5; 717-722 → 720; 723 → 729 = 3^6; 730 → 750 = 2·3·5^3; 746 → 750;
+    # 778 → 800 = 2^5·5^2; 842 → 864 = 2^5·3^3; 970 → 972 = 2^2·3^5; 1226 → 1250 = 2·5^4;
+    # 1738 → 1800 = 2^3·3^2·5^2; 2762 ≥ 2048: the configuration's M ends the list
+    lengths = (720, 729, 750, 800, 864, 972, 1250, 1800, 2048)
+    assert block_candidates(rs1) == ([m - 715 for m in lengths], "")
     nonuniform = preset("psaltis-jpl").with_processor(correlator="nonuniform").processor
     assert block_candidates(nonuniform) == ([1, 2, 4, 8, 16, 32, 64], "")
     tiny = preset("tiny").with_processor(correlator="partitioned").processor  # N = 64
@@ -254,34 +261,38 @@ def test_the_run_gets_the_documented_choice_of_the_measured_costs(monkeypatch):
 
 
 def test_the_fft_correlator_s_transform_length_is_the_documented_choice(monkeypatch):
-    """fft: the candidates are M - N + 1 for M = the powers of two from N (block_candidates);
-    the run gets choose_granularity's block as its transform length M = B + N - 1, and the
-    lens aligned on its blocks (overlap-save releases every B pulses), in calls of at most
-    the lens batch.  Before, the fft correlator kept the configuration's M whatever the rate
-    (RADARSAT-1: blocks of 1,333 lines, 0.5-0.8 s of latency at every rate)."""
-    n = 716
-    blocks = (1024 - n + 1, 2048 - n + 1)
-    costs = StageCosts(  # a block's transforms: 30 ms, 65 ms; the lens 50 µs a pulse
+    """fft: the candidates are M - N + 1 for the products of 2, 3 and 5 above N
+    (block_candidates); the run gets choose_granularity's block as its transform length
+    M = B + N - 1, and the lens aligned on its blocks (overlap-save releases every B pulses),
+    in calls of at most the lens batch.  Before, the fft correlator kept the configuration's
+    M whatever the rate (RADARSAT-1: blocks of 1,333 lines, 0.5-0.8 s of latency at every
+    rate)."""
+    cfg = preset("radarsat1")
+    n, micro = 716, cfg.processor.micro_batch
+    blocks = block_candidates(cfg.processor)[0]
+    costs = StageCosts(  # a block's transforms 40 µs a row of M; the lens 50 µs a pulse
         lens_s={b: 50 * US * b for b in blocks},
-        block_s=dict(zip(blocks, (30e-3, 65e-3), strict=True)),
+        block_s={b: 40 * US * (b + n - 1) for b in blocks},
         strip_s=1e-3,
         ingest_s={b: 3 * US * b for b in blocks},
     )
     monkeypatch.setattr(live_granularity, "measure_costs", _fake_measure(costs))
-    cfg = preset("radarsat1")
-    for rate_hz in (314.0, 1257.0, 1885.0, 4000.0, 9000.0):
+    chosen = set()
+    for rate_hz in (50.0, 314.0, 1257.0, 1885.0, 4000.0, 9000.0):
         new_cfg, settings, g, words = GranularityRequest(rate_hz).apply(cfg, PipelineSettings())
-        u = {
-            b: rate_hz * (50 * US + 3 * US + (costs.block_s[b] + 1e-3 / 64 * b) / b) for b in blocks
-        }  # aligned: the lens and ingest a block; strips of 64 lines
+        # aligned: ingest and the lens a block; strips of the block's lines, at most 64
+        u = {b: rate_hz * (53 * US + 40 * US * (b + n - 1) / b + 1e-3 / min(b, 64)) for b in blocks}
         latency = {b: latency_by_hand(rate_hz, b, u[b]) for b in blocks}
         want = min(blocks, key=lambda b: (latency[b], b))
         if not math.isfinite(latency[want]):
             want = blocks[-1]
         assert g.block_lines == want, rate_hz
         assert new_cfg.processor.fft_length == want + n - 1
-        assert settings.lens_align == want and g.lens_call_pulses == cfg.processor.micro_batch
-        assert "a block's last call ending on its last pulse" in words
+        assert settings.lens_align == want and g.lens_call_pulses == min(want, micro)
+        whole = "each block's pulses together" if want <= micro else "a block's last call"
+        assert whole in words
+        chosen.add(want)
+    assert len(chosen) >= 3  # the choice follows the rate
     assert block_candidates(cfg.processor, given_fft=1024)[1] == "--fft-length"
 
 

@@ -24,6 +24,7 @@ FLOORS = [
     {
         "rtsar",
         "rtsar.params",
+        "rtsar.fft_lengths",
         "rtsar.presets",
         "rtsar.windows",
         "rtsar.instrument",

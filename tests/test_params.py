@@ -71,8 +71,10 @@ def test_processor_and_geometry_validation():
         Processor(aperture_pulses=64, range_bins=64, range_oversampling=3)
     with pytest.raises(ValueError, match="azimuth_window"):
         Processor(aperture_pulses=64, range_bins=64, azimuth_window="kaiser")
-    with pytest.raises(ValueError, match="fft_length"):
-        Processor(aperture_pulses=64, range_bins=64, fft_length=100)
+    for m in (98, 60):  # 2·7²: not a product of 2, 3 and 5; below N
+        with pytest.raises(ValueError, match="fft_length must be >= aperture_pulses and a product"):
+            Processor(aperture_pulses=64, range_bins=64, fft_length=m)
+    assert Processor(aperture_pulses=64, range_bins=64, fft_length=100).fft_length == 100
     with pytest.raises(ValueError, match="platform_height_m"):
         Geometry(1.0, 100.0, 0.1, 100.0, 0.2, platform_height_m=200.0)
     with pytest.raises(ValueError, match="FMCW"):

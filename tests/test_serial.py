@@ -319,7 +319,9 @@ def test_serial_run_of_a_scene_keeps_its_along_track_positions(tmp_path):
     got, az, _, _ = read_image(img)
     want, want_az, _, _ = read_image(ref_img)
     np.testing.assert_allclose(az, want_az)
-    np.testing.assert_array_equal(got, want)
+    # the same lines to float32 rounding: the live run chose its own fft block for its rate
+    # (process keeps the configuration's; test_zmq_in fixes it with --fft-length: bit for bit)
+    assert np.abs(got - want).max() <= 1e-5 * np.abs(want).max()
 
 
 def _false_header(samples: int, channels: int) -> bytes:

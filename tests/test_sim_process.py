@@ -26,14 +26,17 @@ def _fast(source: SimSource) -> SimSource:
 
 @pytest.mark.parametrize("scene_name, pulses", [("demo", 70), ("insal-ridge", 40)])
 def test_the_separate_process_makes_the_same_shots(scene_name, pulses):
-    """Blocks of 16 from the child, releases of 3 here: the shots and the auxiliary channels
-    (insal-ridge's second receiver) are the in-process simulator's, in order."""
+    """Blocks of 16 from the child, released here as the pacer cuts them: the shots and the
+    auxiliary channels (insal-ridge's second receiver) are the in-process simulator's, in
+    order."""
     scene = load_scene(scene_name)
     here = list(_fast(SimSource(scene, pulses=pulses, chunk=3)))
     there_source = _fast(SimSource(scene, pulses=pulses, chunk=3, separate=True))
     there_source.prepare()
     there = list(there_source)
-    assert [b.seq.tolist() for b in there] == [b.seq.tolist() for b in here]
+    # (how the pacer cuts its releases depends on the machine's load: the pulses are the test)
+    assert np.concatenate([b.seq for b in there]).tolist() == list(range(pulses))
+    assert np.concatenate([b.seq for b in here]).tolist() == list(range(pulses))
     np.testing.assert_array_equal(
         np.concatenate([b.samples for b in there]), np.concatenate([b.samples for b in here])
     )

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..analysis.timing import rate_per_s
 from ..ccd import make_ccd
+from ..fft_lengths import next_fast_fft_length
 from ..lens import cl_devices, make_lens, make_plan
 from ..lens.base import survey_devices_first, survey_wanted
 from ..lens.plan import next_pow2
@@ -106,16 +107,21 @@ def block_candidates(
     nonuniform correlators' head block L, 1, 2, 4, … up to MOST_STRIP_LINES (64) or the
     configuration's partition_lines where larger, at most the aperture (a rate that no block
     of 16 keeps up with gets larger ones before it drops shots; ``given``: --partition-lines);
-    the fft correlator's block M - N + 1 for its transform length M = every power of two from
-    the first >= N up to the configuration's M (``given_fft``: --fft-length); the direct
-    and physical CCDs release a line a pulse, so their block is the strip's: 1 … 16."""
+    the fft correlator's block M - N + 1 for the transform lengths M = the least product of
+    2, 3 and 5 >= N - 1 + b for b = 1, 2, 4, …, each once, below the configuration's M, and
+    that M (``given_fft``: --fft-length); the direct and physical CCDs release a line a
+    pulse, so their block is the strip's: 1 … 16."""
     if physical is None and p.correlator == "fft":
         n = p.aperture_pulses
         if given_fft:
             return [given_fft - n + 1], "--fft-length"
         top = p.fft_length or next_pow2(2 * n)
-        lengths = [1 << k for k in range(top.bit_length()) if n <= 1 << k <= top]
-        return [m - n + 1 for m in lengths], ""
+        lengths, b = [], 1
+        while (m := next_fast_fft_length(n - 1 + b)) < top:
+            if m not in lengths:
+                lengths.append(m)
+            b *= 2
+        return [m - n + 1 for m in [*lengths, top]], ""
     if physical is None and p.correlator in BLOCKED_KINDS and given:
         return [given], "--partition-lines"
     largest = 16
@@ -269,6 +275,9 @@ def path_costs_s(
         emitted = 0  # lines out so far (the engine's numbering)
         for pulses in filled:
             timing.record(pulses)
+            if hasattr(ccd, "skip_zeros"):  # fft: the same state without the transforms
+                emitted += ccd.skip_zeros(len(pulses))
+                continue
             emitted += len(ccd.push(np.zeros((len(pulses), len(plan.range_m)), shots.dtype)))
         largest = max([block, *(b for _, _, b in getattr(ccd, "segments", ()))])
         least = min(PATH_LEAST_CALLS, -(-PATH_LEAST_LINES // block))

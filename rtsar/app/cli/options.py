@@ -90,9 +90,10 @@ def add_correlator_option(g) -> None:
         type=int,
         metavar="M",
         help="transform length of the fft correlator: lines leave in blocks of M - N + 1, N "
-        "the aperture (power of two >= N; default: the configuration's, 2N rounded up to a "
-        "power of two in the presets; a live run at a rate chooses it among the powers of "
-        "two from N up to that by the work measured)",
+        "the aperture (M >= N, a product of 2, 3 and 5 such as 1000, 1024, 1080; default: "
+        "the configuration's, 2N rounded up to a power of two in the presets; a live run at a "
+        "rate chooses it from the work measured, blocks of about 1, 2, 4, … lines up to the "
+        "configuration's)",
     )
     g.add_argument(
         "--tail-block-lines",

@@ -1,0 +1,22 @@
+"""FFT lengths the fft correlator may use: products of 2, 3 and 5 (SciPy's and NumPy's FFTs
+transform them in O(M log M) with their short radices)."""
+
+from __future__ import annotations
+
+
+def is_fast_fft_length(m: int) -> bool:
+    """Whether ``m`` >= 1 is a product of 2, 3 and 5 only."""
+    if not isinstance(m, int) or m < 1:
+        return False
+    for p in (2, 3, 5):
+        while m % p == 0:
+            m //= p
+    return m == 1
+
+
+def next_fast_fft_length(n: int) -> int:
+    """The least M >= n that is a product of 2, 3 and 5."""
+    m = max(1, int(n))
+    while not is_fast_fft_length(m):
+        m += 1
+    return m

@@ -296,6 +296,34 @@ def test_the_fft_correlator_s_transform_length_is_the_documented_choice(monkeypa
     assert block_candidates(cfg.processor, given_fft=1024)[1] == "--fft-length"
 
 
+def test_a_hopeless_block_is_timed_on_its_warm_calls_only():
+    """path_costs_s at a rate where the warm calls already take HOPELESS_SHARE of the stream's
+    time stops there (its model is infinite whatever the rounds); at a rate it may keep up
+    with, every round is timed.  Counted on the lens's calls, one a block."""
+    from rtsar.lens import make_lens, make_plan
+
+    cfg = preset("tiny").with_processor(correlator="nonuniform")
+    plan = make_plan(cfg)
+    lens = make_lens(plan, "numpy")
+    calls = []
+
+    class Counting:
+        def compress(self, samples):
+            calls.append(len(samples))
+            return lens.compress(samples)
+
+    rng = np.random.default_rng(0)
+
+    def noise(rows, cols):
+        return (rng.standard_normal((rows, cols)) + 0j).astype(np.complex64)
+
+    g = live_granularity
+    for rate_hz, want in ((1e9, g.PATH_WARM_CALLS), (1.0, g.PATH_WARM_CALLS + 3 * 8)):
+        calls.clear()
+        parts = g.path_costs_s(cfg, plan, Counting(), 1, noise, 64, rate_hz)
+        assert len(calls) == want and all(0 < x < 1 for x in parts)
+
+
 def test_each_block_s_path_is_measured_part_by_part_until_past_the_least():
     """The measurement itself (tiny preset, NumPy lens): with a head block, each candidate's
     path is timed (ingest, lens, correlator at that block; one strip), smallest first, and

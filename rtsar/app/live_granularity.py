@@ -195,7 +195,7 @@ def measure_costs(
         strip_s = None
         lens_batch = settings.max_batch or p.micro_batch
         for block in blocks:
-            parts = path_costs_s(config, plan, lens, block, noise, lens_batch)
+            parts = path_costs_s(config, plan, lens, block, noise, lens_batch, rate_hz)
             ingest_s[block] = parts[0]  # ingest checks every channel in one call
             lens_s[block], block_s[block] = copies * parts[1], copies * parts[2]
             strip_s = parts[3] if strip_s is None else strip_s  # a strip's cost: the first's
@@ -240,10 +240,11 @@ PATH_ROUNDS = 3  # rounds of blocks timed through the path, after PATH_WARM_CALL
 PATH_WARM_CALLS = 4
 PATH_LEAST_CALLS = 8  # blocks a round, at least, …
 PATH_LEAST_LINES = 64  # … where they hold fewer lines than this (fft's hundreds: one a round)
+HOPELESS_SHARE = 2.0  # a block whose warm calls take this share of the stream's time: no rounds
 
 
 def path_costs_s(
-    config: Config, plan, lens, block: int, noise, lens_batch: int = 0
+    config: Config, plan, lens, block: int, noise, lens_batch: int = 0, rate_hz: float = 0.0
 ) -> tuple[float, float, float, float]:
     """Seconds a call of each part of a block's path, (ingest, lens, correlator, strip), for
     blocks taken through all four in turn on one thread, as the pipeline takes them: ingest's
@@ -257,7 +258,9 @@ def path_costs_s(
     waited for there), at least PATH_LEAST_CALLS blocks.  Timed in turn, not each part back to
     back: the parts evict each other's data from the caches in the pipeline, and the sum is
     what one core spends a block (issue 38: back to back, psaltis-jpl's parts summed to
-    264-424 µs a pulse against 600-760 µs in turn)."""
+    264-424 µs a pulse against 600-760 µs in turn).  At ``rate_hz``, a block whose warm calls
+    already take HOPELESS_SHARE of the stream's time is timed on those calls alone: no round
+    would bring it under 1 (RADARSAT-1's fft blocks of 5 and 14 lines: 3.5 s of rounds)."""
     p = config.processor
     n, samples = p.aperture_pulses, plan.samples_per_shot
     ccd = make_ccd(block_config(config, block), plan.range_m, None)
@@ -304,6 +307,8 @@ def path_costs_s(
                 publisher.strip(strip, info)
                 latency.add(clock() - last_s)
             spent.append((t1 - t0, t2 - t1, t3 - t2, clock() - t3))
+            if k + 1 == warm and rate_hz * np.sum(spent) / (warm * block) >= HOPELESS_SHARE:
+                return tuple(float(x) for x in np.median(spent, axis=0))
         rounds = np.reshape(spent[warm:], (PATH_ROUNDS, per_round, 4)).mean(axis=1)
         ingest_s, lens_s, push_s, strip_s = np.median(rounds, axis=0)
         return float(ingest_s), float(lens_s), float(push_s), float(strip_s)

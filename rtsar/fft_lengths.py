@@ -3,11 +3,14 @@ transform them in O(M log M) with their short radices)."""
 
 from __future__ import annotations
 
+import numbers
+
 
 def is_fast_fft_length(m: int) -> bool:
-    """Whether ``m`` >= 1 is a product of 2, 3 and 5 only."""
-    if not isinstance(m, int) or m < 1:
+    """Whether ``m`` (an integer, NumPy's too) >= 1 is a product of 2, 3 and 5 only."""
+    if not isinstance(m, numbers.Integral) or isinstance(m, bool) or m < 1:
         return False
+    m = int(m)
     for p in (2, 3, 5):
         while m % p == 0:
             m //= p

@@ -54,6 +54,7 @@ def test_fft_block_length_is_a_knob(rng):
         corr = FFTCorrelator(mask, fft_length=m)
         assert corr.block_lines == m - n + 1
         assert relative_rms(_stream(corr, lines, [300]), ref) < TOL
+    assert FFTCorrelator(mask, fft_length=np.int64(45)).fft_length == 45  # NumPy's integers
     for m in (30, 49, 66):  # below N; 7²; 2·3·11
         with pytest.raises(ValueError, match="product of 2, 3 and 5"):
             FFTCorrelator(mask, fft_length=m)

@@ -324,6 +324,35 @@ def test_a_hopeless_block_is_timed_on_its_warm_calls_only():
         assert len(calls) == want and all(0 < x < 1 for x in parts)
 
 
+def test_an_fft_block_s_path_is_timed_without_transforming_its_fill():
+    """fft (tiny, N = 64): each candidate M's path timed as the pipeline runs it, the fill of
+    zeros skipped (skip_zeros), every part a positive figure; the pushes each release their
+    block's lines (a strip timed each round)."""
+    from rtsar.lens import make_lens, make_plan
+
+    cfg = preset("tiny")
+    plan = make_plan(cfg)
+    lens = make_lens(plan, "numpy")
+    rng = np.random.default_rng(1)
+
+    def noise(rows, cols):
+        return (rng.standard_normal((rows, cols)) + 0j).astype(np.complex64)
+
+    for block in block_candidates(cfg.processor)[0]:  # 1, 9, 17, 33, 65
+        parts = live_granularity.path_costs_s(cfg, plan, lens, block, noise, 64, 1.0)
+        assert all(0 < x < 1 for x in parts), (block, parts)
+
+
+def test_a_bad_fft_length_on_the_command_line_names_the_option_and_the_aperture():
+    args = build_parser("process").parse_args(["process", "r.h5", "-o", "i.h5"])
+    for m, nearest in ((98, 100), (30, 64)):
+        args.fft_length = m
+        with pytest.raises(ValueError, match=rf"--fft-length {m}: .*N = 64.* up: {nearest}\)"):
+            processor_changes(args, preset("tiny"))
+    args.fft_length = 90
+    assert processor_changes(args, preset("tiny")).processor.fft_length == 90
+
+
 def test_each_block_s_path_is_measured_part_by_part_until_past_the_least():
     """The measurement itself (tiny preset, NumPy lens): with a head block, each candidate's
     path is timed (ingest, lens, correlator at that block; one strip), smallest first, and

@@ -1,14 +1,16 @@
 """A live run's granularity, chosen at its start: the engine's work timed here on synthetic
 shots, then the rule of rtsar.stream.granularity (issue 38).
 
-Timed, each figure the median of 3 rounds of calls made back to back (at least 3 calls or
-10 ms a round): the run's own lens (the backend ``--lens`` picks, at the configuration's
-batch) at 1, 2, 4, … pulses a call, up to the first that keeps up with the rate; the run's
-correlator built with each candidate block, smallest first, up to the first whose work stays
-under the target; one strip's cut and message header.  With ``--height`` each receiver adds a
-lens and a correlator, so their figures count once a channel.  About 0.1-0.5 s where a small
-block fits (most of it building the correlator); more where none does.  What the command line
-fixed (``--partition-lines``, ``--strip-lines`` / ``--strip-ms``, ``--max-batch``) stays.
+Where the correlator releases its lines in blocks (the head block of partitioned and
+nonuniform; fft's overlap-save block, set by its transform length), each candidate block's
+path is timed part by part as the pipeline runs it (path_costs_s: ingest, the run's own lens,
+the correlator built with that block, a published strip), smallest block first, until one
+models worse than a smaller one (past_the_least).  The direct and physical CCDs: the lens at
+1, 2, 4, … pulses a call up to the first that keeps up, each block's push and one strip timed
+alone.  With ``--height`` each receiver adds a lens and a correlator, so their figures count
+once a channel.  A fraction of a second to a few seconds (RADARSAT-1's fft plan: 2.6-4 s, most
+of it building the correlators).  What the command line fixed (``--partition-lines``,
+``--fft-length``, ``--strip-lines`` / ``--strip-ms``, ``--max-batch``) stays.
 """
 
 from __future__ import annotations
@@ -255,12 +257,13 @@ def path_costs_s(
     first filled with an aperture of zeros, so each push releases its block's lines.  Each
     figure: the median over PATH_ROUNDS rounds of its mean a block, a round spanning the
     correlator's largest block (its tail's, whose work falls on one push in many and is
-    waited for there), at least PATH_LEAST_CALLS blocks.  Timed in turn, not each part back to
-    back: the parts evict each other's data from the caches in the pipeline, and the sum is
-    what one core spends a block (issue 38: back to back, psaltis-jpl's parts summed to
-    264-424 µs a pulse against 600-760 µs in turn).  At ``rate_hz``, a block whose warm calls
-    already take HOPELESS_SHARE of the stream's time is timed on those calls alone: no round
-    would bring it under 1 (RADARSAT-1's fft blocks of 5 and 14 lines: 3.5 s of rounds)."""
+    waited for there), at least PATH_LEAST_CALLS blocks or PATH_LEAST_LINES lines.  Timed in
+    turn, not each part back to back: the parts evict each other's data from the caches in
+    the pipeline, and the sum is what one core spends a block (issue 38: back to back,
+    psaltis-jpl's parts summed to 264-424 µs a pulse against 600-760 µs in turn).  At
+    ``rate_hz``, a block whose warm calls already take HOPELESS_SHARE of the stream's time
+    (the fastest of them) is timed on those calls alone: no round would bring it under 1
+    (RADARSAT-1's fft blocks of 5 and 14 lines: 3.5 s of rounds)."""
     p = config.processor
     n, samples = p.aperture_pulses, plan.samples_per_shot
     ccd = make_ccd(block_config(config, block), plan.range_m, None)
@@ -284,7 +287,8 @@ def path_costs_s(
             emitted += len(ccd.push(np.zeros((len(pulses), len(plan.range_m)), shots.dtype)))
         largest = max([block, *(b for _, _, b in getattr(ccd, "segments", ()))])
         least = min(PATH_LEAST_CALLS, -(-PATH_LEAST_LINES // block))
-        per_round, warm = max(least, -(-largest // block)), min(PATH_WARM_CALLS, least)
+        per_round = max(least, -(-largest // block))
+        warm = max(2, min(PATH_WARM_CALLS, least))  # the first: the correlator's first transform
         spent = []
         for k in range(warm + PATH_ROUNDS * per_round):
             seq = fill + k * block + np.arange(block)
@@ -307,7 +311,8 @@ def path_costs_s(
                 publisher.strip(strip, info)
                 latency.add(clock() - last_s)
             spent.append((t1 - t0, t2 - t1, t3 - t2, clock() - t3))
-            if k + 1 == warm and rate_hz * np.sum(spent) / (warm * block) >= HOPELESS_SHARE:
+            fastest_s = min(map(sum, spent)) if k + 1 == warm else 0.0  # of the warm calls
+            if rate_hz * fastest_s / block >= HOPELESS_SHARE:
                 return tuple(float(x) for x in np.median(spent, axis=0))
         rounds = np.reshape(spent[warm:], (PATH_ROUNDS, per_round, 4)).mean(axis=1)
         ingest_s, lens_s, push_s, strip_s = np.median(rounds, axis=0)

@@ -11,6 +11,7 @@ import sys
 import warnings
 from dataclasses import replace
 
+from ...fft_lengths import is_fast_fft_length, next_fast_fft_length
 from ...focus.spec import ORDER as CORRECTIONS
 from ...focus.spec import correct_option
 from ...lens import LENS_BACKENDS, range_axis_m
@@ -344,6 +345,12 @@ def processor_changes(args, cfg):
     for name in ("micro_batch", "partition_lines", "fft_length", "tail_block_lines"):
         if getattr(args, name, None) is not None:
             changes[name] = getattr(args, name)
+    m, n = changes.get("fft_length"), cfg.processor.aperture_pulses
+    if m is not None and not (m >= n and is_fast_fft_length(m)):
+        raise ValueError(
+            f"--fft-length {m}: must be at least the aperture, N = {n}, and a product of 2, 3 "
+            f"and 5 (the least such length from {max(m, n)} up: {next_fast_fft_length(max(m, n))})"
+        )
     if getattr(args, "precision", None):
         changes["precision"] = args.precision
     if getattr(args, "range_migration_taps", None) is not None:

@@ -43,7 +43,7 @@ def measure(preset_name: str, rate: float, pulses: int, lens: str, correlator: s
     idle = _source(chosen, shots, len(shots), "max", 1, False)  # never iterated: fed below
     pipe = Pipeline(chosen, idle, [pub], settings)
     clock = time.perf_counter
-    step = max(1, settings.lens_align)  # shots a lens call takes while keeping up
+    step = min(settings.lens_align, pipe.max_batch) or 1  # shots a lens call takes, keeping up
     warm = -(-(chosen.processor.aperture_pulses + 64) // step)
     calls = -(-pulses // step)
     spent = np.zeros((calls, len(PARTS)))

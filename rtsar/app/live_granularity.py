@@ -8,7 +8,7 @@ the correlator built with that block, a published strip), smallest block first, 
 models worse than a smaller one (past_the_least).  The direct and physical CCDs: the lens at
 1, 2, 4, … pulses a call up to the first that keeps up, each block's push and one strip timed
 alone.  With ``--height`` each receiver adds a lens and a correlator, so their figures count
-once a channel.  A fraction of a second to a few seconds (RADARSAT-1's fft plan: 2.6-4 s, most
+once a channel.  A fraction of a second to a few seconds (RADARSAT-1's fft plan: about 2.4 s, most
 of it building the correlators).  What the command line fixed (``--partition-lines``,
 ``--fft-length``, ``--strip-lines`` / ``--strip-ms``, ``--max-batch``) stays.
 """

@@ -1,6 +1,7 @@
 """Recording format v2: every channel of a shot is recorded, replayed and processed exactly as
 the live path feeds it to the corrections (issue 13)."""
 
+import argparse
 import json
 
 import h5py
@@ -252,11 +253,18 @@ def test_a_slow_live_scene_says_how_to_look_sooner(capsys):
     from rtsar.app.cli.streaming import warn_slow_first_line
     from rtsar.scene import load_scene
 
-    # 160 pulses at 5 Hz, and the fft correlator's first block of 353 lines: 71 s
-    warn_slow_first_line(load_scene("insal-ridge"), "insal-ridge")
+    # 160 pulses at 5 Hz: 32 s; the live run's fft block at this rate is its smallest (M = N,
+    # B = 1), so no block adds to it (before the run chose M: 353 lines, "71 s", said wrongly)
+    scene = load_scene("insal-ridge")
+    warn_slow_first_line(scene, "insal-ridge")
     err = capsys.readouterr().err
-    assert "first image line comes after 71 s" in err and "rtsar replay REC.h5 --rate F" in err
-    assert "--correlator nonuniform" in err
+    assert "first image line comes after 32 s" in err and "rtsar replay REC.h5 --rate F" in err
+    assert "--correlator nonuniform" not in err
+    # --fft-length 512 fixes the block at 353 lines: the first line after 353 pulses, 71 s
+    args = argparse.Namespace(partition_lines=None, fft_length=512)
+    warn_slow_first_line(scene, "insal-ridge", args)
+    err = capsys.readouterr().err
+    assert "first image line comes after 71 s" in err and "--correlator nonuniform" in err
     warn_slow_first_line(load_scene("demo"), "demo")  # 512 pulses at 1600 Hz: no note
     assert capsys.readouterr().err == ""
 

@@ -34,7 +34,7 @@ from ..live import (
     serial_channel_fix,
     zmq_channel_fix,
 )
-from ..live_granularity import request_of
+from ..live_granularity import block_candidates, block_config, request_of
 from ..subscribe import subscribe
 from .files import simulate_to
 from .inputs import open_input
@@ -65,11 +65,16 @@ def channel_map(args, scene) -> ChannelMap | None:
 SLOW_FIRST_LINE_S = 30.0  # a live run whose first line takes longer than this gets a hint
 
 
-def warn_slow_first_line(scene, name) -> None:
+def warn_slow_first_line(scene, name, args=None) -> None:
     """A live simulation waits at the real PRF for its first line (an aperture of N pulses,
     and the correlator's block): say so when that is long (a lidar bench at a few Hz), and how
-    to look at the scene sooner."""
-    g, p = scene.config.geometry, scene.config.processor
+    to look at the scene sooner.  The block is the run's smallest candidate (rtsar.app.
+    live_granularity), or the one ``args`` fixes (--partition-lines, --fft-length): at a rate
+    this slow the wait for a block outweighs any work, so the run chooses the smallest."""
+    g = scene.config.geometry
+    given = (getattr(args, "partition_lines", None), getattr(args, "fft_length", None))
+    smallest = block_candidates(scene.config.processor, None, *given)[0][0]
+    p = block_config(scene.config, smallest).processor
     pulses = first_line_pulses(p)
     wait_s = pulses / g.prf_hz
     if wait_s > SLOW_FIRST_LINE_S:
@@ -179,7 +184,7 @@ def cmd_run(args) -> int:
     scene = replace(scene, config=processor_changes(args, scene.config))
     warn_outside_swath(scene)
     strip_lines(args, scene.config.geometry.prf_hz)
-    warn_slow_first_line(scene, args.scene or scene.name)
+    warn_slow_first_line(scene, args.scene or scene.name, args)
     pulses = None if args.duration is None else int(args.duration * scene.config.geometry.prf_hz)
     source = SimSource(scene, pulses, warm_from=args.scene or DEMO_SCENE, separate=True)
     return run_stream(

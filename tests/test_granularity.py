@@ -290,7 +290,7 @@ def test_the_fft_correlator_s_transform_length_is_the_documented_choice(monkeypa
         assert new_cfg.processor.fft_length == want + n - 1
         assert settings.lens_align == want and g.lens_call_pulses == min(want, micro)
         whole = "each block's pulses together" if want <= micro else "a block's last call"
-        assert whole in words
+        assert whole in words and words.endswith(f"; fft transform length M = {want + n - 1}")
         chosen.add(want)
     assert len(chosen) >= 3  # the choice follows the rate
     assert block_candidates(cfg.processor, given_fft=1024)[1] == "--fft-length"
@@ -345,9 +345,14 @@ def test_an_fft_block_s_path_is_timed_without_transforming_its_fill():
 
 def test_a_bad_fft_length_on_the_command_line_names_the_option_and_the_aperture():
     args = build_parser("process").parse_args(["process", "r.h5", "-o", "i.h5"])
-    for m, nearest in ((98, 100), (30, 64)):
+    for m, rule, nearest in (
+        (98, "a product of 2, 3 and 5", 100),
+        (30, "at least the aperture, N = 64", 64),
+    ):
         args.fft_length = m
-        with pytest.raises(ValueError, match=rf"--fft-length {m}: .*N = 64.* up: {nearest}\)"):
+        with pytest.raises(
+            ValueError, match=rf"--fft-length {m}: must be {rule} \(.* up: {nearest}\)"
+        ):
             processor_changes(args, preset("tiny"))
     args.fft_length = 90
     assert processor_changes(args, preset("tiny")).processor.fft_length == 90

@@ -89,7 +89,10 @@ class GranularityRequest:
             aligned=aligned(config.processor, physical, settings.stages),
         )  # fmt: skip
         words = granularity_words(g, costs)
-        return block_config(config, g.block_lines, physical), chosen_settings(settings, g), g, words
+        chosen = block_config(config, g.block_lines, physical)
+        if physical is None and chosen.processor.correlator == "fft":  # what --fft-length sets
+            words += f"; fft transform length M = {chosen.processor.fft_length}"
+        return chosen, chosen_settings(settings, g), g, words
 
 
 def request_of(args, rate_hz: float | None) -> GranularityRequest | None:

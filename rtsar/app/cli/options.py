@@ -347,9 +347,10 @@ def processor_changes(args, cfg):
             changes[name] = getattr(args, name)
     m, n = changes.get("fft_length"), cfg.processor.aperture_pulses
     if m is not None and not (m >= n and is_fast_fft_length(m)):
+        rule = f"at least the aperture, N = {n}" if m < n else "a product of 2, 3 and 5"
         raise ValueError(
-            f"--fft-length {m}: must be at least the aperture, N = {n}, and a product of 2, 3 "
-            f"and 5 (the least such length from {max(m, n)} up: {next_fast_fft_length(max(m, n))})"
+            f"--fft-length {m}: must be {rule} (the least length >= N that is a product of "
+            f"2, 3 and 5 from {max(m, n)} up: {next_fast_fft_length(max(m, n))})"
         )
     if getattr(args, "precision", None):
         changes["precision"] = args.precision

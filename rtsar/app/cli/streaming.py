@@ -416,7 +416,8 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "replay",
-        description="Replay a recording (from `rtsar simulate`) on an absolute schedule "
+        description="Replay a recording (from `rtsar simulate`, `import` or `run --record`) on "
+        "an absolute schedule "
         "(start + n/PRF: no drift) and publish strips like `rtsar run`. Lossless by default: "
         "the replay waits for the slowest subscriber. Use --wait-subscribers 1 when a "
         "`rtsar subscribe` must see the stream from its first strip.",

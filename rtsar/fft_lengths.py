@@ -1,5 +1,6 @@
 """FFT lengths the fft correlator may use: products of 2, 3 and 5 (SciPy's and NumPy's FFTs
-transform them in O(M log M) with their short radices)."""
+transform them in O(M log M) with their short radices; the least such length >= n is SciPy's
+``scipy.fft.next_fast_len(n, real=True)``)."""
 
 from __future__ import annotations
 
@@ -15,11 +16,3 @@ def is_fast_fft_length(m: int) -> bool:
         while m % p == 0:
             m //= p
     return m == 1
-
-
-def next_fast_fft_length(n: int) -> int:
-    """The least M >= n that is a product of 2, 3 and 5."""
-    m = max(1, int(n))
-    while not is_fast_fft_length(m):
-        m += 1
-    return m

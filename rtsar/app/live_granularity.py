@@ -21,10 +21,10 @@ import time
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.fft import next_fast_len
 
 from ..analysis.timing import rate_per_s
 from ..ccd import make_ccd
-from ..fft_lengths import next_fast_fft_length
 from ..lens import cl_devices, make_lens, make_plan
 from ..lens.base import survey_devices_first, survey_wanted
 from ..lens.plan import next_pow2
@@ -122,7 +122,7 @@ def block_candidates(
             return [given_fft - n + 1], "--fft-length"
         top = p.fft_length or next_pow2(2 * n)
         lengths, b = [], 1
-        while (m := next_fast_fft_length(n - 1 + b)) < top:
+        while (m := next_fast_len(n - 1 + b, real=True)) < top:  # the least 2·3·5 >= it
             if m not in lengths:
                 lengths.append(m)
             b *= 2

@@ -11,7 +11,9 @@ import sys
 import warnings
 from dataclasses import replace
 
-from ...fft_lengths import is_fast_fft_length, next_fast_fft_length
+from scipy.fft import next_fast_len
+
+from ...fft_lengths import is_fast_fft_length
 from ...focus.spec import ORDER as CORRECTIONS
 from ...focus.spec import correct_option
 from ...lens import LENS_BACKENDS, range_axis_m
@@ -350,7 +352,7 @@ def processor_changes(args, cfg):
         rule = f"at least the aperture, N = {n}" if m < n else "a product of 2, 3 and 5"
         raise ValueError(
             f"--fft-length {m}: must be {rule} (the least length >= N that is a product of "
-            f"2, 3 and 5 from {max(m, n)} up: {next_fast_fft_length(max(m, n))})"
+            f"2, 3 and 5 from {max(m, n)} up: {next_fast_len(max(m, n), real=True)})"
         )
     if getattr(args, "precision", None):
         changes["precision"] = args.precision

@@ -547,3 +547,29 @@ def test_the_figures_live_md_states_are_the_code_s():
     assert "(B − 1)/(2r) + S + u·S/(2(1 − u))" in text
     assert int(deadline.group(1)) * 1e-3 == STRIP_DEADLINE_S
     assert int(most.group(1)) == MOST_STRIP_LINES
+
+
+def test_each_path_timing_publishes_on_a_name_never_bound_before(monkeypatch):
+    """A closed socket's inproc name is released later by ZeroMQ's I/O thread: CI (53c0161)
+    failed twice on "cannot bind inproc://rtsar-granularity-…: Address already in use", the
+    name being the id of an object freed by the timing before (17 names for 20 timings)."""
+    from rtsar.lens import make_lens, make_plan
+
+    cfg = preset("tiny").with_processor(correlator="nonuniform")
+    plan = make_plan(cfg)
+    lens = make_lens(plan, "numpy")
+    rng = np.random.default_rng(2)
+    names = []
+
+    class Recording(live_granularity.ZmqPublisher):
+        def __init__(self, endpoint, *args, **kwargs):
+            names.append(endpoint)
+            super().__init__(endpoint, *args, **kwargs)
+
+    def noise(rows, cols):
+        return (rng.standard_normal((rows, cols)) + 0j).astype(np.complex64)
+
+    monkeypatch.setattr(live_granularity, "ZmqPublisher", Recording)
+    for _ in range(20):  # hopeless: the warm calls only
+        live_granularity.path_costs_s(cfg, plan, lens, 1, noise, 64, 1e9)
+    assert len(names) == 20 and len(set(names)) == 20

@@ -15,8 +15,10 @@ of it building the correlators).  What the command line fixed (``--partition-lin
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
+import os
 import time
 from dataclasses import dataclass, replace
 
@@ -246,6 +248,15 @@ PATH_WARM_CALLS = 4
 PATH_LEAST_CALLS = 8  # blocks a round, at least, …
 PATH_LEAST_LINES = 64  # … where they hold fewer lines than this (fft's hundreds: one a round)
 HOPELESS_SHARE = 2.0  # a block whose warm calls take this share of the stream's time: no rounds
+# Each timing's publisher binds a name of its own: a closed socket's inproc name is released
+# by ZeroMQ's I/O thread later, so a reused name (once the id of a freed object) could be
+# "already in use" under load (CI, 53c0161).
+_PROBE_NAMES = itertools.count()
+
+
+def probe_endpoint() -> str:
+    """A fresh inproc name for a timing's publisher: never one this process bound before."""
+    return f"inproc://rtsar-granularity-{os.getpid()}-{next(_PROBE_NAMES)}"
 
 
 def path_costs_s(
@@ -274,7 +285,7 @@ def path_costs_s(
     timing = LineTiming(n, 4 * (n + 2 * p.micro_batch))
     info = StreamInfo("granularity", config, "calibration", "lens", plan.range_m, 0.0, 0.0)
     strips, latency = StripAssembler(info), LatencyStats()
-    publisher = ZmqPublisher(f"inproc://rtsar-granularity-{id(strips):x}", "drop")
+    publisher = ZmqPublisher(probe_endpoint(), "drop", linger_ms=0)  # no subscriber
     shots = noise(block, samples)
     clock = time.perf_counter
     try:

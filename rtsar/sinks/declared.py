@@ -105,3 +105,27 @@ def read_checked(ds: h5py.Dataset, rows: int | None = None, path=None):
     except ValueError as exc:
         raise (ValueError(f"{path}: {exc}") if path is not None else exc) from None
     return ds[:rows]
+
+
+def readable_rows(datasets, rows: int) -> int:
+    """The first ``rows`` rows, or fewer: as many as every dataset of ``datasets`` reads without
+    HDF5's OSError.  A writer killed inside a flush can leave a file whose last rows' storage
+    HDF5 refuses ("len not positive after adjustment for EOA"), though the rows before read;
+    the shortest readable prefix is found by bisection (a read of one row a step: about
+    log2(rows) rows read a dataset, where its last row fails; one where it reads)."""
+
+    def reads(ds, row: int) -> bool:
+        try:
+            ds[row : row + 1]
+        except OSError:
+            return False
+        return True
+
+    for ds in datasets:
+        if rows and not reads(ds, rows - 1):
+            good, bad = 0, rows - 1  # the rows before ``good`` read (none yet); ``bad`` does not
+            while bad - good > 0:
+                middle = (good + bad) // 2
+                good, bad = (middle + 1, bad) if reads(ds, middle) else (good, middle)
+            rows = good
+    return rows

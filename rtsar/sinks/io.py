@@ -33,7 +33,7 @@ from ..params import Config, config_from_dict
 from ..scene.model import Scene, recorded_scene
 from ..sources.formats.foreign import telemetry_problem
 from ..sources.formats.timebase import format_utc, parse_utc, utc_now
-from .declared import check_read, read_checked, stored_rows
+from .declared import check_read, read_checked, readable_rows, stored_rows
 from .h5_output import H5Output, WriteFailed, is_write_error, reason
 from .name_claim import NameClaim
 from .partials import partial_prefix
@@ -443,10 +443,10 @@ def _whole_rows(f: h5py.File, meta: dict) -> int:
     """The rows of a live recording (rtsar.sinks.raw_record) written whole: its writer killed
     (or still writing) may have grown some datasets further than others, and rows it had not
     finished read as zeros; ``pulse_index``, written last and counting 0, 1, 2, … there,
-    says which rows are complete; a row its file does not store is not."""
+    says which rows are complete; a row its file does not store, or HDF5 cannot read, is not."""
     group = f["channels"] if isinstance(f.get("channels"), h5py.Group) else {}
     datasets = [f["shots"], *meta.values(), *group.values()]
-    rows = min(stored_rows(meta["pulse_index"]), *(d.shape[0] for d in datasets))
+    rows = readable_rows(datasets, min(stored_rows(meta["pulse_index"]), *map(len, datasets)))
     index = read_checked(meta["pulse_index"], rows)
     wrong = np.flatnonzero(index != index[0] + np.arange(rows)) if rows else []
     return int(wrong[0]) if len(wrong) else rows

@@ -42,6 +42,25 @@ class ShotBatch:
     def __len__(self) -> int:
         return len(self.seq)
 
+    def split(self, count: int) -> tuple[ShotBatch, ShotBatch]:
+        """The first ``count`` shots and the rest, as two batches (views, nothing copied)."""
+
+        def cut(a, sl):
+            return None if a is None else a[sl]
+
+        head, tail = slice(None, count), slice(count, None)
+        return tuple(
+            ShotBatch(
+                self.seq[sl],
+                self.timestamp_s[sl],
+                self.arrival_s[sl],
+                self.samples[sl],
+                {k: a[sl] for k, a in self.aux.items()},
+                cut(self.flagged, sl),
+            )  # fmt: skip
+            for sl in (head, tail)
+        )
+
 
 class Source(ABC):
     """Base class of shot sources: iterate to receive :class:`ShotBatch` es.

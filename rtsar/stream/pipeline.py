@@ -31,7 +31,7 @@ from collections import deque
 from dataclasses import replace
 
 from ..params import Config
-from ..sources.base import Source
+from ..sources.base import ShotBatch, Source
 from . import heap
 from .engine import Lines, StreamProcessor
 from .height import HeightBatch, HeightChannel
@@ -88,8 +88,7 @@ class Pipeline:
         # A live source's silences are told (``notify``) and end the run at link_timeout_s.
         self.link = None
         if source.live:
-            prf = config.geometry.prf_hz
-            self.link = LinkWatch(prf, notify, link_timeout_s, on_timeout=source.close)
+            self.link = LinkWatch(config.geometry.prf_hz, notify, link_timeout_s, source.close)
         self.sinks = list(sinks)
         for sink in self.sinks:  # a wrong object fails here, not in a stage thread mid-stream
             if not isinstance(sink, StripSink):
@@ -191,7 +190,8 @@ class Pipeline:
             align, hold_s = self.settings.lens_align, self.settings.lens_hold_s  # granularity
             while True:  # align > 1: a block's pulses in one call (a silence: then what came)
                 need = min(align - self.ingest.next_pulse % align, self.max_batch) if align else 1
-                batches = self.q_shots.get_batch(self.max_batch, None, need, hold_s)
+                split = align and ShotBatch.split  # a block's end inside a source's release
+                batches = self.q_shots.get_batch(self.max_batch, None, need, hold_s, split)
                 t = time.perf_counter()
                 blocks = self._ingest(batches)
                 busy += time.perf_counter() - t

@@ -47,13 +47,21 @@ class BoundedQueue:
             return True
 
     def get_batch(
-        self, max_units: int, timeout: float | None = None, at_least: int = 1, hold_s: float = 0.0
+        self,
+        max_units: int,
+        timeout: float | None = None,
+        at_least: int = 1,
+        hold_s: float = 0.0,
+        split=None,
     ) -> list | None:
         """Wait for at least one item, then take items while they fit in ``max_units``.
 
         ``at_least`` > 1: wait, up to ``hold_s`` after the first item, for that many units (or
-        the close), then take what is there.  Returns [] on timeout and None once the queue is
-        closed and empty.
+        the close), then take what is there.  ``split(item, k)`` (the items' own, e.g.
+        ShotBatch.split): an item past ``max_units`` gives its first k units and leaves the
+        rest first in line, so the units taken reach ``max_units`` whatever the items' sizes (a
+        source catching up releases several shots an item).  Returns [] on timeout and None
+        once the queue is closed and empty.
         """
         deadline = None if timeout is None else time.perf_counter() + timeout
         with self._cv:
@@ -73,8 +81,13 @@ class BoundedQueue:
                     self._cv.wait(left)
             out = [self._items.popleft()]
             taken = len(out[0])
-            while self._items and taken + len(self._items[0]) <= max_units:
-                item = self._items.popleft()
+            while self._items and taken < max_units:
+                if taken + len(self._items[0]) <= max_units:
+                    item = self._items.popleft()
+                elif split:
+                    item, self._items[0] = split(self._items[0], max_units - taken)
+                else:
+                    break
                 taken += len(item)
                 out.append(item)
             self._size -= taken

@@ -114,7 +114,6 @@ def test_a_live_recording_cut_short_reads_its_whole_rows_only(tiny_exports, tmp_
         assert np.array_equal(a["image"][...], b["image"][...])
 
 
-
 def test_a_live_recording_whose_last_rows_hdf5_refuses_reads_the_rows_before(
     tiny_exports, tmp_path, monkeypatch
 ):
@@ -143,6 +142,7 @@ def test_a_live_recording_whose_last_rows_hdf5_refuses_reads_the_rows_before(
     monkeypatch.undo()
     with h5py.File(tmp_path / "img.h5") as f:
         assert np.isfinite(f["image"][...]).all() and f["image"].shape[0] > 0
+
 
 # ---- images ---------------------------------------------------------------------------------
 IMAGE_COMMANDS = {

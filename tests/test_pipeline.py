@@ -262,16 +262,19 @@ def test_a_batch_splits_the_item_that_would_pass_its_units():
     got = q.get_batch(7, split=lambda item, k: (item[:k], item[k:]))
     assert got == [[0, 1, 2], [10, 11, 12], [20]] and q.size == 2
     assert q.get_batch(7) == [[21, 22]]
+    q.put(list(range(20)))  # a first item past max_units: cut too (without split: taken whole)
+    assert q.get_batch(16, split=lambda item, k: (item[:k], item[k:])) == [list(range(16))]
+    assert q.get_batch(16) == [[16, 17, 18, 19]] and q.size == 0
 
 
 def test_an_aligned_lens_cuts_a_source_s_release_at_the_batch(tiny):
     """A source that releases several shots at a time (a replay catching up: CI under load
     failed the test below on calls of 16, 16, 16, 15, 2): the aligned lens still takes full
     calls, a release cut where the batch ends (here releases of 3 shots, calls of 16, blocks of
-    65; before: calls of 15, each stopping short of its batch)."""
+    64, so each call waits for a whole batch; before: calls of 15, each short of its batch)."""
     cfg, scene, shots = tiny
     cfg = cfg.with_processor(correlator="fft")
-    settings = PipelineSettings(lens_align=65, lens_hold_s=2.0, lens_backend="numpy", max_batch=16)
+    settings = PipelineSettings(lens_align=64, lens_hold_s=2.0, lens_backend="numpy", max_batch=16)
     pipe = Pipeline(cfg, replay(cfg, shots[:200], batch=3), [Collect()], settings)
     sizes, stage = [], pipe.engine.range_stage
     pipe.engine.range_stage = lambda samples, *a: (sizes.append(len(samples)), stage(samples, *a))[

@@ -111,8 +111,10 @@ def readable_rows(datasets, rows: int) -> int:
     """The first ``rows`` rows, or fewer: as many as every dataset of ``datasets`` reads without
     HDF5's OSError.  A writer killed inside a flush can leave a file whose last rows' storage
     HDF5 refuses ("len not positive after adjustment for EOA"), though the rows before read;
-    the shortest readable prefix is found by bisection (a read of one row a step: about
-    log2(rows) rows read a dataset, where its last row fails; one where it reads)."""
+    the longest readable prefix is found by bisection (a read of one row a step: about
+    log2(rows) rows read a dataset, where its last row fails; one where it reads).  It assumes
+    what HDF5 refuses is a tail (a killed writer's last rows): a refused row between readable
+    ones is not looked for."""
 
     def reads(ds, row: int) -> bool:
         try:

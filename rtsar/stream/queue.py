@@ -54,14 +54,15 @@ class BoundedQueue:
         hold_s: float = 0.0,
         split=None,
     ) -> list | None:
-        """Wait for at least one item, then take items while they fit in ``max_units``.
+        """Wait for at least one item, then take items while they fit in ``max_units`` (without
+        ``split``, the first item whole whatever its size).
 
         ``at_least`` > 1: wait, up to ``hold_s`` after the first item, for that many units (or
         the close), then take what is there.  ``split(item, k)`` (the items' own, e.g.
-        ShotBatch.split): an item past ``max_units`` gives its first k units and leaves the
-        rest first in line, so the units taken reach ``max_units`` whatever the items' sizes (a
-        source catching up releases several shots an item).  Returns [] on timeout and None
-        once the queue is closed and empty.
+        ShotBatch.split): the item that would pass ``max_units``, the first one too, gives its
+        first k units and leaves the rest first in line, so the units taken are ``max_units``
+        where that many wait, whatever the items' sizes (a source catching up releases several
+        shots an item).  Returns [] on timeout and None once the queue is closed and empty.
         """
         deadline = None if timeout is None else time.perf_counter() + timeout
         with self._cv:
@@ -79,13 +80,13 @@ class BoundedQueue:
                     if left <= 0:
                         break
                     self._cv.wait(left)
-            out = [self._items.popleft()]
-            taken = len(out[0])
-            while self._items and taken < max_units:
-                if taken + len(self._items[0]) <= max_units:
+            out, taken = [], 0
+            while self._items and (not out or taken < max_units):
+                head = self._items[0]
+                if split and taken + len(head) > max_units > taken:
+                    item, self._items[0] = split(head, max_units - taken)
+                elif not out or taken + len(head) <= max_units:
                     item = self._items.popleft()
-                elif split:
-                    item, self._items[0] = split(self._items[0], max_units - taken)
                 else:
                     break
                 taken += len(item)

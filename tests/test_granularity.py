@@ -15,7 +15,12 @@ import pytest
 from rtsar.app import bench_latency, live, live_granularity
 from rtsar.app.cli import build_parser
 from rtsar.app.cli.options import pipeline_settings, processor_changes, strip_lines
-from rtsar.app.live_granularity import GranularityRequest, block_candidates, request_of
+from rtsar.app.live_granularity import (
+    GranularityRequest,
+    block_candidates,
+    request_of,
+    stages_words,
+)
 from rtsar.presets import preset
 from rtsar.sources.replay import ReplaySource
 from rtsar.stream.granularity import (
@@ -116,6 +121,38 @@ def test_an_aligned_lens_costs_one_call_a_block():
              for k in BLOCKS}  # fmt: skip
         latency = {k: latency_by_hand(rate_hz, k, u[k]) for k in u}
         assert b == min(latency, key=lambda k: (latency[k], k))
+
+
+def test_the_stages_are_fused_where_the_work_takes_at_most_70_percent():
+    """The layout of the documented rule: lens and correlator on one thread ("fused") where
+    the chosen block's work takes at most 70 % of the stream's time (by hand), else two."""
+    seen = set()
+    for rate_hz in np.geomspace(100, 1e5, 40):
+        g = choose_granularity(rate_hz, COSTS, 64, aligned=True)
+        b = g.block_lines
+        u = rate_hz * (100 + 5 * b + 100 + 10 * b + 100) * US / b  # lens, block, strip
+        assert g.utilisation == pytest.approx(u, rel=1e-12)
+        assert g.stages == ("fused" if u <= 0.7 else "split"), (rate_hz, u)
+        seen.add(g.stages)
+    assert seen == {"fused", "split"}
+
+
+def test_stages_given_stay_and_the_banner_says_a_chosen_layout(monkeypatch):
+    """--stages given: the run keeps it and the line does not claim a choice; not given: the
+    line ends with the layout and why."""
+    monkeypatch.setattr(live_granularity, "measure_costs", _fake_measure(COSTS))
+    cfg = preset("tiny").with_processor(correlator="nonuniform")
+    for rate_hz, want in ((400, "fused"), (40000, "split")):
+        _, chosen, g, words = GranularityRequest(rate_hz).apply(cfg, PipelineSettings())
+        assert chosen.stages == g.stages == want
+        share = f"the work takes {g.utilisation:.0%}"
+        assert words.endswith(f"; {want} stages (lens and correlator on one thread: {share}, "
+                              "at most 70%)" if want == "fused" else
+                              f"; split stages (lens and correlator on two threads: {share}, "
+                              "over 70%)")  # fmt: skip
+        fixed = GranularityRequest(rate_hz, stages="split")
+        _, kept, _, said = fixed.apply(cfg, PipelineSettings(stages="split"))
+        assert kept.stages == "split" and "stages (" not in said
 
 
 def test_blocks_grow_with_the_rate_never_shrink():
@@ -257,7 +294,8 @@ def test_the_run_gets_the_documented_choice_of_the_measured_costs(monkeypatch):
         assert settings.lens_align == (block if block > 1 else 0)
         # the lens holds for a block's pulses two blocks' time at the run's rate, not the PRF's
         assert settings.lens_hold_s == pytest.approx(2 * block / rate_hz if block > 1 else 0)
-        assert words == granularity_words(g, COSTS)
+        assert settings.stages == g.stages  # --stages not given: the run's layout is chosen
+        assert words == granularity_words(g, COSTS) + f"; {g.stages} stages ({stages_words(g)})"
 
 
 def test_the_fft_correlator_s_transform_length_is_the_documented_choice(monkeypatch):
@@ -476,6 +514,8 @@ def test_the_command_line_fixes_what_it_names():
     assert request_of(_args("--strip-ms", "5"), 1600.0).strip_lines == 8
     assert request_of(_args("--partition-lines", "4"), 1600.0).block_lines == 4
     assert request_of(_args(), None) is None
+    assert request_of(_args("--stages", "split"), 1600.0).stages == "split"
+    assert pipeline_settings(_args()).stages == "split"  # chosen by a live run at a rate only
     assert request_of(_args("--swath-workers", "2"), 1600.0) is None
     assert pipeline_settings(_args()).strip_lines == PipelineSettings().strip_lines == 16
     cfg = processor_changes(_args("--partition-lines", "4"), preset("tiny"))

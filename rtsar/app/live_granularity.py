@@ -35,6 +35,7 @@ from ..sinks.publish import ZmqPublisher
 from ..sinks.wire import strip_header
 from ..sources.base import ShotBatch
 from ..stream.granularity import (
+    FUSE_BELOW,
     MOST_STRIP_LINES,
     Granularity,
     StageCosts,
@@ -63,6 +64,7 @@ class GranularityRequest:
     block_lines: int | None = None  # --partition-lines
     strip_lines: int | None = None  # --strip-lines, --strip-ms
     fft_length: int | None = None  # --fft-length
+    stages: str | None = None  # --stages
 
     def apply(
         self,
@@ -91,10 +93,12 @@ class GranularityRequest:
             aligned=aligned(config.processor, physical, settings.stages),
         )  # fmt: skip
         words = granularity_words(g, costs)
+        if self.stages is None:
+            words += f"; {g.stages} stages ({stages_words(g)})"
         chosen = block_config(config, g.block_lines, physical)
         if physical is None and chosen.processor.correlator == "fft":  # what --fft-length sets
             words += f"; fft transform length M = {chosen.processor.fft_length}"
-        return chosen, chosen_settings(settings, g), g, words
+        return chosen, chosen_settings(settings, g, self.stages is None), g, words
 
 
 def request_of(args, rate_hz: float | None) -> GranularityRequest | None:
@@ -103,8 +107,20 @@ def request_of(args, rate_hz: float | None) -> GranularityRequest | None:
     if rate_hz is None or getattr(args, "swath_workers", 0):
         return None
     return GranularityRequest(
-        rate_hz, args.partition_lines, args.strip_lines, getattr(args, "fft_length", None)
+        rate_hz,
+        args.partition_lines,
+        args.strip_lines,
+        getattr(args, "fft_length", None),
+        getattr(args, "stages", None),
     )
+
+
+def stages_words(g) -> str:
+    """Why the layout the run chose (Granularity.stages)."""
+    share = f"the work takes {g.utilisation:.0%}"
+    if g.stages == "fused":
+        return f"lens and correlator on one thread: {share}, at most {FUSE_BELOW:.0%}"
+    return f"lens and correlator on two threads: {share}, over {FUSE_BELOW:.0%}"
 
 
 def block_candidates(
@@ -159,9 +175,11 @@ def block_config(config: Config, block: int, physical=None) -> Config:
     return config
 
 
-def chosen_settings(settings: PipelineSettings, g: Granularity) -> PipelineSettings:
+def chosen_settings(settings: PipelineSettings, g: Granularity, layout=False) -> PipelineSettings:
+    """``settings`` with the granularity ``g``; ``layout``: its stages too (--stages not given)."""
     return replace(
         settings,
+        stages=g.stages if layout else settings.stages,
         strip_lines=g.strip_lines,
         strip_most_lines=g.strip_most_lines,
         strip_deadline_s=g.strip_deadline_s,

@@ -17,6 +17,15 @@ anyway, so this costs them no latency, and ingest, the lens call and the queue h
 once a block, not once a pulse (psaltis-jpl at its PRF, blocks of 2, 2-core Zen 3: median
 1.5-1.9 ms aligned against 3.2-4.0 ms not, one run each of two rounds).
 
+Where the work measured takes at most FUSE_BELOW of the stream's time, ingest, the lens and
+the correlator run on one thread (``stages`` "fused"): a block then needs no hand-over to a
+second thread, whose wake-up on a busy machine was the run's slowest part; above it, on two
+(the lens computes the next block while the correlator takes this one), as a run near
+capacity needs (psaltis-jpl, 2-core Zen 3, alternating 5 s runs, median / p99: at its PRF
+1.49-1.64 / 3.95-5.15 ms fused against 1.62-2.54 / 7.00-8.08 split; psaltis-max at 50 % of
+its PRF 5.5-6.2 / 12-18 ms against 6.1-8.3 / 23-25; psaltis-max at its PRF, 96-142 %
+utilisation, fused dropped 15-16 thousand of 50 thousand shots, split none).
+
 Costs are seconds per call, measured on this machine at the start of the run
 (rtsar.app.live_granularity: each part of a block's path in turn, as the pipeline runs them);
 the choice is a pure function of them, so a test checks the rule, not the machine.
@@ -29,6 +38,7 @@ from dataclasses import dataclass, field
 
 STRIP_DEADLINE_S = 1e-3  # a partial strip waits at most this long for its other lines
 MOST_STRIP_LINES = 64  # lines that wait (a backlog) go out together, at most this many a strip
+FUSE_BELOW = 0.7  # at most this share of the stream's time: lens and correlator on one thread
 
 
 @dataclass(frozen=True)
@@ -66,6 +76,7 @@ class Granularity:
     latency_s: float  # modelled mean latency of a line (modelled_latency_s)
     rate_hz: float  # the pulse rate it was chosen for
     reason: str
+    stages: str = "split"  # "fused" where utilisation <= FUSE_BELOW (module docstring)
 
 
 def lens_call(rate_hz: float, lens_s: dict[int, float]) -> tuple[int, float]:
@@ -139,7 +150,8 @@ def choose_granularity(
     before auto).  The lens takes every pulse waiting up to ``lens_batch`` (lens_call: how
     many while keeping up); ``aligned`` (a correlator with a head block, module docstring):
     the lens waits for each block's pulses, one call a block.  ``fixed_block``: why there is
-    one candidate only (said as the reason), or "".
+    one candidate only (said as the reason), or "".  ``stages``: "fused" where the chosen
+    block's utilisation is at most FUSE_BELOW, else "split" (the run's, unless --stages).
     """
     if not rate_hz > 0:
         raise ValueError(f"rate must be > 0 pulses/s, got {rate_hz!r}")
@@ -180,6 +192,7 @@ def choose_granularity(
         latency_s=latency[block],
         rate_hz=float(rate_hz),
         reason=reason,
+        stages="fused" if u[block] <= FUSE_BELOW else "split",
     )
 
 

@@ -213,10 +213,12 @@ def add_pipeline_options(s, delivery: str) -> None:
     g.add_argument(
         "--stages",
         choices=STAGE_LAYOUTS,
-        default=STAGE_LAYOUTS[0],
-        help="split: lens and CCD in their own threads (default); fused: one thread; "
-        "overlapped: one thread, the lens computing the next batch while the CCD correlates "
-        "(with an OpenCL lens and no --correct/--height/--physical; otherwise as fused)",
+        default=None,
+        help="split: lens and CCD in their own threads; fused: one thread; overlapped: one "
+        "thread, the lens computing the next batch while the CCD correlates (with an OpenCL "
+        "lens and no --correct/--height/--physical; otherwise as fused) (default: a live run "
+        "at a rate chooses fused where the work measured takes at most 70%% of the stream's "
+        "time, else split, said on the banner; otherwise split)",
     )
     g.add_argument(
         "--max-batch",
@@ -459,7 +461,7 @@ def pipeline_settings(args, deadline: bool = False) -> PipelineSettings:
     return PipelineSettings(
         lens_backend=args.lens,
         device=args.device,
-        stages=args.stages,
+        stages=args.stages or STAGE_LAYOUTS[0],
         strip_lines=args.strip_lines or PipelineSettings.strip_lines,
         max_batch=args.max_batch or 0,
         max_gap_pulses=args.max_gap_pulses or 0,

@@ -24,6 +24,7 @@ from rtsar.app.live_granularity import (
 from rtsar.presets import preset
 from rtsar.sources.replay import ReplaySource
 from rtsar.stream.granularity import (
+    FUSE_BELOW,
     MOST_STRIP_LINES,
     STRIP_DEADLINE_S,
     StageCosts,
@@ -150,9 +151,10 @@ def test_stages_given_stay_and_the_banner_says_a_chosen_layout(monkeypatch):
                               "at most 70%)" if want == "fused" else
                               f"; split stages (lens and correlator on two threads: {share}, "
                               "over 70%)")  # fmt: skip
-        fixed = GranularityRequest(rate_hz, stages="split")
-        _, kept, _, said = fixed.apply(cfg, PipelineSettings(stages="split"))
-        assert kept.stages == "split" and "stages (" not in said
+        other = "split" if want == "fused" else "fused"  # given: kept against the rule
+        fixed = GranularityRequest(rate_hz, stages=other)
+        _, kept, _, said = fixed.apply(cfg, PipelineSettings(stages=other))
+        assert kept.stages == other and "stages (" not in said
 
 
 def test_blocks_grow_with_the_rate_never_shrink():
@@ -548,6 +550,8 @@ def test_a_live_run_says_its_granularity_and_runs_with_it(monkeypatch, tmp_path)
     block = seen["block"]
     assert f"blocks of {block} line" in said[0] and block in BLOCKS
     s = seen["settings"]
+    assert f"; {s.stages} stages (lens and correlator on " in said[0]  # the layout it ran
+    assert f", {s.stages} stages, strips of {block} line" in stream.getvalue()
     assert (s.strip_lines, s.strip_most_lines, s.strip_deadline_s) == (
         block,
         MOST_STRIP_LINES,
@@ -585,6 +589,8 @@ def test_the_figures_live_md_states_are_the_code_s():
     deadline = re.search(r"partial strip goes out once its oldest line has waited (\d+) ms", text)
     most = re.search(r"go out together, up to (\d+) a strip", text)
     assert "(B − 1)/(2r) + S + u·S/(2(1 − u))" in text
+    fuse = re.search(r"chooses it where the work it measures \(below\) takes at most (\d+) %", text)
+    assert int(fuse.group(1)) / 100 == FUSE_BELOW
     assert int(deadline.group(1)) * 1e-3 == STRIP_DEADLINE_S
     assert int(most.group(1)) == MOST_STRIP_LINES
 

@@ -254,6 +254,18 @@ def test_a_batch_can_wait_for_a_number_of_units_up_to_its_hold():
     assert time.perf_counter() - t0 < 2.0  # not the 5 s hold
 
 
+@pytest.mark.parametrize("stages", ["split", "fused"])
+def test_every_layout_closes_its_correlator(tiny, stages):
+    """The nonuniform correlator's tail thread ends with the run in every layout (fused, now
+    a live run's usual one, left it running after the run; the review of its choice)."""
+    cfg, scene, shots = tiny
+    cfg = cfg.with_processor(correlator="nonuniform", partition_lines=4)
+    settings = PipelineSettings(stages=stages, lens_backend="numpy")
+    pipe = Pipeline(cfg, replay(cfg, shots[:200]), [Collect()], settings)
+    pipe.run()
+    assert pipe.engine.correlator._closed
+
+
 def test_a_batch_splits_the_item_that_would_pass_its_units():
     """get_batch(split=...): the item past max_units gives what fits, the rest stays first."""
     q = BoundedQueue(100)

@@ -179,7 +179,7 @@ def chosen_settings(settings: PipelineSettings, g: Granularity, layout=False) ->
     """``settings`` with the granularity ``g``; ``layout``: its stages too (--stages not given)."""
     return replace(
         settings,
-        stages=g.stages if layout else settings.stages,
+        stages=g.stages if layout and not settings.swath_workers else settings.stages,
         strip_lines=g.strip_lines,
         strip_most_lines=g.strip_most_lines,
         strip_deadline_s=g.strip_deadline_s,

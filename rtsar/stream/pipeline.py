@@ -176,12 +176,11 @@ class Pipeline:
             if self.link is not None:
                 self.link.ended()
             self.q_shots.close()
-            if self.settings.deadline:
-                self._hurry_sinks()
+            for sink in self.sinks if self.settings.deadline else ():
+                sink.hurry()
 
-    def _hurry_sinks(self) -> None:
-        for sink in self.sinks:
-            sink.hurry()
+    def _overlapped_stage(self) -> None:
+        overlapped_stage(self)
 
     def _lens_stage(self) -> None:
         busy = 0.0
@@ -215,9 +214,8 @@ class Pipeline:
         finally:
             self.stats.busy_s[key] = busy
             (self.q_image if self.settings.stages != "split" else self.q_lines).close()
-
-    def _overlapped_stage(self) -> None:
-        overlapped_stage(self)
+            if self.settings.stages != "split":  # fused: the CCD's stage is this one
+                self.engine.correlator.close()
 
     def _ingest(self, batches: list | None) -> list[PulseBlock]:
         """Ingest checks on the batches taken (None: the source ended); the first shot anchors."""
@@ -463,7 +461,8 @@ class Pipeline:
         """Stop the source; what is in flight is still processed and published, promptly: the
         sinks stop waiting on stalled subscribers."""
         self.source.close()
-        self._hurry_sinks()
+        for sink in self.sinks:
+            sink.hurry()
 
     def join(self) -> PipelineStats:
         """Wait for the run to end.  Ctrl-C (or a signal raised as KeyboardInterrupt) stops the

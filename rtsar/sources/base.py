@@ -44,11 +44,6 @@ class ShotBatch:
 
     def split(self, count: int) -> tuple[ShotBatch, ShotBatch]:
         """The first ``count`` shots and the rest, as two batches (views, nothing copied)."""
-
-        def cut(a, sl):
-            return None if a is None else a[sl]
-
-        head, tail = slice(None, count), slice(count, None)
         return tuple(
             ShotBatch(
                 self.seq[sl],
@@ -56,9 +51,9 @@ class ShotBatch:
                 self.arrival_s[sl],
                 self.samples[sl],
                 {k: a[sl] for k, a in self.aux.items()},
-                cut(self.flagged, sl),
-            )  # fmt: skip
-            for sl in (head, tail)
+                None if self.flagged is None else self.flagged[sl],
+            )
+            for sl in (slice(None, count), slice(count, None))
         )
 
 

@@ -187,9 +187,9 @@ class Pipeline:
         key = "lens" if self.settings.stages == "split" else "lens+ccd"
         try:
             align, hold_s = self.settings.lens_align, self.settings.lens_hold_s  # granularity
+            split = align and ShotBatch.split  # aligned: a source's release cut at the batch
             while True:  # align > 1: a block's pulses in one call (a silence: then what came)
                 need = min(align - self.ingest.next_pulse % align, self.max_batch) if align else 1
-                split = align and ShotBatch.split  # a source's release cut at the batch
                 batches = self.q_shots.get_batch(self.max_batch, None, need, hold_s, split)
                 t = time.perf_counter()
                 blocks = self._ingest(batches)

@@ -38,7 +38,6 @@ class FFTCorrelator(Correlator):
         h[:n] = np.asarray(mask, dtype=np.complex128)[::-1]
         self._H = sfft.fft(h, axis=0).astype(self.dtype)
         self._window = np.zeros((m, self.range_bins), self.dtype)  # history + new lines
-        self._filled = n - 1  # rows of _window holding data (history starts as zeros)
         self._pending = 0  # new lines in the window not yet emitted
         self._zeros_only = 0  # pulses_in while only skip_zeros has moved it
 

@@ -150,7 +150,7 @@ def choose_granularity(
     before auto).  The lens takes every pulse waiting up to ``lens_batch`` (lens_call: how
     many while keeping up); ``aligned`` (a correlator with a head block, module docstring):
     the lens waits for each block's pulses, one call a block.  ``fixed_block``: why there is
-    one candidate only (said as the reason), or "".  ``stages``: "fused" where the chosen
+    one candidate only (said as the reason), or "".  Its ``stages``: "fused" where the chosen
     block's utilisation is at most FUSE_BELOW, else "split" (the run's, unless --stages).
     """
     if not rate_hz > 0:

@@ -38,12 +38,14 @@ def test_processor_precision_values():
 
 @pytest.mark.parametrize("precision", PRECISIONS)
 @pytest.mark.parametrize("name", sorted(PRESETS))
-def test_numpy_lens_in_each_precision(name, precision, rng):
+@pytest.mark.parametrize("library", ["numpy", "scipy"])
+def test_numpy_lens_in_each_precision(name, precision, library, rng):
     plan = make_plan(preset(name))
-    x = crandn(rng, 9, plan.samples_per_shot)
-    y = NumpyLens(plan, precision=precision).compress(x)
-    assert y.dtype == precision_dtype(precision)
-    assert relative_rms(y, compress_reference(plan, x)) < TOL[precision]
+    for pulses in (1, 9):  # one row; several (SciPy transforms them together)
+        x = crandn(rng, pulses, plan.samples_per_shot)
+        y = NumpyLens(plan, library, precision).compress(x)
+        assert y.dtype == precision_dtype(precision)
+        assert relative_rms(y, compress_reference(plan, x)) < TOL[precision]
 
 
 @pytest.mark.parametrize("kernel", ["lanes", "group"])

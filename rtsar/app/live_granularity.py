@@ -29,7 +29,15 @@ from ..analysis.timing import rate_per_s
 from ..ccd import make_ccd
 from ..lens import cl_devices, make_lens, make_plan
 from ..lens.base import survey_devices_first, survey_wanted
+from ..lens.numpy_lens import NumpyLens
 from ..lens.plan import next_pow2
+from ..lens.small_calls import (
+    TIMED_UP_TO,
+    SmallCallsOnCPU,
+    call_cost_s,
+    cpu_limit,
+    route_words,
+)
 from ..params import Config, Processor
 from ..sinks.publish import ZmqPublisher
 from ..sinks.wire import strip_header
@@ -93,12 +101,15 @@ class GranularityRequest:
             aligned=aligned(config.processor, physical, settings.stages),
         )  # fmt: skip
         words = granularity_words(g, costs)
+        if costs.lens_cpu_below > 1:
+            words += f"; {small_calls_words(costs)}"
         if self.stages is None:
             words += f"; {g.stages} stages ({stages_words(g)})"
         chosen = block_config(config, g.block_lines, physical)
         if physical is None and chosen.processor.correlator == "fft":  # what --fft-length sets
             words += f"; fft transform length M = {chosen.processor.fft_length}"
-        return chosen, chosen_settings(settings, g, self.stages is None), g, words
+        chosen_s = chosen_settings(settings, g, self.stages is None)
+        return chosen, replace(chosen_s, lens_cpu_below=costs.lens_cpu_below), g, words
 
 
 def request_of(args, rate_hz: float | None) -> GranularityRequest | None:
@@ -113,6 +124,21 @@ def request_of(args, rate_hz: float | None) -> GranularityRequest | None:
         getattr(args, "fft_length", None),
         getattr(args, "stages", None),
     )
+
+
+def small_calls_words(costs) -> str:
+    """Why the lens's small calls run on the CPU (StageCosts.lens_cpu_below): the largest."""
+    b = max(k for k in costs.lens_route_s if k < costs.lens_cpu_below)
+    cl_wall, cl_cpu, wall, cpu = costs.lens_route_s[b]
+    return (
+        f"{route_words(costs.lens_cpu_below)} (less of the machine: {b} pulse"
+        f"{'s' if b != 1 else ''} take it {_us_each(wall, cpu)}, the OpenCL lens "
+        f"{_us_each(cl_wall, cl_cpu)})"
+    )
+
+
+def _us_each(wall_s: float, cpu_s: float) -> str:
+    return f"{wall_s * 1e6:.0f} µs ({cpu_s * 1e6:.0f} µs of CPU)"
 
 
 def stages_words(g) -> str:
@@ -212,6 +238,11 @@ def measure_costs(
         )
 
     lens = make_lens(plan, settings.lens_backend, settings.device, p.precision, p.micro_batch)
+    route: dict[int, tuple[float, float]] = {}
+    if settings.lens_backend == "auto" and lens.backend == "opencl":  # small calls: the CPU?
+        sizes = sorted({min(b, TIMED_UP_TO) for b in blocks} | {1})
+        lens, route = small_calls_route(lens, sizes, noise)
+    below = getattr(lens, "below", 1)
     fixed_strips = request.strip_lines if request is not None else None
     lens_s: dict[int, float] = {}
     ingest_s: dict[int, float] = {}
@@ -227,7 +258,7 @@ def measure_costs(
             costs = StageCosts(lens_s, dict(block_s), strip_s, source_s, dict(ingest_s))
             if past_the_least(rate_hz, costs, fixed_strips, True):
                 break
-        return StageCosts(lens_s, block_s, strip_s, source_s, ingest_s)
+        return StageCosts(lens_s, block_s, strip_s, source_s, ingest_s, below, route)
     b = 1
     while b <= (settings.max_batch or p.micro_batch):
         shots = noise(b, plan.samples_per_shot)
@@ -242,7 +273,21 @@ def measure_costs(
         costs = StageCosts(lens_s, dict(block_s), strip_s, source_s, ingest_s)
         if past_the_least(rate_hz, costs, fixed_strips, False):
             break
-    return StageCosts(lens_s, block_s, strip_s, source_s, ingest_s)
+    return StageCosts(lens_s, block_s, strip_s, source_s, ingest_s, below, route)
+
+
+def small_calls_route(lens, sizes, noise):
+    """(the lens to time and run, {pulses a call: (wall, CPU seconds a call on the OpenCL lens,
+    the same on SciPy's FFT)}): the OpenCL ``lens`` and the plan on SciPy's FFT timed at each
+    of ``sizes`` in turn, and where SciPy's takes less CPU at the small ones, the lens with
+    those calls on it (rtsar.lens.small_calls)."""
+    cpu = NumpyLens(lens.plan, "scipy", lens.precision)
+    costs = {}
+    for b in sizes:
+        shots = noise(b, lens.plan.samples_per_shot)
+        costs[b] = (*call_cost_s(lens, shots, ROUND_S), *call_cost_s(cpu, shots, ROUND_S))
+    below = cpu_limit({b: (c[1], c[3]) for b, c in costs.items()})
+    return (SmallCallsOnCPU(lens, cpu, below) if below > 1 else lens), costs
 
 
 def past_the_least(rate_hz: float, costs: StageCosts, strip_lines, lens_aligned: bool) -> bool:

@@ -21,6 +21,8 @@ import numpy as np
 from ..ccd import make_ccd
 from ..ccd.base import line_azimuth_m
 from ..lens import make_lens, make_plan
+from ..lens.numpy_lens import NumpyLens
+from ..lens.small_calls import SmallCallsOnCPU
 from ..params import Config
 from ..physical.aocell import AOCell
 from ..samples import zero_nonfinite_rows
@@ -46,7 +48,8 @@ class StreamProcessor:
     its line stages between lens and CCD; ``physical`` (rtsar.physical.PhysicalSettings) puts the
     AO cell before the lens and the physical CCD in place of the ideal correlator.
     ``azimuth`` False builds no correlator (the range half alone: a swath coordinator, whose
-    workers correlate).
+    workers correlate).  ``lens_cpu_below`` > 1 (a live run's granularity): an OpenCL lens's
+    calls of fewer pulses run on SciPy's FFT (rtsar.lens.small_calls).
     """
 
     def __init__(
@@ -58,12 +61,16 @@ class StreamProcessor:
         corrections=None,
         physical=None,
         azimuth: bool = True,
+        lens_cpu_below: int = 0,
     ):
         self.config = config
         check_memory(config)
         self.plan = make_plan(config)
         p = config.processor  # --lens auto decides by the configured batch: one choice a config
         self.lens = make_lens(self.plan, lens_backend, device, p.precision, p.micro_batch)
+        if lens_cpu_below > 1 and self.lens.backend == "opencl":  # a live run's choice
+            cpu = NumpyLens(self.plan, "scipy", p.precision)
+            self.lens = SmallCallsOnCPU(self.lens, cpu, lens_cpu_below)
         self.dtype = self.lens.dtype
         self.corrections = corrections
         self.ao_cell = None

@@ -50,7 +50,10 @@ class StageCosts:
     seconds to cut one strip, record its latency and publish it (any size: the header
     dominates); ``source_s``: seconds of the source's own work a pulse in this process (a
     simulated scene's synthesis; 0 for a link or a recording); ``ingest_s``: pulses in one
-    call → seconds of ingest's checks (none given: not counted).
+    call → seconds of ingest's checks (none given: not counted); ``lens_cpu_below``: the lens
+    was timed with its calls of fewer pulses on the CPU's FFT (rtsar.lens.small_calls; 1:
+    none), chosen from ``lens_route_s``: pulses a call → (wall, CPU seconds a call on the
+    OpenCL lens, the same on SciPy's FFT).
     """
 
     lens_s: dict[int, float]
@@ -58,6 +61,8 @@ class StageCosts:
     strip_s: float
     source_s: float = 0.0
     ingest_s: dict[int, float] = field(default_factory=dict)
+    lens_cpu_below: int = 1
+    lens_route_s: dict[int, tuple[float, float, float, float]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -100,8 +100,9 @@ class Pipeline:
         check_memory(config, capacity, 0 if height is None else len(height.channels))
         azimuth = not s.swath_workers  # with swath workers, they correlate: no CCD here
         self.engine = StreamProcessor(
-            config, s.lens_backend, s.device, start_along_track_m, corrections, physical, azimuth
-        )
+            config, s.lens_backend, s.device, start_along_track_m, corrections, physical, azimuth,
+            s.lens_cpu_below,
+        )  # fmt: skip
         self.height = (
             None
             if height is None

@@ -21,6 +21,7 @@ from rtsar.app.live_granularity import (
     request_of,
     stages_words,
 )
+from rtsar.lens.small_calls import TIMED_UP_TO
 from rtsar.presets import preset
 from rtsar.sources.replay import ReplaySource
 from rtsar.stream.granularity import (
@@ -593,6 +594,8 @@ def test_the_figures_live_md_states_are_the_code_s():
     assert int(fuse.group(1)) / 100 == FUSE_BELOW
     assert int(deadline.group(1)) * 1e-3 == STRIP_DEADLINE_S
     assert int(most.group(1)) == MOST_STRIP_LINES
+    small = re.search(r"of each candidate block of up to (\d+) pulses both on the OpenCL", text)
+    assert int(small.group(1)) == TIMED_UP_TO
 
 
 def test_each_path_timing_publishes_on_a_name_never_bound_before(monkeypatch):

@@ -100,7 +100,7 @@ def test_the_opencl_lens_s_small_calls_give_the_plan_s_lines(opencl):
     """The real OpenCL lens wrapped as a live run wraps it (StreamProcessor): both routes
     within the lenses' tolerance of the reference."""
     cfg = preset("psaltis-jpl")
-    engine = StreamProcessor(cfg, "opencl", lens_cpu_below=3)
+    engine = StreamProcessor(cfg, "opencl", live=PipelineSettings(lens_cpu_below=3))
     assert isinstance(engine.lens, SmallCallsOnCPU) and engine.lens.below == 3
     for pulses in (1, 2, 3, 16):
         shots = _shots(engine.plan, pulses, pulses)
@@ -109,7 +109,7 @@ def test_the_opencl_lens_s_small_calls_give_the_plan_s_lines(opencl):
 
 
 def test_the_numpy_lens_is_never_wrapped():
-    engine = StreamProcessor(preset("tiny"), "numpy", lens_cpu_below=8)
+    engine = StreamProcessor(preset("tiny"), "numpy", live=PipelineSettings(lens_cpu_below=8))
     assert isinstance(engine.lens, NumpyLens)
 
 

@@ -27,6 +27,7 @@ from ..params import Config
 from ..physical.aocell import AOCell
 from ..samples import zero_nonfinite_rows
 from .memory import check_memory
+from .settings import PipelineSettings
 
 
 @dataclass
@@ -48,8 +49,10 @@ class StreamProcessor:
     its line stages between lens and CCD; ``physical`` (rtsar.physical.PhysicalSettings) puts the
     AO cell before the lens and the physical CCD in place of the ideal correlator.
     ``azimuth`` False builds no correlator (the range half alone: a swath coordinator, whose
-    workers correlate).  ``lens_cpu_below`` > 1 (a live run's granularity): an OpenCL lens's
-    calls of fewer pulses run on SciPy's FFT (rtsar.lens.small_calls).
+    workers correlate).  ``live``: a live run's settings, from its granularity: an OpenCL lens's
+    calls of fewer than ``lens_cpu_below`` pulses run on SciPy's FFT (rtsar.lens.small_calls),
+    and with fused stages (the work takes at most FUSE_BELOW of the time) the nonuniform
+    correlator's tail thread yields to the line's path (its ``yield_tail``).
     """
 
     def __init__(
@@ -61,22 +64,25 @@ class StreamProcessor:
         corrections=None,
         physical=None,
         azimuth: bool = True,
-        lens_cpu_below: int = 0,
+        live: PipelineSettings | None = None,
     ):
         self.config = config
         check_memory(config)
         self.plan = make_plan(config)
         p = config.processor  # --lens auto decides by the configured batch: one choice a config
         self.lens = make_lens(self.plan, lens_backend, device, p.precision, p.micro_batch)
-        if lens_cpu_below > 1 and self.lens.backend == "opencl":  # a live run's choice
+        below = live.lens_cpu_below if live is not None else 0
+        if below > 1 and self.lens.backend == "opencl":  # a live run's choice
             cpu = NumpyLens(self.plan, "scipy", p.precision)
-            self.lens = SmallCallsOnCPU(self.lens, cpu, lens_cpu_below)
+            self.lens = SmallCallsOnCPU(self.lens, cpu, below)
         self.dtype = self.lens.dtype
         self.corrections = corrections
         self.ao_cell = None
         if physical is not None:
             self.ao_cell = AOCell(config, physical)
         self.correlator = make_ccd(config, self.plan.range_m, physical) if azimuth else None
+        if live is not None and live.stages == "fused" and hasattr(self.correlator, "yield_tail"):
+            self.correlator.yield_tail()  # headroom: the line's path first (rtsar.ccd.nonuniform)
         self.start_along_track_m = float(start_along_track_m)
         self.lines_out = 0
         self.pulses_in = 0

@@ -100,9 +100,8 @@ class Pipeline:
         check_memory(config, capacity, 0 if height is None else len(height.channels))
         azimuth = not s.swath_workers  # with swath workers, they correlate: no CCD here
         self.engine = StreamProcessor(
-            config, s.lens_backend, s.device, start_along_track_m, corrections, physical, azimuth,
-            s.lens_cpu_below,
-        )  # fmt: skip
+            config, s.lens_backend, s.device, start_along_track_m, corrections, physical, azimuth, s
+        )
         self.height = (
             None
             if height is None

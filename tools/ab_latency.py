@@ -1,0 +1,89 @@
+"""Two ways of running a live stream, alternated in one process: their line latencies (not a test).
+
+A live run's latency on a shared 2-core machine swings by a third from one minute to the next,
+more than most changes worth measuring.  Here a preset's shots are replayed from memory, paced
+at a share of its PRF, with the granularity a live run chooses at that rate (chosen once), in
+short runs that alternate between the run as it is ("new") and the run with the named change
+taken back ("old"), in the order new-old, old-new, …: a swing of the machine falls on both
+alike.  Each run's latencies (from a line's last pulse to its strip's publication) give a
+median and a 99th percentile, the first tenth of its lines left out (its start); the rounds'
+figures are printed side by side, then their means and how many rounds the new run's median
+was the lower.
+
+    python tools/ab_latency.py psaltis-max --rate 0.25 --rounds 8 --seconds 3 --without both
+
+``--without``: ``route`` (the lens's small calls on SciPy's FFT, rtsar.lens.small_calls),
+``yield`` (the nonuniform correlator's tail thread at a lower priority, its ``yield_tail``),
+``both``.  The correlator is the nonuniform one (the presets' latency path in ``rtsar bench``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+
+import numpy as np
+
+from rtsar.app import bench_pipeline
+from rtsar.app.live_granularity import GranularityRequest
+from rtsar.ccd import nonuniform
+from rtsar.presets import PRESETS, preset
+from rtsar.stream import stats
+from rtsar.stream.settings import PipelineSettings
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("preset", choices=sorted(PRESETS))
+    ap.add_argument("--rate", type=float, default=1.0, help="share of the PRF offered (1.0)")
+    ap.add_argument("--rounds", type=int, default=8, help="pairs of runs (8)")
+    ap.add_argument("--seconds", type=float, default=3.0, help="seconds of a run (3)")
+    ap.add_argument("--without", choices=("route", "yield", "both"), default="both")
+    args = ap.parse_args(argv)
+
+    latencies: list[float] = []
+    record = stats.LatencyStats.add
+
+    def add(self, seconds):  # every line's latency, as the pipeline records it
+        latencies.extend(np.asarray(seconds, float).ravel().tolist())
+        return record(self, seconds)
+
+    stats.LatencyStats.add = add
+    cfg = bench_pipeline.with_correlator(preset(args.preset), "nonuniform")
+    shots = bench_pipeline.bench_shots(cfg, 2048)
+    rate_hz = cfg.geometry.prf_hz * args.rate
+    config, settings, _, words = GranularityRequest(rate_hz).apply(cfg, PipelineSettings())
+    print(words)
+    yield_tail = nonuniform.NonUniformCorrelator.yield_tail
+    old_settings = settings
+    if args.without in ("route", "both"):
+        old_settings = dataclasses.replace(settings, lens_cpu_below=0)
+
+    figures: dict[str, list[tuple[float, float, int]]] = {"new": [], "old": []}
+    for r in range(args.rounds):
+        for which in ("new", "old") if r % 2 == 0 else ("old", "new"):
+            takes_back_yield = which == "old" and args.without in ("yield", "both")
+            nonuniform.NonUniformCorrelator.yield_tail = (
+                (lambda self, nice=0: False) if takes_back_yield else yield_tail
+            )
+            latencies.clear()
+            run = bench_pipeline.stream_run(
+                config, shots, args.seconds, args.rate,
+                settings if which == "new" else old_settings,
+            )  # fmt: skip
+            ms = np.array(latencies[len(latencies) // 10 :]) * 1e3
+            figures[which].append((np.median(ms), np.percentile(ms, 99), run["dropped_pulses"]))
+        new, old = figures["new"][-1], figures["old"][-1]
+        print(f"round {r + 1}: median / p99 new {new[0]:.2f} / {new[1]:.2f} ms, "
+              f"old {old[0]:.2f} / {old[1]:.2f} ms")  # fmt: skip
+    nonuniform.NonUniformCorrelator.yield_tail = yield_tail
+    for which in ("new", "old"):
+        a = np.array(figures[which])
+        print(f"{which}: mean median {a[:, 0].mean():.2f} ms, mean p99 {a[:, 1].mean():.2f} ms, "
+              f"dropped {int(a[:, 2].sum())}")  # fmt: skip
+    lower = sum(n[0] < o[0] for n, o in zip(figures["new"], figures["old"], strict=True))
+    print(f"the new run's median was the lower in {lower} of {args.rounds} rounds")
+
+
+if __name__ == "__main__":
+    main()

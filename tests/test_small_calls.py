@@ -49,13 +49,16 @@ class _Counting:
     def __init__(self, plan):
         self.plan, self.dtype, self.precision, self.calls = plan, np.complex64, "complex64", []
 
-    def compress(self, shots):
+    def compress(self, shots, out=None):
         self.calls.append(("compress", len(shots)))
-        return compress_reference(self.plan, shots).astype(np.complex64)
+        lines = compress_reference(self.plan, shots).astype(np.complex64)
+        if out is not None:
+            out[...] = lines
+        return lines if out is None else out
 
-    def submit(self, shots):
+    def submit(self, shots, out=None):
         self.calls.append(("submit", len(shots)))
-        lines = self.compress(shots)
+        lines = self.compress(shots, out)
         self.calls.pop()
         return type("Job", (), {"wait": lambda self: lines})()
 
@@ -84,6 +87,11 @@ def test_calls_under_the_limit_go_to_the_cpu_and_give_the_plan_s_lines(name):
         assert _rel_rms(lens.compress(shots), reference) < 1e-5
         assert _rel_rms(lens.submit(shots).wait(), reference) < 1e-5
     assert inner.calls == [("compress", 4), ("submit", 4), ("compress", 9), ("submit", 9)]
+    for pulses in (2, 5):  # ``out``, as the OpenCL lens takes it, on either route
+        shots = _shots(plan, pulses, 10 + pulses)
+        out = np.empty((pulses, plan.bin_count), np.complex64)
+        assert lens.compress(shots, out) is out and lens.submit(shots, out).wait() is out
+        assert _rel_rms(out, compress_reference(plan, shots)) < 1e-5
     assert lens.backend == "opencl" and lens.device_label == "a counting lens"
     assert lens.choice.startswith("OpenCL lens on a counting lens; lens calls under 4 pulses")
 
@@ -135,13 +143,53 @@ def test_the_granularity_carries_the_route_to_the_run_and_says_it(monkeypatch):
     assert "2 pulses take it 180 µs (180 µs of CPU), the OpenCL lens 200 µs (400 µs" in said
 
 
-def test_only_an_automatic_opencl_lens_is_timed_for_the_route(monkeypatch):
-    """--lens numpy and --lens opencl are run as asked: no route is timed or chosen."""
+class _Stub:
+    """An OpenCL-like lens (backend "opencl") that gives zeros: what make_lens returned."""
+
+    backend, precision, dtype = "opencl", "complex64", np.complex64
+
+    def __init__(self, plan):
+        self.plan = plan
+
+    def compress(self, shots, out=None):
+        return np.zeros((len(shots), self.plan.bin_count), np.complex64)
+
+
+@pytest.mark.parametrize(
+    "backend, copies, timed_route",
+    [("auto", 1, True), ("opencl", 1, False), ("numpy", 1, False), ("auto", 2, False)],
+)
+def test_only_an_automatic_opencl_lens_of_one_receiver_is_timed_for_the_route(
+    monkeypatch, backend, copies, timed_route
+):
+    """--lens opencl and --lens numpy run as asked, and with --height (copies > 1: the
+    receivers' engines keep their own lenses) no route is chosen; --lens auto that chose
+    OpenCL is timed both ways."""
     timed = []
-    monkeypatch.setattr(live_granularity, "small_calls_route", lambda *a: timed.append(a))
+
+    def route(lens, sizes, noise):
+        timed.append(sizes)
+        return lens, {1: (1e-4, 2e-4, 5e-5, 5e-5)}
+
+    plan = make_plan(preset("tiny"))
+    monkeypatch.setattr(live_granularity, "make_lens", lambda *a, **k: _Stub(plan))
+    monkeypatch.setattr(live_granularity, "small_calls_route", route)
+    monkeypatch.setattr(live_granularity, "path_costs_s", lambda *a, **k: (1e-4,) * 4)
     cfg = preset("tiny").with_processor(correlator="nonuniform")
-    costs = live_granularity.measure_costs(cfg, PipelineSettings(lens_backend="numpy"), 500.0, [1])
-    assert costs.lens_cpu_below == 1 and not costs.lens_route_s and not timed
+    settings = PipelineSettings(lens_backend=backend)
+    costs = live_granularity.measure_costs(cfg, settings, 500.0, [1, 2], copies)
+    assert bool(timed) == timed_route
+    assert bool(costs.lens_route_s) == timed_route
+
+
+def test_swath_workers_keep_their_lenses(monkeypatch):
+    """A run whose workers compress (--swath-workers) gets no route: its coordinator's lens
+    never runs a call."""
+    costs = StageCosts({1: 1e-4}, {1: 1e-4}, 1e-4, lens_cpu_below=4, lens_route_s={1: (1,) * 4})
+    monkeypatch.setattr(live_granularity, "measure_costs", lambda *a, **k: costs)
+    cfg = preset("psaltis-jpl").with_processor(correlator="nonuniform")
+    _, settings, _, _ = GranularityRequest(1600.0, 1).apply(cfg, PipelineSettings(swath_workers=2))
+    assert settings.lens_cpu_below == 0
 
 
 def test_the_sizes_timed_are_the_candidate_calls_up_to_the_cap(monkeypatch):

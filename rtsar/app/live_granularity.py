@@ -109,7 +109,8 @@ class GranularityRequest:
         if physical is None and chosen.processor.correlator == "fft":  # what --fft-length sets
             words += f"; fft transform length M = {chosen.processor.fft_length}"
         chosen_s = chosen_settings(settings, g, self.stages is None)
-        return chosen, replace(chosen_s, lens_cpu_below=costs.lens_cpu_below), g, words
+        below = costs.lens_cpu_below if not settings.swath_workers else 0  # workers': their own
+        return chosen, replace(chosen_s, lens_cpu_below=below), g, words
 
 
 def request_of(args, rate_hz: float | None) -> GranularityRequest | None:
@@ -202,10 +203,14 @@ def block_config(config: Config, block: int, physical=None) -> Config:
 
 
 def chosen_settings(settings: PipelineSettings, g: Granularity, layout=False) -> PipelineSettings:
-    """``settings`` with the granularity ``g``; ``layout``: its stages too (--stages not given)."""
+    """``settings`` with the granularity ``g``; ``layout``: its stages too (--stages not given),
+    and where they are fused (the work measured takes at most FUSE_BELOW of the time), the
+    correlator's tail thread yields to the line's path (``tail_yields``: rtsar.stream.engine)."""
+    chosen = layout and not settings.swath_workers
     return replace(
         settings,
-        stages=g.stages if layout and not settings.swath_workers else settings.stages,
+        stages=g.stages if chosen else settings.stages,
+        tail_yields=chosen and g.stages == "fused",
         strip_lines=g.strip_lines,
         strip_most_lines=g.strip_most_lines,
         strip_deadline_s=g.strip_deadline_s,
@@ -239,7 +244,8 @@ def measure_costs(
 
     lens = make_lens(plan, settings.lens_backend, settings.device, p.precision, p.micro_batch)
     route: dict[int, tuple[float, float]] = {}
-    if settings.lens_backend == "auto" and lens.backend == "opencl":  # small calls: the CPU?
+    # Small calls on the CPU?  Not with --height: its receivers' engines keep their own lenses.
+    if settings.lens_backend == "auto" and lens.backend == "opencl" and copies == 1:
         sizes = sorted({min(b, TIMED_UP_TO) for b in blocks} | {1})
         lens, route = small_calls_route(lens, sizes, noise)
     below = getattr(lens, "below", 1)
@@ -282,10 +288,11 @@ def small_calls_route(lens, sizes, noise):
     of ``sizes`` in turn, and where SciPy's takes less CPU at the small ones, the lens with
     those calls on it (rtsar.lens.small_calls)."""
     cpu = NumpyLens(lens.plan, "scipy", lens.precision)
-    costs = {}
-    for b in sizes:
-        shots = noise(b, lens.plan.samples_per_shot)
-        costs[b] = (*call_cost_s(lens, shots, ROUND_S), *call_cost_s(cpu, shots, ROUND_S))
+    shots = {b: noise(b, lens.plan.samples_per_shot) for b in sizes}
+    # SciPy's first, every size, then OpenCL's: the driver's workers spin on after a launch,
+    # and that CPU is OpenCL's, not the next timing's
+    on_cpu = {b: call_cost_s(cpu, shots[b], ROUND_S) for b in sizes}
+    costs = {b: (*call_cost_s(lens, shots[b], ROUND_S), *on_cpu[b]) for b in sizes}
     below = cpu_limit({b: (c[1], c[3]) for b, c in costs.items()})
     return (SmallCallsOnCPU(lens, cpu, below) if below > 1 else lens), costs
 

@@ -408,10 +408,10 @@ class NonUniformCorrelator(Correlator):
         and where it lags the head waits for it (its thread then sleeping).  For a live run
         with headroom (rtsar.stream.engine; psaltis-max at 25 % of its PRF, three alternating
         pairs of 6 s, 2-core Zen 3: median 3.06-3.80 ms against 3.22-4.24, p99 8.5-10.0
-        against 9.1-15.3).  False where there is no tail thread or the system sets no
-        per-thread priority (not Linux)."""
-        tid = self._tail.native_id if self.threaded else None
-        if tid is None or not hasattr(os, "setpriority"):
+        against 9.1-15.3).  False where there is no tail thread (none, or ended) or the
+        system sets no per-thread priority (refused: a Unix other than Linux; not Unix)."""
+        tid = self._tail.native_id if self.threaded and self._tail.is_alive() else None
+        if tid is None or not hasattr(os, "setpriority"):  # no tail thread, or not Unix
             return False
         try:
             lower = min(19, os.getpriority(os.PRIO_PROCESS, tid) + nice)

@@ -69,18 +69,23 @@ class SmallCallsOnCPU:
     def __getattr__(self, name):  # what the wrapped lens has and this one does not
         return getattr(self.lens, name)
 
-    def compress(self, shots: np.ndarray) -> np.ndarray:
-        if len(shots) < self.below:
-            return self.cpu.compress(shots)
-        return self.lens.compress(shots)
+    def compress(self, shots: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """As the OpenCL lens's ``compress`` (``out``: the array to write the lines into)."""
+        if len(shots) >= self.below:
+            return self.lens.compress(shots, out)
+        lines = self.cpu.compress(shots)
+        if out is None:
+            return lines
+        out[...] = lines  # the shape checked as numpy assigns
+        return out
 
     __call__ = compress
 
-    def submit(self, shots: np.ndarray):
+    def submit(self, shots: np.ndarray, out: np.ndarray | None = None):
         """As the OpenCL lens's ``submit``; a small call is computed now (``wait()`` returns)."""
-        if len(shots) < self.below:
-            return _Done(self.cpu.compress(shots))
-        return self.lens.submit(shots)
+        if len(shots) >= self.below:
+            return self.lens.submit(shots, out)
+        return _Done(self.compress(shots, out))
 
 
 def route_words(below: int) -> str:

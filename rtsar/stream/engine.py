@@ -51,8 +51,9 @@ class StreamProcessor:
     ``azimuth`` False builds no correlator (the range half alone: a swath coordinator, whose
     workers correlate).  ``live``: a live run's settings, from its granularity: an OpenCL lens's
     calls of fewer than ``lens_cpu_below`` pulses run on SciPy's FFT (rtsar.lens.small_calls),
-    and with fused stages (the work takes at most FUSE_BELOW of the time) the nonuniform
-    correlator's tail thread yields to the line's path (its ``yield_tail``).
+    and with ``tail_yields`` (the granularity chose fused stages: the work takes at most
+    FUSE_BELOW of the time) the nonuniform correlator's tail thread yields to the line's path
+    (its ``yield_tail``).
     """
 
     def __init__(
@@ -81,7 +82,7 @@ class StreamProcessor:
         if physical is not None:
             self.ao_cell = AOCell(config, physical)
         self.correlator = make_ccd(config, self.plan.range_m, physical) if azimuth else None
-        if live is not None and live.stages == "fused" and hasattr(self.correlator, "yield_tail"):
+        if live is not None and live.tail_yields and hasattr(self.correlator, "yield_tail"):
             self.correlator.yield_tail()  # headroom: the line's path first (rtsar.ccd.nonuniform)
         self.start_along_track_m = float(start_along_track_m)
         self.lines_out = 0

@@ -4,17 +4,21 @@ paced replay reads its file in blocks, not once a release (rtsar.sources.replay.
 Before these, a source released one small chunk at a time however late it was: at the demo's
 1,600 Hz (chunks of 1 pulse) a simulator or replay that lost the interpreter for a while paid
 its per-release cost for every late shot and never caught up (measured: 1,154-1,426 pulses/s
-of 1,600, latency 0.4-2.5 s; with --record 890 pulses/s).
+of 1,600, latency 0.4-2.5 s; with --record 890 pulses/s).  And a pacing thread's sleeps end
+within TIMER_SLACK_NS of their time, not Linux's default 50 µs.
 """
 
 from __future__ import annotations
 
+import ctypes
+import sys
+import threading
 import time
 
 import numpy as np
 import pytest
 
-from rtsar.sources.pacing import CATCH_UP_MOST, Pacer, next_release
+from rtsar.sources.pacing import CATCH_UP_MOST, TIMER_SLACK_NS, Pacer, next_release
 from rtsar.sources.replay import READ_AHEAD_PULSES, ReadAhead, ReplaySource
 
 
@@ -109,3 +113,28 @@ def test_a_simulated_source_that_falls_behind_catches_up(chunk):
             time.sleep(0.08)  # ~128 pulses at 1,600 Hz fall due
     np.testing.assert_array_equal(np.concatenate(seq), np.arange(600))
     assert max(sizes) > 8 * chunk
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="timer slack is Linux's")
+def test_a_pacing_thread_sleeps_tight_and_no_other_thread_does():
+    """The thread that waits on a Pacer gets TIMER_SLACK_NS of timer slack (Linux's default is
+    50 µs: every release up to that late); the thread that made the Pacer keeps its own."""
+    libc = ctypes.CDLL(None)
+    get, put = 30, 29  # PR_GET_TIMERSLACK, PR_SET_TIMERSLACK
+    mine = libc.prctl(get, 0, 0, 0, 0)  # this thread's (another test's Pacer may have set it)
+    before = 50_000  # Linux's default, which a new thread inherits from its creator
+    assert libc.prctl(put, ctypes.c_ulong(before), 0, 0, 0) == 0
+    seen = []
+
+    def paced():
+        pacer = Pacer(1000.0)
+        seen.append(libc.prctl(get, 0, 0, 0, 0))
+        pacer.wait(1)
+        seen.append(libc.prctl(get, 0, 0, 0, 0))
+
+    thread = threading.Thread(target=paced)
+    thread.start()
+    thread.join()
+    assert seen == [before, TIMER_SLACK_NS] and TIMER_SLACK_NS < before
+    assert libc.prctl(get, 0, 0, 0, 0) == before
+    libc.prctl(put, ctypes.c_ulong(mine), 0, 0, 0)

@@ -14,7 +14,9 @@ was the lower.
 
 ``--without``: ``route`` (the lens's small calls on SciPy's FFT, rtsar.lens.small_calls),
 ``yield`` (the nonuniform correlator's tail thread at a lower priority, its ``yield_tail``),
-``both``.  The correlator is the nonuniform one (the presets' latency path in ``rtsar bench``).
+``both`` (those two), ``slack`` (the replay's pacing thread's tight sleeps,
+rtsar.sources.pacing).  The correlator is the nonuniform one (the presets' latency path in
+``rtsar bench``).
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from rtsar.app import bench_pipeline
 from rtsar.app.live_granularity import GranularityRequest
 from rtsar.ccd import nonuniform
 from rtsar.presets import PRESETS, preset
+from rtsar.sources import pacing
 from rtsar.stream import stats
 from rtsar.stream.settings import PipelineSettings
 
@@ -38,7 +41,7 @@ def main(argv=None) -> None:
     ap.add_argument("--rate", type=float, default=1.0, help="share of the PRF offered (1.0)")
     ap.add_argument("--rounds", type=int, default=8, help="pairs of runs (8)")
     ap.add_argument("--seconds", type=float, default=3.0, help="seconds of a run (3)")
-    ap.add_argument("--without", choices=("route", "yield", "both"), default="both")
+    ap.add_argument("--without", choices=("route", "yield", "both", "slack"), default="both")
     args = ap.parse_args(argv)
 
     latencies: list[float] = []
@@ -54,7 +57,7 @@ def main(argv=None) -> None:
     rate_hz = cfg.geometry.prf_hz * args.rate
     config, settings, _, words = GranularityRequest(rate_hz).apply(cfg, PipelineSettings())
     print(words)
-    yield_tail = nonuniform.NonUniformCorrelator.yield_tail
+    yield_tail, tight_sleeps = nonuniform.NonUniformCorrelator.yield_tail, pacing.tight_sleeps
     old_settings = settings
     if args.without in ("route", "both"):
         old_settings = dataclasses.replace(settings, lens_cpu_below=0)
@@ -66,6 +69,8 @@ def main(argv=None) -> None:
             nonuniform.NonUniformCorrelator.yield_tail = (
                 (lambda self, nice=0: False) if takes_back_yield else yield_tail
             )
+            takes_back_slack = which == "old" and args.without == "slack"
+            pacing.tight_sleeps = (lambda *a: False) if takes_back_slack else tight_sleeps
             latencies.clear()
             run = bench_pipeline.stream_run(
                 config, shots, args.seconds, args.rate,
@@ -76,7 +81,7 @@ def main(argv=None) -> None:
         new, old = figures["new"][-1], figures["old"][-1]
         print(f"round {r + 1}: median / p99 new {new[0]:.2f} / {new[1]:.2f} ms, "
               f"old {old[0]:.2f} / {old[1]:.2f} ms")  # fmt: skip
-    nonuniform.NonUniformCorrelator.yield_tail = yield_tail
+    nonuniform.NonUniformCorrelator.yield_tail, pacing.tight_sleeps = yield_tail, tight_sleeps
     for which in ("new", "old"):
         a = np.array(figures[which])
         print(f"{which}: mean median {a[:, 0].mean():.2f} ms, mean p99 {a[:, 1].mean():.2f} ms, "

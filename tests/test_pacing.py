@@ -18,7 +18,13 @@ import time
 import numpy as np
 import pytest
 
-from rtsar.sources.pacing import CATCH_UP_MOST, TIMER_SLACK_NS, Pacer, next_release
+from rtsar.sources.pacing import (
+    CATCH_UP_MOST,
+    TIGHT_FROM_S,
+    TIMER_SLACK_NS,
+    Pacer,
+    next_release,
+)
 from rtsar.sources.replay import READ_AHEAD_PULSES, ReadAhead, ReplaySource
 
 
@@ -117,24 +123,27 @@ def test_a_simulated_source_that_falls_behind_catches_up(chunk):
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="timer slack is Linux's")
 def test_a_pacing_thread_sleeps_tight_and_no_other_thread_does():
-    """The thread that waits on a Pacer gets TIMER_SLACK_NS of timer slack (Linux's default is
-    50 µs: every release up to that late); the thread that made the Pacer keeps its own."""
+    """The thread that waits on a Pacer of a shot every TIGHT_FROM_S or more gets
+    TIMER_SLACK_NS of timer slack (Linux's default is 50 µs: every release up to that late);
+    a faster pacer's thread keeps the default (its late wake-ups merge releases), and so
+    does every other thread."""
     libc = ctypes.CDLL(None)
     get, put = 30, 29  # PR_GET_TIMERSLACK, PR_SET_TIMERSLACK
     mine = libc.prctl(get, 0, 0, 0, 0)  # this thread's (another test's Pacer may have set it)
     before = 50_000  # Linux's default, which a new thread inherits from its creator
     assert libc.prctl(put, ctypes.c_ulong(before), 0, 0, 0) == 0
-    seen = []
+    seen = {}
 
-    def paced():
-        pacer = Pacer(1000.0)
-        seen.append(libc.prctl(get, 0, 0, 0, 0))
+    def paced(rate_hz):
+        pacer = Pacer(rate_hz)
         pacer.wait(1)
-        seen.append(libc.prctl(get, 0, 0, 0, 0))
+        seen[rate_hz] = libc.prctl(get, 0, 0, 0, 0)
 
-    thread = threading.Thread(target=paced)
-    thread.start()
-    thread.join()
-    assert seen == [before, TIMER_SLACK_NS] and TIMER_SLACK_NS < before
+    slow, fast = 0.99 / TIGHT_FROM_S, 1.01 / TIGHT_FROM_S  # a shot each TIGHT_FROM_S: tight
+    for rate_hz in (slow, fast):
+        thread = threading.Thread(target=paced, args=(rate_hz,))
+        thread.start()
+        thread.join()
+    assert seen == {slow: TIMER_SLACK_NS, fast: before} and TIMER_SLACK_NS < before
     assert libc.prctl(get, 0, 0, 0, 0) == before
     libc.prctl(put, ctypes.c_ulong(mine), 0, 0, 0)

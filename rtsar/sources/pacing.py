@@ -8,7 +8,12 @@ Linux lets a sleep end up to the thread's "timer slack" late, 50 µs by default,
 can be merged: a pacing thread asks for TIMER_SLACK_NS instead (``tight_sleeps``, prctl
 PR_SET_TIMERSLACK, its own thread only).  Pacing at 1,600 shots/s on a quiet 2-core Zen 3
 (2026-11-29): releases 79 µs late at the median (p90 112) with the default, 22 µs (p90 31-38)
-with 1 µs.  Elsewhere the sleeps are the system's.
+with 1 µs.  Only where a shot comes every TIGHT_FROM_S or more: a late wake-up releases the
+shots then due together, and near a machine's capacity that merging is what keeps up
+(psaltis-max at its 10 kHz on 2 cores, alternating 3 s replays: tight sleeps released one shot
+at a time, dropped 502 shots and doubled the latency; at 2.5 and 5 kHz they lowered the median
+in 5 and 4 of 6 rounds, at 1.6 kHz in 7 of 8: tools/ab_latency.py).  Elsewhere the sleeps
+are the system's.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ import threading
 import time
 
 TIMER_SLACK_NS = 1000  # a pacing thread's sleeps end at most this late, where the system allows
+TIGHT_FROM_S = 200e-6  # … where a shot comes every this many seconds or more (module docstring)
 _PR_SET_TIMERSLACK = 29  # linux/prctl.h
 _paced = threading.local()  # threads whose slack is set
 
@@ -60,10 +66,12 @@ class Pacer:
 
     def wait(self, n: int, stop=lambda: False) -> float:
         """Sleep until shot n is due (in short naps so ``stop()`` is honoured); return its time.
-        The calling thread's first wait sets its sleeps tight (``tight_sleeps``)."""
-        if not getattr(_paced, "tight", False):
-            _paced.tight = True
-            tight_sleeps()
+        The calling thread's first wait sets its sleeps tight (``tight_sleeps``) where a shot
+        comes every TIGHT_FROM_S or more (the thread's first pacer decides)."""
+        if not getattr(_paced, "decided", False):
+            _paced.decided = True
+            if 1.0 / self.rate_hz >= TIGHT_FROM_S:
+                tight_sleeps()
         t = self.due(n)
         while not stop():
             left = t - time.perf_counter()

@@ -158,19 +158,6 @@ def test_stages_given_stay_and_the_banner_says_a_chosen_layout(monkeypatch):
         assert kept.stages == other and "stages (" not in said
 
 
-def test_the_tail_yields_only_where_the_granularity_chose_fused_stages():
-    """tail_yields: the layout chosen (not given) and fused; never with swath workers."""
-    fused = choose_granularity(100.0, COSTS, 64)  # a low rate: fused
-    split = choose_granularity(1e5, COSTS, 64)
-    assert (fused.stages, split.stages) == ("fused", "split")
-    assert live_granularity.chosen_settings(PipelineSettings(), fused, True).tail_yields
-    assert not live_granularity.chosen_settings(PipelineSettings(), split, True).tail_yields
-    given = PipelineSettings(stages="fused")
-    assert not live_granularity.chosen_settings(given, fused, False).tail_yields
-    workers = PipelineSettings(swath_workers=2)
-    assert not live_granularity.chosen_settings(workers, fused, True).tail_yields
-
-
 def test_blocks_grow_with_the_rate_never_shrink():
     """Graceful: with the lens aligned (a call a block, the live default), a higher rate never
     gets a smaller block (latency grows before drops).  Not aligned, the lens's own call grows

@@ -151,7 +151,7 @@ def test_lens_option_offers_auto_by_default(capsys):
     with pytest.raises(SystemExit):
         main(["process", "--help"])
     out = capsys.readouterr().out
-    assert "{auto,opencl,numpy}" in out and "auto (default" in out
+    assert "{auto,opencl,numpy,hybrid}" in out and "auto (default" in out
 
 
 def test_a_small_recording_is_not_worth_a_first_device_survey(monkeypatch):

@@ -1,8 +1,5 @@
 """The non-uniformly partitioned correlator: the float64 reference, push sizes, flush, threads."""
 
-import os
-import threading
-
 import numpy as np
 import pytest
 from conftest import crandn
@@ -10,7 +7,7 @@ from conftest import crandn
 from rtsar.analysis import relative_rms
 from rtsar.ccd import make_ccd, make_correlator
 from rtsar.ccd.base import correlate_reference
-from rtsar.ccd.nonuniform import TAIL_NICE, NonUniformCorrelator, plan_segments
+from rtsar.ccd.nonuniform import NonUniformCorrelator, plan_segments
 from rtsar.ccd.partitioned import PartitionedCorrelator
 from rtsar.params import Processor
 
@@ -269,33 +266,3 @@ def test_complex128_reaches_the_float64_reference(rng):
     assert len(corr.segments) > 1
     got = _stream(corr, lines, [7] * 42 + [6])
     assert got.dtype == np.complex128 and relative_rms(got, ref) < 1e-12
-
-
-@pytest.mark.skipif(not hasattr(os, "setpriority"), reason="no per-thread priority here")
-def test_a_live_run_with_headroom_lowers_the_tail_thread_s_priority_only(rng):
-    """Where the granularity chose fused stages (``tail_yields``: the work takes at most
-    FUSE_BELOW of the time), the engine lowers the tail thread's priority by TAIL_NICE steps
-    against its own thread's; otherwise (split, or fused given by hand: no headroom measured)
-    it leaves it; the lines are the same either way (the priority orders the work, never
-    changes it)."""
-    from rtsar.presets import preset
-    from rtsar.stream.engine import StreamProcessor
-    from rtsar.stream.settings import PipelineSettings
-
-    cfg = preset("psaltis-jpl").with_processor(correlator="nonuniform", partition_lines=4)
-    here = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
-    shots = crandn(rng, 600, cfg.waveform.samples_per_shot, dtype=np.complex64)
-    images = {}
-    for yields in (True, False):
-        live = PipelineSettings(stages="fused", tail_yields=yields)
-        engine = StreamProcessor(cfg, "numpy", live=live)
-        tail = engine.correlator._tail
-        assert tail.is_alive()
-        nice = os.getpriority(os.PRIO_PROCESS, tail.native_id)
-        assert nice == (min(19, here + TAIL_NICE) if yields else here)
-        images[yields] = np.concatenate([engine.push(shots).lines, engine.flush().lines])
-        engine.correlator.close()
-        assert engine.correlator.yield_tail() is False  # its thread ended: nothing to lower
-    assert np.array_equal(images[True], images[False])
-    no_tail = NonUniformCorrelator(crandn(rng, 16, 3), 16, 16, threaded=True)
-    assert not no_tail.threaded and no_tail.yield_tail() is False

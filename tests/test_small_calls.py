@@ -1,8 +1,8 @@
-"""A live run's small lens calls on SciPy's FFT (rtsar.lens.small_calls): the route is the
-documented function of the measured CPU times, a routed call gives the plan's lines (against
-compress_reference, which shares no code with either lens), the engine and the granularity
-carry the route to the run, and the banner says it.  No verdict depends on this machine's
-speed: where a route is chosen here, the times are given."""
+"""A live run's small lens calls on SciPy's FFT (--lens hybrid, rtsar.lens.small_calls): the
+route is the documented function of the measured CPU times, a routed call gives the plan's
+lines (against compress_reference, which shares no code with either lens), the engine and the
+granularity carry the route to the run, and the banner says it.  No verdict depends on this
+machine's speed: where a route is chosen here, the times are given."""
 
 import numpy as np
 import pytest
@@ -157,14 +157,20 @@ class _Stub:
 
 @pytest.mark.parametrize(
     "backend, copies, timed_route",
-    [("auto", 1, True), ("opencl", 1, False), ("numpy", 1, False), ("auto", 2, False)],
+    [
+        ("hybrid", 1, True),
+        ("auto", 1, False),
+        ("opencl", 1, False),
+        ("numpy", 1, False),
+        ("hybrid", 2, False),
+    ],
 )
-def test_only_an_automatic_opencl_lens_of_one_receiver_is_timed_for_the_route(
+def test_only_a_hybrid_lens_of_one_receiver_is_timed_for_the_route(
     monkeypatch, backend, copies, timed_route
 ):
-    """--lens opencl and --lens numpy run as asked, and with --height (copies > 1: the
-    receivers' engines keep their own lenses) no route is chosen; --lens auto that chose
-    OpenCL is timed both ways."""
+    """--lens hybrid that chose OpenCL is timed both ways; auto (the default: the design's
+    OpenCL lens for every call), opencl and numpy run as asked, and with --height (copies > 1:
+    the receivers' engines keep their own lenses) no route is chosen."""
     timed = []
 
     def route(lens, sizes, noise):
@@ -210,5 +216,6 @@ def test_the_sizes_timed_are_the_candidate_calls_up_to_the_cap(monkeypatch):
     monkeypatch.setattr(live_granularity, "small_calls_route", route)
     monkeypatch.setattr(live_granularity, "path_costs_s", lambda *a, **k: (1e-4,) * 4)
     cfg = preset("tiny").with_processor(correlator="nonuniform")
-    live_granularity.measure_costs(cfg, PipelineSettings(), 500.0, [2, 4, 8, 16, 32])
+    settings = PipelineSettings(lens_backend="hybrid")
+    live_granularity.measure_costs(cfg, settings, 500.0, [2, 4, 8, 16, 32])
     assert seen == sorted({1, 2, 4, 8, min(16, TIMED_UP_TO), min(32, TIMED_UP_TO)})

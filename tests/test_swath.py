@@ -349,11 +349,15 @@ def test_a_worker_blocked_sending_to_a_coordinator_that_dies_ends():
     coordinator that stopped taking lines (its downstream stalls: a wait without limit) and
     then died (SIGKILL) left the worker blocked in its send forever.  Now, once the connection
     has been down for the timeout while lines wait to go, it ends with status 1 and says why."""
-    sock = socket.socket()
-    sock.bind(("127.0.0.1", 0))
-    port = sock.getsockname()[1]
-    sock.close()
-    shots_ep, results_ep = f"tcp://127.0.0.1:{port}", f"tcp://127.0.0.1:{port + 1}"
+    # Two ports the system gave out free, both held until now (port + 1 was once taken by
+    # another test's socket: "Address already in use" in the coordinator, 2026-11-29).
+    held = [socket.socket() for _ in range(2)]
+    for sock in held:
+        sock.bind(("127.0.0.1", 0))
+    ports = [sock.getsockname()[1] for sock in held]
+    for sock in held:
+        sock.close()
+    shots_ep, results_ep = (f"tcp://127.0.0.1:{port}" for port in ports)
     coordinator = subprocess.Popen([sys.executable, "-c", DYING_COORDINATOR, shots_ep, results_ep])
     t, box, said = _serving(shots_ep, results_ep, 1.0)
     assert coordinator.wait(60) == -signal.SIGKILL

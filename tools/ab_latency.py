@@ -10,11 +10,11 @@ median and a 99th percentile, the first tenth of its lines left out (its start);
 figures are printed side by side, then their means and how many rounds the new run's median
 was the lower.
 
-    python tools/ab_latency.py psaltis-max --rate 0.25 --rounds 8 --seconds 3 --without both
+    python tools/ab_latency.py psaltis-jpl --rate 1.5 --lens hybrid --without route
+    python tools/ab_latency.py psaltis-jpl --without slack
 
-``--without``: ``route`` (the lens's small calls on SciPy's FFT, rtsar.lens.small_calls),
-``yield`` (the nonuniform correlator's tail thread at a lower priority, its ``yield_tail``),
-``both`` (those two), ``slack`` (the replay's pacing thread's tight sleeps,
+``--without``: ``route`` (with ``--lens hybrid``: the lens's small calls on SciPy's FFT,
+rtsar.lens.small_calls), ``slack`` (the replay's pacing thread's tight sleeps,
 rtsar.sources.pacing).  The correlator is the nonuniform one (the presets' latency path in
 ``rtsar bench``).
 """
@@ -28,7 +28,6 @@ import numpy as np
 
 from rtsar.app import bench_pipeline
 from rtsar.app.live_granularity import GranularityRequest
-from rtsar.ccd import nonuniform
 from rtsar.presets import PRESETS, preset
 from rtsar.sources import pacing
 from rtsar.stream import stats
@@ -41,8 +40,11 @@ def main(argv=None) -> None:
     ap.add_argument("--rate", type=float, default=1.0, help="share of the PRF offered (1.0)")
     ap.add_argument("--rounds", type=int, default=8, help="pairs of runs (8)")
     ap.add_argument("--seconds", type=float, default=3.0, help="seconds of a run (3)")
-    ap.add_argument("--without", choices=("route", "yield", "both", "slack"), default="both")
+    ap.add_argument("--without", choices=("route", "slack"), default="slack")
+    ap.add_argument("--lens", default="auto", help="the lens backend (hybrid: the route runs)")
     args = ap.parse_args(argv)
+    if args.without == "route" and args.lens != "hybrid":
+        ap.error("--without route compares --lens hybrid with its route taken back")
 
     latencies: list[float] = []
     record = stats.LatencyStats.add
@@ -55,20 +57,17 @@ def main(argv=None) -> None:
     cfg = bench_pipeline.with_correlator(preset(args.preset), "nonuniform")
     shots = bench_pipeline.bench_shots(cfg, 2048)
     rate_hz = cfg.geometry.prf_hz * args.rate
-    config, settings, _, words = GranularityRequest(rate_hz).apply(cfg, PipelineSettings())
+    asked = PipelineSettings(lens_backend=args.lens)
+    config, settings, _, words = GranularityRequest(rate_hz).apply(cfg, asked)
     print(words)
-    yield_tail, tight_sleeps = nonuniform.NonUniformCorrelator.yield_tail, pacing.tight_sleeps
+    tight_sleeps = pacing.tight_sleeps
     old_settings = settings
-    if args.without in ("route", "both"):
+    if args.without == "route":
         old_settings = dataclasses.replace(settings, lens_cpu_below=0)
 
     figures: dict[str, list[tuple[float, float, int]]] = {"new": [], "old": []}
     for r in range(args.rounds):
         for which in ("new", "old") if r % 2 == 0 else ("old", "new"):
-            takes_back_yield = which == "old" and args.without in ("yield", "both")
-            nonuniform.NonUniformCorrelator.yield_tail = (
-                (lambda self, nice=0: False) if takes_back_yield else yield_tail
-            )
             takes_back_slack = which == "old" and args.without == "slack"
             pacing.tight_sleeps = (lambda *a: False) if takes_back_slack else tight_sleeps
             latencies.clear()
@@ -81,7 +80,7 @@ def main(argv=None) -> None:
         new, old = figures["new"][-1], figures["old"][-1]
         print(f"round {r + 1}: median / p99 new {new[0]:.2f} / {new[1]:.2f} ms, "
               f"old {old[0]:.2f} / {old[1]:.2f} ms")  # fmt: skip
-    nonuniform.NonUniformCorrelator.yield_tail, pacing.tight_sleeps = yield_tail, tight_sleeps
+    pacing.tight_sleeps = tight_sleeps
     for which in ("new", "old"):
         a = np.array(figures[which])
         print(f"{which}: mean median {a[:, 0].mean():.2f} ms, mean p99 {a[:, 1].mean():.2f} ms, "

@@ -203,14 +203,10 @@ def block_config(config: Config, block: int, physical=None) -> Config:
 
 
 def chosen_settings(settings: PipelineSettings, g: Granularity, layout=False) -> PipelineSettings:
-    """``settings`` with the granularity ``g``; ``layout``: its stages too (--stages not given),
-    and where they are fused (the work measured takes at most FUSE_BELOW of the time), the
-    correlator's tail thread yields to the line's path (``tail_yields``: rtsar.stream.engine)."""
-    chosen = layout and not settings.swath_workers
+    """``settings`` with the granularity ``g``; ``layout``: its stages too (--stages not given)."""
     return replace(
         settings,
-        stages=g.stages if chosen else settings.stages,
-        tail_yields=chosen and g.stages == "fused",
+        stages=g.stages if layout and not settings.swath_workers else settings.stages,
         strip_lines=g.strip_lines,
         strip_most_lines=g.strip_most_lines,
         strip_deadline_s=g.strip_deadline_s,
@@ -244,8 +240,9 @@ def measure_costs(
 
     lens = make_lens(plan, settings.lens_backend, settings.device, p.precision, p.micro_batch)
     route: dict[int, tuple[float, float]] = {}
-    # Small calls on the CPU?  Not with --height: its receivers' engines keep their own lenses.
-    if settings.lens_backend == "auto" and lens.backend == "opencl" and copies == 1:
+    # --lens hybrid: small calls on the CPU?  Not with --height: its receivers' engines keep
+    # their own lenses.
+    if settings.lens_backend == "hybrid" and lens.backend == "opencl" and copies == 1:
         sizes = sorted({min(b, TIMED_UP_TO) for b in blocks} | {1})
         lens, route = small_calls_route(lens, sizes, noise)
     below = getattr(lens, "below", 1)

@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import atexit
 import math
-import os
 import threading
 import weakref
 from collections import deque
@@ -75,7 +74,6 @@ def _check_plan(n: int, head_lines: int, max_block_lines: int) -> None:
 
 
 TAIL_LEAD = 2  # a tail segment of block B starts at D ≥ TAIL_LEAD · B (module docstring)
-TAIL_NICE = 10  # a live run with headroom lowers the tail thread's priority this much
 
 
 def _segments_for(n: int, blocks: list[int]) -> list[tuple[int, int, int]] | None:
@@ -400,25 +398,6 @@ class NonUniformCorrelator(Correlator):
         out = self._lines_out(first, pending, self._flushed)
         self._flushed = pending
         return out
-
-    def yield_tail(self, nice: int = TAIL_NICE) -> bool:
-        """Lower the tail thread's scheduling priority by ``nice`` steps (capped at 19), so
-        that on a busy machine the threads on a line's path (the head, the lens, the strips)
-        run before it: its blocks have a lead of TAIL_LEAD blocks before a line needs them,
-        and where it lags the head waits for it (its thread then sleeping).  For a live run
-        with headroom (rtsar.stream.engine; psaltis-max at 25 % of its PRF, three alternating
-        pairs of 6 s, 2-core Zen 3: median 3.06-3.80 ms against 3.22-4.24, p99 8.5-10.0
-        against 9.1-15.3).  False where there is no tail thread (none, or ended) or the
-        system sets no per-thread priority (refused: a Unix other than Linux; not Unix)."""
-        tid = self._tail.native_id if self.threaded and self._tail.is_alive() else None
-        if tid is None or not hasattr(os, "setpriority"):  # no tail thread, or not Unix
-            return False
-        try:
-            lower = min(19, os.getpriority(os.PRIO_PROCESS, tid) + nice)
-            os.setpriority(os.PRIO_PROCESS, tid, lower)
-        except OSError:  # the thread ended, or a system without per-thread priorities
-            return False
-        return True
 
     def close(self) -> None:
         """End the tail thread and wait for it (also done, without the wait, when the correlator

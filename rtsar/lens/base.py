@@ -22,7 +22,7 @@ import numpy as np
 from .numpy_lens import NumpyLens
 from .plan import LensPlan, dft
 
-LENS_BACKENDS = ("auto", "opencl", "numpy")
+LENS_BACKENDS = ("auto", "opencl", "numpy", "hybrid")
 
 
 class Lens(Protocol):
@@ -53,8 +53,11 @@ def make_lens(
     the configured micro-batch), else the NumPy lens, with a RuntimeWarning and the reason in
     ``fallback_reason`` where OpenCL cannot run at all.  Every lens says what runs
     and why in its ``choice`` line; the backend in use is its ``backend`` attribute.
+    ``backend="hybrid"``: the same lens as ``auto`` here; a live run then times its small
+    calls both ways and sends those that take less CPU on SciPy's FFT there
+    (rtsar.lens.small_calls).
     """
-    if backend == "auto":
+    if backend in ("auto", "hybrid"):
         try:
             from .auto import choose
         except ImportError as exc:  # pyopencl missing or its driver library broken
@@ -87,8 +90,8 @@ def make_lens(
 
 
 def survey_wanted(backend: str, device: str | None) -> bool:
-    """Whether the lens will need the device survey: ``auto`` or ``opencl`` with no device
-    asked for (``--device``, RTSAR_OPENCL_DEVICE)."""
+    """Whether the lens will need the device survey: ``auto``, ``hybrid`` or ``opencl`` with no
+    device asked for (``--device``, RTSAR_OPENCL_DEVICE)."""
     return not (backend == "numpy" or device is not None or os.environ.get("RTSAR_OPENCL_DEVICE"))
 
 

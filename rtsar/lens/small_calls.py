@@ -1,5 +1,8 @@
-"""Small lens calls on the CPU's FFT: a live run's calls of a few pulses, where the OpenCL lens
-takes more of the machine than the plan on SciPy's FFT in the calling thread (issue 38).
+"""Small lens calls on the CPU's FFT (``--lens hybrid``): a live run's calls of a few pulses,
+where the OpenCL lens takes more of the machine than the plan on SciPy's FFT in the calling
+thread (issue 38).  Not the default: the design's lens is the OpenCL one, and a run of small
+blocks would then run none of its calls on it (psaltis-jpl at its PRF: blocks of 1-2 pulses,
+every call on SciPy's FFT).
 
 A CPU OpenCL driver runs a call on its worker threads and the calling thread together, and its
 workers then wait for the next launch spinning: every call holds both cores of a 2-core machine
@@ -19,7 +22,7 @@ tail, the strips and the source then could not use.  Where the live run's granul
 chosen (rtsar.app.live_granularity), both lenses are timed at each candidate call size up to
 TIMED_UP_TO (8) pulses, and calls of fewer than ``below`` pulses run on the CPU
 (``cpu_limit``: where SciPy's FFT takes less CPU); larger calls (larger blocks, a run that
-fell behind) go to the OpenCL lens, as ``--lens auto`` chose it.
+fell behind) go to the OpenCL lens, as ``--lens auto`` would choose it.
 
 The two agree to the lenses' single-precision error (about 1e-7 relative RMS, each against
 compress_reference), not bit for bit: a live run's lines then depend on which calls were small.

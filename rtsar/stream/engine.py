@@ -50,10 +50,8 @@ class StreamProcessor:
     AO cell before the lens and the physical CCD in place of the ideal correlator.
     ``azimuth`` False builds no correlator (the range half alone: a swath coordinator, whose
     workers correlate).  ``live``: a live run's settings, from its granularity: an OpenCL lens's
-    calls of fewer than ``lens_cpu_below`` pulses run on SciPy's FFT (rtsar.lens.small_calls),
-    and with ``tail_yields`` (the granularity chose fused stages: the work takes at most
-    FUSE_BELOW of the time) the nonuniform correlator's tail thread yields to the line's path
-    (its ``yield_tail``).
+    calls of fewer than ``lens_cpu_below`` pulses run on SciPy's FFT (--lens hybrid:
+    rtsar.lens.small_calls).
     """
 
     def __init__(
@@ -82,8 +80,6 @@ class StreamProcessor:
         if physical is not None:
             self.ao_cell = AOCell(config, physical)
         self.correlator = make_ccd(config, self.plan.range_m, physical) if azimuth else None
-        if live is not None and live.tail_yields and hasattr(self.correlator, "yield_tail"):
-            self.correlator.yield_tail()  # headroom: the line's path first (rtsar.ccd.nonuniform)
         self.start_along_track_m = float(start_along_track_m)
         self.lines_out = 0
         self.pulses_in = 0

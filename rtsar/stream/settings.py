@@ -20,7 +20,6 @@ class PipelineSettings:
     lens_align: int = 0  # > 1: the lens waits for the pulses that complete a block of this many
     lens_hold_s: float = 0.0  # … at most this long (the granularity's: 2 blocks at the run's rate)
     lens_cpu_below: int = 0  # > 1: an OpenCL lens's calls of fewer pulses on SciPy's FFT
-    tail_yields: bool = False  # the granularity chose fused stages: the CCD's tail thread yields
     queue_pulses: int = 0  # capacity of each queue (0: 8 apertures of pulses)
     max_batch: int = 0  # most pulses per lens launch / CCD push (0: config micro_batch)
     max_gap_pulses: int = 0  # longest zero-filled gap; beyond it a restart (0: one aperture)

@@ -60,7 +60,10 @@ def add_lens_options(g) -> None:
         choices=LENS_BACKENDS,
         help="AO lens backend: auto (default: the OpenCL lens where it is faster than NumPy's for "
         "this configuration, timed once and kept; else NumPy; said on the banner's lens: line), "
-        "opencl (on --device; an error if it cannot build), or numpy",
+        "opencl (on --device; an error if it cannot build), numpy, or hybrid (auto's lens, and "
+        "in a live run the calls of a few pulses on SciPy's FFT where that takes less CPU than "
+        "the OpenCL lens: for a CPU OpenCL driver on a machine of few cores; said on the "
+        "banner's granularity line)",
     )
     g.add_argument(
         "--device",

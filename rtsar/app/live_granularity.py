@@ -239,7 +239,7 @@ def measure_costs(
         )
 
     lens = make_lens(plan, settings.lens_backend, settings.device, p.precision, p.micro_batch)
-    route: dict[int, tuple[float, float]] = {}
+    route: dict[int, tuple[float, float, float, float]] = {}
     # --lens hybrid: small calls on the CPU?  Not with --height: its receivers' engines keep
     # their own lenses.
     if settings.lens_backend == "hybrid" and lens.backend == "opencl" and copies == 1:

@@ -38,7 +38,6 @@ class NumpyLens:
             self._fft, self._in_place = scipy_fft, {"overwrite_x": True}
         else:
             raise ValueError("library must be 'numpy' or 'scipy'")
-        self.library = library
         self.plan = plan
         self.precision = precision
         self.dtype = dt = precision_dtype(precision)

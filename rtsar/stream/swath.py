@@ -436,18 +436,29 @@ class SwathWorkers:
         """Wait up to ``wait_s`` (in all) for the workers started here, kill the rest, close
         the sockets.  Call it once no thread sends or receives any more.  Unless every worker
         is done (the run failed or was given up), the workers are sent a ``stop`` with
-        ``reason``, so that those on other hosts end now, not after their coordinator timeout
-        (a worker whose queue is full learns it from that timeout)."""
+        ``reason``, so that those on other hosts end now, not after their coordinator timeout:
+        a worker whose queue is full is sent it again while its lines are taken and dropped
+        (up to STOP_LINGER_MS), and learns it from that timeout only if it still takes none.
+        (CI, 2026-11-29: a failed coordinator's stop refused by a full queue left a worker
+        waiting its 60 s timeout.)"""
         if self._closed:
             return
         self._closed = True
         self._beats_off.set()
         if self._beater is not None:
             self._beater.join()  # within beat_s / 4: it never waits on a socket
-        told = self._tell_stop(reason or "the coordinator ended before the end of the stream")
-        if told:  # a worker blocked sending its lines reads its stop once they go: take them
+        reason = reason or "the coordinator ended before the end of the stream"
+        told = self._tell_stop(reason)
+        untold = self._tell_stop(reason, dry=True) - told  # their queues were full
+        # A worker blocked sending its lines reads its stop once they go, and takes pulses
+        # again, which makes room for a stop its full queue refused: take the lines (dropped)
+        # and send those stops again meanwhile.
+        if told or untold:
             until = time.monotonic() + STOP_LINGER_MS / 1000
             while time.monotonic() < until:
+                if untold:
+                    now_told = self._tell_stop(reason, among=untold)
+                    told, untold = told | now_told, untold - now_told
                 if self._results.poll(50):
                     self._results.recv_multipart(copy=False)  # dropped: the run has failed
         deadline = time.monotonic() + wait_s
@@ -463,14 +474,17 @@ class SwathWorkers:
             self._results.close(0)
         self._ctx.term()
 
-    def _tell_stop(self, reason: str) -> set[int]:
-        """Send ``stop`` to every set-up worker, unless all are done, without waiting; the
-        workers it went to."""
+    def _tell_stop(self, reason: str, among=None, dry: bool = False) -> set[int]:
+        """Send ``stop`` to every set-up worker (of ``among``, where given), unless all are
+        done, without waiting; the workers it went to (``dry``: those it would go to)."""
         if not hasattr(self, "_done") or self.finished:  # never started, or all done
             return set()
         told = set()
         for k, s in enumerate(self._pushes):
-            if self._sent_at[k] is None:  # never set up: it has nothing to stop
+            if self._sent_at[k] is None or (among is not None and k not in among):
+                continue  # never set up (it has nothing to stop), or not asked for
+            if dry:
+                told.add(k)
                 continue
             try:
                 s.send_multipart([b"stop", reason.encode()], zmq.NOBLOCK)

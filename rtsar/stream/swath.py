@@ -448,8 +448,9 @@ class SwathWorkers:
         if self._beater is not None:
             self._beater.join()  # within beat_s / 4: it never waits on a socket
         reason = reason or "the coordinator ended before the end of the stream"
-        told = self._tell_stop(reason)
-        untold = self._tell_stop(reason, dry=True) - told  # their queues were full
+        wanted = self._to_stop()
+        told = self._tell_stop(reason, wanted)
+        untold = wanted - told  # their queues were full
         # A worker blocked sending its lines reads its stop once they go, and takes pulses
         # again, which makes room for a stop its full queue refused: take the lines (dropped)
         # and send those stops again meanwhile.
@@ -457,7 +458,7 @@ class SwathWorkers:
             until = time.monotonic() + STOP_LINGER_MS / 1000
             while time.monotonic() < until:
                 if untold:
-                    now_told = self._tell_stop(reason, among=untold)
+                    now_told = self._tell_stop(reason, untold)
                     told, untold = told | now_told, untold - now_told
                 if self._results.poll(50):
                     self._results.recv_multipart(copy=False)  # dropped: the run has failed
@@ -474,20 +475,18 @@ class SwathWorkers:
             self._results.close(0)
         self._ctx.term()
 
-    def _tell_stop(self, reason: str, among=None, dry: bool = False) -> set[int]:
-        """Send ``stop`` to every set-up worker (of ``among``, where given), unless all are
-        done, without waiting; the workers it went to (``dry``: those it would go to)."""
-        if not hasattr(self, "_done") or self.finished:  # never started, or all done
+    def _to_stop(self) -> set[int]:
+        """The workers a ``stop`` goes to: those set up, unless all are done (or none started)."""
+        if not hasattr(self, "_done") or self.finished:
             return set()
+        return {k for k in range(len(self._pushes)) if self._sent_at[k] is not None}
+
+    def _tell_stop(self, reason: str, workers: set[int]) -> set[int]:
+        """Send ``stop`` to ``workers`` without waiting; those it went to."""
         told = set()
-        for k, s in enumerate(self._pushes):
-            if self._sent_at[k] is None or (among is not None and k not in among):
-                continue  # never set up (it has nothing to stop), or not asked for
-            if dry:
-                told.add(k)
-                continue
+        for k in sorted(workers):
             try:
-                s.send_multipart([b"stop", reason.encode()], zmq.NOBLOCK)
+                self._pushes[k].send_multipart([b"stop", reason.encode()], zmq.NOBLOCK)
                 told.add(k)
             except zmq.ZMQError:  # its queue is full or it is gone: its timeout tells it
                 pass

@@ -33,6 +33,7 @@ from rtsar.stream.granularity import (
     granularity_words,
     lens_call,
 )
+from rtsar.stream.growth import growth_words
 from rtsar.stream.pipeline import Pipeline, PipelineSettings
 from rtsar.stream.strips import LineBlock, StreamInfo, StripAssembler
 
@@ -298,7 +299,12 @@ def test_the_run_gets_the_documented_choice_of_the_measured_costs(monkeypatch):
         # the lens holds for a block's pulses two blocks' time at the run's rate, not the PRF's
         assert settings.lens_hold_s == pytest.approx(2 * block / rate_hz if block > 1 else 0)
         assert settings.stages == g.stages  # --stages not given: the run's layout is chosen
-        assert words == granularity_words(g, COSTS) + f"; {g.stages} stages ({stages_words(g)})"
+        # and the block may grow, through the larger candidates (rtsar.stream.growth)
+        larger = tuple(b for b in block_candidates(cfg.processor)[0] if b >= block)
+        assert settings.grow_blocks == larger and settings.grow_rate_hz == rate_hz
+        assert words == granularity_words(g, COSTS) + f"; {growth_words(larger)}" + (
+            f"; {g.stages} stages ({stages_words(g)})"
+        )
 
 
 def test_the_fft_correlator_s_transform_length_is_the_documented_choice(monkeypatch):

@@ -12,11 +12,14 @@ was the lower.
 
     python tools/ab_latency.py psaltis-jpl --rate 1.5 --lens hybrid --without route
     python tools/ab_latency.py psaltis-jpl --without slack
+    python tools/ab_latency.py psaltis-max --rate 0.5 --block 8 --without growth
 
 ``--without``: ``route`` (with ``--lens hybrid``: the lens's small calls on SciPy's FFT,
 rtsar.lens.small_calls), ``slack`` (the replay's pacing thread's tight sleeps,
-rtsar.sources.pacing).  The correlator is the nonuniform one (the presets' latency path in
-``rtsar bench``).
+rtsar.sources.pacing), ``growth`` (the correlator's block doubled while the run falls behind,
+rtsar.stream.growth; ``--block B`` starts both runs at blocks of B, as if the granularity had
+chosen it, the new one free to grow to 64).  The correlator is the nonuniform one (the
+presets' latency path in ``rtsar bench``).
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ import dataclasses
 import numpy as np
 
 from rtsar.app import bench_pipeline
-from rtsar.app.live_granularity import GranularityRequest
+from rtsar.app.live_granularity import GranularityRequest, block_candidates
 from rtsar.presets import PRESETS, preset
 from rtsar.sources import pacing
 from rtsar.stream import stats
@@ -40,7 +43,8 @@ def main(argv=None) -> None:
     ap.add_argument("--rate", type=float, default=1.0, help="share of the PRF offered (1.0)")
     ap.add_argument("--rounds", type=int, default=8, help="pairs of runs (8)")
     ap.add_argument("--seconds", type=float, default=3.0, help="seconds of a run (3)")
-    ap.add_argument("--without", choices=("route", "slack"), default="slack")
+    ap.add_argument("--without", choices=("route", "slack", "growth"), default="slack")
+    ap.add_argument("--block", type=int, help="start at blocks of this many lines")
     ap.add_argument("--lens", default="auto", help="the lens backend (hybrid: the route runs)")
     args = ap.parse_args(argv)
     if args.without == "route" and args.lens != "hybrid":
@@ -58,14 +62,20 @@ def main(argv=None) -> None:
     shots = bench_pipeline.bench_shots(cfg, 2048)
     rate_hz = cfg.geometry.prf_hz * args.rate
     asked = PipelineSettings(lens_backend=args.lens)
-    config, settings, _, words = GranularityRequest(rate_hz).apply(cfg, asked)
+    config, settings, _, words = GranularityRequest(rate_hz, args.block).apply(cfg, asked)
+    if args.block:  # fixed: the granularity leaves it be; free to grow in the new run
+        larger = [b for b in block_candidates(cfg.processor)[0] if b >= args.block]
+        settings = dataclasses.replace(settings, grow_blocks=tuple(larger), grow_rate_hz=rate_hz)
     print(words)
     tight_sleeps = pacing.tight_sleeps
     old_settings = settings
     if args.without == "route":
         old_settings = dataclasses.replace(settings, lens_cpu_below=0)
+    if args.without == "growth":
+        old_settings = dataclasses.replace(settings, grow_blocks=())
 
     figures: dict[str, list[tuple[float, float, int]]] = {"new": [], "old": []}
+    grew = {"new": 0, "old": 0}
     for r in range(args.rounds):
         for which in ("new", "old") if r % 2 == 0 else ("old", "new"):
             takes_back_slack = which == "old" and args.without == "slack"
@@ -77,8 +87,10 @@ def main(argv=None) -> None:
             )  # fmt: skip
             ms = np.array(latencies[len(latencies) // 10 :]) * 1e3
             figures[which].append((np.median(ms), np.percentile(ms, 99), run["dropped_pulses"]))
+            grew[which] = run["correlator_block_lines"] if run["correlator_growths"] else 0
         new, old = figures["new"][-1], figures["old"][-1]
-        print(f"round {r + 1}: median / p99 new {new[0]:.2f} / {new[1]:.2f} ms, "
+        grown = f" (grown to {grew['new']})" if grew["new"] else ""
+        print(f"round {r + 1}: median / p99 new {new[0]:.2f} / {new[1]:.2f} ms{grown}, "
               f"old {old[0]:.2f} / {old[1]:.2f} ms")  # fmt: skip
     pacing.tight_sleeps = tight_sleeps
     for which in ("new", "old"):

@@ -43,10 +43,12 @@ def latency_against_rate(cfg, shots, seconds: float, capacity: float, log, strea
         rate_hz = prf * fraction
         chosen_cfg, settings, g, words = GranularityRequest(rate_hz).apply(cfg, PipelineSettings())
         r = stream_run(chosen_cfg, shots, seconds, fraction, settings)
+        grew = r.get("correlator_growths")  # the block grown while behind (rtsar.stream.growth)
         row = {
             "offered_fraction": fraction,
             "offered_hz": rate_hz,
             "block_lines": g.block_lines,
+            "grown_to_lines": r.get("correlator_block_lines") if grew else None,
             "strip_lines": settings.strip_lines,
             "granularity": words,
             "kept_fraction": r["kept_fraction"],
@@ -56,9 +58,11 @@ def latency_against_rate(cfg, shots, seconds: float, capacity: float, log, strea
         }
         row["meets_goal"] = meets_goal(row)
         rows.append(row)
+        to = row["grown_to_lines"]
         log(
-            f"    {fraction:4.0%} of the PRF ({rate_hz:,.0f} Hz): blocks of {row['block_lines']}, "
-            f"strips of {row['strip_lines']}; kept {100 * r['kept_fraction']:.1f} %, dropped "
+            f"    {fraction:4.0%} of the PRF ({rate_hz:,.0f} Hz): blocks of {row['block_lines']}"
+            + (f" grown to {to} (it fell behind)" if to else "")
+            + f", strips of {row['strip_lines']}; kept {100 * r['kept_fraction']:.1f} %, dropped "
             f"{r['dropped_pulses']:,}; latency median {row['latency_median_ms']:.2f} ms, p99 "
             f"{row['latency_p99_ms']:.2f} ms (goal median <= {goal_median_ms(rate_hz):.2f} ms: "
             f"{'met' if row['meets_goal'] else 'not met'})"

@@ -153,6 +153,8 @@ def stream_run(
         "latency_max_ms": d["latency_max_ms"],
         "stage_busy_s": d["stage_busy_s"],
         "strips": c["strips_published"],
+        "correlator_growths": c.get("correlator_growths", 0),  # rtsar.stream.growth
+        "correlator_block_lines": c.get("correlator_block_lines"),
     }
     if live:  # paced: what the instrument-like source offered, and how much of it was kept
         out.update(paced_figures(total, done, c["gap_pulses"]))

@@ -53,6 +53,7 @@ from ..stream.granularity import (
     modelled_latency_s,
     utilisation,
 )
+from ..stream.growth import config_with_block, growth_words, why_fixed
 from ..stream.ingest import Ingest
 from ..stream.settings import PipelineSettings
 from ..stream.stats import LatencyStats
@@ -103,6 +104,11 @@ class GranularityRequest:
         words = granularity_words(g, costs)
         if costs.lens_cpu_below > 1:
             words += f"; {small_calls_words(costs)}"
+        swath = bool(settings.swath_workers)
+        grow = not fixed and not why_fixed(config.processor, physical, copies, swath)
+        grow_blocks = tuple(b for b in blocks if b >= g.block_lines) if grow else ()
+        if len(grow_blocks) > 1:
+            words += f"; {growth_words(grow_blocks)}"
         if self.stages is None:
             words += f"; {g.stages} stages ({stages_words(g)})"
         chosen = block_config(config, g.block_lines, physical)
@@ -110,6 +116,8 @@ class GranularityRequest:
             words += f"; fft transform length M = {chosen.processor.fft_length}"
         chosen_s = chosen_settings(settings, g, self.stages is None)
         below = costs.lens_cpu_below if not settings.swath_workers else 0  # workers': their own
+        chosen_s = replace(chosen_s, grow_blocks=grow_blocks if len(grow_blocks) > 1 else ())
+        chosen_s = replace(chosen_s, grow_rate_hz=self.rate_hz if chosen_s.grow_blocks else 0.0)
         return chosen, replace(chosen_s, lens_cpu_below=below), g, words
 
 
@@ -190,16 +198,9 @@ def aligned(p: Processor, physical=None, stages: str = "split") -> bool:
 
 
 def block_config(config: Config, block: int, physical=None) -> Config:
-    """``config`` whose correlator releases its lines in blocks of ``block``: partitioned and
-    nonuniform with that head block, fft with M = block + N - 1; the others as they are."""
-    p = config.processor
-    if physical is not None:
-        return config
-    if p.correlator in BLOCKED_KINDS:
-        return config.with_processor(partition_lines=block)
-    if p.correlator == "fft":
-        return config.with_processor(fft_length=block + p.aperture_pulses - 1)
-    return config
+    """``config`` whose correlator releases its lines in blocks of ``block``
+    (rtsar.stream.growth.config_with_block); with ``physical`` (its CCD), as it is."""
+    return config if physical is not None else config_with_block(config, block)
 
 
 def chosen_settings(settings: PipelineSettings, g: Granularity, layout=False) -> PipelineSettings:

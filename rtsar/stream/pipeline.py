@@ -4,10 +4,9 @@ Each stage is a thread, joined to the next by a bounded queue (capacity in pulse
 memory bounded whatever the source does); the heavy work releases the GIL, so threads overlap.
 ``stages``: "split" (lens and CCD threads), "fused" (one thread: one queue hop less),
 "overlapped" (one thread, the lens computing batch k + 1 while the CCD correlates batch k).
-A live source never waits: when the first queue is full its shots are dropped and counted, and
-ingest zero-fills their slots so azimuth timing holds; a replay waits; downstream stages wait
-for each other.  Every stage takes all the work waiting, up to a cap (adaptive micro-batching);
-with ``lens_align`` = B the lens first waits for the pulses that complete a block of B.
+A live source's shots are dropped and counted when the first queue is full (ingest zero-fills
+their slots); a replay waits.  Each stage takes all the work waiting, up to a cap (``lens_align``
+= B: the lens first waits for the pulses that complete a block of B).
 
 Corrections (rtsar.focus.chain) run in the lens thread in pulse order: "raw" stages before the
 lens, "lines" stages between lens and CCD; a line stage may hold pulses (PGA holds a block),
@@ -20,8 +19,9 @@ Latency of an image line: from the arrival of the last pulse that contributes to
 j + N - 1 for line j, Psaltis & Wagner 1981: the row leaves the CCD after N shifts) to the
 publication of its strip: a strip goes out when it holds ``strip_lines`` (with every line then
 waiting, up to ``strip_most_lines``), or its oldest line waited ``strip_deadline_s``
-(rtsar.stream.granularity chooses them).  The pieces: rtsar.stream.queue, ingest, engine, hold,
-timing, height, strips, swath, link (silences), stats, settings, heap (the collector)."""
+(rtsar.stream.granularity chooses them; rtsar.stream.growth doubles the correlator's block
+while the work falls behind).  The pieces: rtsar.stream.queue, ingest, engine, hold, timing,
+height, strips, swath, link (silences), stats, settings, heap (the collector)."""
 
 from __future__ import annotations
 
@@ -34,6 +34,7 @@ from ..params import Config
 from ..sources.base import ShotBatch, Source
 from . import heap
 from .engine import Lines, StreamProcessor
+from .growth import growth_of
 from .height import HeightBatch, HeightChannel
 from .hold import HeldPulses
 from .ingest import Ingest, PulseBlock, concat_blocks, regroup_blocks
@@ -94,7 +95,7 @@ class Pipeline:
             if not isinstance(sink, StripSink):
                 raise TypeError(f"sinks must be StripSink objects, got {type(sink).__name__}")
         self._pulse_sinks = [sink for sink in self.sinks if sink.wants_pulses]
-        self.settings = s = settings or PipelineSettings()
+        self.settings = s = replace(settings) if settings else PipelineSettings()  # a growth sets
         n = config.processor.aperture_pulses
         capacity = s.queue_pulses or 8 * n
         check_memory(config, capacity, 0 if height is None else len(height.channels))
@@ -102,11 +103,10 @@ class Pipeline:
         self.engine = StreamProcessor(
             config, s.lens_backend, s.device, start_along_track_m, corrections, physical, azimuth, s
         )
-        self.height = (
-            None
-            if height is None
-            else HeightChannel(config, height, s.lens_backend, s.device, start_along_track_m)
-        )
+        where = (s.lens_backend, s.device, start_along_track_m)  # the receivers' lenses
+        self.height = None if height is None else HeightChannel(config, height, *where)
+        self.notify = notify
+        self.growth = growth_of(config, s, self.engine, physical, height)  # the block, if behind
         self._held = HeldPulses()  # pulses inside the line stages (metadata)
         self._holding = bool(corrections and corrections.line_stages)
         self.max_batch = s.max_batch or config.processor.micro_batch
@@ -186,10 +186,11 @@ class Pipeline:
         busy = 0.0
         key = "lens" if self.settings.stages == "split" else "lens+ccd"
         try:
-            align, hold_s = self.settings.lens_align, self.settings.lens_hold_s  # granularity
-            split = align and ShotBatch.split  # aligned: a source's release cut at the batch
             while True:  # align > 1: a block's pulses in one call (a silence: then what came)
-                need = min(align - self.ingest.next_pulse % align, self.max_batch) if align else 1
+                align, hold_s = self.settings.lens_align, self.settings.lens_hold_s  # may grow
+                split = align and ShotBatch.split  # aligned: a source's release cut at the batch
+                into = (self.ingest.next_pulse - self.settings.lens_align_from) % (align or 1)
+                need = min(align - into, self.max_batch) if align else 1
                 batches = self.q_shots.get_batch(self.max_batch, None, need, hold_s, split)
                 t = time.perf_counter()
                 blocks = self._ingest(batches)
@@ -291,7 +292,8 @@ class Pipeline:
         finally:
             self.q_image.close()  # the sockets close in join(), once no stage uses them
 
-    def _put_image(self, block: LineBlock | None) -> None:
+    def _put_image(self, block: LineBlock | HeightBatch | None) -> None:
+        """Image lines (or height strips, in order with them) queued for publication."""
         if block is not None:
             self.q_image.put(block)
 
@@ -317,21 +319,19 @@ class Pipeline:
         block = concat_blocks(blocks)
         self.timing.record(block)
         self.own["pulses_processed"] += len(block)
+        lag_s = time.perf_counter() - float(block.arrival_s[-1])  # of the newest pulse
         out = self.engine.azimuth_stage(block.samples)
+        if self.growth is not None:
+            self.growth.step(self, block.samples, lag_s)
         if self.height is not None:
-            self._put_heights(self.height.correlate(out.lines, block.aux))
+            self._put_image(self.height.correlate(out.lines, block.aux))
         return self._line_block(out)
 
     def _ccd_flush(self) -> LineBlock | None:
         out = self.engine.flush_azimuth()
         if self.height is not None:
-            self._put_heights(self.height.flush(out.lines))
+            self._put_image(self.height.flush(out.lines))
         return self._line_block(out)
-
-    def _put_heights(self, batch: HeightBatch | None) -> None:
-        """Height strips, queued for publication in order with the image lines."""
-        if batch is not None:
-            self.q_image.put(batch)
 
     def _line_block(self, out: Lines) -> LineBlock | None:
         block = self.timing.lines(out.first_line, out.lines)
@@ -395,7 +395,7 @@ class Pipeline:
             c.update(self.corrections.counters())
         for sink in self.sinks:
             c.update(sink.counters())
-        for part in (self.link, self.swath):  # a live source's silences, refused messages
+        for part in (self.link, self.swath, self.growth):  # silences, refusals, growths
             c.update(part.counters() if part is not None else {})
         c.update(self.own)
         return c

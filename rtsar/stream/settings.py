@@ -19,7 +19,10 @@ class PipelineSettings:
     strip_deadline_s: float | None = None  # a partial strip goes out once a line waited this long
     lens_align: int = 0  # > 1: the lens waits for the pulses that complete a block of this many
     lens_hold_s: float = 0.0  # … at most this long (the granularity's: 2 blocks at the run's rate)
+    lens_align_from: int = 0  # … counted from this pulse (a grown block: rtsar.stream.growth)
     lens_cpu_below: int = 0  # > 1: an OpenCL lens's calls of fewer pulses on SciPy's FFT
+    grow_blocks: tuple = ()  # the correlator's block and larger ones to grow to when behind …
+    grow_rate_hz: float = 0.0  # … block periods counted at this rate (rtsar.stream.growth)
     queue_pulses: int = 0  # capacity of each queue (0: 8 apertures of pulses)
     max_batch: int = 0  # most pulses per lens launch / CCD push (0: config micro_batch)
     max_gap_pulses: int = 0  # longest zero-filled gap; beyond it a restart (0: one aperture)

@@ -1,0 +1,233 @@
+"""A live run's correlator block, doubled while the run falls behind (issue 38: latency
+"degrades gracefully (larger blocks, never drops) as the rate approaches capacity").
+
+The granularity (rtsar.stream.granularity) is chosen from the work timed at the run's start,
+blocks back to back.  In a paced run the same work costs 1.3-1.5 times as much (the caches
+cold after each idle gap, the other threads on the cores), so near capacity the block chosen
+can be too small, and a backlog then grows for the rest of the run (psaltis-max at 50 % of
+its PRF, blocks of 8, 2-core Zen 3: median latency 237 ms).  So the run watches its backlog
+(``BacklogWatch``): the lag of each correlator push, from the arrival of its newest pulse to
+the push.  Where, over a whole window of GROW_WINDOW_S, the lag stays above ``lag_limit_s``
+(GROW_LAG_BLOCKS block periods, at least GROW_LEAST_LAG_S) and ends no lower than it began,
+the work does not keep up, and the correlator's block doubles: its fixed costs a block are
+shared by twice the lines.  A backlog that shrinks is left to drain (a stall of the machine,
+the start-up's burst), and so is one that never lasts a window.
+
+The grown correlator continues the stream exactly (``LineHistory``, ``BlockGrowth``): built
+with the larger block, it is first fed the last H lines the old one took (H: the least
+multiple of the new block ≥ N - 1; zeros before the run's first pulse), whose outputs, lines
+the old correlator gave already, are dropped; the next line it gives is the old one's next.
+The swap waits for a push after which the old correlator holds no partial block (the next
+one, where the lens aligns its calls to the blocks); the new blocks are counted from there,
+and so are the lens's calls (rtsar.stream.pipeline, ``lens_align``, ``lens_align_from``).
+Feeding H lines costs one push of about an aperture (psaltis-max: N = 512 lines), once a
+growth.  The candidates are the granularity's: the head blocks 1, 2, 4, … (each growth
+doubles), fft's M - N + 1 for the fast transform lengths M (the next of them).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..ccd import make_ccd
+from ..params import Config
+
+GROW_WINDOW_S = 0.25  # the lag is judged over windows of this long …
+GROW_LAG_BLOCKS = 4  # … a backlog: a lag over this many block periods throughout …
+GROW_LEAST_LAG_S = 5e-3  # … and over this (a busy machine's jitter stays under it)
+GROWING_KINDS = ("partitioned", "nonuniform", "fft")  # whose block a config sets
+
+
+def config_with_block(config: Config, block: int) -> Config:
+    """``config`` whose correlator releases its lines in blocks of ``block``: partitioned and
+    nonuniform with that head block, fft with the transform length M = block + N - 1; the
+    others as they are."""
+    p = config.processor
+    if p.correlator in ("partitioned", "nonuniform"):
+        return config.with_processor(partition_lines=block)
+    if p.correlator == "fft":
+        return config.with_processor(fft_length=block + p.aperture_pulses - 1)
+    return config
+
+
+def lag_limit_s(block: int, rate_hz: float) -> float:
+    """The lag above which pulses wait in a backlog, with blocks of ``block`` lines at
+    ``rate_hz`` pulses/s: GROW_LAG_BLOCKS block periods, at least GROW_LEAST_LAG_S."""
+    return max(GROW_LEAST_LAG_S, GROW_LAG_BLOCKS * block / rate_hz)
+
+
+class BacklogWatch:
+    """Whether the work keeps up, from the lags of the correlator's pushes (module docstring).
+
+    ``observe(now_s, lag_s, limit_s)`` → True at the end of a window (GROW_WINDOW_S, from the
+    first push after the last verdict) in which every lag exceeded ``limit_s`` and the last
+    was no lower than the first: the backlog lasted and did not shrink."""
+
+    def __init__(self, window_s: float = GROW_WINDOW_S):
+        self.window_s = float(window_s)
+        self.restart()
+
+    def restart(self) -> None:
+        """Forget the window (after a growth: the next is judged on the new block alone)."""
+        self._start_s: float | None = None
+        self._first_lag_s = self._least_lag_s = 0.0
+
+    def observe(self, now_s: float, lag_s: float, limit_s: float) -> bool:
+        if self._start_s is None:
+            self._start_s, self._first_lag_s, self._least_lag_s = now_s, lag_s, lag_s
+            return False
+        self._least_lag_s = min(self._least_lag_s, lag_s)
+        if now_s - self._start_s < self.window_s:
+            return False
+        behind = self._least_lag_s > limit_s and lag_s >= self._first_lag_s
+        self._start_s, self._first_lag_s, self._least_lag_s = now_s, lag_s, lag_s
+        return behind
+
+
+class LineHistory:
+    """The last ``rows`` lines pushed into the correlator (a ring), zeros before the first."""
+
+    def __init__(self, rows: int, range_bins: int, dtype):
+        self._ring = np.zeros((rows, range_bins), dtype)
+        self.pushed = 0  # lines added so far
+
+    def add(self, lines: np.ndarray) -> None:
+        rows, count = len(self._ring), len(lines)
+        if count >= rows:  # line k of the stream sits at row k mod rows
+            self._ring[(self.pushed + np.arange(count - rows, count)) % rows] = lines[-rows:]
+        else:
+            at = self.pushed % rows
+            first = min(count, rows - at)
+            self._ring[at : at + first] = lines[:first]
+            self._ring[: count - first] = lines[first:]
+        self.pushed += count
+
+    def last(self, count: int) -> np.ndarray:
+        """The last ``count`` (≤ rows) lines added, oldest first; zeros before the first."""
+        if count > len(self._ring):
+            raise ValueError(f"the history holds {len(self._ring)} lines, not {count}")
+        index = np.arange(self.pushed - count, self.pushed) % len(self._ring)
+        out = self._ring[index]
+        out[: max(0, count - self.pushed)] = 0
+        return out
+
+
+def history_lines(aperture: int, block: int) -> int:
+    """H: the least multiple of ``block`` that is at least N - 1 (module docstring)."""
+    return -(-(aperture - 1) // block) * block
+
+
+def grown_correlator(config: Config, range_m: np.ndarray, block: int, history: np.ndarray):
+    """The correlator of ``config`` with blocks of ``block`` lines, fed ``history`` (the last
+    history_lines(N, block) lines of the stream) and its outputs of them dropped."""
+    correlator = make_ccd(config_with_block(config, block), range_m)
+    correlator.push(history)
+    return correlator
+
+
+class BlockGrowth:
+    """The correlator's block, doubled while a live run falls behind (module docstring).
+
+    ``blocks``: the run's block and the larger ones it may grow to, in order; ``rate_hz``: the
+    pulse rate the block periods are counted at.  ``after_push(engine, lines, lag_s, now_s)``
+    (after each push of ``lines`` into ``engine.correlator``, an rtsar.stream.engine
+    StreamProcessor, whose push began ``lag_s`` after its newest pulse arrived) → the new
+    block where the correlator grew, else 0."""
+
+    def __init__(self, config: Config, blocks, rate_hz: float, range_bins: int, dtype):
+        self.blocks = [int(b) for b in blocks]
+        if len(self.blocks) < 2 or self.blocks != sorted(set(self.blocks)):
+            raise ValueError(f"blocks must be the run's and larger ones, got {blocks!r}")
+        if not rate_hz > 0:
+            raise ValueError(f"rate must be > 0 pulses/s, got {rate_hz!r}")
+        self.config = config
+        self.rate_hz = float(rate_hz)
+        self.block = self.blocks[0]
+        n = config.processor.aperture_pulses
+        rows = max(history_lines(n, b) for b in self.blocks[1:])
+        self.history = LineHistory(rows, range_bins, dtype)
+        self.watch = BacklogWatch()
+        self.due = False  # a growth decided, waiting for a push that ends on a block
+        self.growths = 0
+        self.from_pulse = 0  # the stream's pulse from which the blocks are counted
+
+    def counters(self) -> dict:
+        return {"correlator_growths": self.growths, "correlator_block_lines": self.block}
+
+    def step(self, pipe, lines: np.ndarray, lag_s: float) -> None:
+        """After a push in ``pipe`` (an rtsar.stream.pipeline.Pipeline): where the block grew,
+        the lens aligns its calls to the new block (``lens_align`` from ``lens_align_from``,
+        ``lens_hold_s``: two blocks' time) and the run's ``notify`` is told why."""
+        was = self.block
+        grown = self.after_push(pipe.engine, lines, lag_s, time.perf_counter())
+        if not grown:
+            return
+        s = pipe.settings
+        if s.lens_align:  # the new blocks counted from the pulse of the swap
+            s.lens_align_from, s.lens_hold_s = self.from_pulse, 2 * grown / self.rate_hz
+            s.lens_align = grown
+        if pipe.notify is not None:
+            limit_ms = lag_limit_s(was, self.rate_hz) * 1e3
+            pipe.notify(
+                f"the work fell behind (lag over {limit_ms:.0f} ms for {self.watch.window_s:g} s):"
+                f" the correlator's block grows from {was} to {grown} lines"
+            )
+
+    def after_push(self, engine, lines: np.ndarray, lag_s: float, now_s: float) -> int:
+        if self.block == self.blocks[-1]:
+            return 0  # the largest: no history kept from here
+        self.history.add(lines)
+        limit_s = lag_limit_s(self.block, self.rate_hz)
+        self.due = self.watch.observe(now_s, lag_s, limit_s) or self.due
+        if not self.due:
+            return 0
+        grown = self.blocks[self.blocks.index(self.block) + 1]
+        old = engine.correlator
+        n = self.config.processor.aperture_pulses
+        if old.pulses_in - old.lines_out != n - 1:
+            return 0  # a partial block held: the next push that ends one
+        history = self.history.last(history_lines(n, grown))
+        engine.correlator = grown_correlator(self.config, engine.range_m, grown, history)
+        engine.config = config_with_block(engine.config, grown)
+        old.close()
+        self.block, self.due, self.from_pulse = grown, False, self.history.pushed
+        self.growths += 1
+        self.watch.restart()
+        return grown
+
+
+def why_fixed(p, physical=None, copies: int = 1, swath: bool = False) -> str:
+    """Why the correlator of Processor ``p`` cannot grow its block in a live run ("" where it
+    can): the correlators whose block a config sets, one receiver (``copies`` > 1: --height's
+    receivers keep their own correlators), no swath workers, not --physical, not the
+    Doppler-domain range migration."""
+    doppler = p.range_migration_taps and p.range_migration_domain == "doppler"
+    return (
+        "swath workers correlate in their own processes" if swath
+        else "--physical's CCD has no block" if physical is not None
+        else "--height's receivers keep their own correlators" if copies > 1
+        else "Doppler-domain migration has no block" if doppler
+        else f"the {p.correlator} correlator has no block" if p.correlator not in GROWING_KINDS
+        else ""
+    )  # fmt: skip
+
+
+def growth_words(blocks) -> str:
+    """The banner's words for a run whose block may grow (blocks: its own, then the larger)."""
+    steps = " → ".join(f"{b:,}" for b in blocks)
+    return f"a backlog that lasts {GROW_WINDOW_S:g} s grows the block, {steps} lines at most"
+
+
+def growth_of(config: Config, settings, engine, physical=None, height=None):
+    """The BlockGrowth of a pipeline whose ``settings.grow_blocks`` name blocks to grow to
+    (None where they name none); an error where its correlator cannot grow (why_fixed)."""
+    blocks = tuple(settings.grow_blocks)
+    if len(blocks) < 2:
+        return None
+    copies = 1 if height is None else 2
+    why = why_fixed(config.processor, physical, copies, engine.correlator is None)
+    if why:
+        raise ValueError(f"the correlator's block cannot grow: {why}")
+    return BlockGrowth(config, blocks, settings.grow_rate_hz, len(engine.range_m), engine.dtype)

@@ -1,0 +1,242 @@
+"""A live run's correlator block, doubled while it falls behind (rtsar.stream.growth): the
+rule on given lags, the grown correlator continuing the stream exactly (against eq. 1's
+float64 reference), and a pipeline that grows without losing or changing a line."""
+
+import re
+import time
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from rtsar.ccd import correlate_reference, design_mask, make_ccd
+from rtsar.lens import make_plan
+from rtsar.presets import preset
+from rtsar.scene import Simulator, point_scene
+from rtsar.sources.base import ShotBatch, Source
+from rtsar.stream.engine import process_block
+from rtsar.stream.growth import (
+    GROW_LAG_BLOCKS,
+    GROW_LEAST_LAG_S,
+    GROW_WINDOW_S,
+    BacklogWatch,
+    BlockGrowth,
+    LineHistory,
+    config_with_block,
+    history_lines,
+    lag_limit_s,
+)
+from rtsar.stream.pipeline import Pipeline, PipelineSettings
+from rtsar.stream.strips import StripSink
+
+TOL = 1e-5  # complex64 correlators against the float64 reference, relative RMS
+
+
+def test_the_lag_limit_is_four_block_periods_and_at_least_5_ms():
+    assert GROW_LAG_BLOCKS == 4 and GROW_LEAST_LAG_S == 5e-3
+    assert lag_limit_s(8, 2_500.0) == pytest.approx(4 * 8 / 2_500.0)  # 12.8 ms
+    assert lag_limit_s(1, 1_600.0) == 5e-3  # 2.5 ms of periods: the floor
+
+
+def lags(watch, pairs, limit_s=0.01):
+    return [watch.observe(t, lag, limit_s) for t, lag in pairs]
+
+
+def test_a_backlog_that_lasts_a_window_and_does_not_shrink_is_behind():
+    w = GROW_WINDOW_S
+    watch = BacklogWatch()
+    # over the limit throughout, growing: behind at the window's end, not before
+    assert lags(watch, [(0.0, 0.02), (w / 2, 0.03), (w - 1e-6, 0.03), (w, 0.04)]) == [
+        False, False, False, True
+    ]  # fmt: skip
+    # the next window starts there: a constant lag (not shrinking) is behind too
+    assert lags(watch, [(1.5 * w, 0.04), (2 * w, 0.04)]) == [False, True]
+
+
+def test_a_shrinking_backlog_or_one_dip_under_the_limit_is_not_behind():
+    w = GROW_WINDOW_S
+    shrinking = BacklogWatch()
+    assert lags(shrinking, [(0.0, 0.20), (w / 2, 0.15), (w, 0.10)]) == [False] * 3
+    dip = BacklogWatch()
+    assert lags(dip, [(0.0, 0.02), (w / 2, 0.009), (w, 0.05)]) == [False] * 3
+    first_under = BacklogWatch()  # the window's first lag counts
+    assert lags(first_under, [(0.0, 0.005), (w, 0.05)]) == [False, False]
+    short = BacklogWatch()
+    assert lags(short, [(0.0, 0.02), (w * 0.99, 0.05)]) == [False, False]
+
+
+def test_the_line_history_keeps_the_last_lines_in_order_with_zeros_before_the_first():
+    h = LineHistory(5, 2, np.complex64)
+    stream = (np.arange(40) + 1j).astype(np.complex64)[:, None] * np.array([1, 2])
+    np.testing.assert_array_equal(h.last(3), 0)
+    at = 0
+    for count in (2, 1, 7, 3, 5, 11, 4):  # smaller and larger than the ring, across its end
+        h.add(stream[at : at + count])
+        at += count
+        for want in (1, 4, 5):
+            expect = stream[max(0, at - want) : at]
+            got = h.last(want)
+            np.testing.assert_array_equal(got[want - len(expect) :], expect)
+            np.testing.assert_array_equal(got[: want - len(expect)], 0)
+    with pytest.raises(ValueError, match="holds 5 lines"):
+        h.last(6)
+
+
+def test_history_lines_is_the_least_multiple_of_the_block_covering_n_minus_1():
+    assert history_lines(64, 16) == 64 and history_lines(64, 1) == 63
+    assert history_lines(512, 64) == 512 and history_lines(65, 64) == 64
+
+
+def engine_of(cfg, block):
+    c = config_with_block(cfg, block)
+    plan = make_plan(c)
+    return SimpleNamespace(
+        correlator=make_ccd(c, plan.range_m), range_m=plan.range_m, config=c
+    ), plan
+
+
+@pytest.mark.parametrize("kind", ["partitioned", "nonuniform", "fft"])
+@pytest.mark.parametrize("grow_at", [72, 160])  # before H lines (zeros fed), after
+def test_a_grown_correlator_continues_the_stream_exactly(kind, grow_at):
+    cfg = preset("tiny").with_processor(correlator=kind)
+    # fft: the block is M - N + 1, M = 72, 80, 96 (products of 2, 3 and 5; N = 64)
+    blocks = [9, 17, 33] if kind == "fft" else [2, 4, 8]
+    engine, plan = engine_of(cfg, blocks[0])
+    rng = np.random.default_rng(1)
+    shape = (320, plan.bin_count)
+    lines = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(np.complex64)
+    start = config_with_block(cfg, blocks[0])
+    growth = BlockGrowth(start, blocks, 1_000.0, plan.bin_count, np.complex64)
+    out, grown, ends, p = [], [], [], 0
+    for k in range(400):  # whole blocks of the correlator of the time, as the lens aligns them
+        count = growth.block * (1, 2, 1, 3)[k % 4]
+        if p + count > len(lines):
+            break
+        out.append(engine.correlator.push(lines[p : p + count]))
+        p += count
+        ends.append(p)
+        growth.due = p >= grow_at  # decided (the rule is tested above): where and how it swaps
+        if g := growth.after_push(engine, lines[p - count : p], 1.0, 0.0):
+            grown.append((p, g))
+    out.append(engine.correlator.flush())
+    image = np.concatenate(out)
+    ref = correlate_reference(lines[:p], design_mask(cfg, plan.range_m))
+    assert image.shape == ref.shape  # not a line lost or given twice
+    err = np.linalg.norm(image - ref) / np.linalg.norm(ref)
+    assert err < TOL
+    # grown twice, each at once: the pushes leave the old correlator no partial block
+    at = min(e for e in ends if e >= grow_at)
+    then = min(e for e in ends if e > at)
+    assert grown == [(at, blocks[1]), (then, blocks[2])] and growth.growths == 2
+    assert growth.from_pulse == then
+    assert engine.config.processor.partition_lines == blocks[-1] or kind == "fft"
+    engine.correlator.close()
+
+
+class Collect(StripSink):
+    def __init__(self):
+        self.strips, self.final = [], None
+
+    def strip(self, strip, pipeline):
+        self.strips.append(strip)
+
+    def stats(self, d, pipeline):
+        pass
+
+    def end(self, d, pipeline):
+        self.final = d
+
+
+class Behind(Source):
+    """Shots released over ``seconds``, all stamped as arriving at the start: every push's lag
+    grows, as in a run whose work does not keep up."""
+
+    live = False
+    description = "behind"
+
+    def __init__(self, shots, seconds):
+        super().__init__()
+        self.shots, self.seconds = shots, seconds
+
+    def __iter__(self):
+        start, step = time.perf_counter() - 0.05, 8  # 50 ms behind from the first
+        count = len(self.shots)
+        for k in range(0, count, step):
+            time.sleep(self.seconds * step / count)
+            seq = np.arange(k, min(k + step, count))
+            yield ShotBatch(seq, seq * 1e-3, np.full(len(seq), start), self.shots[seq])
+
+
+@pytest.mark.parametrize("stages", ["split", "fused"])
+def test_a_pipeline_behind_grows_its_block_and_loses_no_line(stages):
+    cfg = preset("tiny").with_processor(correlator="nonuniform", partition_lines=2)
+    r0 = cfg.geometry.slant_range_m
+    scene = point_scene(cfg, [0.0, 4.0], [r0, r0 + 25.0])
+    shots = np.tile(Simulator(scene).block(scene.pulses), (3, 1))[:640]
+    ref, _, _ = process_block(cfg, shots)
+    sink = Collect()
+    said = []
+    settings = PipelineSettings(
+        stages=stages, strip_lines=2, lens_align=2, grow_blocks=(2, 4, 8), grow_rate_hz=500.0
+    )
+    pipe = Pipeline(cfg, Behind(shots, 1.4), [sink], settings, notify=said.append)
+    pipe.run()
+    image = np.concatenate([s.lines for s in sink.strips])
+    assert image.shape == ref.shape
+    assert np.linalg.norm(image - ref) / np.linalg.norm(ref) < TOL
+    c = sink.final["counters"]
+    assert c["correlator_growths"] == 2 and c["correlator_block_lines"] == 8
+    assert pipe.settings.lens_align == 8
+    assert [s for s in said if "correlator's block" in s] == [
+        "the work fell behind (lag over 16 ms for 0.25 s): the correlator's block grows "
+        "from 2 to 4 lines",
+        "the work fell behind (lag over 32 ms for 0.25 s): the correlator's block grows "
+        "from 4 to 8 lines",
+    ]
+    assert c["dropped_pulses"] == 0 and c["lines_out"] == len(ref)
+
+
+def test_a_run_that_keeps_up_keeps_its_block():
+    cfg = preset("tiny").with_processor(correlator="nonuniform", partition_lines=2)
+    r0 = cfg.geometry.slant_range_m
+    scene = point_scene(cfg, [0.0], [r0])
+    shots = np.tile(Simulator(scene).block(scene.pulses), (3, 1))[:640]
+
+    class OnTime(Behind):  # at the preset's 500 pulses/s for 1.3 s: five windows
+        def __iter__(self):
+            for k in range(0, len(self.shots), 8):
+                time.sleep(8 / 500)
+                seq = np.arange(k, min(k + 8, len(self.shots)))
+                now = np.full(len(seq), time.perf_counter())
+                yield ShotBatch(seq, seq * 1e-3, now, self.shots[seq])
+
+    sink = Collect()
+    settings = PipelineSettings(stages="fused", grow_blocks=(2, 4), grow_rate_hz=500.0)
+    Pipeline(cfg, OnTime(shots, 0.0), [sink], settings).run()
+    c = sink.final["counters"]
+    assert c["correlator_growths"] == 0 and c["correlator_block_lines"] == 2
+    assert c["lines_out"] == len(shots) - cfg.processor.aperture_pulses + 1
+
+
+def test_the_figures_live_md_states_are_the_code_s():
+    """docs/pages/guide/live.md states the window, the lag limit and its floor."""
+    from pathlib import Path
+
+    live_md = Path(__file__).resolve().parents[1] / "docs/pages/guide/live.md"
+    text = " ".join(live_md.read_text().split())
+    rule = re.search(
+        r"over a whole ([\d.]+) s window every lag exceeded (\d+) block periods \(at least "
+        r"(\d+) ms\)",
+        text,
+    )
+    assert float(rule.group(1)) == GROW_WINDOW_S and int(rule.group(2)) == GROW_LAG_BLOCKS
+    assert int(rule.group(3)) * 1e-3 == GROW_LEAST_LAG_S
+    assert f"a backlog that lasts {GROW_WINDOW_S:g} s grows the block" in text
+
+
+def test_a_pipeline_whose_correlator_cannot_grow_says_why():
+    cfg = preset("tiny").with_processor(correlator="direct")
+    shots = np.zeros((8, cfg.waveform.samples_per_shot), np.complex64)
+    settings = PipelineSettings(grow_blocks=(1, 2), grow_rate_hz=500.0)
+    with pytest.raises(ValueError, match="cannot grow: the direct correlator has no block"):
+        Pipeline(cfg, Behind(shots, 0.0), [Collect()], settings)

@@ -108,6 +108,7 @@ def test_a_grown_correlator_continues_the_stream_exactly(kind, grow_at):
     start = config_with_block(cfg, blocks[0])
     growth = BlockGrowth(start, blocks, 1_000.0, plan.bin_count, np.complex64)
     out, grown, ends, p = [], [], [], 0
+    lag_s = 1.0 if grow_at > 100 else 0.0  # 1 s: over the limit from the first push
     for k in range(400):  # whole blocks of the correlator of the time, as the lens aligns them
         count = growth.block * (1, 2, 1, 3)[k % 4]
         if p + count > len(lines):
@@ -116,8 +117,10 @@ def test_a_grown_correlator_continues_the_stream_exactly(kind, grow_at):
         p += count
         ends.append(p)
         growth.due = p >= grow_at  # decided (the rule is tested above): where and how it swaps
-        if g := growth.after_push(engine, lines[p - count : p], 1.0, 0.0):
+        if g := growth.after_push(engine, lines[p - count : p], lag_s, 0.0):
             grown.append((p, g))
+        elif growth.block < blocks[-1]:  # a lag over the limit: the next one built ahead
+            assert (growth.next is not None) == (lag_s > 0)  # (else at the swap)
     out.append(engine.correlator.flush())
     image = np.concatenate(out)
     ref = correlate_reference(lines[:p], design_mask(cfg, plan.range_m))

@@ -1,5 +1,5 @@
 """A live run's correlator block, doubled while it falls behind (rtsar.stream.growth): the
-rule on given lags, the grown correlator continuing the stream exactly (against eq. 1's
+rule on given backlogs, the grown correlator continuing the stream exactly (against eq. 1's
 float64 reference), and a pipeline that grows without losing or changing a line."""
 
 import re
@@ -16,15 +16,15 @@ from rtsar.scene import Simulator, point_scene
 from rtsar.sources.base import ShotBatch, Source
 from rtsar.stream.engine import process_block
 from rtsar.stream.growth import (
-    GROW_LAG_BLOCKS,
-    GROW_LEAST_LAG_S,
+    GROW_BACKLOG_BLOCKS,
+    GROW_LEAST_BACKLOG_S,
     GROW_WINDOW_S,
     BacklogWatch,
     BlockGrowth,
     LineHistory,
+    backlog_limit_s,
     config_with_block,
     history_lines,
-    lag_limit_s,
 )
 from rtsar.stream.pipeline import Pipeline, PipelineSettings
 from rtsar.stream.strips import StripSink
@@ -32,10 +32,10 @@ from rtsar.stream.strips import StripSink
 TOL = 1e-5  # complex64 correlators against the float64 reference, relative RMS
 
 
-def test_the_lag_limit_is_four_block_periods_and_at_least_5_ms():
-    assert GROW_LAG_BLOCKS == 4 and GROW_LEAST_LAG_S == 5e-3
-    assert lag_limit_s(8, 2_500.0) == pytest.approx(4 * 8 / 2_500.0)  # 12.8 ms
-    assert lag_limit_s(1, 1_600.0) == 5e-3  # 2.5 ms of periods: the floor
+def test_the_backlog_limit_is_four_block_periods_and_at_least_5_ms():
+    assert GROW_BACKLOG_BLOCKS == 4 and GROW_LEAST_BACKLOG_S == 5e-3
+    assert backlog_limit_s(8, 2_500.0) == pytest.approx(4 * 8 / 2_500.0)  # 12.8 ms
+    assert backlog_limit_s(1, 1_600.0) == 5e-3  # 2.5 ms of periods: the floor
 
 
 def lags(watch, pairs, limit_s=0.01):
@@ -108,7 +108,7 @@ def test_a_grown_correlator_continues_the_stream_exactly(kind, grow_at):
     start = config_with_block(cfg, blocks[0])
     growth = BlockGrowth(start, blocks, 1_000.0, plan.bin_count, np.complex64)
     out, grown, ends, p = [], [], [], 0
-    lag_s = 1.0 if grow_at > 100 else 0.0  # 1 s: over the limit from the first push
+    backlog_s = 1.0 if grow_at > 100 else 0.0  # 1 s: over the limit from the first push
     for k in range(400):  # whole blocks of the correlator of the time, as the lens aligns them
         count = growth.block * (1, 2, 1, 3)[k % 4]
         if p + count > len(lines):
@@ -117,10 +117,10 @@ def test_a_grown_correlator_continues_the_stream_exactly(kind, grow_at):
         p += count
         ends.append(p)
         growth.due = p >= grow_at  # decided (the rule is tested above): where and how it swaps
-        if g := growth.after_push(engine, lines[p - count : p], lag_s, 0.0):
+        if g := growth.after_push(engine, lines[p - count : p], backlog_s, 0.0):
             grown.append((p, g))
         elif growth.block < blocks[-1]:  # a lag over the limit: the next one built ahead
-            assert (growth.next is not None) == (lag_s > 0)  # (else at the swap)
+            assert (growth.next is not None) == (backlog_s > 0)  # (else at the swap)
     out.append(engine.correlator.flush())
     image = np.concatenate(out)
     ref = correlate_reference(lines[:p], design_mask(cfg, plan.range_m))
@@ -150,90 +150,124 @@ class Collect(StripSink):
         self.final = d
 
 
-class Behind(Source):
-    """Shots released over ``seconds``, all stamped as arriving at the start: every push's lag
-    grows, as in a run whose work does not keep up."""
+class SlowSink(Collect):
+    """A subscriber that takes 3 ms a strip: the queues before it fill, and so do those before
+    the correlator (a run whose work does not keep up)."""
+
+    def strip(self, strip, pipeline):
+        time.sleep(0.003)
+        super().strip(strip, pipeline)
+
+
+class OnTime(Source):
+    """Shots released 8 at a time at ``rate_hz`` (0: all at once, a replay as fast as it
+    goes, waited for when the first queue is full)."""
 
     live = False
-    description = "behind"
+    description = "on time"
 
-    def __init__(self, shots, seconds):
+    def __init__(self, shots, rate_hz):
         super().__init__()
-        self.shots, self.seconds = shots, seconds
+        self.shots, self.rate_hz = shots, rate_hz
 
     def __iter__(self):
-        start, step = time.perf_counter() - 0.05, 8  # 50 ms behind from the first
-        count = len(self.shots)
-        for k in range(0, count, step):
-            time.sleep(self.seconds * step / count)
-            seq = np.arange(k, min(k + step, count))
-            yield ShotBatch(seq, seq * 1e-3, np.full(len(seq), start), self.shots[seq])
+        for k in range(0, len(self.shots), 8):
+            if self.rate_hz:
+                time.sleep(8 / self.rate_hz)
+            seq = np.arange(k, min(k + 8, len(self.shots)))
+            now = np.full(len(seq), time.perf_counter())
+            yield ShotBatch(seq, seq * 1e-3, now, self.shots[seq])
+
+
+def tiny_shots(copies):
+    cfg = preset("tiny").with_processor(correlator="nonuniform", partition_lines=2)
+    r0 = cfg.geometry.slant_range_m
+    scene = point_scene(cfg, [0.0, 4.0], [r0, r0 + 25.0])
+    return cfg, np.tile(Simulator(scene).block(scene.pulses), (copies, 1))
 
 
 @pytest.mark.parametrize("stages", ["split", "fused"])
 def test_a_pipeline_behind_grows_its_block_and_loses_no_line(stages):
-    cfg = preset("tiny").with_processor(correlator="nonuniform", partition_lines=2)
-    r0 = cfg.geometry.slant_range_m
-    scene = point_scene(cfg, [0.0, 4.0], [r0, r0 + 25.0])
-    shots = np.tile(Simulator(scene).block(scene.pulses), (3, 1))[:640]
+    cfg, shots = tiny_shots(4)
+    shots = shots[:1000]
     ref, _, _ = process_block(cfg, shots)
-    sink = Collect()
-    said = []
+    sink, said = SlowSink(), []
     settings = PipelineSettings(
-        stages=stages, strip_lines=2, lens_align=2, grow_blocks=(2, 4, 8), grow_rate_hz=500.0
-    )
-    pipe = Pipeline(cfg, Behind(shots, 1.4), [sink], settings, notify=said.append)
+        stages=stages, strip_lines=2, lens_align=2, queue_pulses=64, grow_blocks=(2, 4, 8),
+        grow_rate_hz=500.0,
+    )  # fmt: skip
+    pipe = Pipeline(cfg, OnTime(shots, 0.0), [sink], settings, notify=said.append)
     pipe.run()
     image = np.concatenate([s.lines for s in sink.strips])
     assert image.shape == ref.shape
     assert np.linalg.norm(image - ref) / np.linalg.norm(ref) < TOL
     c = sink.final["counters"]
     assert c["correlator_growths"] == 2 and c["correlator_block_lines"] == 8
-    assert pipe.settings.lens_align == 8
+    # the lens's calls aligned to the blocks of the last swap
+    assert pipe.settings.lens_align == 8 and pipe.settings.lens_align_from == pipe.growth.from_pulse
+    assert pipe.growth.from_pulse > 0
     assert [s for s in said if "correlator's block" in s] == [
-        "the work fell behind (lag over 16 ms for 0.25 s): the correlator's block grows "
-        "from 2 to 4 lines",
-        "the work fell behind (lag over 32 ms for 0.25 s): the correlator's block grows "
-        "from 4 to 8 lines",
+        "the work fell behind (16 ms of pulses waiting for 0.25 s): the correlator's block "
+        "grows from 2 to 4 lines",
+        "the work fell behind (32 ms of pulses waiting for 0.25 s): the correlator's block "
+        "grows from 4 to 8 lines",
     ]
     assert c["dropped_pulses"] == 0 and c["lines_out"] == len(ref)
 
 
 def test_a_run_that_keeps_up_keeps_its_block():
-    cfg = preset("tiny").with_processor(correlator="nonuniform", partition_lines=2)
-    r0 = cfg.geometry.slant_range_m
-    scene = point_scene(cfg, [0.0], [r0])
-    shots = np.tile(Simulator(scene).block(scene.pulses), (3, 1))[:640]
-
-    class OnTime(Behind):  # at the preset's 500 pulses/s for 1.3 s: five windows
-        def __iter__(self):
-            for k in range(0, len(self.shots), 8):
-                time.sleep(8 / 500)
-                seq = np.arange(k, min(k + 8, len(self.shots)))
-                now = np.full(len(seq), time.perf_counter())
-                yield ShotBatch(seq, seq * 1e-3, now, self.shots[seq])
-
+    cfg, shots = tiny_shots(3)
+    shots = shots[:640]  # at the preset's 500 pulses/s: 1.3 s, five windows
     sink = Collect()
     settings = PipelineSettings(stages="fused", grow_blocks=(2, 4), grow_rate_hz=500.0)
-    Pipeline(cfg, OnTime(shots, 0.0), [sink], settings).run()
+    Pipeline(cfg, OnTime(shots, 500.0), [sink], settings).run()
     c = sink.final["counters"]
     assert c["correlator_growths"] == 0 and c["correlator_block_lines"] == 2
     assert c["lines_out"] == len(shots) - cfg.processor.aperture_pulses + 1
 
 
+@pytest.mark.parametrize("kind", ["partitioned", "nonuniform", "fft"])
+def test_pushes_of_any_size_grow_only_where_no_block_is_partial(kind):
+    """Pushes of 0-11 lines, growth decided at random pushes: the swap waits for a push that
+    leaves the old correlator no partial block, and the image stays eq. 1's."""
+    cfg = preset("tiny").with_processor(correlator=kind)
+    blocks = [9, 17, 33] if kind == "fft" else [2, 4, 8]
+    engine, plan = engine_of(cfg, blocks[0])
+    rng = np.random.default_rng(7)
+    shape = (400, plan.bin_count)
+    lines = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(np.complex64)
+    growth = BlockGrowth(config_with_block(cfg, blocks[0]), blocks, 1e3, shape[1], np.complex64)
+    out, p, partial_at_decision = [], 0, 0
+    while p < len(lines):
+        count = min(int(rng.integers(0, 12)), len(lines) - p)
+        out.append(engine.correlator.push(lines[p : p + count]))
+        p += count
+        if p >= 70 and rng.random() < 0.2:
+            growth.due = True
+            c = engine.correlator
+            partial_at_decision += c.pulses_in - c.lines_out != cfg.processor.aperture_pulses - 1
+        growth.after_push(engine, lines[p - count : p], 0.0, 0.0)
+    out.append(engine.correlator.flush())
+    image = np.concatenate(out)
+    ref = correlate_reference(lines, design_mask(cfg, plan.range_m))
+    assert image.shape == ref.shape
+    assert np.linalg.norm(image - ref) / np.linalg.norm(ref) < TOL
+    assert growth.growths == 2 and partial_at_decision > 0  # the guard had work to do
+
+
 def test_the_figures_live_md_states_are_the_code_s():
-    """docs/pages/guide/live.md states the window, the lag limit and its floor."""
+    """docs/pages/guide/live.md states the window, the backlog limit and its floor."""
     from pathlib import Path
 
     live_md = Path(__file__).resolve().parents[1] / "docs/pages/guide/live.md"
     text = " ".join(live_md.read_text().split())
     rule = re.search(
-        r"over a whole ([\d.]+) s window every lag exceeded (\d+) block periods \(at least "
+        r"over a whole ([\d.]+) s window it exceeded (\d+) block periods \(at least "
         r"(\d+) ms\)",
         text,
     )
-    assert float(rule.group(1)) == GROW_WINDOW_S and int(rule.group(2)) == GROW_LAG_BLOCKS
-    assert int(rule.group(3)) * 1e-3 == GROW_LEAST_LAG_S
+    assert float(rule.group(1)) == GROW_WINDOW_S and int(rule.group(2)) == GROW_BACKLOG_BLOCKS
+    assert int(rule.group(3)) * 1e-3 == GROW_LEAST_BACKLOG_S
     assert f"a backlog that lasts {GROW_WINDOW_S:g} s grows the block" in text
 
 
@@ -242,4 +276,4 @@ def test_a_pipeline_whose_correlator_cannot_grow_says_why():
     shots = np.zeros((8, cfg.waveform.samples_per_shot), np.complex64)
     settings = PipelineSettings(grow_blocks=(1, 2), grow_rate_hz=500.0)
     with pytest.raises(ValueError, match="cannot grow: the direct correlator has no block"):
-        Pipeline(cfg, Behind(shots, 0.0), [Collect()], settings)
+        Pipeline(cfg, OnTime(shots, 0.0), [Collect()], settings)

@@ -6,12 +6,14 @@ blocks back to back.  In a paced run the same work costs 1.3-1.5 times as much (
 cold after each idle gap, the other threads on the cores), so near capacity the block chosen
 can be too small, and a backlog then grows for the rest of the run (psaltis-max at 50 % of
 its PRF, blocks of 8, 2-core Zen 3: median latency 237 ms).  So the run watches its backlog
-(``BacklogWatch``): the lag of each correlator push, from the arrival of its newest pulse to
-the push.  Where, over a whole window of GROW_WINDOW_S, the lag stays above ``lag_limit_s``
-(GROW_LAG_BLOCKS block periods, at least GROW_LEAST_LAG_S) and ends no lower than it began,
-the work does not keep up, and the correlator's block doubles: its fixed costs a block are
-shared by twice the lines.  A backlog that shrinks is left to drain (a stall of the machine,
-the start-up's burst), and so is one that never lasts a window.
+(``BacklogWatch``): after each correlator push, the pulses waiting in the queues before the
+correlator (shots for the lens, lines for the correlator's thread), counted in time at the
+run's rate.  Where, over a whole window of GROW_WINDOW_S, it stays above ``backlog_limit_s``
+(GROW_BACKLOG_BLOCKS block periods, at least GROW_LEAST_BACKLOG_S) and ends no lower than
+it began, the work does not keep up, and the correlator's block doubles: its fixed costs a
+block are shared by twice the lines.  A backlog that shrinks is left to drain (a stall of the
+machine, a burst after a silence), and so is one that never lasts a window; pulses a line
+correction holds (PGA's block) wait in no queue, and are no backlog.
 
 The grown correlator continues the stream exactly (``LineHistory``, ``BlockGrowth``): built
 with the larger block, it is first fed the last H lines the old one took (H: the least
@@ -20,7 +22,7 @@ the old correlator gave already, are dropped; the next line it gives is the old 
 The swap waits for a push after which the old correlator holds no partial block (the next
 one, where the lens aligns its calls to the blocks); the new blocks are counted from there,
 and so are the lens's calls (rtsar.stream.pipeline, ``lens_align``, ``lens_align_from``).
-The new correlator is built on a thread of its own from the first lag over the limit
+The new correlator is built on a thread of its own from the first backlog over the limit
 (``Prebuilt``), so the swap costs the push of H lines, about an aperture, once a growth.
 The candidates are the granularity's: the head blocks 1, 2, 4, … (each growth doubles),
 fft's M - N + 1 for the fast transform lengths M (the next of them).
@@ -36,9 +38,9 @@ import numpy as np
 from ..ccd import make_ccd
 from ..params import Config
 
-GROW_WINDOW_S = 0.25  # the lag is judged over windows of this long …
-GROW_LAG_BLOCKS = 4  # … a backlog: a lag over this many block periods throughout …
-GROW_LEAST_LAG_S = 5e-3  # … and over this (a busy machine's jitter stays under it)
+GROW_WINDOW_S = 0.25  # the backlog is judged over windows of this long …
+GROW_BACKLOG_BLOCKS = 4  # … behind: over this many block periods of pulses throughout …
+GROW_LEAST_BACKLOG_S = 5e-3  # … and over this (a busy machine's jitter stays under it)
 GROWING_KINDS = ("partitioned", "nonuniform", "fft")  # whose block a config sets
 
 
@@ -54,37 +56,39 @@ def config_with_block(config: Config, block: int) -> Config:
     return config
 
 
-def lag_limit_s(block: int, rate_hz: float) -> float:
-    """The lag above which pulses wait in a backlog, with blocks of ``block`` lines at
-    ``rate_hz`` pulses/s: GROW_LAG_BLOCKS block periods, at least GROW_LEAST_LAG_S."""
-    return max(GROW_LEAST_LAG_S, GROW_LAG_BLOCKS * block / rate_hz)
+def backlog_limit_s(block: int, rate_hz: float) -> float:
+    """The backlog (pulses waiting, in seconds at the rate) above which the work is behind,
+    with blocks of ``block`` lines at ``rate_hz`` pulses/s: GROW_BACKLOG_BLOCKS block
+    periods, at least GROW_LEAST_BACKLOG_S."""
+    return max(GROW_LEAST_BACKLOG_S, GROW_BACKLOG_BLOCKS * block / rate_hz)
 
 
 class BacklogWatch:
-    """Whether the work keeps up, from the lags of the correlator's pushes (module docstring).
+    """Whether the work keeps up, from the backlog after each push (module docstring).
 
-    ``observe(now_s, lag_s, limit_s)`` → True at the end of a window (GROW_WINDOW_S, from the
-    first push after the last verdict) in which every lag exceeded ``limit_s`` and the last
-    was no lower than the first: the backlog lasted and did not shrink."""
+    ``observe(now_s, backlog_s, limit_s)`` → True at the end of a window (GROW_WINDOW_S, from
+    the first push after the last verdict) in which every backlog exceeded ``limit_s`` and the
+    last was no lower than the first less ``slack_s`` (a lens call's pulses: the queues' fill
+    moves by that much from one push to the next): the backlog lasted and did not shrink."""
 
-    def __init__(self, window_s: float = GROW_WINDOW_S):
-        self.window_s = float(window_s)
+    def __init__(self, window_s: float = GROW_WINDOW_S, slack_s: float = 0.0):
+        self.window_s, self.slack_s = float(window_s), float(slack_s)
         self.restart()
 
     def restart(self) -> None:
         """Forget the window (after a growth: the next is judged on the new block alone)."""
         self._start_s: float | None = None
-        self._first_lag_s = self._least_lag_s = 0.0
+        self._first_s = self._least_s = 0.0
 
-    def observe(self, now_s: float, lag_s: float, limit_s: float) -> bool:
+    def observe(self, now_s: float, backlog_s: float, limit_s: float) -> bool:
         if self._start_s is None:
-            self._start_s, self._first_lag_s, self._least_lag_s = now_s, lag_s, lag_s
+            self._start_s, self._first_s, self._least_s = now_s, backlog_s, backlog_s
             return False
-        self._least_lag_s = min(self._least_lag_s, lag_s)
+        self._least_s = min(self._least_s, backlog_s)
         if now_s - self._start_s < self.window_s:
             return False
-        behind = self._least_lag_s > limit_s and lag_s >= self._first_lag_s
-        self._start_s, self._first_lag_s, self._least_lag_s = now_s, lag_s, lag_s
+        behind = self._least_s > limit_s and backlog_s >= self._first_s - self.slack_s
+        self._start_s, self._first_s, self._least_s = now_s, backlog_s, backlog_s
         return behind
 
 
@@ -123,7 +127,7 @@ def history_lines(aperture: int, block: int) -> int:
 
 class Prebuilt:
     """The correlator of ``config`` with blocks of ``block`` lines, built on a thread of its
-    own from the first lag over the limit: by the window's verdict it is ready, and the swap
+    own from the first backlog over the limit: by the window's verdict it is ready, and the swap
     only feeds it the history (psaltis-max, nonuniform: building 90-400 ms, feeding its 512
     lines 28-38 ms, 2-core Zen 3)."""
 
@@ -154,12 +158,14 @@ class BlockGrowth:
     """The correlator's block, doubled while a live run falls behind (module docstring).
 
     ``blocks``: the run's block and the larger ones it may grow to, in order; ``rate_hz``: the
-    pulse rate the block periods are counted at.  ``after_push(engine, lines, lag_s, now_s)``
-    (after each push of ``lines`` into ``engine.correlator``, an rtsar.stream.engine
-    StreamProcessor, whose push began ``lag_s`` after its newest pulse arrived) → the new
-    block where the correlator grew, else 0."""
+    pulse rate the block periods are counted at.  ``after_push(engine, lines, backlog_s,
+    now_s)`` (after each push of ``lines`` into ``engine.correlator``, an rtsar.stream.engine
+    StreamProcessor, ``backlog_s`` of pulses then waiting before it) → the new block where
+    the correlator grew, else 0."""
 
-    def __init__(self, config: Config, blocks, rate_hz: float, range_bins: int, dtype):
+    def __init__(
+        self, config: Config, blocks, rate_hz: float, range_bins: int, dtype, batch: int = 0
+    ):
         self.blocks = [int(b) for b in blocks]
         if len(self.blocks) < 2 or self.blocks != sorted(set(self.blocks)):
             raise ValueError(f"blocks must be the run's and larger ones, got {blocks!r}")
@@ -171,43 +177,47 @@ class BlockGrowth:
         n = config.processor.aperture_pulses
         rows = max(history_lines(n, b) for b in self.blocks[1:])
         self.history = LineHistory(rows, range_bins, dtype)
-        self.watch = BacklogWatch()
+        self.watch = BacklogWatch(slack_s=batch / self.rate_hz)  # a lens call's pulses
         self.due = False  # a growth decided, waiting for a push that ends on a block
         self.growths = 0
         self.from_pulse = 0  # the stream's pulse from which the blocks are counted
-        self.next: Prebuilt | None = None  # the next block's correlator, once a lag was over
+        self.next: Prebuilt | None = None  # the next block's correlator, once a backlog was over
 
     def counters(self) -> dict:
         return {"correlator_growths": self.growths, "correlator_block_lines": self.block}
 
-    def step(self, pipe, lines: np.ndarray, lag_s: float) -> None:
-        """After a push in ``pipe`` (an rtsar.stream.pipeline.Pipeline): where the block grew,
-        the lens aligns its calls to the new block (``lens_align`` from ``lens_align_from``,
-        ``lens_hold_s``: two blocks' time) and the run's ``notify`` is told why."""
+    def step(self, pipe, lines: np.ndarray) -> None:
+        """After a push of ``lines`` in ``pipe`` (an rtsar.stream.pipeline.Pipeline), its
+        backlog the pulses in its queues before the correlator: where the block grew, the
+        lens aligns its calls to the new block (``lens_align`` from ``lens_align_from``,
+        ``lens_hold_s``: two blocks' time; not in the overlapped layout, whose lens takes what
+        waits) and the run's ``notify`` is told why."""
         was = self.block
-        grown = self.after_push(pipe.engine, lines, lag_s, time.perf_counter())
+        backlog_s = (pipe.q_shots.size + pipe.q_lines.size) / self.rate_hz
+        grown = self.after_push(pipe.engine, lines, backlog_s, time.perf_counter())
         if not grown:
             return
         s = pipe.settings
-        if s.lens_align:  # the new blocks counted from the pulse of the swap
+        if s.stages != "overlapped":  # the new blocks counted from the pulse of the swap
             s.lens_align_from, s.lens_hold_s = self.from_pulse, 2 * grown / self.rate_hz
             s.lens_align = grown
         if pipe.notify is not None:
-            limit_ms = lag_limit_s(was, self.rate_hz) * 1e3
+            limit_ms = backlog_limit_s(was, self.rate_hz) * 1e3
             pipe.notify(
-                f"the work fell behind (lag over {limit_ms:.0f} ms for {self.watch.window_s:g} s):"
+                f"the work fell behind ({limit_ms:.0f} ms of pulses waiting for "
+                f"{self.watch.window_s:g} s):"
                 f" the correlator's block grows from {was} to {grown} lines"
             )
 
-    def after_push(self, engine, lines: np.ndarray, lag_s: float, now_s: float) -> int:
+    def after_push(self, engine, lines: np.ndarray, backlog_s: float, now_s: float) -> int:
         if self.block == self.blocks[-1]:
             return 0  # the largest: no history kept from here
         self.history.add(lines)
-        limit_s = lag_limit_s(self.block, self.rate_hz)
+        limit_s = backlog_limit_s(self.block, self.rate_hz)
         grown = self.blocks[self.blocks.index(self.block) + 1]
-        if lag_s > limit_s and self.next is None:  # behind, perhaps: build the next meanwhile
+        if backlog_s > limit_s and self.next is None:  # behind, perhaps: build the next now
             self.next = Prebuilt(self.config, engine.range_m, grown)
-        self.due = self.watch.observe(now_s, lag_s, limit_s) or self.due
+        self.due = self.watch.observe(now_s, backlog_s, limit_s) or self.due
         if not self.due:
             return 0
         old = engine.correlator
@@ -257,4 +267,6 @@ def growth_of(config: Config, settings, engine, physical=None, height=None):
     why = why_fixed(config.processor, physical, copies, engine.correlator is None)
     if why:
         raise ValueError(f"the correlator's block cannot grow: {why}")
-    return BlockGrowth(config, blocks, settings.grow_rate_hz, len(engine.range_m), engine.dtype)
+    batch = settings.max_batch or config.processor.micro_batch
+    bins, rate_hz = len(engine.range_m), settings.grow_rate_hz
+    return BlockGrowth(config, blocks, rate_hz, bins, engine.dtype, batch)

@@ -319,10 +319,9 @@ class Pipeline:
         block = concat_blocks(blocks)
         self.timing.record(block)
         self.own["pulses_processed"] += len(block)
-        lag_s = time.perf_counter() - float(block.arrival_s[-1])  # of the newest pulse
         out = self.engine.azimuth_stage(block.samples)
-        if self.growth is not None:
-            self.growth.step(self, block.samples, lag_s)
+        if self.growth is not None:  # behind: a larger block (its backlog: the queues')
+            self.growth.step(self, block.samples)
         if self.height is not None:
             self._put_image(self.height.correlate(out.lines, block.aux))
         return self._line_block(out)

@@ -8,6 +8,8 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import crandn
+from test_pipeline import Collect
 
 from rtsar.ccd import correlate_reference, design_mask, make_ccd
 from rtsar.lens import make_plan
@@ -27,7 +29,6 @@ from rtsar.stream.growth import (
     history_lines,
 )
 from rtsar.stream.pipeline import Pipeline, PipelineSettings
-from rtsar.stream.strips import StripSink
 
 TOL = 1e-5  # complex64 correlators against the float64 reference, relative RMS
 
@@ -87,26 +88,25 @@ def test_history_lines_is_the_least_multiple_of_the_block_covering_n_minus_1():
     assert history_lines(512, 64) == 512 and history_lines(65, 64) == 64
 
 
-def engine_of(cfg, block):
-    c = config_with_block(cfg, block)
-    plan = make_plan(c)
-    return SimpleNamespace(
-        correlator=make_ccd(c, plan.range_m), range_m=plan.range_m, config=c
-    ), plan
+def stream_of(kind: str, pulses: int, seed: int):
+    """(config, blocks, an engine of the first block, its plan, random lines, a BlockGrowth)
+    for the tiny preset's ``kind`` of correlator; fft's blocks are M - N + 1 for M = 72, 80,
+    96 (products of 2, 3 and 5; N = 64)."""
+    cfg = preset("tiny").with_processor(correlator=kind)
+    blocks = [9, 17, 33] if kind == "fft" else [2, 4, 8]
+    start = config_with_block(cfg, blocks[0])
+    plan = make_plan(start)
+    engine = SimpleNamespace(correlator=make_ccd(start, plan.range_m), range_m=plan.range_m)
+    engine.config = start
+    lines = crandn(np.random.default_rng(seed), pulses, plan.bin_count, dtype=np.complex64)
+    growth = BlockGrowth(start, blocks, 1_000.0, plan.bin_count, np.complex64)
+    return cfg, blocks, engine, plan, lines, growth
 
 
 @pytest.mark.parametrize("kind", ["partitioned", "nonuniform", "fft"])
 @pytest.mark.parametrize("grow_at", [72, 160])  # before H lines (zeros fed), after
 def test_a_grown_correlator_continues_the_stream_exactly(kind, grow_at):
-    cfg = preset("tiny").with_processor(correlator=kind)
-    # fft: the block is M - N + 1, M = 72, 80, 96 (products of 2, 3 and 5; N = 64)
-    blocks = [9, 17, 33] if kind == "fft" else [2, 4, 8]
-    engine, plan = engine_of(cfg, blocks[0])
-    rng = np.random.default_rng(1)
-    shape = (320, plan.bin_count)
-    lines = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(np.complex64)
-    start = config_with_block(cfg, blocks[0])
-    growth = BlockGrowth(start, blocks, 1_000.0, plan.bin_count, np.complex64)
+    cfg, blocks, engine, plan, lines, growth = stream_of(kind, 320, 1)
     out, grown, ends, p = [], [], [], 0
     backlog_s = 1.0 if grow_at > 100 else 0.0  # 1 s: over the limit from the first push
     for k in range(400):  # whole blocks of the correlator of the time, as the lens aligns them
@@ -134,20 +134,6 @@ def test_a_grown_correlator_continues_the_stream_exactly(kind, grow_at):
     assert growth.from_pulse == then
     assert engine.config.processor.partition_lines == blocks[-1] or kind == "fft"
     engine.correlator.close()
-
-
-class Collect(StripSink):
-    def __init__(self):
-        self.strips, self.final = [], None
-
-    def strip(self, strip, pipeline):
-        self.strips.append(strip)
-
-    def stats(self, d, pipeline):
-        pass
-
-    def end(self, d, pipeline):
-        self.final = d
 
 
 class SlowSink(Collect):
@@ -230,13 +216,8 @@ def test_a_run_that_keeps_up_keeps_its_block():
 def test_pushes_of_any_size_grow_only_where_no_block_is_partial(kind):
     """Pushes of 0-11 lines, growth decided at random pushes: the swap waits for a push that
     leaves the old correlator no partial block, and the image stays eq. 1's."""
-    cfg = preset("tiny").with_processor(correlator=kind)
-    blocks = [9, 17, 33] if kind == "fft" else [2, 4, 8]
-    engine, plan = engine_of(cfg, blocks[0])
+    cfg, blocks, engine, plan, lines, growth = stream_of(kind, 400, 7)
     rng = np.random.default_rng(7)
-    shape = (400, plan.bin_count)
-    lines = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(np.complex64)
-    growth = BlockGrowth(config_with_block(cfg, blocks[0]), blocks, 1e3, shape[1], np.complex64)
     out, p, partial_at_decision = [], 0, 0
     while p < len(lines):
         count = min(int(rng.integers(0, 12)), len(lines) - p)

@@ -53,7 +53,7 @@ from ..stream.granularity import (
     modelled_latency_s,
     utilisation,
 )
-from ..stream.growth import config_with_block, growth_words, why_fixed
+from ..stream.growth import HEAD_BLOCK_KINDS, config_with_block, growth_words, why_fixed
 from ..stream.ingest import Ingest
 from ..stream.settings import PipelineSettings
 from ..stream.stats import LatencyStats
@@ -61,7 +61,7 @@ from ..stream.strips import LineBlock, StreamInfo, StripAssembler
 from ..stream.timing import LineTiming
 
 ROUND_S = 0.01  # each of a figure's 3 rounds
-BLOCKED_KINDS = ("partitioned", "nonuniform")  # their block is the head block L
+BLOCKED_KINDS = HEAD_BLOCK_KINDS  # their block is the head block L
 
 
 @dataclass(frozen=True)
@@ -106,8 +106,9 @@ class GranularityRequest:
             words += f"; {small_calls_words(costs)}"
         swath = bool(settings.swath_workers)
         grow = not fixed and not why_fixed(config.processor, physical, copies, swath)
-        grow_blocks = tuple(b for b in blocks if b >= g.block_lines) if grow else ()
-        if len(grow_blocks) > 1:
+        larger = [b for b in blocks if b > g.block_lines] if grow else []
+        grow_blocks = (g.block_lines, *larger) if larger else ()
+        if grow_blocks:
             words += f"; {growth_words(grow_blocks)}"
         if self.stages is None:
             words += f"; {g.stages} stages ({stages_words(g)})"
@@ -116,8 +117,8 @@ class GranularityRequest:
             words += f"; fft transform length M = {chosen.processor.fft_length}"
         chosen_s = chosen_settings(settings, g, self.stages is None)
         below = costs.lens_cpu_below if not settings.swath_workers else 0  # workers': their own
-        chosen_s = replace(chosen_s, grow_blocks=grow_blocks if len(grow_blocks) > 1 else ())
-        chosen_s = replace(chosen_s, grow_rate_hz=self.rate_hz if chosen_s.grow_blocks else 0.0)
+        grow_rate_hz = self.rate_hz if grow_blocks else 0.0
+        chosen_s = replace(chosen_s, grow_blocks=grow_blocks, grow_rate_hz=grow_rate_hz)
         return chosen, replace(chosen_s, lens_cpu_below=below), g, words
 
 

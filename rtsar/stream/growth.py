@@ -41,7 +41,8 @@ from ..params import Config
 GROW_WINDOW_S = 0.25  # the backlog is judged over windows of this long …
 GROW_BACKLOG_BLOCKS = 4  # … behind: over this many block periods of pulses throughout …
 GROW_LEAST_BACKLOG_S = 5e-3  # … and over this (a busy machine's jitter stays under it)
-GROWING_KINDS = ("partitioned", "nonuniform", "fft")  # whose block a config sets
+HEAD_BLOCK_KINDS = ("partitioned", "nonuniform")  # their block: the head block L
+GROWING_KINDS = (*HEAD_BLOCK_KINDS, "fft")  # whose block a config sets
 
 
 def config_with_block(config: Config, block: int) -> Config:
@@ -49,7 +50,7 @@ def config_with_block(config: Config, block: int) -> Config:
     nonuniform with that head block, fft with the transform length M = block + N - 1; the
     others as they are."""
     p = config.processor
-    if p.correlator in ("partitioned", "nonuniform"):
+    if p.correlator in HEAD_BLOCK_KINDS:
         return config.with_processor(partition_lines=block)
     if p.correlator == "fft":
         return config.with_processor(fft_length=block + p.aperture_pulses - 1)
@@ -132,7 +133,7 @@ class Prebuilt:
     lines 28-38 ms, 2-core Zen 3)."""
 
     def __init__(self, config: Config, range_m: np.ndarray, block: int):
-        self.block, self._built, self._error = block, None, None
+        self._built, self._error = None, None
         args = (config_with_block(config, block), range_m)
         self._thread = threading.Thread(target=self._build, args=args, daemon=True)
         self._thread.name = f"rtsar-grow-{block}"

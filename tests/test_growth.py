@@ -258,3 +258,14 @@ def test_a_pipeline_whose_correlator_cannot_grow_says_why():
     settings = PipelineSettings(grow_blocks=(1, 2), grow_rate_hz=500.0)
     with pytest.raises(ValueError, match="cannot grow: the direct correlator has no block"):
         Pipeline(cfg, OnTime(shots, 0.0), [Collect()], settings)
+
+
+def test_the_status_line_names_growths_not_the_block():
+    """The block is a state, not news: the status line and the summary name a growth only
+    (before, every live run showed `correlator_block_lines 2` among its problems)."""
+    from rtsar.app.live import problems
+
+    assert problems({"correlator_block_lines": 2, "correlator_growths": 0}) == []
+    assert problems({"correlator_block_lines": 8, "correlator_growths": 2}) == [
+        "correlator blocks grown (the work fell behind) 2"
+    ]

@@ -32,6 +32,7 @@ _NORMAL = {
     "lines_out",
     "strips_published",
     "height_strips_published",
+    "correlator_block_lines",  # a state (rtsar.stream.growth); its growths are the news
     "frames_ok",
     "bytes_fed",
     "messages",  # GNU Radio messages received (rtsar.sources.zmq_in)
@@ -77,6 +78,7 @@ _LABELS = {
     "record_unconfirmed": "not confirmed in the recording (it may lack them)",
     "image_lines_lost": "lines not written to -o",
     "swath_refused_messages": "refused swath messages",
+    "correlator_growths": "correlator blocks grown (the work fell behind)",
 }
 
 
@@ -84,8 +86,7 @@ class RateWatch:
     """Says when the stream is processed slower than its source should deliver it.
 
     Rates are measured over windows of at least ``window_s``; two windows in a row below
-    ``fraction`` of ``expected_hz`` give one warning (then at most one per ``repeat_s``).
-    """
+    ``fraction`` of ``expected_hz`` give one warning (then at most one per ``repeat_s``)."""
 
     def __init__(self, expected_hz: float, say, window_s=2.0, fraction=0.9, repeat_s=30.0):
         self.expected_hz, self.say = float(expected_hz), say
@@ -317,8 +318,7 @@ def run_stream(
     replay's): a stream processed slower is warned about.
     ``channel_fix(missing)``: how to give the source the auxiliary channels a stage reads and it
     lacks (check_source_channels, before anything starts).  ``granularity``: a
-    rtsar.app.live_granularity.GranularityRequest (the blocks chosen at the start), or None.
-    """
+    rtsar.app.live_granularity.GranularityRequest (the blocks chosen at the start), or None."""
     try:
         check_source_channels(source, corrections, height, channel_fix)
     except ValueError:

@@ -269,3 +269,8 @@ def test_the_status_line_names_growths_not_the_block():
     assert problems({"correlator_block_lines": 8, "correlator_growths": 2}) == [
         "correlator blocks grown (the work fell behind) 2"
     ]
+    from rtsar.app.webview.frames import losses, notes  # the web view: noted, not a loss
+
+    grown = {"correlator_block_lines": 8, "correlator_growths": 2}
+    assert losses(grown) == [] and notes({"correlator_block_lines": 2}) == []
+    assert notes(grown) == ["2 growth(s) of the correlator's block (the work fell behind)"]

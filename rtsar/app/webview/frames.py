@@ -351,6 +351,7 @@ NOTED_WORDS = {
     "layout_changes": "{n} change(s) of the stream's layout",
     "subscriber_stalls": "{n} stalled subscriber(s) cut off",
     "swath_refused_messages": "{n} swath message(s) refused (malformed or of no worker)",
+    "correlator_growths": "{n} growth(s) of the correlator's block (the work fell behind)",
 }
 LINK_COUNTERS = ("link_silences", "link_silent_ms", "link_drops", "reconnects")
 

@@ -585,8 +585,24 @@ def test_bench_runs_each_offered_rate_the_capacity_allows_with_its_granularity(m
     assert runs == [(0.25, expect[0], expect[0]), (0.5, expect[1], expect[1])]
     assert [r["offered_hz"] for r in rows] == [125.0, 250.0]
     assert [r["meets_goal"] for r in rows] == [True, False]  # 9 ms > 1 + 4 ms
+    assert any(line.endswith("(goal: median <= 9.00 ms met, p99 <= 3x the median (3.00 ms) met, "
+                             "0 dropped met)") for line in said)  # fmt: skip
     assert sum("over the capacity measured (0.80x)" in line for line in said) == 2
     assert bench_latency.goal_median_ms(1600.0) == 1.625
+
+
+def test_bench_names_the_part_of_the_goal_a_row_misses():
+    """A row whose median meets the goal and whose p99 does not (bench at 2026-11-29, 800 Hz:
+    0.56 / 2.20 ms) said 'goal median <= 2.25 ms: not met', as if the median had missed."""
+    row = {"offered_hz": 800.0, "latency_median_ms": 0.56, "latency_p99_ms": 2.20, "dropped": 0}
+    assert bench_latency.goal_parts(row) == {"median": True, "p99": False, "dropped": True}
+    assert not bench_latency.meets_goal(row)
+    words = bench_latency.goal_words(row)
+    assert "median <= 2.25 ms met" in words and "(1.68 ms) not met" in words
+    assert words.endswith("0 dropped met")
+    late = dict(row, latency_median_ms=3.0, latency_p99_ms=4.0, dropped=5)
+    assert bench_latency.goal_parts(late) == {"median": False, "p99": True, "dropped": False}
+    assert "median <= 2.25 ms not met" in bench_latency.goal_words(late)
 
 
 def test_the_figures_live_md_states_are_the_code_s():

@@ -239,8 +239,8 @@ def test_tiled_transforms_and_spectra_against_numpy(rng):
     inverse gives the second half of the inverse DFT, tile_spectra the bit-reversed /2B DFT."""
     from rtsar.ccd import tiled
 
-    for n in (2, 8, 64):
-        x = crandn(rng, n, tiled.TILE_COLUMNS)  # the kernels' fixed row width
+    for n, cols in ((2, 5), (8, 48), (64, 16)):  # any row width: the kernels read it
+        x = crandn(rng, n, cols)
         re, im = x.real.copy(), x.imag.copy()
         twr, twi = tiled.twiddles(2 * n, np.float64)  # stride 2: the table of a larger size
         tiled._dif(re, im, twr, twi, 2)
@@ -266,3 +266,24 @@ def test_complex128_reaches_the_float64_reference(rng):
     assert len(corr.segments) > 1
     got = _stream(corr, lines, [7] * 42 + [6])
     assert got.dtype == np.complex128 and relative_rms(got, ref) < 1e-12
+
+
+def test_a_tile_holds_every_range_bin_up_to_the_widest():
+    """tile_columns: one tile of all the bins (rounded up to whole AVX-512 registers) up to
+    MOST_TILE_COLUMNS, equal tiles beyond; the correlator's rings have that width.  Tiles of 32
+    columns spent more on the kernels' loop costs than on the arithmetic (tiled.tile_columns)."""
+    from rtsar.ccd import tiled
+
+    lanes, most = tiled.LANES, tiled.MOST_TILE_COLUMNS
+    for bins in (1, 5, 16, 64, 320, 1200, most, most + 1, 3 * most, 3 * most + 7):
+        tile = tiled.tile_columns(bins)
+        tiles = -(-bins // tile)
+        assert tile % lanes == 0 and tile <= most
+        assert tiles == -(-bins // most)  # as few tiles as the widest allows
+        assert tiles * tile - bins < tiles * lanes  # padding: under a register a tile
+    assert tiled.tile_columns(1200) == 1200 and tiled.tile_columns(5) == 16
+    with pytest.raises(ValueError, match="bins must be >= 1"):
+        tiled.tile_columns(0)
+    rng = np.random.default_rng(3)
+    corr = NonUniformCorrelator(crandn(rng, 16, 40) / 16, 2, 8, threaded=False)
+    assert corr._hist[0].shape[0] == 1 and corr._hist[0].shape[2] == 48

@@ -300,7 +300,7 @@ class NonUniformCorrelator(Correlator):
         self.segments = plan_segments(n, head_lines, min(max_block_lines, largest), rule)
         self.partitions = sum(-(-t // b) for _, t, b in self.segments)
         real = np.float64 if self.dtype == np.complex128 else np.float32
-        tile = tiled.TILE_COLUMNS
+        tile = tiled.tile_columns(bins)
         tiles = -(-bins // tile)
         widest = max(b for _, _, b in self.segments)
         self._window_rows = 2 * widest  # rows the widest segment's transform reads
@@ -312,9 +312,9 @@ class NonUniformCorrelator(Correlator):
         # chunk behind the newest pulse), the tail's sums of the full output (rows up to N
         # ahead of it, a chunk behind) and the head's outputs (the chunk's blocks).
         chunk = self.CHUNK + 2 * head_lines
-        self._hist = self._ring(tiles, 2 * max(widest, head_lines) + chunk, real)
-        self._acc = self._ring(tiles, n + chunk, real)
-        self._head_out = self._ring(tiles, chunk, real)
+        self._hist = self._ring(tiles, 2 * max(widest, head_lines) + chunk, tile, real)
+        self._acc = self._ring(tiles, n + chunk, tile, real)
+        self._head_out = self._ring(tiles, chunk, tile, real)
         if threaded is None:
             threaded = True
         self.threaded = bool(threaded) and tail is not None
@@ -326,9 +326,9 @@ class NonUniformCorrelator(Correlator):
         self._warm()
 
     @staticmethod
-    def _ring(tiles: int, rows: int, real) -> tuple[np.ndarray, np.ndarray]:
+    def _ring(tiles: int, rows: int, tile: int, real) -> tuple[np.ndarray, np.ndarray]:
         """Real and imaginary parts of a ring of at least ``rows`` rows on every tile."""
-        shape = (tiles, 1 << (rows - 1).bit_length(), tiled.TILE_COLUMNS)
+        shape = (tiles, 1 << (rows - 1).bit_length(), tile)
         return np.zeros(shape, real), np.zeros(shape, real)
 
     def _warm(self) -> None:

@@ -22,7 +22,30 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-TILE_COLUMNS = 32  # range columns per tile (a compile-time constant of the kernels' inner loops)
+LANES = 16  # float32 values in one AVX-512 register: a tile's width is a multiple of it
+MOST_TILE_COLUMNS = 2048  # the widest tile (tile_columns)
+
+
+def tile_columns(bins: int) -> int:
+    """Range columns a tile for ``bins`` columns: all of them in one tile where they are at
+    most MOST_TILE_COLUMNS (else equal tiles), rounded up to a multiple of LANES.
+
+    The kernels' inner loops run along a tile's row, so their fixed costs (a row view, the
+    vectorised loop's set-up and alias checks, a radix-2 butterfly's bookkeeping) fall on
+    every row of every tile, and rows of 32 columns (the width before 2026-11-29) spent more
+    on them than on the arithmetic.  The nonuniform correlator alone, tiles of 32 against one
+    tile, in separate processes alternated three times (2-core Intel Xeon, 2026-11-29),
+    pulses/s: psaltis-max pushes of 64 lines 17.9-19.5k against 28.3-30.5k, of 16
+    16.2-17.4k against 23.4-28.9k, of 4 13.8-17.3k against 19.0-21.8k; psaltis-jpl pushes of
+    64 60.7-77.0k against 80.0-102.1k, of 1 20.2-31.1k against 27.2-32.4k; crouch-sal
+    25.6-30.2k against 32.9-41.9k; tiny 308-373k against 396-422k.  MOST_TILE_COLUMNS bounds
+    a tile's rows for wider swaths; it is not tuned (no preset's nonuniform plan exceeds
+    1,200 bins)."""
+    if bins < 1:
+        raise ValueError(f"bins must be >= 1, got {bins}")
+    tiles = -(-bins // MOST_TILE_COLUMNS)
+    per_tile = -(-bins // tiles)
+    return -(-per_tile // LANES) * LANES
 
 
 def twiddles(size: int, dtype) -> tuple[np.ndarray, np.ndarray]:
@@ -83,7 +106,7 @@ def store_lines(lines, hist_re, hist_im, first_row):  # pragma: no cover - compi
 def _dif(re, im, twr, twi, stride):  # pragma: no cover - compiled
     # In place: natural order in, bit-reversed out; twiddle j of size n at tw[j·stride].  The
     # 2-point stage and j = 0 (twiddle 1) skip the multiply.
-    n = re.shape[0]
+    n, cols = re.shape
     m = n
     while m > 2:
         half = m // 2
@@ -92,7 +115,7 @@ def _dif(re, im, twr, twi, stride):  # pragma: no cover - compiled
                 wr, wi = twr[j * stride], twi[j * stride]
                 ar, ai, br, bi = re[k + j], im[k + j], re[k + j + half], im[k + j + half]
                 if j == 0:
-                    for c in range(TILE_COLUMNS):
+                    for c in range(cols):
                         dr = ar[c] - br[c]
                         di = ai[c] - bi[c]
                         ar[c] += br[c]
@@ -100,7 +123,7 @@ def _dif(re, im, twr, twi, stride):  # pragma: no cover - compiled
                         br[c] = dr
                         bi[c] = di
                 else:
-                    for c in range(TILE_COLUMNS):
+                    for c in range(cols):
                         dr = ar[c] - br[c]
                         di = ai[c] - bi[c]
                         ar[c] += br[c]
@@ -112,7 +135,7 @@ def _dif(re, im, twr, twi, stride):  # pragma: no cover - compiled
     if m == 2:
         for k in range(0, n, 2):
             ar, ai, br, bi = re[k], im[k], re[k + 1], im[k + 1]
-            for c in range(TILE_COLUMNS):
+            for c in range(cols):
                 dr = ar[c] - br[c]
                 di = ai[c] - bi[c]
                 ar[c] += br[c]
@@ -125,15 +148,15 @@ def _dif(re, im, twr, twi, stride):  # pragma: no cover - compiled
 def _dit_second_half(re, im, twr, twi, stride, out_re, out_im):  # pragma: no cover - compiled
     # Inverse DFT (conjugate twiddles), bit-reversed in, natural out, in place but for the last
     # stage, which writes only outputs n/2 .. n-1 into out[0 .. n/2).
-    n = re.shape[0]
+    n, cols = re.shape
     if n == 2:
-        for c in range(TILE_COLUMNS):
+        for c in range(cols):
             out_re[0, c] = re[0, c] - re[1, c]
             out_im[0, c] = im[0, c] - im[1, c]
         return
     for k in range(0, n, 2):  # the 2-point stage: twiddle 1
         ar, ai, br, bi = re[k], im[k], re[k + 1], im[k + 1]
-        for c in range(TILE_COLUMNS):
+        for c in range(cols):
             dr = ar[c] - br[c]
             di = ai[c] - bi[c]
             ar[c] += br[c]
@@ -148,7 +171,7 @@ def _dit_second_half(re, im, twr, twi, stride, out_re, out_im):  # pragma: no co
             for j in range(half):
                 wr, wi = twr[j * step], -twi[j * step]
                 ar, ai, br, bi = re[k + j], im[k + j], re[k + j + half], im[k + j + half]
-                for c in range(TILE_COLUMNS):
+                for c in range(cols):
                     tr = br[c] * wr - bi[c] * wi
                     ti = br[c] * wi + bi[c] * wr
                     br[c] = ar[c] - tr
@@ -162,7 +185,7 @@ def _dit_second_half(re, im, twr, twi, stride, out_re, out_im):  # pragma: no co
         wr, wi = twr[j * step], -twi[j * step]
         ar, ai, br, bi = re[j], im[j], re[j + half], im[j + half]
         yr, yi = out_re[j], out_im[j]
-        for c in range(TILE_COLUMNS):
+        for c in range(cols):
             yr[c] = ar[c] - (br[c] * wr - bi[c] * wi)
             yi[c] = ai[c] - (br[c] * wi + bi[c] * wr)
 
@@ -172,10 +195,10 @@ def _enter_and_mac(x_re, x_im, h_re, h_im, d_re, d_im, k, y_re, y_im):  # pragma
     # X_k = x enters the delay line at slot k mod P, then y = Σ_p H_p · X_{k-p}; h[f, p] = H_p
     # and d[f, s] = X_s at frequency f: one contiguous run of P·C values each.  (Indexed, not
     # sliced: a row view per partition cost 1.7× the time.)
-    n, parts = h_re.shape[0], h_re.shape[1]
+    n, parts, cols = h_re.shape
     slot = k % parts
     for f in range(n):
-        for c in range(TILE_COLUMNS):  # p = 0: X_k itself, entering the delay line
+        for c in range(cols):  # p = 0: X_k itself, entering the delay line
             hr, hi, xr, xi = h_re[f, 0, c], h_im[f, 0, c], x_re[f, c], x_im[f, c]
             d_re[f, slot, c] = xr
             d_im[f, slot, c] = xi
@@ -184,7 +207,7 @@ def _enter_and_mac(x_re, x_im, h_re, h_im, d_re, d_im, k, y_re, y_im):  # pragma
         s = slot
         for p in range(1, parts):
             s = s - 1 if s > 0 else parts - 1
-            for c in range(TILE_COLUMNS):
+            for c in range(cols):
                 hr, hi, xr, xi = h_re[f, p, c], h_im[f, p, c], d_re[f, s, c], d_im[f, s, c]
                 y_re[f, c] += hr * xr - hi * xi
                 y_im[f, c] += hr * xi + hi * xr
@@ -228,12 +251,12 @@ def _block(
     for i in range(n):
         pulse = (k - 1) * block + i
         if pulse < 0 or pulse >= valid_end:
-            for c in range(TILE_COLUMNS):
+            for c in range(width):
                 xr[i, c] = 0
                 xi[i, c] = 0
         else:
             r = pulse % rows
-            for c in range(TILE_COLUMNS):
+            for c in range(width):
                 xr[i, c] = ring_re[t, r, c]
                 xi[i, c] = ring_im[t, r, c]
     stride = (tw_re.shape[0] * 2) // n
@@ -245,11 +268,11 @@ def _block(
     for i in range(block):
         r = (k * block + i + delay) % ring_rows
         if assign:
-            for c in range(TILE_COLUMNS):
+            for c in range(width):
                 out_re[t, r, c] = ob_r[i, c]
                 out_im[t, r, c] = ob_i[i, c]
         else:
-            for c in range(TILE_COLUMNS):
+            for c in range(width):
                 out_re[t, r, c] += ob_r[i, c]
                 out_im[t, r, c] += ob_i[i, c]
 

@@ -38,9 +38,11 @@ def tile_columns(bins: int) -> int:
     pulses/s: psaltis-max pushes of 64 lines 17.9-19.5k against 28.3-30.5k, of 16
     16.2-17.4k against 23.4-28.9k, of 4 13.8-17.3k against 19.0-21.8k; psaltis-jpl pushes of
     64 60.7-77.0k against 80.0-102.1k, of 1 20.2-31.1k against 27.2-32.4k; crouch-sal
-    25.6-30.2k against 32.9-41.9k; tiny 308-373k against 396-422k.  MOST_TILE_COLUMNS bounds
-    a tile's rows for wider swaths; it is not tuned (no preset's nonuniform plan exceeds
-    1,200 bins)."""
+    25.6-30.2k against 32.9-41.9k; tiny 308-373k against 396-422k.  Wider swaths (random
+    masks, N = 512, two rounds): 2,048 bins, blocks of 16 and 128, pushes of 64, 10.0-11.6k
+    against 16.7-17.2k; 4,096 bins (two tiles) 5.1-5.4k against 7.8-9.0k; 2,048 bins, blocks
+    of 4, pushes of 4, 5.6-5.7k against 8.3-8.8k.  MOST_TILE_COLUMNS bounds a tile's rows for
+    wider swaths; no width between 2,048 and 4,096 was compared."""
     if bins < 1:
         raise ValueError(f"bins must be >= 1, got {bins}")
     tiles = -(-bins // MOST_TILE_COLUMNS)

@@ -585,6 +585,7 @@ def test_bench_runs_each_offered_rate_the_capacity_allows_with_its_granularity(m
     assert runs == [(0.25, expect[0], expect[0]), (0.5, expect[1], expect[1])]
     assert [r["offered_hz"] for r in rows] == [125.0, 250.0]
     assert [r["meets_goal"] for r in rows] == [True, False]  # 9 ms > 1 + 4 ms
+    assert rows[1]["goal_parts"] == {"median": False, "p99": True, "dropped": True}
     assert any(line.endswith("(goal: median <= 9.00 ms met, p99 <= 3x the median (3.00 ms) met, "
                              "0 dropped met)") for line in said)  # fmt: skip
     assert sum("over the capacity measured (0.80x)" in line for line in said) == 2

@@ -62,7 +62,7 @@ def transform_cost(block: int) -> float:
     rtsar.ccd.tiled on the 2-core development machine (one thread, 1200 range cells: a
     partition ≈ 1.5 µs a line, the transforms of B = 16 / 32 / 64 / 128 / 256 11.3 / 12.0 /
     13.7 / 14.0 / 18.2 µs a line).  Fitted to the kernels' tiles of 32 columns; on one tile
-    (rtsar.ccd.tiled.tile_columns, 2026-11-29, 2-core Intel Xeon) a partition costs 1.3-2.1 µs
+    (rtsar.ccd.tiled.tile_columns, 2026-11-29, 2-core Intel Xeon) a partition costs 1.2-2.1 µs
     a line from B = 16 (0.2-0.7 µs below, where the segment stays in cache) and the transforms
     7.2 / 8.9 / 10.7 / 15.0 / 22.0 µs, not refitted: at psaltis-max, L = 16, the plan this
     model chooses was still the fastest of the eight it weighs (33.5k pulses/s against 28.6k

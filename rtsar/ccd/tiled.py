@@ -32,8 +32,8 @@ def tile_columns(bins: int) -> int:
 
     The kernels' inner loops run along a tile's row, so their fixed costs (a row view, the
     vectorised loop's set-up and alias checks, a radix-2 butterfly's bookkeeping) fall on
-    every row of every tile, and rows of 32 columns (the width before 2026-11-29) spent more
-    on them than on the arithmetic.  The nonuniform correlator alone, tiles of 32 against one
+    every row of every tile: with rows of 32 columns (the width before 2026-11-29) they took
+    about a third of the time.  The nonuniform correlator alone, tiles of 32 against one
     tile, in separate processes alternated three times (2-core Intel Xeon, 2026-11-29),
     pulses/s: psaltis-max pushes of 64 lines 17.9-19.5k against 28.3-30.5k, of 16
     16.2-17.4k against 23.4-28.9k, of 4 13.8-17.3k against 19.0-21.8k; psaltis-jpl pushes of

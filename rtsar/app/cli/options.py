@@ -89,7 +89,8 @@ def add_correlator_option(g) -> None:
         metavar="L",
         help="block of the partitioned correlator, head block of the nonuniform one: lines "
         "leave in blocks of L (power of two; default: the configuration's, 16 in the presets; "
-        "a live run at a rate chooses it from 1 up to that by the work measured)",
+        "a live run at a rate chooses it from 1 up to 64 by the work measured, and grows it "
+        "where the run falls behind)",
     )
     g.add_argument(
         "--fft-length",

@@ -53,7 +53,13 @@ from ..stream.granularity import (
     modelled_latency_s,
     utilisation,
 )
-from ..stream.growth import HEAD_BLOCK_KINDS, config_with_block, growth_words, why_fixed
+from ..stream.growth import (
+    GROWING_KINDS,
+    HEAD_BLOCK_KINDS,
+    config_with_block,
+    growth_words,
+    why_fixed,
+)
 from ..stream.ingest import Ingest
 from ..stream.settings import PipelineSettings
 from ..stream.stats import LatencyStats
@@ -61,7 +67,6 @@ from ..stream.strips import LineBlock, StreamInfo, StripAssembler
 from ..stream.timing import LineTiming
 
 ROUND_S = 0.01  # each of a figure's 3 rounds
-BLOCKED_KINDS = HEAD_BLOCK_KINDS  # their block is the head block L
 
 
 @dataclass(frozen=True)
@@ -181,10 +186,10 @@ def block_candidates(
                 lengths.append(m)
             b *= 2
         return [m - n + 1 for m in [*lengths, top]], ""
-    if physical is None and p.correlator in BLOCKED_KINDS and given:
+    if physical is None and p.correlator in HEAD_BLOCK_KINDS and given:
         return [given], "--partition-lines"
     largest = 16
-    if p.correlator in BLOCKED_KINDS:
+    if p.correlator in HEAD_BLOCK_KINDS:
         largest = min(max(p.partition_lines, MOST_STRIP_LINES), p.aperture_pulses)
     return [1 << k for k in range(largest.bit_length()) if 1 << k <= largest], ""
 
@@ -194,8 +199,7 @@ def aligned(p: Processor, physical=None, stages: str = "split") -> bool:
     correlators that release lines in blocks (a head block; fft's overlap-save blocks, which
     also end on multiples of their B pulses), in the split or fused stages (the overlapped
     stage's lens takes what waits, rtsar.stream.overlap)."""
-    blocked = p.correlator in BLOCKED_KINDS or p.correlator == "fft"
-    return physical is None and blocked and stages != "overlapped"
+    return physical is None and p.correlator in GROWING_KINDS and stages != "overlapped"
 
 
 def block_config(config: Config, block: int, physical=None) -> Config:

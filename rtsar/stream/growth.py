@@ -42,7 +42,7 @@ GROW_WINDOW_S = 0.25  # the backlog is judged over windows of this long …
 GROW_BACKLOG_BLOCKS = 4  # … behind: over this many block periods of pulses throughout …
 GROW_LEAST_BACKLOG_S = 5e-3  # … and over this (a busy machine's jitter stays under it)
 HEAD_BLOCK_KINDS = ("partitioned", "nonuniform")  # their block: the head block L
-GROWING_KINDS = (*HEAD_BLOCK_KINDS, "fft")  # whose block a config sets
+GROWING_KINDS = (*HEAD_BLOCK_KINDS, "fft")  # lines in blocks a config sets (fft: M - N + 1)
 
 
 def config_with_block(config: Config, block: int) -> Config:

@@ -7,6 +7,7 @@ verdict here depends on this machine's speed: the costs are given."""
 import io
 import math
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +36,7 @@ from rtsar.stream.granularity import (
 )
 from rtsar.stream.growth import growth_words
 from rtsar.stream.pipeline import Pipeline, PipelineSettings
-from rtsar.stream.strips import LineBlock, StreamInfo, StripAssembler
+from rtsar.stream.strips import InfoChange, LineBlock, StreamInfo, StripAssembler
 
 ROOT = Path(__file__).resolve().parents[1]
 US = 1e-6
@@ -245,6 +246,30 @@ def test_a_partial_strip_goes_out_at_its_deadline(assembler):
     assert a.due(10.0 + d + 2 * q, 16, 64, d) == 1
     assert a.due(99.0, 16, 64, None) == 0  # no deadline: a partial strip waits
     assert a.wait_s(99.0, None) == np.inf
+
+
+def test_a_new_info_is_the_strips_after_the_lines_before_it(assembler):
+    """The correlator's block changed after line 5 (rtsar.stream.growth): the 5 lines before
+    go out at once, in strips of at most ``most`` lines, under the old info; the next strips
+    under the new one (the new info in the queue of lines: an item of no lines)."""
+    a = assembler
+    old, new = a.info, replace(a.info, config=a.info.config.with_processor(partition_lines=8))
+    assert len(InfoChange(new)) == 0
+    a.add(_block(0, 5), now_s=1.0)
+    a.add(InfoChange(new), now_s=1.0)
+    a.add(_block(5, 8), now_s=1.0)
+    assert a.due(1.0, 16, 16, None) == 5  # at once, though strips hold 16
+    assert a.due(1.0, 16, 3, None) == 5 and a.due(1.0, 2, 2, None) == 2  # at most max(lines, most)
+    strip, _ = a.take(2, {})
+    assert (strip.first_line, len(strip.lines), a.info) == (0, 2, old)
+    assert a.due(1.0, 16, 16, None) == 3
+    strip, _ = a.take(3, {})
+    assert (strip.first_line, len(strip.lines), a.info) == (2, 3, old)  # the strip's own info
+    assert a.due(1.0, 16, 16, None) == 0 and a.info is new  # then the new one's turn
+    assert a.due(1.0, 8, 8, None) == 8
+    a.take(8, {})
+    a.add(InfoChange(old))  # nothing held: at once
+    assert a.held == 0 and a.info is old
 
 
 def test_the_deadline_counts_from_the_oldest_line_held(assembler):

@@ -1,6 +1,7 @@
-"""A live run's correlator block, doubled while it falls behind (rtsar.stream.growth): the
-rule on given backlogs, the grown correlator continuing the stream exactly (against eq. 1's
-float64 reference), and a pipeline that grows without losing or changing a line."""
+"""A live run's correlator block, doubled while it falls behind and shrunk back once it has
+room (rtsar.stream.growth): the rules on given backlogs and busy times, the new correlator
+continuing the stream exactly (against eq. 1's float64 reference), and a pipeline that changes
+its block without losing or changing a line, its strips declaring the block that made them."""
 
 import re
 import time
@@ -21,9 +22,13 @@ from rtsar.stream.growth import (
     GROW_BACKLOG_BLOCKS,
     GROW_LEAST_BACKLOG_S,
     GROW_WINDOW_S,
+    SHRINK_BUSY_BELOW,
+    SHRINK_WINDOW_MOST_S,
+    SHRINK_WINDOW_S,
     BacklogWatch,
     BlockGrowth,
     LineHistory,
+    QuietWatch,
     backlog_limit_s,
     config_with_block,
     history_lines,
@@ -64,6 +69,56 @@ def test_a_shrinking_backlog_or_one_dip_under_the_limit_is_not_behind():
     assert lags(first_under, [(0.0, 0.005), (w, 0.05)]) == [False, False]
     short = BacklogWatch()
     assert lags(short, [(0.0, 0.02), (w * 0.99, 0.05)]) == [False, False]
+
+
+def quiet_windows(watch, shares, backlog_s=0.0, limit_s=0.01, ratio=2.0, pushes=10):
+    """The verdict of ``watch`` at the end of each window, one window per share: ``pushes``
+    pushes a window, the busiest of two stages busy that share of the time (the other a tenth
+    of it)."""
+    busy, out = {"lens": 0.0, "ccd": 0.0}, []
+    step = watch.window_s / pushes
+    assert watch.observe(0.0, backlog_s, limit_s, dict(busy), ratio) is None  # opens a window
+    for w, share in enumerate(shares):
+        for k in range(1, pushes + 1):
+            busy["ccd"] += share * step
+            busy["lens"] += share * step / 10
+            t = (w * pushes + k) * step * (1 + 1e-9)  # the last push ends the window
+            verdict = watch.observe(t, backlog_s, limit_s, dict(busy), ratio)
+            assert verdict is None or k == pushes
+        out.append(verdict)
+    return out
+
+
+def test_a_window_without_backlog_and_with_room_at_the_smaller_block_shrinks_it():
+    """Room: the busiest stage's share × the blocks' ratio under SHRINK_BUSY_BELOW (0.7) and no
+    backlog over the smaller block's limit, throughout a window of SHRINK_WINDOW_S."""
+    assert SHRINK_WINDOW_S == 1.0 and SHRINK_BUSY_BELOW == 0.7
+    low = quiet_windows(QuietWatch(), [0.2])
+    assert low[-1] == pytest.approx(0.2)  # the share, as said in the log
+    assert quiet_windows(QuietWatch(), [0.36])[-1] is None  # 0.72 at half the block
+    assert quiet_windows(QuietWatch(), [0.3], ratio=3.0)[-1] is None  # fft's 3x smaller block
+    assert quiet_windows(QuietWatch(), [0.2], backlog_s=0.02)[-1] is None  # a backlog
+    assert QuietWatch().observe(0.0, 0.0, 1.0, {}, 2.0) is None
+    w = QuietWatch()
+    w.observe(0.0, 0.0, 1.0, {}, 2.0)
+    assert w.observe(2.0, 0.0, 1.0, {}, 2.0) is None  # no stage measured: no room known
+
+
+def test_one_backlog_over_the_limit_spoils_a_quiet_window():
+    w = QuietWatch()
+    busy = {"ccd": 0.0}
+    assert w.observe(0.0, 0.0, 0.01, busy, 2.0) is None
+    assert w.observe(0.5, 0.02, 0.01, busy, 2.0) is None  # over, once
+    assert w.observe(1.0, 0.0, 0.01, busy, 2.0) is None  # the window's verdict: not quiet
+    assert w.observe(2.0, 0.0, 0.01, busy, 2.0) == 0.0  # the next window: quiet
+
+
+def test_the_quiet_window_doubles_at_each_growth_after_a_shrink_up_to_its_most():
+    w = QuietWatch()
+    for expected in (2.0, 4.0, 8.0, 16.0, 32.0, 32.0):
+        w.back_off()
+        assert w.window_s == expected
+    assert SHRINK_WINDOW_MOST_S == 32.0
 
 
 def test_the_line_history_keeps_the_last_lines_in_order_with_zeros_before_the_first():
@@ -136,6 +191,38 @@ def test_a_grown_correlator_continues_the_stream_exactly(kind, grow_at):
     engine.correlator.close()
 
 
+@pytest.mark.parametrize("kind", ["partitioned", "nonuniform", "fft"])
+def test_a_block_grown_then_shrunk_back_continues_the_stream_exactly(kind):
+    """Grown twice (as decided), then quiet windows: it shrinks back one candidate at a time to
+    the run's own block, never below; every swap at the end of a block, the image eq. 1's."""
+    cfg, blocks, engine, plan, lines, growth = stream_of(kind, 900, 3)
+    out, p, t, busy, seen = [], 0, 0.0, {"ccd": 0.0}, [blocks[0]]
+    while p < len(lines):
+        count = min(growth.block * (1, 2, 1, 3)[len(out) % 4], len(lines) - p)
+        out.append(engine.correlator.push(lines[p : p + count]))
+        p += count
+        t += 0.3  # seconds a push: a quiet window every 4 pushes
+        busy["ccd"] += 0.03  # 10 % busy
+        growth.due = growth.growths < 2 and p >= 70 and growth.block < blocks[-1]
+        if g := growth.after_push(engine, lines[p - count : p], 0.0, t, dict(busy)):
+            seen.append(g)
+            c = engine.correlator  # the swap at the end of a block of the old correlator
+            assert c.pulses_in - c.lines_out == cfg.processor.aperture_pulses - 1
+        if growth.smaller is not None:
+            growth.smaller._thread.join()  # built: swapped at the next push that ends a block
+    out.append(engine.correlator.flush())
+    image = np.concatenate(out)
+    ref = correlate_reference(lines[:p], design_mask(cfg, plan.range_m))
+    assert image.shape == ref.shape
+    assert np.linalg.norm(image - ref) / np.linalg.norm(ref) < TOL
+    assert seen == [blocks[0], blocks[1], blocks[2], blocks[1], blocks[0]]
+    assert growth.shrinks == 2 and growth.growths == 2 and growth.block == blocks[0]
+    assert growth.quiet_share == pytest.approx(0.1)
+    if kind != "fft":
+        assert engine.config.processor.partition_lines == blocks[0]
+    engine.correlator.close()
+
+
 class SlowSink(Collect):
     """A subscriber that takes 3 ms a strip: the queues before it fill, and so do those before
     the correlator (a run whose work does not keep up)."""
@@ -201,6 +288,88 @@ def test_a_pipeline_behind_grows_its_block_and_loses_no_line(stages):
     assert c["dropped_pulses"] == 0 and c["lines_out"] == len(ref)
 
 
+class BlockNoted(Collect):
+    """Keeps each strip's first line, its lines and the block its header's config declares;
+    3 ms a strip for the first ``slow`` strips (the work then falls behind)."""
+
+    def __init__(self, slow: int):
+        super().__init__()
+        self.slow, self.declared = slow, []
+
+    def strip(self, strip, info):
+        if len(self.strips) < self.slow:
+            time.sleep(0.003)
+        super().strip(strip, info)
+        declared = info.config_dict["processor"]["partition_lines"]
+        assert declared == info.config.processor.partition_lines
+        self.declared.append((strip.first_line, len(strip.lines), declared))
+
+
+class FastThenPaced(Source):
+    """The first ``fast`` shots 8 at a time, at once (a replay, waited for), then one at a
+    time at ``rate_hz``."""
+
+    live = False
+    description = "fast, then paced"
+
+    def __init__(self, shots, fast: int, rate_hz: float):
+        super().__init__()
+        self.shots, self.fast, self.rate_hz = shots, fast, rate_hz
+
+    def __iter__(self):
+        k = 0
+        while k < len(self.shots):
+            step = 8 if k < self.fast else 1
+            if k >= self.fast:
+                time.sleep(1 / self.rate_hz)
+            seq = np.arange(k, min(k + step, len(self.shots)))
+            now = np.full(len(seq), time.perf_counter())
+            yield ShotBatch(seq, seq * 2e-3, now, self.shots[seq])
+            k += step
+
+
+def test_a_run_with_room_again_shrinks_its_block_and_its_strips_declare_theirs():
+    """Behind at first (a slow subscriber, shots as fast as they go), then paced at the
+    preset's 500 pulses/s with a prompt subscriber: the block grows, then shrinks back; no
+    line lost or changed, and every strip's header declares the block of the correlator
+    that gave its lines (before, every strip declared the run's first block)."""
+    cfg, shots = tiny_shots(6)
+    shots = shots[:1500]  # 700 at once, then 800 at 500 pulses/s: 1.6 s
+    ref, _, _ = process_block(cfg, shots)
+    sink, said = BlockNoted(slow=150), []
+    settings = PipelineSettings(
+        stages="split", strip_lines=2, lens_align=2, queue_pulses=64, grow_blocks=(2, 4, 8),
+        grow_rate_hz=500.0,
+    )  # fmt: skip
+    pipe = Pipeline(cfg, FastThenPaced(shots, 700, 500.0), [sink], settings, notify=said.append)
+    n, swaps, after_push = cfg.processor.aperture_pulses, [(0, 2)], pipe.growth.after_push
+
+    def noted(*args, **kw):  # the first line each block gave (the old one gave those before)
+        if block := after_push(*args, **kw):
+            swaps.append((pipe.growth.from_pulse - (n - 1), block))
+        return block
+
+    pipe.growth.after_push = noted
+    pipe.growth.quiet.window_s = 0.3  # (the rule's 1 s is tested above): a short test
+    pipe.run()
+    image = np.concatenate([s.lines for s in sink.strips])
+    assert image.shape == ref.shape
+    assert np.linalg.norm(image - ref) / np.linalg.norm(ref) < TOL
+    c = sink.final["counters"]
+    assert c["correlator_growths"] >= 1 and c["correlator_shrinks"] >= 1
+    assert c["correlator_block_lines"] == swaps[-1][1] and c["dropped_pulses"] == 0
+    for first, count, declared in sink.declared:  # the block in force for all its lines
+        made_by = [b for at, b in swaps if at <= first][-1]
+        assert made_by == [b for at, b in swaps if at <= first + count - 1][-1]
+        assert declared == made_by
+    shrunk = [s for s in said if "shrinks back" in s]
+    assert shrunk and re.fullmatch(
+        r"the work keeps up with room to spare \(its busiest stage \d+% busy, no backlog, "
+        r"for 0.3 s\): the correlator's block shrinks back from (8 to 4|4 to 2) lines",
+        shrunk[0],
+    )
+
+
 def test_a_run_that_keeps_up_keeps_its_block():
     cfg, shots = tiny_shots(3)
     shots = shots[:640]  # at the preset's 500 pulses/s: 1.3 s, five windows
@@ -250,6 +419,16 @@ def test_the_figures_live_md_states_are_the_code_s():
     assert float(rule.group(1)) == GROW_WINDOW_S and int(rule.group(2)) == GROW_BACKLOG_BLOCKS
     assert int(rule.group(3)) * 1e-3 == GROW_LEAST_BACKLOG_S
     assert f"a backlog that lasts {GROW_WINDOW_S:g} s grows the block" in text
+    shrink = re.search(
+        r"over a whole ([\d.]+) s window the backlog stayed under the smaller block's limit and "
+        r"the busiest stage's busy share \(its busy seconds over the window's\), times the "
+        r"ratio of the blocks, stayed under ([\d.]+)\..*?\(up to (\d+) s\)",
+        text,
+    )
+    assert float(shrink.group(1)) == SHRINK_WINDOW_S
+    assert float(shrink.group(2)) == SHRINK_BUSY_BELOW
+    assert float(shrink.group(3)) == SHRINK_WINDOW_MOST_S
+    assert f"room to spare for {SHRINK_WINDOW_S:g} s shrinks it back" in text
 
 
 def test_a_pipeline_whose_correlator_cannot_grow_says_why():

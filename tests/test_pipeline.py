@@ -589,6 +589,24 @@ def test_stats_messages_carry_stage_busy_times_while_running(tiny):
     assert busy.get("lens", 0) > 0 and busy.get("ccd", 0) > 0
 
 
+def test_a_fused_stage_s_busy_time_counts_its_correlator_s_work(tiny):
+    """In the fused layout one thread runs lens and CCD: its busy time ("lens+ccd") holds both
+    (before, the CCD's part was left out, and a 2-ms-a-push correlator read as idle)."""
+    cfg, scene, shots = tiny
+    pipe = Pipeline(cfg, replay(cfg, shots), [Collect()], PipelineSettings(stages="fused"))
+    azimuth, pushes = pipe.engine.azimuth_stage, []
+
+    def slow(samples):
+        pushes.append(len(samples))
+        time.sleep(0.002)
+        return azimuth(samples)
+
+    pipe.engine.azimuth_stage = slow
+    busy_s = pipe.run().busy_s
+    assert list(busy_s) == ["lens+ccd"] and len(pushes) > 3
+    assert busy_s["lens+ccd"] >= 0.002 * len(pushes)
+
+
 def test_the_live_status_warns_when_processing_falls_below_the_source_rate():
     from rtsar.app.live import RateWatch
 

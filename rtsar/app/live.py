@@ -26,13 +26,10 @@ from .live_outputs import LiveOutputs
 # Counters that describe normal work; every other counter that is not zero is shown, so nothing
 # that went wrong is hidden from the status line.
 _NORMAL = {
-    "pulses_received",
-    "pulses_accepted",
-    "pulses_processed",
-    "lines_out",
+    *("pulses_received", "pulses_accepted", "pulses_processed", "lines_out"),
     "strips_published",
     "height_strips_published",
-    "correlator_block_lines",  # a state (rtsar.stream.growth); its growths are the news
+    "correlator_block_lines",  # a state (rtsar.stream.growth); its changes are the news
     "frames_ok",
     "bytes_fed",
     "messages",  # GNU Radio messages received (rtsar.sources.zmq_in)
@@ -79,6 +76,7 @@ _LABELS = {
     "image_lines_lost": "lines not written to -o",
     "swath_refused_messages": "refused swath messages",
     "correlator_growths": "correlator blocks grown (the work fell behind)",
+    "correlator_shrinks": "correlator blocks shrunk back (room again)",
 }
 
 

@@ -26,21 +26,38 @@ The new correlator is built on a thread of its own from the first backlog over t
 (``Prebuilt``), so the swap costs the push of H lines, about an aperture, once a growth.
 The candidates are the granularity's: the head blocks 1, 2, 4, … (each growth doubles),
 fft's M - N + 1 for the fast transform lengths M (the next of them).
+
+A grown block shrinks back, one candidate at a time and never below the run's own, once the
+room is there (``QuietWatch``): over a window of SHRINK_WINDOW_S the backlog stayed under the
+smaller block's limit and the busiest stage's share of the time (its busy seconds over the
+window's, rtsar.stream.stats) stayed under SHRINK_BUSY_BELOW over the blocks' ratio.  A
+call's work never falls with its size, so at a block r times smaller each stage's work a pulse
+is at most r times its present one: under SHRINK_BUSY_BELOW, a margin that FUSE_BELOW's
+70 % share keeps too (rtsar.stream.granularity).  The smaller correlator is built on its own
+thread from that verdict, and the swap is a growth's, the other way.  Where the block grows
+again after a shrink, the quiet window doubles (up to SHRINK_WINDOW_MOST_S), so a run at the
+edge does not swap back and forth.
 """
 
 from __future__ import annotations
 
+import math
 import threading
 import time
+from dataclasses import replace
 
 import numpy as np
 
 from ..ccd import make_ccd
 from ..params import Config
+from .strips import InfoChange
 
 GROW_WINDOW_S = 0.25  # the backlog is judged over windows of this long …
 GROW_BACKLOG_BLOCKS = 4  # … behind: over this many block periods of pulses throughout …
 GROW_LEAST_BACKLOG_S = 5e-3  # … and over this (a busy machine's jitter stays under it)
+SHRINK_WINDOW_S = 1.0  # a grown block shrinks after a window this long …
+SHRINK_BUSY_BELOW = 0.7  # … in which the busiest stage's share × the blocks' ratio stayed under
+SHRINK_WINDOW_MOST_S = 32.0  # the quiet window doubles at each growth after a shrink, to this
 HEAD_BLOCK_KINDS = ("partitioned", "nonuniform")  # their block: the head block L
 GROWING_KINDS = (*HEAD_BLOCK_KINDS, "fft")  # lines in blocks a config sets (fft: M - N + 1)
 
@@ -93,6 +110,44 @@ class BacklogWatch:
         return behind
 
 
+class QuietWatch:
+    """Whether the run has room for a smaller block (module docstring).
+
+    ``observe(now_s, backlog_s, limit_s, busy_s, ratio)`` → the busiest stage's share of the
+    window's time at the end of a window (``window_s``, from the first push after the last
+    verdict) in which every backlog stayed at or under ``limit_s`` (the smaller block's) and
+    that share × ``ratio`` (the block over the smaller one) stayed under SHRINK_BUSY_BELOW;
+    else None.  ``busy_s``: each stage's busy seconds so far (rtsar.stream.stats.busy_s)."""
+
+    def __init__(self, window_s: float = SHRINK_WINDOW_S):
+        self.window_s = float(window_s)
+        self.restart()
+
+    def restart(self) -> None:
+        """Forget the window (after a swap: the next is judged on the new block alone)."""
+        self._start_s: float | None = None
+        self._busy0: dict = {}
+        self._quiet = True
+
+    def observe(self, now_s, backlog_s, limit_s, busy_s: dict, ratio: float) -> float | None:
+        if self._start_s is None:
+            self._start_s, self._busy0, self._quiet = now_s, dict(busy_s), True
+            return None
+        self._quiet = self._quiet and backlog_s <= limit_s
+        elapsed = now_s - self._start_s
+        if elapsed < self.window_s:
+            return None
+        worked = [busy_s[k] - self._busy0.get(k, 0.0) for k in busy_s]
+        share = max(worked) / elapsed if worked else math.inf  # no stage measured: no room
+        quiet = self._quiet and share * ratio < SHRINK_BUSY_BELOW
+        self._start_s, self._busy0, self._quiet = now_s, dict(busy_s), True
+        return share if quiet else None
+
+    def back_off(self) -> None:
+        """A growth after a shrink: the next shrink needs a window twice as long."""
+        self.window_s = min(2 * self.window_s, SHRINK_WINDOW_MOST_S)
+
+
 class LineHistory:
     """The last ``rows`` lines pushed into the correlator (a ring), zeros before the first."""
 
@@ -128,11 +183,12 @@ def history_lines(aperture: int, block: int) -> int:
 
 class Prebuilt:
     """The correlator of ``config`` with blocks of ``block`` lines, built on a thread of its
-    own from the first backlog over the limit: by the window's verdict it is ready, and the swap
-    only feeds it the history (psaltis-max, nonuniform: building 90-400 ms, feeding its 512
-    lines 28-38 ms, 2-core Zen 3)."""
+    own from the first backlog over the limit (a shrink: from the quiet window's verdict): by
+    the swap it is ready, and the swap only feeds it the history (psaltis-max, nonuniform:
+    building 90-400 ms, feeding its 512 lines 28-38 ms, 2-core Zen 3)."""
 
     def __init__(self, config: Config, range_m: np.ndarray, block: int):
+        self.block = int(block)
         self._built, self._error = None, None
         args = (config_with_block(config, block), range_m)
         self._thread = threading.Thread(target=self._build, args=args, daemon=True)
@@ -145,6 +201,10 @@ class Prebuilt:
         except BaseException as exc:  # raised where the swap takes it
             self._error = exc
 
+    def ready(self) -> bool:
+        """Built (or failed: ``take`` raises): a swap now would not wait."""
+        return not self._thread.is_alive()
+
     def take(self, history: np.ndarray):
         """The correlator, built (waited for), fed ``history`` (the last
         history_lines(N, block) lines of the stream) and its outputs of them dropped."""
@@ -154,15 +214,27 @@ class Prebuilt:
         self._built.push(history)
         return self._built
 
+    def discard(self) -> None:
+        """Not needed after all (the block moved the other way): closed once built, on a
+        thread of its own, so the stream does not wait for the build."""
+
+        def close() -> None:
+            self._thread.join()
+            if self._built is not None:
+                self._built.close()
+
+        threading.Thread(target=close, daemon=True, name=f"rtsar-discard-{self.block}").start()
+
 
 class BlockGrowth:
-    """The correlator's block, doubled while a live run falls behind (module docstring).
+    """The correlator's block, doubled while a live run falls behind and shrunk back once it
+    has room (module docstring).
 
     ``blocks``: the run's block and the larger ones it may grow to, in order; ``rate_hz``: the
     pulse rate the block periods are counted at.  ``after_push(engine, lines, backlog_s,
-    now_s)`` (after each push of ``lines`` into ``engine.correlator``, an rtsar.stream.engine
-    StreamProcessor, ``backlog_s`` of pulses then waiting before it) → the new block where
-    the correlator grew, else 0."""
+    now_s, busy_s)`` (after each push of ``lines`` into ``engine.correlator``, an
+    rtsar.stream.engine StreamProcessor, ``backlog_s`` of pulses then waiting before it,
+    ``busy_s`` each stage's busy seconds so far) → the new block where it changed, else 0."""
 
     def __init__(
         self, config: Config, blocks, rate_hz: float, range_bins: int, dtype, batch: int = 0
@@ -176,64 +248,108 @@ class BlockGrowth:
         self.rate_hz = float(rate_hz)
         self.block = self.blocks[0]
         n = config.processor.aperture_pulses
-        rows = max(history_lines(n, b) for b in self.blocks[1:])
+        rows = max(history_lines(n, b) for b in self.blocks)
         self.history = LineHistory(rows, range_bins, dtype)
         self.watch = BacklogWatch(slack_s=batch / self.rate_hz)  # a lens call's pulses
+        self.quiet = QuietWatch()
         self.due = False  # a growth decided, waiting for a push that ends on a block
-        self.growths = 0
+        self.growths = self.shrinks = 0
         self.from_pulse = 0  # the stream's pulse from which the blocks are counted
         self.next: Prebuilt | None = None  # the next block's correlator, once a backlog was over
+        self.smaller: Prebuilt | None = None  # the smaller block's, once a window was quiet
+        self.quiet_share = 0.0  # the busiest stage's share in the window that shrank the block
 
     def counters(self) -> dict:
-        return {"correlator_growths": self.growths, "correlator_block_lines": self.block}
+        return {
+            "correlator_growths": self.growths,
+            "correlator_shrinks": self.shrinks,
+            "correlator_block_lines": self.block,
+        }
 
-    def step(self, pipe, lines: np.ndarray) -> None:
+    def step(self, pipe, lines: np.ndarray) -> InfoChange | None:
         """After a push of ``lines`` in ``pipe`` (an rtsar.stream.pipeline.Pipeline), its
-        backlog the pulses in its queues before the correlator: where the block grew, the
+        backlog the pulses in its queues before the correlator: where the block changed, the
         lens aligns its calls to the new block (``lens_align`` from ``lens_align_from``,
         ``lens_hold_s``: two blocks' time; not in the overlapped layout, whose lens takes what
-        waits) and the run's ``notify`` is told why."""
+        waits), the run's ``notify`` is told why, and the stream's info with the new block in
+        its config is returned (the strips after the old block's lines declare it, queued
+        after them); else None."""
         was = self.block
         backlog_s = (pipe.q_shots.size + pipe.q_lines.size) / self.rate_hz
-        grown = self.after_push(pipe.engine, lines, backlog_s, time.perf_counter())
-        if not grown:
-            return
+        busy_s = dict(pipe.stats.busy_s)
+        now = self.after_push(pipe.engine, lines, backlog_s, time.perf_counter(), busy_s)
+        if not now:
+            return None
         s = pipe.settings
         if s.stages != "overlapped":  # the new blocks counted from the pulse of the swap
-            s.lens_align_from, s.lens_hold_s = self.from_pulse, 2 * grown / self.rate_hz
-            s.lens_align = grown
-        if pipe.notify is not None:
+            s.lens_align_from, s.lens_hold_s = self.from_pulse, 2 * now / self.rate_hz
+            s.lens_align = now
+        info = InfoChange(replace(pipe.info, config=pipe.engine.config, config_dict={}))
+        if pipe.notify is None:
+            return info
+        if now > was:
             limit_ms = backlog_limit_s(was, self.rate_hz) * 1e3
-            pipe.notify(
+            why = (
                 f"the work fell behind ({limit_ms:.0f} ms of pulses waiting for "
-                f"{self.watch.window_s:g} s):"
-                f" the correlator's block grows from {was} to {grown} lines"
+                f"{self.watch.window_s:g} s)"
             )
+        else:
+            why = (
+                f"the work keeps up with room to spare (its busiest stage "
+                f"{self.quiet_share:.0%} busy, no backlog, for {self.quiet.window_s:g} s)"
+            )
+        verb = "grows" if now > was else "shrinks back"
+        pipe.notify(f"{why}: the correlator's block {verb} from {was} to {now} lines")
+        return info
 
-    def after_push(self, engine, lines: np.ndarray, backlog_s: float, now_s: float) -> int:
-        if self.block == self.blocks[-1]:
-            return 0  # the largest: no history kept from here
+    def after_push(
+        self, engine, lines: np.ndarray, backlog_s: float, now_s: float, busy_s=None
+    ) -> int:
         self.history.add(lines)
-        limit_s = backlog_limit_s(self.block, self.rate_hz)
-        grown = self.blocks[self.blocks.index(self.block) + 1]
-        if backlog_s > limit_s and self.next is None:  # behind, perhaps: build the next now
-            self.next = Prebuilt(self.config, engine.range_m, grown)
-        self.due = self.watch.observe(now_s, backlog_s, limit_s) or self.due
-        if not self.due:
-            return 0
+        at = self.blocks.index(self.block)
+        grown = self.blocks[at + 1] if at + 1 < len(self.blocks) else 0
+        if grown:
+            limit_s = backlog_limit_s(self.block, self.rate_hz)
+            if backlog_s > limit_s and self.next is None:  # behind, perhaps: build the next now
+                self.next = Prebuilt(self.config, engine.range_m, grown)
+            self.due = self.watch.observe(now_s, backlog_s, limit_s) or self.due
+        if at and not self.due and self.smaller is None and busy_s is not None:
+            down = self.blocks[at - 1]
+            limit_s = backlog_limit_s(down, self.rate_hz)
+            share = self.quiet.observe(now_s, backlog_s, limit_s, busy_s, self.block / down)
+            if share is not None:  # room: build the smaller one, swapped once it is ready
+                self.quiet_share = share
+                self.smaller = Prebuilt(self.config, engine.range_m, down)
         old = engine.correlator
         n = self.config.processor.aperture_pulses
         if old.pulses_in - old.lines_out != n - 1:
             return 0  # a partial block held: the next push that ends one
-        history = self.history.last(history_lines(n, grown))
-        built = self.next if self.next is not None else Prebuilt(self.config, engine.range_m, grown)
-        engine.correlator, self.next = built.take(history), None
-        engine.config = config_with_block(engine.config, grown)
+        self.due = self.due and bool(grown)  # (the largest block has no larger one)
+        if self.due:
+            built = self.next or Prebuilt(self.config, engine.range_m, grown)
+            self.next = None
+            if self.smaller is not None:
+                self.smaller.discard()
+                self.smaller = None
+            self.growths += 1
+            if self.shrinks:
+                self.quiet.back_off()
+        elif self.smaller is not None and self.smaller.ready():
+            built, self.smaller = self.smaller, None
+            if self.next is not None:
+                self.next.discard()
+                self.next = None
+            self.shrinks += 1
+        else:
+            return 0
+        history = self.history.last(history_lines(n, built.block))
+        engine.correlator = built.take(history)
+        engine.config = config_with_block(engine.config, built.block)
         old.close()
-        self.block, self.due, self.from_pulse = grown, False, self.history.pushed
-        self.growths += 1
+        self.block, self.due, self.from_pulse = built.block, False, self.history.pushed
         self.watch.restart()
-        return grown
+        self.quiet.restart()
+        return self.block
 
 
 def why_fixed(p, physical=None, copies: int = 1, swath: bool = False) -> str:
@@ -255,7 +371,10 @@ def why_fixed(p, physical=None, copies: int = 1, swath: bool = False) -> str:
 def growth_words(blocks) -> str:
     """The banner's words for a run whose block may grow (blocks: its own, then the larger)."""
     steps = " → ".join(f"{b:,}" for b in blocks)
-    return f"a backlog that lasts {GROW_WINDOW_S:g} s grows the block, {steps} lines at most"
+    return (
+        f"a backlog that lasts {GROW_WINDOW_S:g} s grows the block, {steps} lines at most, "
+        f"and room to spare for {SHRINK_WINDOW_S:g} s shrinks it back"
+    )
 
 
 def growth_of(config: Config, settings, engine, physical=None, height=None):

@@ -1,12 +1,11 @@
 """The streaming pipeline: source → ingest → AO lens → shifting CCD → strips → publishers.
 
-Each stage is a thread, joined to the next by a bounded queue (capacity in pulses or lines:
-memory bounded whatever the source does); the heavy work releases the GIL, so threads overlap.
-``stages``: "split" (lens and CCD threads), "fused" (one thread: one queue hop less),
-"overlapped" (one thread, the lens computing batch k + 1 while the CCD correlates batch k).
-A live source's shots are dropped and counted when the first queue is full (ingest zero-fills
-their slots); a replay waits.  Each stage takes all the work waiting, up to a cap (``lens_align``
-= B: the lens first waits for the pulses that complete a block of B).
+Each stage is a thread, joined to the next by a bounded queue (capacity in pulses or lines);
+the heavy work releases the GIL.  ``stages``: "split" (lens and CCD threads), "fused" (one
+thread), "overlapped" (one thread, the lens computing batch k + 1 while the CCD correlates
+batch k).  A live source's shots are dropped and counted when the first queue is full (ingest
+zero-fills their slots); a replay waits.  Each stage takes all the work waiting, up to a cap
+(``lens_align`` = B: the lens first waits for the pulses that complete a block of B).
 
 Corrections (rtsar.focus.chain) run in the lens thread in pulse order: "raw" stages before the
 lens, "lines" stages between lens and CCD; a line stage may hold pulses (PGA holds a block),
@@ -20,8 +19,9 @@ j + N - 1 for line j, Psaltis & Wagner 1981: the row leaves the CCD after N shif
 publication of its strip: a strip goes out when it holds ``strip_lines`` (with every line then
 waiting, up to ``strip_most_lines``), or its oldest line waited ``strip_deadline_s``
 (rtsar.stream.granularity chooses them; rtsar.stream.growth doubles the correlator's block
-while the work falls behind).  The pieces: rtsar.stream.queue, ingest, engine, hold, timing,
-height, strips, swath, link (silences), stats, settings, heap (the collector)."""
+while the work falls behind, and halves it back once there is room).  The pieces:
+rtsar.stream.queue, ingest, engine, hold, timing, height, strips, publication (the strip
+stage), swath, link (silences), stats, settings, heap (the collector)."""
 
 from __future__ import annotations
 
@@ -41,6 +41,7 @@ from .ingest import Ingest, PulseBlock, concat_blocks, regroup_blocks
 from .link import LinkWatch
 from .memory import check_memory
 from .overlap import overlapped_stage
+from .publication import strip_stage
 from .queue import BoundedQueue
 from .settings import PipelineSettings
 from .stats import PipelineStats
@@ -127,7 +128,8 @@ class Pipeline:
         self._stop = threading.Event()
         self._ended: list[threading.Event] = []  # set by each stage thread as it ends
         self._height_seq = 0
-        self.info = StreamInfo(
+        self._fused_ccd_s = 0.0  # the CCD's work in the fused lens stage (its busy time)
+        self.strips = StripAssembler(StreamInfo(  # the stream's info: the strips' (``info``)
             stream_id=stream_id or new_stream_id(),
             config=config,
             source=source.description,
@@ -141,8 +143,7 @@ class Pipeline:
             correction_specs=tuple(corrections.specs) if corrections else (),
             physical=None if physical is None else physical.to_dict(),
             collection_start_utc=utc_text(getattr(source, "collection_start", None)),
-        )
-        self.strips = StripAssembler(self.info)
+        ))  # fmt: skip
         self.swath = None  # lens + CCD in worker processes (rtsar.stream.swath)
         if s.swath_workers:
             if corrections or physical is not None or height is not None:
@@ -156,6 +157,11 @@ class Pipeline:
     @property
     def stream_id(self) -> str:
         return self.info.stream_id
+
+    @property
+    def info(self) -> StreamInfo:
+        """What the sinks know of the run (a new block's config from its first strip)."""
+        return self.strips.info
 
     # ---- stages ---------------------------------------------------------------------------
     def _source_stage(self) -> None:
@@ -202,7 +208,7 @@ class Pipeline:
                         continue
                     out = self._range(block)
                     busy += time.perf_counter() - t
-                    self.stats.busy_s[key] = busy  # live in every stats message
+                    self.stats.busy_s[key] = busy + self._fused_ccd_s  # in every stats message
                     self._forward(out)
                 if batches is None:
                     break
@@ -213,7 +219,7 @@ class Pipeline:
             if self.settings.stages != "split":
                 self._put_image(self._ccd_flush())
         finally:
-            self.stats.busy_s[key] = busy
+            self.stats.busy_s[key] = busy + self._fused_ccd_s
             (self.q_image if self.settings.stages != "split" else self.q_lines).close()
             if self.settings.stages != "split":  # fused: the CCD's stage is this one
                 self.engine.correlator.close()
@@ -240,8 +246,7 @@ class Pipeline:
         if not shift_m:
             return
         start = self.info.start_along_track_m + shift_m
-        self.info = replace(self.info, start_along_track_m=start)
-        self.strips.info = self.info
+        self.strips.info = replace(self.info, start_along_track_m=start)
         engines = [self.engine, *(self.height.engines.values() if self.height else ())]
         for engine in engines:
             engine.start_along_track_m = start
@@ -262,8 +267,11 @@ class Pipeline:
         """Hand a block of range-compressed pulses to the CCD (its thread, or here if fused)."""
         if block is None or not len(block):
             return
-        if self.settings.stages != "split":
-            self._put_image(self._ccd_step([block]))
+        if self.settings.stages != "split":  # the CCD's work here is this stage's too
+            t = time.perf_counter()
+            lines = self._ccd_step([block])
+            self._fused_ccd_s += time.perf_counter() - t
+            self._put_image(lines)
         else:
             self.q_lines.put(block)
 
@@ -320,11 +328,14 @@ class Pipeline:
         self.timing.record(block)
         self.own["pulses_processed"] += len(block)
         out = self.engine.azimuth_stage(block.samples)
-        if self.growth is not None:  # behind: a larger block (its backlog: the queues')
-            self.growth.step(self, block.samples)
+        # the block changed (behind, or room: rtsar.stream.growth): the new info after its lines
+        info = self.growth.step(self, block.samples) if self.growth is not None else None
         if self.height is not None:
             self._put_image(self.height.correlate(out.lines, block.aux))
-        return self._line_block(out)
+        if info is None:
+            return self._line_block(out)
+        self._put_image(self._line_block(out))
+        self._put_image(info)
 
     def _ccd_flush(self) -> LineBlock | None:
         out = self.engine.flush_azimuth()
@@ -340,36 +351,7 @@ class Pipeline:
         return block
 
     def _strip_stage(self) -> None:
-        last_stats = time.perf_counter()
-        s, prf = self.settings, self.config.geometry.prf_hz
-        strip_lines, deadline_s = s.strip_lines, s.strip_deadline_s
-        strip_period_s = min(max(strip_lines / prf, 1e-3), self.stats_every_s / 4)
-        strips = self.strips
-        try:
-            while True:
-                wait_s = strips.wait_s(time.perf_counter(), deadline_s)  # the deadline's turn
-                take = max(8 * strip_lines, s.strip_most_lines)
-                blocks = self.q_image.get_batch(take, timeout=min(wait_s, strip_period_s))
-                if blocks is None:
-                    break
-                if not blocks and strips.held:  # no new line for a strip's time (or a deadline)
-                    self._publish(strips.held)
-                now = time.perf_counter()
-                for b in blocks:
-                    if isinstance(b, HeightBatch):
-                        self._publish_heights(b)
-                    else:
-                        strips.add(b, now)
-                while count := strips.due(now, strip_lines, s.strip_most_lines, deadline_s):
-                    self._publish(count)
-                now = time.perf_counter()
-                if now - last_stats >= self.stats_every_s:
-                    last_stats = now
-                    self._send_stats()
-            while strips.held:
-                self._publish(min(strips.held, strip_lines))
-        finally:
-            self._send_stats(final=True)
+        strip_stage(self)
 
     def _publish(self, count: int) -> None:
         """Publish the first ``count`` pending lines as one strip."""
@@ -378,13 +360,6 @@ class Pipeline:
             sink.strip(strip, self.info)
         self.stats.latency.add(time.perf_counter() - last_arrival_s)
         self.own["strips_published"] += 1
-
-    def _publish_heights(self, batch: HeightBatch) -> None:
-        for strip in batch.strips:
-            for sink in self.sinks:
-                sink.height(strip, self._height_seq, self.info)
-            self._height_seq += 1
-            self.own["height_strips_published"] = self.own.get("height_strips_published", 0) + 1
 
     def counters(self) -> dict:
         """All counters: source, ingest, corrections, sinks and pipeline."""

@@ -146,27 +146,57 @@ class StripSink:
         """The run must end soon (Ctrl-C, a signal, a deadline): stop waiting on anyone."""
 
 
+@dataclass(frozen=True)
+class InfoChange:
+    """The stream's info from here on, in the queue of image lines (the correlator's block
+    changed, rtsar.stream.growth): an item of no lines."""
+
+    info: StreamInfo
+
+    def __len__(self) -> int:
+        return 0
+
+
 class StripAssembler:
     """Collects line blocks in order and cuts them into strips of any length; knows when the
     oldest line held came (``due``: the strip deadline)."""
 
     def __init__(self, info: StreamInfo):
-        self.info = info
+        self.info = info  # the stream's, as the strips published next declare it
         self._pending: list[LineBlock] = []
         self._came_s: list[float] = []  # when each pending block came (the strip stage's clock)
         self.held = 0  # lines pending
         self.seq = 0  # the next strip's number
+        self._switches: list[tuple[int, StreamInfo]] = []  # (lines held before it, new info)
 
-    def add(self, block: LineBlock, now_s: float = 0.0) -> None:
-        """A block of lines, come at ``now_s`` (seconds on the caller's clock)."""
+    def add(self, block: LineBlock | InfoChange, now_s: float = 0.0) -> None:
+        """A block of lines, come at ``now_s`` (seconds on the caller's clock); or the stream's
+        info as it is from here (the correlator's block changed, rtsar.stream.growth): the
+        lines held before it go out first, as strips of the old info (``due``)."""
+        self._switch()
+        if isinstance(block, InfoChange):
+            if self.held:
+                self._switches.append((self.held, block.info))
+            else:
+                self.info = block.info
+            return
         self._pending.append(block)
         self._came_s.append(float(now_s))
         self.held += len(block)
 
+    def _switch(self) -> None:
+        """The lines before a new info all taken (by the last ``take``): the new info's turn."""
+        while self._switches and self._switches[0][0] <= 0:
+            self.info = self._switches.pop(0)[1]
+
     def due(self, now_s: float, lines: int, most: int, deadline_s: float | None) -> int:
         """Lines to publish now as one strip (0: none yet).  ``lines`` or more held: all of
         them, at most max(lines, ``most``) (``most`` <= ``lines``: strips of exactly ``lines``);
-        fewer: all of them once the oldest has waited ``deadline_s`` (None: never)."""
+        fewer: all of them once the oldest has waited ``deadline_s`` (None: never).  A new
+        info waiting (``add``): the lines before it, at once."""
+        self._switch()
+        if self._switches:
+            return min(self._switches[0][0], max(lines, most))
         if self.held >= lines:
             return min(self.held, max(lines, most))
         if self.held and deadline_s is not None and now_s - self._came_s[0] >= deadline_s:
@@ -182,7 +212,9 @@ class StripAssembler:
 
     def take(self, count: int, counters: dict) -> tuple[Strip, np.ndarray]:
         """The first ``count`` pending lines as one strip, and the arrival of the last pulse of
-        each of its lines (the latency reference)."""
+        each of its lines (the latency reference); ``info`` is the strip's until the next
+        call."""
+        self._switch()
         parts, rest, came, need = [], [], [], count
         for b, came_s in zip(self._pending, self._came_s, strict=True):
             if need == 0:
@@ -198,6 +230,7 @@ class StripAssembler:
                 need = 0
         self._pending, self._came_s = rest, came
         self.held -= count
+        self._switches = [(at - count, info) for at, info in self._switches]
         first = parts[0].first_line
         one = len(parts) == 1  # the low-latency case: no copies
         lines = parts[0].lines if one else np.concatenate([p.lines for p in parts])

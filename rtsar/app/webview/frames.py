@@ -352,6 +352,7 @@ NOTED_WORDS = {
     "subscriber_stalls": "{n} stalled subscriber(s) cut off",
     "swath_refused_messages": "{n} swath message(s) refused (malformed or of no worker)",
     "correlator_growths": "{n} growth(s) of the correlator's block (the work fell behind)",
+    "correlator_shrinks": "{n} shrink(s) of the correlator's block back (room again)",
 }
 LINK_COUNTERS = ("link_silences", "link_silent_ms", "link_drops", "reconnects")
 

@@ -154,6 +154,7 @@ def stream_run(
         "stage_busy_s": d["stage_busy_s"],
         "strips": c["strips_published"],
         "correlator_growths": c.get("correlator_growths", 0),  # rtsar.stream.growth
+        "correlator_shrinks": c.get("correlator_shrinks", 0),
         "correlator_block_lines": c.get("correlator_block_lines"),
     }
     if live:  # paced: what the instrument-like source offered, and how much of it was kept

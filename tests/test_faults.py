@@ -125,6 +125,36 @@ def test_a_configuration_larger_than_the_machine_is_refused_before_allocating():
         check_memory(cfg, queue_pulses=int(need))
 
 
+def test_a_block_that_may_change_counts_its_history_and_second_correlator(monkeypatch):
+    """A live run whose correlator's block may grow or shrink (rtsar.stream.growth) holds the
+    last N lines of the stream and, at a swap, two correlators: the estimate counts both
+    (before, neither), and a pipeline checks it with them."""
+    from rtsar.sources.replay import ReplaySource
+    from rtsar.stream import memory
+    from rtsar.stream.pipeline import Pipeline, PipelineSettings
+
+    cfg = preset("psaltis-max").with_processor(correlator="nonuniform")
+    p, item = cfg.processor, 8  # complex64
+    fixed = memory.estimate_bytes(cfg, 64)
+    assert memory.estimate_bytes(cfg, 64, growing=True) - fixed == (
+        (2 * p.aperture_pulses + 8 * p.aperture_pulses) * p.range_bins * item
+    )
+    seen = []
+    monkeypatch.setattr(memory, "available_bytes", lambda: 1e12)
+    check = memory.check_memory
+    monkeypatch.setattr(
+        "rtsar.stream.pipeline.check_memory", lambda *a: seen.append(a) or check(*a)
+    )
+    settings = PipelineSettings(
+        lens_backend="numpy", grow_blocks=(16, 32), grow_rate_hz=1e4, queue_pulses=64
+    )
+    shots = np.zeros((1, cfg.waveform.samples_per_shot), np.complex64)
+    source = ReplaySource(shots, np.arange(1), np.zeros(1), 1e4, "max", 1)
+    pipe = Pipeline(cfg, source, [], settings)
+    pipe.engine.correlator.close()
+    assert seen == [(cfg, 64, 0, True)]
+
+
 def _subscribe_to_a_bare_publisher(tmp_path):
     """A hand-driven XPUB and `rtsar subscribe -o` reading it in a thread, subscribed:
     (publisher, output path, thread, {"rc": exit status} once it ends)."""

@@ -3,7 +3,9 @@
 The estimate counts the large buffers: the pipeline's three bounded queues (raw shots, range
 lines, image lines; ``queue_pulses`` pulses each) and the shifting CCD's state (the FFT
 correlator's blocks and filter, the partitioned correlator's filter spectra and delay line, the
-direct register).  It is an upper-side estimate, within a factor of about two; a configuration
+direct register) and, where the correlator's block may change in a live run
+(rtsar.stream.growth), the history of its last lines and a second correlator built beside
+it.  It is an upper-side estimate, within a factor of about two; a configuration
 that would need more than ``MEMORY_FRACTION`` of the memory available is refused with both
 figures, instead of failing later half-way into a run.
 """
@@ -36,8 +38,11 @@ def available_bytes() -> float | None:
         return None
 
 
-def estimate_bytes(config: Config, queue_pulses: int = 0, aux_channels: int = 0) -> float:
-    """Bytes of the large buffers of the engine and, with ``queue_pulses``, of the queues."""
+def estimate_bytes(
+    config: Config, queue_pulses: int = 0, aux_channels: int = 0, growing: bool = False
+) -> float:
+    """Bytes of the large buffers of the engine and, with ``queue_pulses``, of the queues;
+    ``growing``: with a block that may change (the line history, a second correlator)."""
     p, s = config.processor, config.waveform.samples_per_shot
     item = np.dtype(precision_dtype(p.precision)).itemsize
     n, bins = p.aperture_pulses, p.range_bins
@@ -50,13 +55,17 @@ def estimate_bytes(config: Config, queue_pulses: int = 0, aux_channels: int = 0)
         "nonuniform": 8 * n * bins,  # segments padded to whole partitions, their block buffers
     }
     engine = taps * ccd[p.correlator] * item + 4 * p.micro_batch * max(s, bins) * item
+    if growing:  # the history's N lines (up to a block more) and the next correlator
+        engine += (2 * n * bins + ccd[p.correlator]) * item
     queues = queue_pulses * ((1 + aux_channels) * s + 2 * bins) * item
     return float(engine + queues)
 
 
-def check_memory(config: Config, queue_pulses: int = 0, aux_channels: int = 0) -> float:
+def check_memory(
+    config: Config, queue_pulses: int = 0, aux_channels: int = 0, growing: bool = False
+) -> float:
     """The estimate; ValueError when it exceeds MEMORY_FRACTION of the available memory."""
-    need = estimate_bytes(config, queue_pulses, aux_channels)
+    need = estimate_bytes(config, queue_pulses, aux_channels, growing)
     have = available_bytes()
     if have is not None and need > MEMORY_FRACTION * have:
         p = config.processor

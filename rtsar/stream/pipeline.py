@@ -99,7 +99,8 @@ class Pipeline:
         self.settings = s = replace(settings) if settings else PipelineSettings()  # a growth sets
         n = config.processor.aperture_pulses
         capacity = s.queue_pulses or 8 * n
-        check_memory(config, capacity, 0 if height is None else len(height.channels))
+        aux, growing = 0 if height is None else len(height.channels), len(s.grow_blocks) > 1
+        check_memory(config, capacity, aux, growing)  # growing: a history, a second correlator
         azimuth = not s.swath_workers  # with swath workers, they correlate: no CCD here
         self.engine = StreamProcessor(
             config, s.lens_backend, s.device, start_along_track_m, corrections, physical, azimuth, s

@@ -137,8 +137,8 @@ def test_a_block_that_may_change_counts_its_history_and_second_correlator(monkey
     p, item = cfg.processor, 8  # complex64
     fixed = memory.estimate_bytes(cfg, 64)
     assert memory.estimate_bytes(cfg, 64, growing=True) - fixed == (
-        (2 * p.aperture_pulses + 8 * p.aperture_pulses) * p.range_bins * item
-    )
+        (2 * p.aperture_pulses + 2 * 8 * p.aperture_pulses) * p.range_bins * item
+    )  # the history, a growth's and a shrink's correlators (nonuniform: 8 N lines each)
     seen = []
     monkeypatch.setattr(memory, "available_bytes", lambda: 1e12)
     check = memory.check_memory
@@ -152,7 +152,7 @@ def test_a_block_that_may_change_counts_its_history_and_second_correlator(monkey
     source = ReplaySource(shots, np.arange(1), np.zeros(1), 1e4, "max", 1)
     pipe = Pipeline(cfg, source, [], settings)
     pipe.engine.correlator.close()
-    assert seen == [(cfg, 64, 0, True)]
+    assert seen == [(cfg.with_processor(partition_lines=32), 64, 0, True)]  # the largest
 
 
 def _subscribe_to_a_bare_publisher(tmp_path):

@@ -4,6 +4,7 @@ continuing the stream exactly (against eq. 1's float64 reference), and a pipelin
 its block without losing or changing a line, its strips declaring the block that made them."""
 
 import re
+import threading
 import time
 from types import SimpleNamespace
 
@@ -28,6 +29,7 @@ from rtsar.stream.growth import (
     BacklogWatch,
     BlockGrowth,
     LineHistory,
+    Prebuilt,
     QuietWatch,
     backlog_limit_s,
     config_with_block,
@@ -223,6 +225,91 @@ def test_a_block_grown_then_shrunk_back_continues_the_stream_exactly(kind):
     engine.correlator.close()
 
 
+def drive(growth, engine, lines, p, pushes, backlog_s, t, busy, share=0.1):
+    """``pushes`` pushes of a block each from line ``p``, 0.3 s apart, the CCD ``share`` busy:
+    (the next line, the time, the blocks the growth changed to)."""
+    changed = []
+    for _ in range(pushes):
+        count = growth.block
+        engine.correlator.push(lines[p : p + count])
+        p, t = p + count, t + 0.3
+        busy["ccd"] += 0.3 * share
+        if g := growth.after_push(engine, lines[p - count : p], backlog_s, t, dict(busy)):
+            changed.append(g)
+        if growth.smaller is not None:
+            growth.smaller._thread.join()  # built: the next push that ends a block swaps it
+    return p, t, changed
+
+
+def tails_alive() -> int:
+    return sum(t.name == "rtsar-ccd-tail" and t.is_alive() for t in threading.enumerate())
+
+
+def test_correlators_built_for_a_change_that_did_not_come_are_closed_at_the_end():
+    """A growth's correlator (built at a backlog over the limit) and a shrink's (built at a
+    quiet window) pending when the run ends: ``close`` closes both (before, their tail
+    threads stayed alive for the life of the process)."""
+    cfg, blocks, engine, plan, lines, growth = stream_of("nonuniform", 900, 5)
+    before = tails_alive()
+    growth.due = True
+    p, t, changed = drive(growth, engine, lines, 0, 40, 0.0, 0.0, {"ccd": 0.0}, share=1.0)
+    assert changed == [4] and growth.block == 4  # (no room to shrink: busy throughout)
+    busy = {"ccd": 0.0}
+    p, t, _ = drive(growth, engine, lines, p, 1, 1.0, t, busy)  # over the limit: next built
+    growth.watch.restart()  # (no growth: one push is no lasting backlog)
+    p, t, changed = drive(growth, engine, lines, p, 4, 0.0, t, busy)  # quiet: smaller built
+    engine.correlator.push(lines[p : p + 1])  # a partial block: no swap yet
+    growth.after_push(engine, lines[p : p + 1], 0.0, t, dict(busy))
+    assert growth.next is not None and growth.smaller is not None and not changed
+    engine.correlator.close()
+    growth.close()
+    deadline = time.monotonic() + 5
+    while tails_alive() > before and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert tails_alive() == before and growth.next is None and growth.smaller is None
+
+
+def test_a_shrink_waits_for_room_at_the_swap_and_gives_way_to_a_failed_build(monkeypatch):
+    """The smaller correlator built, a backlog over the smaller block's limit before the swap:
+    not swapped (the room has gone), the window judged anew.  A build that fails: the run
+    keeps its block (a shrink is optional)."""
+    cfg, blocks, engine, plan, lines, growth = stream_of("partitioned", 1200, 6)
+    growth.due = True
+    p, t, changed = drive(growth, engine, lines, 0, 40, 0.0, 0.0, {"ccd": 0.0}, share=1.0)
+    assert changed == [4]
+    busy = {"ccd": 0.0}
+    growth.smaller = Prebuilt(growth.config, engine.range_m, 2)  # as a quiet window built it
+    p, t, changed = drive(growth, engine, lines, p, 1, 1.0, t, busy)  # 1 s of pulses waiting
+    assert changed == [] and growth.smaller is None and growth.block == 4
+    p, t, changed = drive(growth, engine, lines, p, 8, 0.0, t, busy)  # quiet again: shrinks
+    assert changed == [2] and growth.shrinks == 1
+    growth.due = True
+    p, t, changed = drive(growth, engine, lines, p, 2, 0.0, t, busy)
+    assert changed == [4]
+
+    def fails(*args):
+        raise MemoryError("no room for it")
+
+    monkeypatch.setattr("rtsar.stream.growth.make_ccd", fails)
+    p, t, changed = drive(growth, engine, lines, p, 12, 0.0, t, busy)
+    assert changed == [] and growth.block == 4 and growth.shrinks == 1
+    engine.correlator.close()
+
+
+def test_only_a_growth_straight_after_a_shrink_doubles_the_quiet_window():
+    """2 → 4, back to 2, 4 again (straight after a shrink: the window doubles), then 8 (after
+    a growth: as it was; before, every growth once a shrink had been did)."""
+    cfg, blocks, engine, plan, lines, growth = stream_of("partitioned", 2000, 8)
+    busy, seen = {"ccd": 0.0}, []
+    p, t, _ = drive(growth, engine, lines, 0, 40, 0.0, 0.0, busy)  # the aperture filled
+    for step in ("grow", "shrink", "grow", "grow"):
+        growth.due = step == "grow"
+        p, t, changed = drive(growth, engine, lines, p, 1 if step == "grow" else 8, 0.0, t, busy)
+        seen.append((*changed, growth.quiet.window_s))
+    assert seen == [(4, 1.0), (2, 1.0), (4, 2.0), (8, 2.0)]
+    engine.correlator.close()
+
+
 class SlowSink(Collect):
     """A subscriber that takes 3 ms a strip: the queues before it fill, and so do those before
     the correlator (a run whose work does not keep up)."""
@@ -364,8 +451,8 @@ def test_a_run_with_room_again_shrinks_its_block_and_its_strips_declare_theirs()
         assert declared == made_by
     shrunk = [s for s in said if "shrinks back" in s]
     assert shrunk and re.fullmatch(
-        r"the work keeps up with room to spare \(its busiest stage \d+% busy, no backlog, "
-        r"for 0.3 s\): the correlator's block shrinks back from (8 to 4|4 to 2) lines",
+        r"the work keeps up with room to spare \(its busiest stage \d+% busy, the backlog under "
+        r"(16|32) ms, for 0.3 s\): the correlator's block shrinks back from (8 to 4|4 to 2) lines",
         shrunk[0],
     )
 

@@ -34,9 +34,10 @@ window's, rtsar.stream.stats) stayed under SHRINK_BUSY_BELOW over the blocks' ra
 call's work never falls with its size, so at a block r times smaller each stage's work a pulse
 is at most r times its present one: under SHRINK_BUSY_BELOW, a margin that FUSE_BELOW's
 70 % share keeps too (rtsar.stream.granularity).  The smaller correlator is built on its own
-thread from that verdict, and the swap is a growth's, the other way.  Where the block grows
-again after a shrink, the quiet window doubles (up to SHRINK_WINDOW_MOST_S), so a run at the
-edge does not swap back and forth.
+thread from that verdict, and the swap is a growth's, the other way (not if the backlog rose
+over the limit again meanwhile; a failed build leaves the block as it is).  Where the block
+grows straight after a shrink, the quiet window doubles (up to SHRINK_WINDOW_MOST_S), so a
+run at the edge does not swap back and forth.
 """
 
 from __future__ import annotations
@@ -144,7 +145,7 @@ class QuietWatch:
         return share if quiet else None
 
     def back_off(self) -> None:
-        """A growth after a shrink: the next shrink needs a window twice as long."""
+        """A growth straight after a shrink: the next shrink needs a window twice as long."""
         self.window_s = min(2 * self.window_s, SHRINK_WINDOW_MOST_S)
 
 
@@ -205,6 +206,10 @@ class Prebuilt:
         """Built (or failed: ``take`` raises): a swap now would not wait."""
         return not self._thread.is_alive()
 
+    def failed(self) -> bool:
+        """The build ended in an error."""
+        return self.ready() and self._error is not None
+
     def take(self, history: np.ndarray):
         """The correlator, built (waited for), fed ``history`` (the last
         history_lines(N, block) lines of the stream) and its outputs of them dropped."""
@@ -257,7 +262,9 @@ class BlockGrowth:
         self.from_pulse = 0  # the stream's pulse from which the blocks are counted
         self.next: Prebuilt | None = None  # the next block's correlator, once a backlog was over
         self.smaller: Prebuilt | None = None  # the smaller block's, once a window was quiet
-        self.quiet_share = 0.0  # the busiest stage's share in the window that shrank the block
+        self.quiet_share = 0.0  # the busiest stage's share in the window that shrank the block …
+        self.quiet_limit_s = 0.0  # … and the backlog it stayed under
+        self.last_change = ""  # "growth" or "shrink"
 
     def counters(self) -> dict:
         return {
@@ -265,6 +272,13 @@ class BlockGrowth:
             "correlator_shrinks": self.shrinks,
             "correlator_block_lines": self.block,
         }
+
+    def close(self) -> None:
+        """The run ended: the correlators built for a swap that did not come are closed."""
+        for pending in (self.next, self.smaller):
+            if pending is not None:
+                pending.discard()
+        self.next = self.smaller = None
 
     def step(self, pipe, lines: np.ndarray) -> InfoChange | None:
         """After a push of ``lines`` in ``pipe`` (an rtsar.stream.pipeline.Pipeline), its
@@ -296,7 +310,8 @@ class BlockGrowth:
         else:
             why = (
                 f"the work keeps up with room to spare (its busiest stage "
-                f"{self.quiet_share:.0%} busy, no backlog, for {self.quiet.window_s:g} s)"
+                f"{self.quiet_share:.0%} busy, the backlog under {self.quiet_limit_s * 1e3:.0f} "
+                f"ms, for {self.quiet.window_s:g} s)"
             )
         verb = "grows" if now > was else "shrinks back"
         pipe.notify(f"{why}: the correlator's block {verb} from {was} to {now} lines")
@@ -313,12 +328,16 @@ class BlockGrowth:
             if backlog_s > limit_s and self.next is None:  # behind, perhaps: build the next now
                 self.next = Prebuilt(self.config, engine.range_m, grown)
             self.due = self.watch.observe(now_s, backlog_s, limit_s) or self.due
-        if at and not self.due and self.smaller is None and busy_s is not None:
-            down = self.blocks[at - 1]
+        down = self.blocks[at - 1] if at else 0
+        if down and backlog_s > backlog_limit_s(down, self.rate_hz) and self.smaller is not None:
+            self.smaller.discard()  # the room has gone while it was built: not now
+            self.smaller = None
+            self.quiet.restart()
+        if down and not self.due and self.smaller is None and busy_s is not None:
             limit_s = backlog_limit_s(down, self.rate_hz)
             share = self.quiet.observe(now_s, backlog_s, limit_s, busy_s, self.block / down)
             if share is not None:  # room: build the smaller one, swapped once it is ready
-                self.quiet_share = share
+                self.quiet_share, self.quiet_limit_s = share, limit_s
                 self.smaller = Prebuilt(self.config, engine.range_m, down)
         old = engine.correlator
         n = self.config.processor.aperture_pulses
@@ -332,14 +351,20 @@ class BlockGrowth:
                 self.smaller.discard()
                 self.smaller = None
             self.growths += 1
-            if self.shrinks:
+            if self.last_change == "shrink":  # it did not hold: wait longer before the next
                 self.quiet.back_off()
+            self.last_change = "growth"
+        elif self.smaller is not None and self.smaller.failed():
+            self.smaller = None  # a shrink is optional: the run keeps the block it has
+            self.quiet.restart()
+            return 0
         elif self.smaller is not None and self.smaller.ready():
             built, self.smaller = self.smaller, None
             if self.next is not None:
                 self.next.discard()
                 self.next = None
             self.shrinks += 1
+            self.last_change = "shrink"
         else:
             return 0
         history = self.history.last(history_lines(n, built.block))

@@ -4,10 +4,10 @@ The estimate counts the large buffers: the pipeline's three bounded queues (raw 
 lines, image lines; ``queue_pulses`` pulses each) and the shifting CCD's state (the FFT
 correlator's blocks and filter, the partitioned correlator's filter spectra and delay line, the
 direct register) and, where the correlator's block may change in a live run
-(rtsar.stream.growth), the history of its last lines and a second correlator built beside
-it.  It is an upper-side estimate, within a factor of about two; a configuration
-that would need more than ``MEMORY_FRACTION`` of the memory available is refused with both
-figures, instead of failing later half-way into a run.
+(rtsar.stream.growth), the history of its last lines and the two correlators that may be
+built beside the one running, all at the largest block.  It is an upper-side estimate, within
+a factor of about two; a configuration that would need more than ``MEMORY_FRACTION`` of the
+memory available is refused with both figures, instead of failing later half-way into a run.
 """
 
 from __future__ import annotations
@@ -42,7 +42,8 @@ def estimate_bytes(
     config: Config, queue_pulses: int = 0, aux_channels: int = 0, growing: bool = False
 ) -> float:
     """Bytes of the large buffers of the engine and, with ``queue_pulses``, of the queues;
-    ``growing``: with a block that may change (the line history, a second correlator)."""
+    ``growing``: with a block that may change (the line history, the correlators built beside
+    the one running; ``config`` then with the largest block, rtsar.stream.growth)."""
     p, s = config.processor, config.waveform.samples_per_shot
     item = np.dtype(precision_dtype(p.precision)).itemsize
     n, bins = p.aperture_pulses, p.range_bins
@@ -55,8 +56,9 @@ def estimate_bytes(
         "nonuniform": 8 * n * bins,  # segments padded to whole partitions, their block buffers
     }
     engine = taps * ccd[p.correlator] * item + 4 * p.micro_batch * max(s, bins) * item
-    if growing:  # the history's N lines (up to a block more) and the next correlator
-        engine += (2 * n * bins + ccd[p.correlator]) * item
+    if growing:  # the history (N lines and up to a block more) and two correlators built
+        history = n + (m if p.correlator == "fft" else n)  # beside it (a growth's, a shrink's)
+        engine += (history * bins + 2 * taps * ccd[p.correlator]) * item
     queues = queue_pulses * ((1 + aux_channels) * s + 2 * bins) * item
     return float(engine + queues)
 

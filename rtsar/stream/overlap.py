@@ -42,7 +42,7 @@ def overlapped_stage(pipe) -> None:
     finally:
         pipe.stats.busy_s["lens+ccd"] = busy
         pipe.q_image.close()
-        pipe.engine.correlator.close()
+        pipe._close_correlators()
 
 
 def _finish(pipe, pending) -> None:

@@ -19,7 +19,7 @@ j + N - 1 for line j, Psaltis & Wagner 1981: the row leaves the CCD after N shif
 publication of its strip: a strip goes out when it holds ``strip_lines`` (with every line then
 waiting, up to ``strip_most_lines``), or its oldest line waited ``strip_deadline_s``
 (rtsar.stream.granularity chooses them; rtsar.stream.growth doubles the correlator's block
-while the work falls behind, and halves it back once there is room).  The pieces:
+while the work falls behind, and shrinks it back once there is room).  The pieces:
 rtsar.stream.queue, ingest, engine, hold, timing, height, strips, publication (the strip
 stage), swath, link (silences), stats, settings, heap (the collector)."""
 
@@ -34,7 +34,7 @@ from ..params import Config
 from ..sources.base import ShotBatch, Source
 from . import heap
 from .engine import Lines, StreamProcessor
-from .growth import growth_of
+from .growth import config_with_block, growth_of
 from .height import HeightBatch, HeightChannel
 from .hold import HeldPulses
 from .ingest import Ingest, PulseBlock, concat_blocks, regroup_blocks
@@ -100,7 +100,8 @@ class Pipeline:
         n = config.processor.aperture_pulses
         capacity = s.queue_pulses or 8 * n
         aux, growing = 0 if height is None else len(height.channels), len(s.grow_blocks) > 1
-        check_memory(config, capacity, aux, growing)  # growing: a history, a second correlator
+        largest = config_with_block(config, s.grow_blocks[-1]) if growing else config
+        check_memory(largest, capacity, aux, growing)  # (a history, correlators built beside)
         azimuth = not s.swath_workers  # with swath workers, they correlate: no CCD here
         self.engine = StreamProcessor(
             config, s.lens_backend, s.device, start_along_track_m, corrections, physical, azimuth, s
@@ -223,7 +224,7 @@ class Pipeline:
             self.stats.busy_s[key] = busy + self._fused_ccd_s
             (self.q_image if self.settings.stages != "split" else self.q_lines).close()
             if self.settings.stages != "split":  # fused: the CCD's stage is this one
-                self.engine.correlator.close()
+                self._close_correlators()
 
     def _ingest(self, batches: list | None) -> list[PulseBlock]:
         """Ingest checks on the batches taken (None: the source ended); the first shot anchors."""
@@ -322,7 +323,13 @@ class Pipeline:
         finally:
             self.stats.busy_s["ccd"] = busy
             self.q_image.close()
-            self.engine.correlator.close()
+            self._close_correlators()
+
+    def _close_correlators(self) -> None:
+        """The run's end: its correlator, and any built for a change of block that did not come."""
+        self.engine.correlator.close()
+        if self.growth is not None:
+            self.growth.close()
 
     def _ccd_step(self, blocks: list[PulseBlock]) -> LineBlock | None:
         block = concat_blocks(blocks)

@@ -22,6 +22,7 @@ from ..lens.plan import make_plan
 from ..params import Processor
 from ..presets import preset
 from ..sinks.io import check_writable, replace_when_complete
+from ..stream.settings import PipelineSettings
 from .bench_alone import CorrelatorAlone, LensAlone
 from .bench_latency import plot_latency
 from .bench_pipeline import bench_pipeline, with_correlator
@@ -261,8 +262,9 @@ def run_bench(args) -> int:
             file=out,
         )
     alone = CorrelatorAlone(seconds)
-    # At the pipeline's own batch (the micro-batch), so its ratios below reuse these figures.
-    corr_rows = bench_correlators(cfg, name, alone, cfg.processor.micro_batch, seconds=seconds)
+    # At the pipeline's own takes at max rate (a replay's), so its ratios below reuse these.
+    take = PipelineSettings().take_cap(cfg.processor.micro_batch, live=False)
+    corr_rows = bench_correlators(cfg, name, alone, take, seconds=seconds)
     r = corr_rows[0]
     print(
         f"\nShifting CCD (azimuth correlation) alone, pulses/s: each correlator as the pipeline "

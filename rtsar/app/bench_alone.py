@@ -90,10 +90,11 @@ class LensAlone:
         return self.rates[key]
 
 
-def lens_alone(name: str, cfg: Config, lenses: LensAlone) -> dict:
-    """The lens the pipeline builds (``--lens auto``'s choice), alone, at its micro-batch."""
-    batch = cfg.processor.micro_batch
-    lens = make_lens(make_plan(cfg), "auto", batch=batch)
+def lens_alone(name: str, cfg: Config, lenses: LensAlone, batch: int = 0) -> dict:
+    """The lens the pipeline builds (``--lens auto``'s choice), alone, at ``batch`` pulses a
+    call (0: its micro-batch)."""
+    batch = batch or cfg.processor.micro_batch
+    lens = make_lens(make_plan(cfg), "auto", batch=cfg.processor.micro_batch)
     rate = lenses.rate(name, lens, batch)
     where = lenses.source[LensAlone.key(name, lens, batch)]
     return {"backend": lens.backend, "batch": batch, "pulses_per_s": rate, "source": where}

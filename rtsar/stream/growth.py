@@ -402,9 +402,10 @@ def growth_words(blocks) -> str:
     )
 
 
-def growth_of(config: Config, settings, engine, physical=None, height=None):
+def growth_of(config: Config, settings, engine, physical=None, height=None, batch=0):
     """The BlockGrowth of a pipeline whose ``settings.grow_blocks`` name blocks to grow to
-    (None where they name none); an error where its correlator cannot grow (why_fixed)."""
+    (None where they name none); an error where its correlator cannot grow (why_fixed).
+    ``batch``: the most pulses a lens call takes (0: the config's micro-batch)."""
     blocks = tuple(settings.grow_blocks)
     if len(blocks) < 2:
         return None
@@ -412,6 +413,6 @@ def growth_of(config: Config, settings, engine, physical=None, height=None):
     why = why_fixed(config.processor, physical, copies, engine.correlator is None)
     if why:
         raise ValueError(f"the correlator's block cannot grow: {why}")
-    batch = settings.max_batch or config.processor.micro_batch
+    batch = batch or settings.max_batch or config.processor.micro_batch
     bins, rate_hz = len(engine.range_m), settings.grow_rate_hz
     return BlockGrowth(config, blocks, rate_hz, bins, engine.dtype, batch)

@@ -109,10 +109,10 @@ class Pipeline:
         where = (s.lens_backend, s.device, start_along_track_m)  # the receivers' lenses
         self.height = None if height is None else HeightChannel(config, height, *where)
         self.notify = notify
-        self.growth = growth_of(config, s, self.engine, physical, height)  # the block, if behind
+        self.max_batch = s.take_cap(config.processor.micro_batch, source.live)
+        self.growth = growth_of(config, s, self.engine, physical, height, self.max_batch)
         self._held = HeldPulses()  # pulses inside the line stages (metadata)
         self._holding = bool(corrections and corrections.line_stages)
-        self.max_batch = s.max_batch or config.processor.micro_batch
         self.q_shots = BoundedQueue(capacity, "shots")
         self.q_lines = BoundedQueue(capacity, "compressed")
         self.q_image = BoundedQueue(capacity, "image lines")

@@ -227,8 +227,8 @@ def add_pipeline_options(s, delivery: str) -> None:
     g.add_argument(
         "--max-batch",
         type=int,
-        help="most pulses per lens launch "
-        "(default: the configuration's micro_batch; fewer when keeping up)",
+        help="most pulses per lens launch and correlator push (default: the configuration's "
+        "micro_batch from a live source, four of them from a recording; fewer when keeping up)",
     )
     g.add_argument(
         "--max-gap-pulses",

@@ -37,7 +37,7 @@ def stand_ins(monkeypatch):
         out = {
             "rate": rate,
             "correlator": cfg.processor.correlator,
-            "max_batch": settings.take_cap(cfg.processor.micro_batch, rate != "max"),
+            "max_batch": settings.take_cap(cfg.processor.micro_batch, paced=rate != "max"),
             "pulses": 900,
             "pulses_per_s": 1180.0,
             "real_time_factor": 2.36,

@@ -354,7 +354,7 @@ def test_a_pipeline_behind_grows_its_block_and_loses_no_line(stages):
     sink, said = SlowSink(), []
     settings = PipelineSettings(
         stages=stages, strip_lines=2, lens_align=2, queue_pulses=64, grow_blocks=(2, 4, 8),
-        grow_rate_hz=500.0, max_batch=16,  # a live source's takes (a replay's are larger)
+        grow_rate_hz=500.0, max_batch=16,  # a paced stream's takes (at --rate max: larger)
     )  # fmt: skip
     pipe = Pipeline(cfg, OnTime(shots, 0.0), [sink], settings, notify=said.append)
     pipe.run()
@@ -426,7 +426,7 @@ def test_a_run_with_room_again_shrinks_its_block_and_its_strips_declare_theirs()
     sink, said = BlockNoted(slow=150), []
     settings = PipelineSettings(
         stages="split", strip_lines=2, lens_align=2, queue_pulses=64, grow_blocks=(2, 4, 8),
-        grow_rate_hz=500.0, max_batch=16,  # a live source's takes (a replay's are larger)
+        grow_rate_hz=500.0, max_batch=16,  # a paced stream's takes (at --rate max: larger)
     )  # fmt: skip
     pipe = Pipeline(cfg, FastThenPaced(shots, 700, 500.0), [sink], settings, notify=said.append)
     n, swaps, after_push = cfg.processor.aperture_pulses, [(0, 2)], pipe.growth.after_push

@@ -589,6 +589,28 @@ def test_stats_messages_carry_stage_busy_times_while_running(tiny):
     assert busy.get("lens", 0) > 0 and busy.get("ccd", 0) > 0
 
 
+def test_a_replay_as_fast_as_it_goes_takes_four_micro_batches_a_paced_stream_one(tiny):
+    """``--rate max`` has no rate to keep: its stages take up to REPLAY_TAKE_BATCHES
+    micro-batches at a time (throughput); a paced replay or an instrument, one (latency);
+    ``max_batch`` where given."""
+    from rtsar.stream.settings import REPLAY_TAKE_BATCHES
+
+    cfg, scene, shots = tiny
+    micro = cfg.processor.micro_batch
+    assert REPLAY_TAKE_BATCHES == 4
+    for rate, settings, expected in (
+        ("max", PipelineSettings(lens_backend="numpy"), 4 * micro),
+        ("real", PipelineSettings(lens_backend="numpy"), micro),
+        ("max", PipelineSettings(lens_backend="numpy", max_batch=24), 24),
+    ):
+        source = replay(cfg, shots, rate=rate)
+        assert source.paced == (rate != "max")
+        pipe = Pipeline(cfg, source, [Collect()], settings)
+        assert pipe.max_batch == expected
+        pipe.engine.correlator.close()
+    assert Flood.paced  # an instrument keeps its rate
+
+
 def test_a_fused_stage_s_busy_time_counts_its_correlator_s_work(tiny):
     """In the fused layout one thread runs lens and CCD: its busy time ("lens+ccd") holds both
     (before, the CCD's part was left out, and a 2-ms-a-push correlator read as idle)."""

@@ -263,7 +263,7 @@ def run_bench(args) -> int:
         )
     alone = CorrelatorAlone(seconds)
     # At the pipeline's own takes at max rate (a replay's), so its ratios below reuse these.
-    take = PipelineSettings().take_cap(cfg.processor.micro_batch, live=False)
+    take = PipelineSettings().take_cap(cfg.processor.micro_batch, paced=False)
     corr_rows = bench_correlators(cfg, name, alone, take, seconds=seconds)
     r = corr_rows[0]
     print(

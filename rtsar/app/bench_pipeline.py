@@ -140,7 +140,7 @@ def stream_run(
         "rate": rate,
         "stages": settings.stages,
         "correlator": cfg.processor.correlator,
-        "max_batch": pipe.max_batch,  # what its stages took at most (a replay: 4 batches)
+        "max_batch": pipe.max_batch,  # what its stages took at most (at "max": 4 batches)
         "strip_lines": settings.strip_lines,
         "pulses": done,
         "wall_s": wall,
@@ -276,7 +276,7 @@ def bench_pipeline(
     )
     # Warm-up (OpenCL build, numba cache, FFT plans), not recorded.
     stream_run(part, shots, 0.5, "max", PipelineSettings())
-    take = PipelineSettings().take_cap(cfg.processor.micro_batch, live=False)  # at max rate
+    take = PipelineSettings().take_cap(cfg.processor.micro_batch, paced=False)  # at max rate
     lens_alone = bench_alone.lens_alone(name, cfg, lenses, take)
     result["lens_alone"] = lens_alone
     log(
@@ -316,7 +316,7 @@ def bench_pipeline(
             stalled_subscriber=True,
         )
         stalled_ratios.append(stalled["pulses_per_s"] / none["pulses_per_s"])
-        for mb in (8, 16, 64):  # (64: a live source's; a replay takes 256)
+        for mb in (8, 16, 64):  # (64: a paced stream's; at "max" the stages take 256)
             label = f"{base_kind}: max rate, max batch {mb}"
             run(label, part, "max", seconds, round_, max_batch=mb)
         # Placement: lens + CCD in two worker processes, a range half each (rtsar.stream.swath).

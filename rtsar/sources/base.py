@@ -69,6 +69,7 @@ class Source(ABC):
     """
 
     live: bool = True
+    paced: bool = True  # shots come at a rate (False: a recording replayed as fast as it goes)
     description: str = "source"
 
     def __init__(self):

@@ -79,6 +79,7 @@ class ReplaySource(Source):
             raise ValueError("flagged must have one entry per shot")
         self.prf_hz = float(prf_hz)
         self.factor = parse_rate(rate)
+        self.paced = self.factor is not None  # "max": as fast as the pipeline takes them
         self.chunk = batch if self.factor is None else release_chunk(self.prf_hz * self.factor)
         self.released = 0
         self.description = description

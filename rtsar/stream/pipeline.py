@@ -109,7 +109,7 @@ class Pipeline:
         where = (s.lens_backend, s.device, start_along_track_m)  # the receivers' lenses
         self.height = None if height is None else HeightChannel(config, height, *where)
         self.notify = notify
-        self.max_batch = s.take_cap(config.processor.micro_batch, source.live)
+        self.max_batch = s.take_cap(config.processor.micro_batch, source.paced)
         self.growth = growth_of(config, s, self.engine, physical, height, self.max_batch)
         self._held = HeldPulses()  # pulses inside the line stages (metadata)
         self._holding = bool(corrections and corrections.line_stages)

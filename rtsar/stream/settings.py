@@ -5,8 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 STAGE_LAYOUTS = ("split", "fused", "overlapped")
-# A recording's stages take up to this many micro-batches at a time (a live source's: one).
-# Larger calls only while behind, and a replay behind wants its throughput: psaltis-max's
+# Stages fed as fast as they go (a recording replayed at "max") take up to this many
+# micro-batches at a time; a stream with a rate, one (its latency counts, and the granularity
+# a live run chooses caps its calls at one).  Larger calls come only while behind, and a
+# replay at "max" is always behind: it wants throughput.  psaltis-max's
 # nonuniform pipeline at max rate, 2-core Xeon, ten alternated rounds, 9 of 10 faster with
 # takes of 256 than of 64 pulses, mean 18.6 against 17.0 thousand pulses/s, while the
 # correlator alone was no faster at pushes of 256 (fewer lens launches and hand-offs).
@@ -37,11 +39,11 @@ class PipelineSettings:
     swath_spawn: bool = True  # start them here (False: they connect from elsewhere)
     swath_bind: str = "127.0.0.1"  # HOST or tcp://HOST:PORT: where the coordinator listens
 
-    def take_cap(self, micro_batch: int, live: bool) -> int:
+    def take_cap(self, micro_batch: int, paced: bool) -> int:
         """Most pulses a stage takes at a time: ``max_batch`` where set; else the config's
-        micro-batch for a live source (its latency), REPLAY_TAKE_BATCHES of them for a
-        recording (its throughput)."""
-        return self.max_batch or micro_batch * (1 if live else REPLAY_TAKE_BATCHES)
+        micro-batch for shots that come at a rate (an instrument, a paced replay: their
+        latency), REPLAY_TAKE_BATCHES of them for a replay as fast as it goes (throughput)."""
+        return self.max_batch or micro_batch * (1 if paced else REPLAY_TAKE_BATCHES)
 
     def __post_init__(self):
         if self.stages not in STAGE_LAYOUTS:

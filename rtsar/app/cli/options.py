@@ -228,7 +228,7 @@ def add_pipeline_options(s, delivery: str) -> None:
         "--max-batch",
         type=int,
         help="most pulses per lens launch and correlator push (default: the configuration's "
-        "micro_batch from a live source, four of them from a recording; fewer when keeping up)",
+        "micro_batch; four of them for --rate max; fewer when keeping up)",
     )
     g.add_argument(
         "--max-gap-pulses",

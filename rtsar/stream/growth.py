@@ -58,7 +58,7 @@ GROW_BACKLOG_BLOCKS = 4  # … behind: over this many block periods of pulses th
 GROW_LEAST_BACKLOG_S = 5e-3  # … and over this (a busy machine's jitter stays under it)
 SHRINK_WINDOW_S = 1.0  # a grown block shrinks after a window this long …
 SHRINK_BUSY_BELOW = 0.7  # … in which the busiest stage's share × the blocks' ratio stayed under
-SHRINK_WINDOW_MOST_S = 32.0  # the quiet window doubles at each growth after a shrink, to this
+SHRINK_WINDOW_MOST_S = 32.0  # the quiet window doubles at a growth straight after a shrink, to this
 HEAD_BLOCK_KINDS = ("partitioned", "nonuniform")  # their block: the head block L
 GROWING_KINDS = (*HEAD_BLOCK_KINDS, "fft")  # lines in blocks a config sets (fft: M - N + 1)
 

@@ -4,7 +4,6 @@ continuing the stream exactly (against eq. 1's float64 reference), and a pipelin
 its block without losing or changing a line, its strips declaring the block that made them."""
 
 import re
-import threading
 import time
 from types import SimpleNamespace
 
@@ -241,16 +240,11 @@ def drive(growth, engine, lines, p, pushes, backlog_s, t, busy, share=0.1):
     return p, t, changed
 
 
-def tails_alive() -> int:
-    return sum(t.name == "rtsar-ccd-tail" and t.is_alive() for t in threading.enumerate())
-
-
 def test_correlators_built_for_a_change_that_did_not_come_are_closed_at_the_end():
     """A growth's correlator (built at a backlog over the limit) and a shrink's (built at a
     quiet window) pending when the run ends: ``close`` closes both (before, their tail
     threads stayed alive for the life of the process)."""
     cfg, blocks, engine, plan, lines, growth = stream_of("nonuniform", 900, 5)
-    before = tails_alive()
     growth.due = True
     p, t, changed = drive(growth, engine, lines, 0, 40, 0.0, 0.0, {"ccd": 0.0}, share=1.0)
     assert changed == [4] and growth.block == 4  # (no room to shrink: busy throughout)
@@ -261,12 +255,18 @@ def test_correlators_built_for_a_change_that_did_not_come_are_closed_at_the_end(
     engine.correlator.push(lines[p : p + 1])  # a partial block: no swap yet
     growth.after_push(engine, lines[p : p + 1], 0.0, t, dict(busy))
     assert growth.next is not None and growth.smaller is not None and not changed
+    for pending in (growth.next, growth.smaller):
+        pending._thread.join()  # built
+    built = [pending._built for pending in (growth.next, growth.smaller)]
+    tails = [c._tail for c in built if c.threaded]  # (a correlator with tail segments)
+    assert tails and all(t.is_alive() for t in tails)
     engine.correlator.close()
     growth.close()
     deadline = time.monotonic() + 5
-    while tails_alive() > before and time.monotonic() < deadline:
+    while any(t.is_alive() for t in tails) and time.monotonic() < deadline:
         time.sleep(0.01)
-    assert tails_alive() == before and growth.next is None and growth.smaller is None
+    assert not any(t.is_alive() for t in tails)  # (other tests' tails may come and go)
+    assert growth.next is None and growth.smaller is None
 
 
 def test_a_shrink_waits_for_room_at_the_swap_and_gives_way_to_a_failed_build(monkeypatch):

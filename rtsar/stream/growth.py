@@ -275,10 +275,7 @@ class BlockGrowth:
 
     def close(self) -> None:
         """The run ended: the correlators built for a swap that did not come are closed."""
-        for pending in (self.next, self.smaller):
-            if pending is not None:
-                pending.discard()
-        self.next = self.smaller = None
+        self.next, self.smaller = _discarded(self.next), _discarded(self.smaller)
 
     def step(self, pipe, lines: np.ndarray) -> InfoChange | None:
         """After a push of ``lines`` in ``pipe`` (an rtsar.stream.pipeline.Pipeline), its
@@ -330,8 +327,7 @@ class BlockGrowth:
             self.due = self.watch.observe(now_s, backlog_s, limit_s) or self.due
         down = self.blocks[at - 1] if at else 0
         if down and backlog_s > backlog_limit_s(down, self.rate_hz) and self.smaller is not None:
-            self.smaller.discard()  # the room has gone while it was built: not now
-            self.smaller = None
+            self.smaller = _discarded(self.smaller)  # the room has gone while it was built
             self.quiet.restart()
         if down and not self.due and self.smaller is None and busy_s is not None:
             limit_s = backlog_limit_s(down, self.rate_hz)
@@ -346,10 +342,7 @@ class BlockGrowth:
         self.due = self.due and bool(grown)  # (the largest block has no larger one)
         if self.due:
             built = self.next or Prebuilt(self.config, engine.range_m, grown)
-            self.next = None
-            if self.smaller is not None:
-                self.smaller.discard()
-                self.smaller = None
+            self.next, self.smaller = None, _discarded(self.smaller)
             self.growths += 1
             if self.last_change == "shrink":  # it did not hold: wait longer before the next
                 self.quiet.back_off()
@@ -359,10 +352,7 @@ class BlockGrowth:
             self.quiet.restart()
             return 0
         elif self.smaller is not None and self.smaller.ready():
-            built, self.smaller = self.smaller, None
-            if self.next is not None:
-                self.next.discard()
-                self.next = None
+            built, self.smaller, self.next = self.smaller, None, _discarded(self.next)
             self.shrinks += 1
             self.last_change = "shrink"
         else:
@@ -375,6 +365,12 @@ class BlockGrowth:
         self.watch.restart()
         self.quiet.restart()
         return self.block
+
+
+def _discarded(pending: Prebuilt | None) -> None:
+    """None, once ``pending`` (if any) is discarded: what a swap not made leaves."""
+    if pending is not None:
+        pending.discard()
 
 
 def why_fixed(p, physical=None, copies: int = 1, swath: bool = False) -> str:

@@ -33,6 +33,7 @@ from rtsar.stream.granularity import (
     choose_granularity,
     granularity_words,
     lens_call,
+    live_correlator,
 )
 from rtsar.stream.growth import growth_words
 from rtsar.stream.pipeline import Pipeline, PipelineSettings
@@ -670,3 +671,38 @@ def test_each_path_timing_publishes_on_a_name_never_bound_before(monkeypatch):
     for _ in range(20):  # hopeless: the warm calls only
         live_granularity.path_costs_s(cfg, plan, lens, 1, noise, 64, 1e9)
     assert len(names) == 20 and len(set(names)) == 20
+
+
+def test_a_live_run_of_an_fft_configuration_runs_the_nonuniform_correlator(monkeypatch):
+    """Every preset names the fft correlator (the fastest over a whole recording), whose lines
+    leave in overlap-save blocks of M - N + 1: a live run at psaltis-jpl's PRF chose blocks of
+    29 lines, 19.5 ms a line (median) against 1.5 ms nonuniform.  Where the command line names
+    no correlator, a live run correlates with the nonuniform one and says so on a line of its
+    own; --correlator, --fft-length, the emulated CCD and the Doppler-domain migration (fft's
+    alone: RADARSAT-1) keep the configuration's."""
+    monkeypatch.setattr(live_granularity, "measure_costs", _fake_measure(COSTS))
+    cfg = preset("psaltis-jpl")
+    assert cfg.processor.correlator == "fft"
+    new_cfg, settings, g, words = GranularityRequest(1600.0).apply(cfg, PipelineSettings())
+    assert new_cfg.processor.correlator == "nonuniform"
+    assert new_cfg.processor.partition_lines == g.block_lines == settings.strip_lines
+    said, rest = words.split("\n")
+    assert said.startswith("correlator nonuniform, not the configuration's fft: ")
+    assert "--correlator fft keeps fft" in said and rest.startswith("granularity: correlator")
+    # what keeps fft: the command line's --correlator / --fft-length, the physical CCD, Doppler
+    kept = [
+        live_correlator(cfg, given="fft"),
+        live_correlator(cfg, fft_length=1024),
+        live_correlator(cfg, physical=object()),
+        live_correlator(preset("radarsat1")),
+    ]
+    assert all(c.processor.correlator == "fft" and w == "" for c, w in kept)
+    assert live_correlator(cfg.with_processor(correlator="partitioned"))[1] == ""
+    # the command line's --correlator reaches the request (rtsar run, replay)
+    assert request_of(_args(), 1600.0).correlator is None
+    assert request_of(_args("--correlator", "fft"), 1600.0).correlator == "fft"
+    any_block = StageCosts({b: (100 + 5 * b) * US for b in range(1, 1025)},
+                           {b: (100 + 10 * b) * US for b in range(1, 1025)}, 100 * US)  # fmt: skip
+    monkeypatch.setattr(live_granularity, "measure_costs", _fake_measure(any_block))
+    fft, _, _, words = GranularityRequest(1600.0, correlator="fft").apply(cfg, PipelineSettings())
+    assert fft.processor.correlator == "fft" and words.startswith("granularity: correlator ")

@@ -14,17 +14,21 @@ was the lower.
     python tools/ab_latency.py psaltis-jpl --without slack
     python tools/ab_latency.py psaltis-max --rate 0.5 --block 8 --without growth
     python tools/ab_latency.py psaltis-max --rate 0.5 --block 8 --without shrink --load-s 3
+    python tools/ab_latency.py psaltis-jpl --rounds 3 --seconds 5 --without correlator
 
 ``--without``: ``route`` (with ``--lens hybrid``: the lens's small calls on SciPy's FFT,
 rtsar.lens.small_calls), ``slack`` (the replay's pacing thread's tight sleeps,
 rtsar.sources.pacing), ``growth`` (the correlator's block doubled while the run falls behind,
 rtsar.stream.growth; ``--block B`` starts both runs at blocks of B, as if the granularity had
 chosen it, the new one free to grow to 64), ``shrink`` (a grown block shrunk back once the
-run has room, rtsar.stream.growth's QuietWatch; both runs free to grow).  ``--load-s S``:
+run has room, rtsar.stream.growth's QuietWatch; both runs free to grow), ``correlator`` (a
+live run's nonuniform correlator in place of the preset's fft, rtsar.stream.granularity's
+live_correlator: the old run keeps fft, its block chosen by the same rule).  ``--load-s S``:
 busy loops, each in a process of its own, take ``--load-cores`` cores (1) for the first S s
 of each run, and the figures are those of the lines published from S + 2 s on (what a run
 makes of its time once the load is gone: the quiet window and a swap take about that).  The
-correlator is the nonuniform one (the presets' latency path in ``rtsar bench``).
+correlator is the nonuniform one (a live run's with a preset), but in ``--without correlator``'s
+old run.
 """
 
 from __future__ import annotations
@@ -55,7 +59,9 @@ def main(argv=None) -> None:
     ap.add_argument("--rate", type=float, default=1.0, help="share of the PRF offered (1.0)")
     ap.add_argument("--rounds", type=int, default=8, help="pairs of runs (8)")
     ap.add_argument("--seconds", type=float, default=3.0, help="seconds of a run (3)")
-    ap.add_argument("--without", choices=("route", "slack", "growth", "shrink"), default="slack")
+    ap.add_argument(
+        "--without", choices=("route", "slack", "growth", "shrink", "correlator"), default="slack"
+    )
     ap.add_argument("--block", type=int, help="start at blocks of this many lines")
     ap.add_argument("--lens", default="auto", help="the lens backend (hybrid: the route runs)")
     ap.add_argument("--load-s", type=float, default=0.0, help="cores taken for this long first")
@@ -85,7 +91,11 @@ def main(argv=None) -> None:
         settings = dataclasses.replace(settings, grow_blocks=tuple(larger), grow_rate_hz=rate_hz)
     print(words)
     tight_sleeps = pacing.tight_sleeps
-    old_settings = settings
+    old_config, old_settings = config, settings
+    if args.without == "correlator":  # the preset's own fft, its block chosen by the same rule
+        fft = GranularityRequest(rate_hz, args.block, correlator="fft")
+        old_config, old_settings, _, old_words = fft.apply(preset(args.preset), asked)
+        print(f"old: {old_words}")
     if args.without == "route":
         old_settings = dataclasses.replace(settings, lens_cpu_below=0)
     if args.without == "growth":
@@ -105,7 +115,7 @@ def main(argv=None) -> None:
             spin = [sys.executable, "-c", SPIN, str(args.load_s)]
             loads = [subprocess.Popen(spin) for _ in range(args.load_cores if args.load_s else 0)]
             run = bench_pipeline.stream_run(
-                config, shots, args.seconds, args.rate,
+                config if which == "new" else old_config, shots, args.seconds, args.rate,
                 settings if which == "new" else old_settings,
             )  # fmt: skip
             for load in loads:

@@ -54,8 +54,9 @@ def latency_against_rate(cfg, shots, seconds: float, capacity: float, log, strea
     each ``seconds`` of source time; rows with the granularity chosen and the latencies."""
     prf = cfg.geometry.prf_hz
     rows = []
+    live = GranularityRequest(prf).live_config(cfg)[0].processor.correlator
     log(
-        f"  latency against the offered rate ({cfg.processor.correlator}, the granularity a "
+        f"  latency against the offered rate ({live}, the correlator and the granularity a "
         "live run chooses at each rate; goal: median <= 1 ms + a pulse period, p99 <= 3x "
         "the median, 0 dropped)"
     )
@@ -68,6 +69,7 @@ def latency_against_rate(cfg, shots, seconds: float, capacity: float, log, strea
         r = stream_run(chosen_cfg, shots, seconds, fraction, settings)
         grew = r.get("correlator_growths")  # the block grown while behind (rtsar.stream.growth)
         row = {
+            "correlator": chosen_cfg.processor.correlator,
             "offered_fraction": fraction,
             "offered_hz": rate_hz,
             "block_lines": g.block_lines,

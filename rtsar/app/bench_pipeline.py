@@ -37,7 +37,7 @@ from ..params import Config
 from ..scene import Simulator, point_scene
 from ..sinks.publish import ZmqPublisher
 from ..sources.replay import ReplaySource, parse_rate
-from ..stream.granularity import MOST_STRIP_LINES
+from ..stream.granularity import MOST_STRIP_LINES, live_correlator
 from ..stream.pipeline import Pipeline, PipelineSettings
 from . import bench_alone
 from .bench_alone import ABOVE_ONE, CorrelatorAlone, LensAlone, against_ideal
@@ -331,11 +331,12 @@ def bench_pipeline(
                 round_,
                 swath_workers=2,
             )
-    # Latency against the offered rate, the granularity chosen at each (rtsar.app.bench_latency).
-    kind = "nonuniform" if "nonuniform" in kinds else base_kind
+    # Latency against the offered rate, the correlator and granularity a live run chooses at
+    # each (rtsar.app.bench_latency); its capacity: that correlator's at max rate.
+    kind = live_correlator(cfg)[0].processor.correlator
     capacity = summarize_runs(result["runs"])[f"{kind}: max rate"]["real_time_factor"][0]
     result["latency_against_rate"] = latency_against_rate(
-        with_correlator(cfg, kind), shots, min(real_seconds, 5.0), capacity, log, stream_run
+        cfg, shots, min(real_seconds, 5.0), capacity, log, stream_run
     )
     result["stalled_subscriber_over_none"] = float(np.median(stalled_ratios))
     rd = bench_numpy_range_doppler(cfg, np.concatenate([shots] * 2))

@@ -379,6 +379,7 @@ def run_stream(
             physical,
             source,
             lambda m: print(f"rtsar: {m} …", file=stream, flush=True),
+            granularity,
         )
         if settings.swath_workers:
             print(
@@ -438,8 +439,8 @@ def run_stream(
         )
         if getattr(pipe.engine.lens, "choice", None):
             print(f"rtsar: lens: {pipe.engine.lens.choice}", file=stream, flush=True)
-        if chosen:
-            print(f"rtsar: {chosen}", file=stream, flush=True)
+        for line in (chosen or "").splitlines():  # the correlator's, then the granularity's
+            print(f"rtsar: {line}", file=stream, flush=True)
         if wait_subscribers:
             print(
                 f"waiting for {wait_subscribers} subscriber(s) on {endpoint} …",

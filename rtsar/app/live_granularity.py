@@ -50,6 +50,7 @@ from ..stream.granularity import (
     auto_strip_lines,
     choose_granularity,
     granularity_words,
+    live_correlator,
     modelled_latency_s,
     utilisation,
 )
@@ -79,6 +80,7 @@ class GranularityRequest:
     strip_lines: int | None = None  # --strip-lines, --strip-ms
     fft_length: int | None = None  # --fft-length
     stages: str | None = None  # --stages
+    correlator: str | None = None  # --correlator (None: rtsar.stream.granularity.live_correlator)
 
     def apply(
         self,
@@ -92,6 +94,7 @@ class GranularityRequest:
         """(config, settings, Granularity, the banner's line) with the chosen granularity;
         ``say`` (a message) is told when the measuring starts; ``source_s``: the source's own
         work a pulse in this process (StageCosts)."""
+        config, switched = self.live_config(config, physical)
         if say is not None:
             say(f"measuring the work at {self.rate_hz:,.0f} pulses/s to choose the granularity …")
         copies = 1 + (len(height.channels) if height is not None else 0)
@@ -124,7 +127,12 @@ class GranularityRequest:
         below = costs.lens_cpu_below if not settings.swath_workers else 0  # workers': their own
         grow_rate_hz = self.rate_hz if grow_blocks else 0.0
         chosen_s = replace(chosen_s, grow_blocks=grow_blocks, grow_rate_hz=grow_rate_hz)
+        words = f"{switched}\n{words}" if switched else words  # a line each on the banner
         return chosen, replace(chosen_s, lens_cpu_below=below), g, words
+
+    def live_config(self, config: Config, physical=None) -> tuple[Config, str]:
+        """(config with the correlator a live run takes, words for a change): live_correlator"""
+        return live_correlator(config, self.correlator, self.fft_length, physical)
 
 
 def request_of(args, rate_hz: float | None) -> GranularityRequest | None:
@@ -138,6 +146,7 @@ def request_of(args, rate_hz: float | None) -> GranularityRequest | None:
         args.strip_lines,
         getattr(args, "fft_length", None),
         getattr(args, "stages", None),
+        getattr(args, "correlator", None),
     )
 
 
@@ -438,9 +447,10 @@ def push_s(config: Config, range_m, physical, block: int, noise) -> float:
             ccd.close()
 
 
-def survey_and_compile(settings, config, physical, source, say) -> None:
+def survey_and_compile(settings, config, physical, source, say, request=None) -> None:
     """Where the simulator's kernels compile in a process of their own (``source.warming``),
-    the correlator's compile here meanwhile (warm_correlator); then the OpenCL survey
+    the correlator's compile here meanwhile (warm_correlator: the one ``request``, a
+    GranularityRequest, will run, GranularityRequest.live_config); then the OpenCL survey
     (rtsar.lens.base.survey_devices_first), timed alone: where it must probe, the simulator's
     process is waited for first (``source.wait_warm``).  (Run beside a compile,
     the survey's cached rates fell by a third to a half and two devices swapped places, and a
@@ -453,7 +463,8 @@ def survey_and_compile(settings, config, physical, source, say) -> None:
         except RuntimeError:  # no OpenCL platform: make_lens says so
             pass
     if compile_here and getattr(source, "warming", False):
-        warm_correlator(config, physical)  # beside the simulator's process, before any timing
+        live = request.live_config(config, physical)[0] if request else config
+        warm_correlator(live, physical)  # beside the simulator's process, before any timing
     if probing and hasattr(source, "wait_warm"):
         source.wait_warm(say)
     survey_devices_first(settings.lens_backend, settings.device, say)

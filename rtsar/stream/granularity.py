@@ -201,6 +201,38 @@ def choose_granularity(
     )
 
 
+LIVE_CORRELATOR = "nonuniform"  # a live run's, where the configuration names fft (below)
+
+
+def live_correlator(config, given: str | None = None, fft_length: int | None = None,
+                    physical=None) -> tuple:  # fmt: skip
+    """(the configuration a live run correlates with, the banner's words for the change, or
+    "" where there is none).
+
+    The fft correlator, every preset's and the fastest over a whole recording (`rtsar
+    process`), releases its lines in overlap-save blocks of M - N + 1: live runs at the PRF
+    of psaltis-jpl chose blocks of 29 lines and a line waited 15.1-19.5 ms (median; p99
+    24.6-41.1 ms) where the nonuniform correlator, which computes the same correlation with a
+    head block from 1 line, gave 1.6-2.0 ms (5.6-19.1 ms); psaltis-max at 25 % of its PRF,
+    29-44 ms against 2.7-8.9 ms (2-core Xeon, 2026-11-29, three alternated rounds of 5 s, 0
+    dropped: ``python tools/ab_latency.py psaltis-jpl --rounds 3 --seconds 5 --without
+    correlator``).  So where the command line names no correlator (``given``: --correlator)
+    and no transform length (``fft_length``: --fft-length), a live run runs LIVE_CORRELATOR
+    in fft's place; not the emulated CCD (``physical``), nor where the range migration reads
+    each block's azimuth spectrum (Doppler domain, fft's alone: RADARSAT-1)."""
+    p = config.processor
+    doppler = p.range_migration_taps and p.range_migration_domain == "doppler"
+    if given or fft_length or physical is not None or p.correlator != "fft" or doppler:
+        return config, ""
+    words = (
+        f"correlator {LIVE_CORRELATOR}, not the configuration's fft: a live run's where the "
+        "command line names none (fft's overlap-save blocks hold a line for up to M - N + 1 "
+        f"pulses; {LIVE_CORRELATOR} computes the same correlation and releases lines in head "
+        "blocks from 1 line; --correlator fft keeps fft)"
+    )
+    return config.with_processor(correlator=LIVE_CORRELATOR), words
+
+
 def candidate_words(blocks: list[int]) -> str:
     """The candidate blocks in words: "1, 2, 4, …" for the doubling series from 1 (the head
     blocks), else each ("309 or 1,333": the fft correlator's M - N + 1)."""

@@ -81,7 +81,9 @@ def add_correlator_option(g) -> None:
         help="direct: CCD shift register, one line per pulse; fft: overlap-save blocks (fast, "
         "one block of latency); partitioned: partitioned overlap-save (low latency, fast); "
         "nonuniform: a short head block and long tail blocks (the partitioned latency, fewer "
-        "multiply-adds) (default: the configuration's)",
+        "multiply-adds) (default: the configuration's; a live run at a rate runs nonuniform "
+        "where it names fft, lines as they come, but not with --fft-length or the "
+        "Doppler-domain range migration)",
     )
     g.add_argument(
         "--partition-lines",

@@ -34,7 +34,7 @@ from ..live import (
     serial_channel_fix,
     zmq_channel_fix,
 )
-from ..live_granularity import block_candidates, block_config, request_of
+from ..live_granularity import block_candidates, block_config, live_correlator, request_of
 from ..subscribe import subscribe
 from .files import simulate_to
 from .inputs import open_input
@@ -73,8 +73,9 @@ def warn_slow_first_line(scene, name, args=None) -> None:
     this slow the wait for a block outweighs any work, so the run chooses the smallest."""
     g = scene.config.geometry
     given = (getattr(args, "partition_lines", None), getattr(args, "fft_length", None))
-    smallest = block_candidates(scene.config.processor, None, *given)[0][0]
-    p = block_config(scene.config, smallest).processor
+    config = live_correlator(scene.config, getattr(args, "correlator", None), given[1])[0]
+    smallest = block_candidates(config.processor, None, *given)[0][0]
+    p = block_config(config, smallest).processor
     pulses = first_line_pulses(p)
     wait_s = pulses / g.prf_hz
     if wait_s > SLOW_FIRST_LINE_S:

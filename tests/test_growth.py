@@ -23,6 +23,7 @@ from rtsar.stream.growth import (
     GROW_LEAST_BACKLOG_S,
     GROW_WINDOW_S,
     SHRINK_BUSY_BELOW,
+    SHRINK_HELD_S,
     SHRINK_WINDOW_MOST_S,
     SHRINK_WINDOW_S,
     BacklogWatch,
@@ -310,6 +311,23 @@ def test_only_a_growth_straight_after_a_shrink_doubles_the_quiet_window():
     engine.correlator.close()
 
 
+def test_a_growth_after_a_shrink_that_held_returns_the_quiet_window_to_the_rule_s():
+    """The window doubled (a growth straight after a shrink) comes back to SHRINK_WINDOW_S
+    at a growth SHRINK_HELD_S or more after the last shrink: the back-off answers a run at
+    the edge, not a load of long ago (before, it stayed doubled for the rest of the run)."""
+    cfg, blocks, engine, plan, lines, growth = stream_of("partitioned", 4000, 8)
+    busy, seen = {"ccd": 0.0}, []
+    p, t, _ = drive(growth, engine, lines, 0, 40, 0.0, 0.0, busy)  # the aperture filled
+    for step, later_s in (("grow", 0), ("shrink", 0), ("grow", 0), ("shrink", 0), ("grow", 40)):
+        growth.due = step == "grow"
+        t += later_s
+        p, t, changed = drive(growth, engine, lines, p, 1 if step == "grow" else 16, 0.0, t, busy)
+        seen.append((*changed, growth.quiet.window_s))
+    assert seen == [(4, 1.0), (2, 1.0), (4, 2.0), (2, 2.0), (4, SHRINK_WINDOW_S)]
+    assert SHRINK_HELD_S == 32.0  # (the 40 s above)
+    engine.correlator.close()
+
+
 class SlowSink(Collect):
     """A subscriber that takes 3 ms a strip: the queues before it fill, and so do those before
     the correlator (a run whose work does not keep up)."""
@@ -516,6 +534,8 @@ def test_the_figures_live_md_states_are_the_code_s():
     assert float(shrink.group(2)) == SHRINK_BUSY_BELOW
     assert float(shrink.group(3)) == SHRINK_WINDOW_MOST_S
     assert f"room to spare for {SHRINK_WINDOW_S:g} s shrinks it back" in text
+    held = f"a growth {SHRINK_HELD_S:g} s or more after the last shrink (it held) returns"
+    assert f"{held} the window to {SHRINK_WINDOW_S:g} s" in text
 
 
 def test_a_pipeline_whose_correlator_cannot_grow_says_why():

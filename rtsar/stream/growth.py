@@ -36,8 +36,10 @@ is at most r times its present one: under SHRINK_BUSY_BELOW, a margin that FUSE_
 70 % share keeps too (rtsar.stream.granularity).  The smaller correlator is built on its own
 thread from that verdict, and the swap is a growth's, the other way (not if the backlog rose
 over the limit again meanwhile; a failed build leaves the block as it is).  Where the block
-grows straight after a shrink, the quiet window doubles (up to SHRINK_WINDOW_MOST_S), so a
-run at the edge does not swap back and forth.
+grows straight after a shrink (within SHRINK_HELD_S of it), the quiet window doubles (up to
+SHRINK_WINDOW_MOST_S), so a run at the edge does not swap back and forth; a growth after a
+shrink that held that long returns it to SHRINK_WINDOW_S (a load minutes ago does not slow
+the shrinks of the hours after it).
 """
 
 from __future__ import annotations
@@ -59,6 +61,7 @@ GROW_LEAST_BACKLOG_S = 5e-3  # … and over this (a busy machine's jitter stays 
 SHRINK_WINDOW_S = 1.0  # a grown block shrinks after a window this long …
 SHRINK_BUSY_BELOW = 0.7  # … in which the busiest stage's share × the blocks' ratio stayed under
 SHRINK_WINDOW_MOST_S = 32.0  # the quiet window doubles at a growth straight after a shrink, to this
+SHRINK_HELD_S = 32.0  # a shrink this long before a growth held: the window is SHRINK_WINDOW_S again
 HEAD_BLOCK_KINDS = ("partitioned", "nonuniform")  # their block: the head block L
 GROWING_KINDS = (*HEAD_BLOCK_KINDS, "fft")  # lines in blocks a config sets (fft: M - N + 1)
 
@@ -147,6 +150,10 @@ class QuietWatch:
     def back_off(self) -> None:
         """A growth straight after a shrink: the next shrink needs a window twice as long."""
         self.window_s = min(2 * self.window_s, SHRINK_WINDOW_MOST_S)
+
+    def reset(self) -> None:
+        """A growth after a shrink that held: the window is the rule's again."""
+        self.window_s = SHRINK_WINDOW_S
 
 
 class LineHistory:
@@ -265,6 +272,7 @@ class BlockGrowth:
         self.quiet_share = 0.0  # the busiest stage's share in the window that shrank the block …
         self.quiet_limit_s = 0.0  # … and the backlog it stayed under
         self.last_change = ""  # "growth" or "shrink"
+        self.last_change_s = 0.0  # when (the push's time)
 
     def counters(self) -> dict:
         return {
@@ -344,9 +352,11 @@ class BlockGrowth:
             built = self.next or Prebuilt(self.config, engine.range_m, grown)
             self.next, self.smaller = None, _discarded(self.smaller)
             self.growths += 1
-            if self.last_change == "shrink":  # it did not hold: wait longer before the next
+            if self.last_change == "shrink" and now_s - self.last_change_s >= SHRINK_HELD_S:
+                self.quiet.reset()  # it held: the load that backed the window off is old
+            elif self.last_change == "shrink":  # it did not hold: wait longer before the next
                 self.quiet.back_off()
-            self.last_change = "growth"
+            self.last_change, self.last_change_s = "growth", now_s
         elif self.smaller is not None and self.smaller.failed():
             self.smaller = None  # a shrink is optional: the run keeps the block it has
             self.quiet.restart()
@@ -354,7 +364,7 @@ class BlockGrowth:
         elif self.smaller is not None and self.smaller.ready():
             built, self.smaller, self.next = self.smaller, None, _discarded(self.next)
             self.shrinks += 1
-            self.last_change = "shrink"
+            self.last_change, self.last_change_s = "shrink", now_s
         else:
             return 0
         history = self.history.last(history_lines(n, built.block))

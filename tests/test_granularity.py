@@ -694,7 +694,8 @@ def test_a_live_run_of_an_fft_configuration_runs_the_nonuniform_correlator(monke
         live_correlator(cfg, given="fft"),
         live_correlator(cfg, fft_length=1024),
         live_correlator(cfg, physical=object()),
-        live_correlator(preset("radarsat1")),
+        live_correlator(preset("radarsat1")),  # Doppler-domain taps: fft's alone
+        live_correlator(cfg.with_processor(range_migration_taps=8)),  # time domain: a tap each
     ]
     assert all(c.processor.correlator == "fft" and w == "" for c, w in kept)
     assert live_correlator(cfg.with_processor(correlator="partitioned"))[1] == ""
@@ -706,3 +707,25 @@ def test_a_live_run_of_an_fft_configuration_runs_the_nonuniform_correlator(monke
     monkeypatch.setattr(live_granularity, "measure_costs", _fake_measure(any_block))
     fft, _, _, words = GranularityRequest(1600.0, correlator="fft").apply(cfg, PipelineSettings())
     assert fft.processor.correlator == "fft" and words.startswith("granularity: correlator ")
+
+
+def test_a_live_run_of_an_fft_preset_says_and_writes_the_nonuniform_correlator(tmp_path):
+    """run_stream of the tiny preset (fft) with a request, measured for real: the switch on a
+    banner line of its own before the granularity's, the run's line names the nonuniform
+    correlator, and so does the image file (-o) it wrote."""
+    from rtsar.sinks.image_file import read_image
+
+    cfg = preset("tiny")
+    shots = np.zeros((300, cfg.waveform.samples_per_shot), np.complex64)
+    seq = np.arange(300)
+    source = ReplaySource(shots, seq, seq / 500.0, 500.0, "max", 16)
+    stream, out = io.StringIO(), tmp_path / "img.h5"
+    settings = PipelineSettings(lens_backend="numpy")
+    endpoint, request = "ipc://" + str(tmp_path / "pub"), GranularityRequest(500.0)
+    assert live.run_stream(cfg, source, settings, endpoint, "drop", output=str(out),
+                           stream=stream, granularity=request) == 0  # fmt: skip
+    lines = stream.getvalue().splitlines()
+    at = [k for k, line in enumerate(lines) if line.startswith("rtsar: correlator nonuniform")]
+    assert len(at) == 1 and lines[at[0] + 1].startswith("rtsar: granularity: correlator blocks")
+    assert any(", nonuniform correlator, " in line for line in lines)
+    assert read_image(out)[3]["correlator"] == "nonuniform"

@@ -265,6 +265,10 @@ def test_a_slow_live_scene_says_how_to_look_sooner(capsys):
     warn_slow_first_line(scene, "insal-ridge", args)
     err = capsys.readouterr().err
     assert "first image line comes after 71 s" in err and "--correlator nonuniform" in err
+    # swath workers keep the configuration's correlator and block (fft, M = 512): 71 s too
+    args = argparse.Namespace(partition_lines=None, fft_length=None, swath_workers=2)
+    warn_slow_first_line(scene, "insal-ridge", args)
+    assert "first image line comes after 71 s" in capsys.readouterr().err
     warn_slow_first_line(load_scene("demo"), "demo")  # 512 pulses at 1600 Hz: no note
     assert capsys.readouterr().err == ""
 

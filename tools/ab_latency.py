@@ -27,8 +27,8 @@ live_correlator: the old run keeps fft, its block chosen by the same rule).  ``-
 busy loops, each in a process of its own, take ``--load-cores`` cores (1) for the first S s
 of each run, and the figures are those of the lines published from S + 2 s on (what a run
 makes of its time once the load is gone: the quiet window and a swap take about that).  The
-correlator is the nonuniform one (a live run's with a preset), but in ``--without correlator``'s
-old run.
+correlator is the nonuniform one (a live run's with the psaltis presets), but in ``--without
+correlator``'s old run.
 """
 
 from __future__ import annotations

@@ -91,7 +91,7 @@ class GranularityRequest:
         say=None,
         source_s: float = 0.0,
     ):
-        """(config, settings, Granularity, the banner's line) with the chosen granularity;
+        """(config, settings, Granularity, the banner's lines) with the chosen granularity;
         ``say`` (a message) is told when the measuring starts; ``source_s``: the source's own
         work a pulse in this process (StageCosts)."""
         config, switched = self.live_config(config, physical)

@@ -82,8 +82,8 @@ def add_correlator_option(g) -> None:
         "one block of latency); partitioned: partitioned overlap-save (low latency, fast); "
         "nonuniform: a short head block and long tail blocks (the partitioned latency, fewer "
         "multiply-adds) (default: the configuration's; a live run at a rate runs nonuniform "
-        "where it names fft, lines as they come, but not with --fft-length or the "
-        "Doppler-domain range migration)",
+        "where it names fft, lines as they come, but not with --fft-length, range-migration "
+        "taps or --swath-workers)",
     )
     g.add_argument(
         "--partition-lines",
@@ -101,8 +101,8 @@ def add_correlator_option(g) -> None:
         help="transform length of the fft correlator: lines leave in blocks of M - N + 1, N "
         "the aperture (M >= N, a product of 2, 3 and 5 such as 1000, 1024, 1080; default: "
         "the configuration's, 2N rounded up to a power of two in the presets; a live run at a "
-        "rate chooses it from the work measured, blocks of about 1, 2, 4, … lines up to the "
-        "configuration's)",
+        "rate that runs fft chooses it from the work measured, blocks of about 1, 2, 4, … "
+        "lines up to the configuration's)",
     )
     g.add_argument(
         "--tail-block-lines",

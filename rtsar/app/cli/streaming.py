@@ -68,14 +68,14 @@ SLOW_FIRST_LINE_S = 30.0  # a live run whose first line takes longer than this g
 def warn_slow_first_line(scene, name, args=None) -> None:
     """A live simulation waits at the real PRF for its first line (an aperture of N pulses,
     and the correlator's block): say so when that is long (a lidar bench at a few Hz), and how
-    to look at the scene sooner.  The block is the run's smallest candidate (rtsar.app.
-    live_granularity), or the one ``args`` fixes (--partition-lines, --fft-length): at a rate
-    this slow the wait for a block outweighs any work, so the run chooses the smallest."""
-    g = scene.config.geometry
+    to look at the scene sooner.  The block: the smallest candidate of the run's correlator
+    (rtsar.app.live_granularity; at a rate this slow the wait outweighs any work), the one
+    ``args`` fixes, or with swath workers the configuration's correlator and block."""
+    g, p = scene.config.geometry, scene.config.processor
     given = (getattr(args, "partition_lines", None), getattr(args, "fft_length", None))
-    config = live_correlator(scene.config, getattr(args, "correlator", None), given[1])[0]
-    smallest = block_candidates(config.processor, None, *given)[0][0]
-    p = block_config(config, smallest).processor
+    if not getattr(args, "swath_workers", 0):  # the correlator and block a live run chooses
+        config = live_correlator(scene.config, getattr(args, "correlator", None), given[1])[0]
+        p = block_config(config, block_candidates(config.processor, None, *given)[0][0]).processor
     pulses = first_line_pulses(p)
     wait_s = pulses / g.prf_hz
     if wait_s > SLOW_FIRST_LINE_S:

@@ -37,7 +37,7 @@ def measure(preset_name: str, rate: float, pulses: int, lens: str, correlator: s
     cfg = with_correlator(preset(preset_name), correlator)
     prf = cfg.geometry.prf_hz
     shots = bench_shots(cfg, 2048)
-    request = GranularityRequest(rate * prf)
+    request = GranularityRequest(rate * prf, correlator=correlator)  # the one asked for
     chosen, settings, g, words = request.apply(cfg, PipelineSettings(lens_backend=lens))
     pub = ZmqPublisher("tcp://127.0.0.1:*", "drop")
     idle = _source(chosen, shots, len(shots), "max", 1, False)  # never iterated: fed below

@@ -204,8 +204,9 @@ def choose_granularity(
 LIVE_CORRELATOR = "nonuniform"  # a live run's, where the configuration names fft (below)
 
 
-def live_correlator(config, given: str | None = None, fft_length: int | None = None,
-                    physical=None) -> tuple:  # fmt: skip
+def live_correlator(
+    config, given: str | None = None, fft_length: int | None = None, physical=None
+) -> tuple[object, str]:
     """(the configuration a live run correlates with, the banner's words for the change, or
     "" where there is none).
 
@@ -214,15 +215,17 @@ def live_correlator(config, given: str | None = None, fft_length: int | None = N
     of psaltis-jpl chose blocks of 29 lines and a line waited 15.1-19.5 ms (median; p99
     24.6-41.1 ms) where the nonuniform correlator, which computes the same correlation with a
     head block from 1 line, gave 1.6-2.0 ms (5.6-19.1 ms); psaltis-max at 25 % of its PRF,
-    29-44 ms against 2.7-8.9 ms (2-core Xeon, 2026-11-29, three alternated rounds of 5 s, 0
-    dropped: ``python tools/ab_latency.py psaltis-jpl --rounds 3 --seconds 5 --without
-    correlator``).  So where the command line names no correlator (``given``: --correlator)
-    and no transform length (``fft_length``: --fft-length), a live run runs LIVE_CORRELATOR
-    in fft's place; not the emulated CCD (``physical``), nor with range-migration taps: in
-    the Doppler domain they read each block's azimuth spectrum (fft's alone: RADARSAT-1), in
-    the time domain fft shares its transforms among them where nonuniform runs a correlator
-    a tap (8 taps, each correlator alone: psaltis-jpl 26.4 against 4.7 thousand pulses/s, a
-    cold review's figures), so a run that keeps up on fft could fall behind."""
+    blocks of 29 against 4, 15.7-16.3 ms (p99 24.2-31.3) against 2.1-2.2 ms (5.2-5.8)
+    (2-core Xeon, 2026-11-29, three alternated rounds of 5 s, 0 dropped: ``python
+    tools/ab_latency.py psaltis-jpl --rounds 3 --seconds 5 --without correlator``, and
+    ``psaltis-max --rate 0.25``).  So where the command line names no correlator (``given``:
+    --correlator) and no transform length (``fft_length``: --fft-length), a live run runs
+    LIVE_CORRELATOR in fft's place; not the emulated CCD (``physical``), nor with
+    range-migration taps: in the Doppler domain they read each block's azimuth spectrum (fft's
+    alone: RADARSAT-1), in the time domain fft shares its transforms among them where
+    nonuniform runs a correlator a tap (8 taps, each correlator alone: psaltis-jpl 26.4
+    against 4.7 thousand pulses/s, a cold review's figures), so a run that keeps up on fft
+    could fall behind."""
     p = config.processor
     taps = bool(p.range_migration_taps)
     if given or fft_length or physical is not None or p.correlator != "fft" or taps:

@@ -9,6 +9,7 @@ median, nothing dropped.  ``plot_latency`` draws the rows of every preset (``--p
 
 from __future__ import annotations
 
+from ..stream.granularity import live_correlator
 from ..stream.settings import PipelineSettings
 from .live_granularity import GranularityRequest
 
@@ -54,7 +55,7 @@ def latency_against_rate(cfg, shots, seconds: float, capacity: float, log, strea
     each ``seconds`` of source time; rows with the granularity chosen and the latencies."""
     prf = cfg.geometry.prf_hz
     rows = []
-    live = GranularityRequest(prf).live_config(cfg)[0].processor.correlator
+    live = live_correlator(cfg)[0].processor.correlator  # the one each row's request runs
     log(
         f"  latency against the offered rate ({live}, the correlator and the granularity a "
         "live run chooses at each rate; goal: median <= 1 ms + a pulse period, p99 <= 3x "

@@ -230,7 +230,8 @@ class StripAssembler:
                 need = 0
         self._pending, self._came_s = rest, came
         self.held -= count
-        self._switches = [(at - count, info) for at, info in self._switches]
+        if self._switches:  # (a block change waiting: rare)
+            self._switches = [(at - count, info) for at, info in self._switches]
         first = parts[0].first_line
         one = len(parts) == 1  # the low-latency case: no copies
         lines = parts[0].lines if one else np.concatenate([p.lines for p in parts])

@@ -86,6 +86,25 @@ def test_output_is_bit_identical_whatever_the_pushes_and_the_thread(rule, rng):
         assert np.array_equal(by_line, one) and np.array_equal(odd, one)
 
 
+@pytest.mark.parametrize("threaded", [False, True])
+def test_the_tail_works_only_on_pushes_that_complete_one_of_its_blocks(threaded, rng):
+    """A push of one line completes a tail block only every few lines (blocks of 4 here):
+    the tail's thread is given a job (woken) only then, and the lines stay exact."""
+    n, nr, p = 128, 5, 700
+    mask, lines = crandn(rng, n, nr) / n, crandn(rng, p, nr, dtype=np.complex64)
+    corr = NonUniformCorrelator(mask, 1, 16, threaded=threaded)
+    tail_blocks = [b for _, _, b in corr.segments[1:]]
+    assert min(tail_blocks) == 4  # the plan this test reasons about
+    jobs = []
+    work = corr._tail._work
+    corr._tail._work = lambda job: (jobs.append(job[0]), work(job))
+    got = _stream(corr, lines, [1] * p)
+    corr.close()
+    # one job at each pulse count that ends a tail block, none at the others
+    assert jobs == [end for end in range(1, p + 1) if any(end % b == 0 for b in tail_blocks)]
+    assert relative_rms(got, correlate_reference(lines, mask)) < TOL
+
+
 def test_flush_gives_every_complete_line_and_the_stream_goes_on(rng):
     n, nr = 128, 5
     mask, lines = crandn(rng, n, nr) / n, crandn(rng, 500, nr, dtype=np.complex64)

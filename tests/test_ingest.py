@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from rtsar.sources.base import ShotBatch
+from rtsar.sources.base import ShotBatch, join_batches
 from rtsar.stream.ingest import Ingest
 
 S = 8
@@ -286,3 +286,44 @@ def test_a_recordings_flagged_lines_at_once_equal_the_streamed_ones():
     assert got == want and at_once.lines == len(want) > 0
     naive = [j for j in range(pulses - n + 1) if marked[j : j + n].any()]
     assert want == naive
+
+
+def test_batches_taken_together_are_checked_as_one_with_the_same_verdicts(rng):
+    """join_batches (the pipeline's ingest of what it takes at once): the same pulses, flags
+    and counters as the batches one by one, through gaps, repeats, a reset, a stray, NaN and
+    marked shots; a batch of other channels stays alone."""
+    seq = np.arange(600)
+    seq = np.concatenate([seq[:200], seq[205:300], seq[290:320], [9000], seq[320:400], seq[:150]])
+    samples = (np.arange(len(seq))[:, None] + 1 + np.zeros((1, S))).astype(np.complex64)
+    samples[[7, 333], 2] = np.nan
+    marked = np.zeros(len(seq), bool)
+    marked[[50, 51, 420]] = True
+    t = np.arange(len(seq)) * 1e-3  # the clock runs on: the second pass is a counter reset
+    whole = ShotBatch(seq, t, t + 10.0, samples, {"ref": -samples}, marked)
+    cuts = np.sort(rng.choice(np.arange(1, len(seq)), 120, replace=False))
+    parts, start = [], 0
+    for end in [*cuts, len(seq)]:
+        one = whole.split(end - start)
+        parts.append(one[0])
+        whole, start = one[1], end
+    for p in parts[::3]:
+        p.flagged = None  # unmarked batches among marked ones
+
+    one_by_one, joined = Ingest(S, 16, 64), Ingest(S, 16, 64)
+    a = stream(one_by_one, parts)
+    groups = [parts[i : i + 7] for i in range(0, len(parts), 7)]
+    taken = [join_batches(g) for g in groups]
+    assert all(len(t) == 1 for t in taken)  # the same channels: one batch a take
+    b = stream(joined, [x for t in taken for x in t])
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[1], b[1])
+    assert one_by_one.counters == joined.counters
+    assert joined.counters["nonfinite_pulses"] and joined.counters["marked_pulses"]
+    assert joined.counters["duplicates"] or joined.counters["discontinuities"]
+
+    other = batch([1000, 1001])  # no "ref" channel: not joined with its neighbours
+    assert [len(x) for x in join_batches([parts[0], other, parts[1], parts[2]])] == [
+        len(parts[0]),
+        2,
+        len(parts[1]) + len(parts[2]),
+    ]

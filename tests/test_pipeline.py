@@ -15,6 +15,7 @@ from rtsar.sources.base import ShotBatch, Source
 from rtsar.sources.replay import ReplaySource, parse_rate
 from rtsar.stream import heap
 from rtsar.stream.engine import process_block
+from rtsar.stream.ingest import Ingest
 from rtsar.stream.pipeline import Pipeline, PipelineSettings
 from rtsar.stream.queue import BoundedQueue
 from rtsar.stream.stats import LatencyStats
@@ -294,6 +295,30 @@ def test_an_aligned_lens_cuts_a_source_s_release_at_the_batch(tiny):
     ]
     pipe.run()
     assert sum(sizes) == 200 and set(sizes[:-1]) == {16}, sizes
+
+
+def test_the_shots_a_lens_call_takes_are_checked_in_one_ingest_call(tiny):
+    """A source that releases a shot at a time, a lens aligned on blocks of 8: ingest checks
+    each block's eight shots in one call (it cost the same for one shot as for eight), and
+    the image is the one of the same shots in batches of 16."""
+    cfg, scene, shots = tiny
+    cfg = cfg.with_processor(correlator="fft")
+    settings = PipelineSettings(lens_align=8, lens_hold_s=2.0, lens_backend="numpy", max_batch=8)
+    pipe = Pipeline(cfg, replay(cfg, shots[:240], batch=1), [Collect()], settings)
+    calls = []
+
+    class Counted(Ingest):
+        def __call__(self, batch):
+            calls.append(len(batch))
+            return super().__call__(batch)
+
+    pipe.ingest.__class__ = Counted
+    pipe.run()
+    assert sum(calls) == 240 and len(calls) < 240 / 4, calls  # 8 a call, but under load
+    one, whole = Collect(), Collect()
+    Pipeline(cfg, replay(cfg, shots[:240], batch=1), [one], settings).run()
+    Pipeline(cfg, replay(cfg, shots[:240]), [whole], PipelineSettings(lens_backend="numpy")).run()
+    assert np.array_equal(one.image(), whole.image())
 
 
 @pytest.mark.parametrize(

@@ -31,7 +31,7 @@ from collections import deque
 from dataclasses import replace
 
 from ..params import Config
-from ..sources.base import ShotBatch, Source
+from ..sources.base import ShotBatch, Source, join_batches
 from . import heap
 from .engine import Lines, StreamProcessor
 from .growth import config_with_block, growth_of
@@ -227,11 +227,12 @@ class Pipeline:
                 self._close_correlators()
 
     def _ingest(self, batches: list | None) -> list[PulseBlock]:
-        """Ingest checks on the batches taken (None: the source ended); the first shot anchors."""
+        """Ingest checks on the batches taken (None: the source ended), joined where they can be
+        (rtsar.sources.base.join_batches); the first shot anchors."""
         if batches is None:
             blocks = self.ingest.flush()
         else:
-            blocks = [b for batch in batches for b in self.ingest(batch)]
+            blocks = [b for batch in join_batches(batches) for b in self.ingest(batch)]
             if not self._anchored and self.ingest.counters["pulses_received"]:
                 self._anchor()
         for block in blocks:  # the stream as ingest made it: to a raw recorder

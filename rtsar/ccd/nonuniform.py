@@ -25,9 +25,10 @@ L = 16: 8 partitions of 16 then 6 of 64, 28 multiply-adds a pixel and line again
 on the latency path: lines leave in blocks of L, as with the uniform correlator of block L,
 while the long tail blocks cut the multiply-adds per pixel and line from 2N/L to
 2·(number of partitions), at the cost of one more pair of transforms per segment.  The tail
-segments run on a worker thread (the kernels release the GIL), fed each chunk of a push before
-the head is computed, the blocks the head's lines of that chunk need first, so the rest
-overlaps the head's work and the next pulses' arrival.
+segments run on a worker thread (the kernels release the GIL), fed each chunk of a push that
+completes a tail block before the head is computed (a push that completes none leaves it
+asleep), the blocks the head's lines of that chunk need first, so the rest overlaps the head's
+work and the next pulses' arrival.
 
 All segments run on the kernels of rtsar.ccd.tiled (split real/imaginary arrays over tiles of
 range columns, FFTs along azimuth without transposes, one kernel call for all the blocks of a

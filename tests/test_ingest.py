@@ -289,18 +289,37 @@ def test_a_recordings_flagged_lines_at_once_equal_the_streamed_ones():
 
 
 def test_batches_taken_together_are_checked_as_one_with_the_same_verdicts(rng):
-    """join_batches (the pipeline's ingest of what it takes at once): the same pulses, flags
-    and counters as the batches one by one, through gaps, repeats, a reset, a stray, NaN and
-    marked shots; a batch of other channels stays alone."""
-    seq = np.arange(600)
-    seq = np.concatenate([seq[:200], seq[205:300], seq[290:320], [9000], seq[320:400], seq[:150]])
+    """join_batches (the pipeline's ingest of what it takes at once): the same pulses (every
+    field), flags and counters as the batches one by one, through a gap and its late shots,
+    repeats, a stray, a counter reset, NaN and marked shots, NaN times and a clock that steps
+    back (the newest time once read the last shot of each batch: a batch ending on a NaN time
+    or on a step back made a repeat a reset, or a reset a repeat); a batch of other channels
+    stays alone."""
+    seq = np.concatenate(
+        [
+            np.arange(0, 200),  # 0-199
+            np.arange(205, 300),  # 200-294: a gap of 5 before them
+            [201, 203],  # 295-296: late (their slots were zero-filled)
+            np.arange(290, 320),  # 297-326: repeats of 290-299, then on
+            [9000],  # 327: a stray
+            np.arange(320, 400),  # 328-407
+            np.arange(0, 150),  # 408-557: the counter reset (the clock goes on)
+            [140, 141, 142],  # 558-560: repeats of the new run
+        ]
+    )
+    t = np.arange(len(seq)) * 1e-3
+    t[295:297] = t[199]  # the late shots: taken before the newest
+    t[297:307] = t[285:295]  # the repeats: the times they first had
+    t[[399, 431]] = np.nan  # no time for these shots
+    t[440:445] -= 0.2  # a step back of the clock
+    t[558:] = t[548:551]  # the last repeats: the times they first had
     samples = (np.arange(len(seq))[:, None] + 1 + np.zeros((1, S))).astype(np.complex64)
     samples[[7, 333], 2] = np.nan
     marked = np.zeros(len(seq), bool)
     marked[[50, 51, 420]] = True
-    t = np.arange(len(seq)) * 1e-3  # the clock runs on: the second pass is a counter reset
     whole = ShotBatch(seq, t, t + 10.0, samples, {"ref": -samples}, marked)
-    cuts = np.sort(rng.choice(np.arange(1, len(seq)), 120, replace=False))
+    cuts = np.sort(rng.choice(np.arange(1, len(seq)), 150, replace=False))
+    cuts = np.union1d(cuts, [400, 432, 445])  # batches that end on a NaN time, a step back
     parts, start = [], 0
     for end in [*cuts, len(seq)]:
         one = whole.split(end - start)
@@ -309,17 +328,25 @@ def test_batches_taken_together_are_checked_as_one_with_the_same_verdicts(rng):
     for p in parts[::3]:
         p.flagged = None  # unmarked batches among marked ones
 
+    def fields(ing, batches):
+        blocks = [b for x in batches for b in ing(x)] + ing.flush()
+        names = ("samples", "arrival_s", "flagged", "seq", "time_s", "inserted")
+        got = {k: np.concatenate([getattr(b, k) for b in blocks]) for k in names}
+        got["ref"] = np.concatenate([b.aux["ref"] for b in blocks])
+        got["first_pulse"] = [b.first_pulse for b in blocks][:1]
+        return got
+
     one_by_one, joined = Ingest(S, 16, 64), Ingest(S, 16, 64)
-    a = stream(one_by_one, parts)
-    groups = [parts[i : i + 7] for i in range(0, len(parts), 7)]
-    taken = [join_batches(g) for g in groups]
-    assert all(len(t) == 1 for t in taken)  # the same channels: one batch a take
-    b = stream(joined, [x for t in taken for x in t])
-    np.testing.assert_array_equal(a[0], b[0])
-    np.testing.assert_array_equal(a[1], b[1])
+    a = fields(one_by_one, parts)
+    taken = [join_batches(parts[i : i + 7]) for i in range(0, len(parts), 7)]
+    assert all(len(x) == 1 for x in taken)  # the same channels: one batch a take
+    b = fields(joined, [x for group in taken for x in group])
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
     assert one_by_one.counters == joined.counters
-    assert joined.counters["nonfinite_pulses"] and joined.counters["marked_pulses"]
-    assert joined.counters["duplicates"] or joined.counters["discontinuities"]
+    c = joined.counters
+    assert c["late_pulses"] == 2 and c["duplicates"] and c["stray_pulses"] == 1
+    assert c["discontinuities"] == 1 and c["nonfinite_pulses"] and c["marked_pulses"]
 
     other = batch([1000, 1001])  # no "ref" channel: not joined with its neighbours
     assert [len(x) for x in join_batches([parts[0], other, parts[1], parts[2]])] == [
@@ -327,3 +354,23 @@ def test_batches_taken_together_are_checked_as_one_with_the_same_verdicts(rng):
         2,
         len(parts[1]) + len(parts[2]),
     ]
+
+
+def test_the_newest_time_does_not_depend_on_where_a_batch_ends():
+    """A batch ending on a shot without a time, or on a clock that stepped back: the shot that
+    follows is judged against the newest time of every shot accepted, one batch or two."""
+    cases = [  # (numbers, times) of three batches, the last a repeat of shot 1
+        ([[0, 1], [2, 3], [1]], [[0.0, 0.002], [0.003, np.nan], [0.0025]]),
+        ([[0, 1], [2], [1]], [[0.0, 0.005], [0.002], [0.004]]),
+    ]
+    for numbers, times in cases:
+        parts = [
+            ShotBatch(np.array(n), np.array(t), np.array(t) + 10.0, np.ones((len(n), S), "c8"))
+            for n, t in zip(numbers, times, strict=True)
+        ]
+        one_by_one, joined = Ingest(S, 4, 16), Ingest(S, 4, 16)
+        a = stream(one_by_one, parts)
+        b = stream(joined, [*join_batches(parts[:2]), parts[2]])
+        assert one_by_one.counters == joined.counters, (numbers, times)
+        assert joined.counters["duplicates"] == 1  # not newer than shot 2: a repeat
+        np.testing.assert_array_equal(a[0], b[0])

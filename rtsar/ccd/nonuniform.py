@@ -210,12 +210,13 @@ class _Tail(threading.Thread):
     def submit(self, end: int, urgent: int) -> None:
         """Compute the blocks complete at ``end`` pulses, those completing by ``urgent`` first.
 
-        Where no tail block ends after the last job's end and by ``end`` (most pushes: the
-        tail's blocks are 4 or more head blocks long), there is nothing to compute and the
-        thread is not woken: a wake-up at every push cost more than the small tail's work
-        (psaltis-jpl's 320 bins, N = 512, a line a push: 94-95 µs a push when every push woke
-        it, 64-67 µs now, 51 µs with the tail on the caller's thread; 2-core Intel Xeon,
-        2026-11-29).  ``wait_for`` knows those pulses as done once the last job is."""
+        Where no tail block ends after the last job's end and by ``end`` (the pushes of a
+        head block or a few: every tail block is at least two head blocks long, four or more
+        in most plans), there is nothing to compute and the thread is not woken: a wake-up
+        at every push cost more than the small tail's work (psaltis-jpl's 320 bins, N = 512,
+        a line a push: 94-95 µs a push when every push woke it, 64-67 µs now, 51 µs with the
+        tail on the caller's thread; 2-core Intel Xeon, 2026-11-29).  ``wait_for`` knows
+        those pulses as done once the last job is."""
         if all(end // b == self._submitted // b for b in self.group.blocks):
             return
         self._submitted = end

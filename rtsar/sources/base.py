@@ -91,10 +91,10 @@ def join_batches(batches: list[ShotBatch]) -> list[ShotBatch]:
                     [np.zeros(len(b), bool) if b.flagged is None else b.flagged for b in run]
                 )
             out.append(
-                ShotBatch(
-                    np.concatenate([b.seq for b in run]),
-                    np.concatenate([b.timestamp_s for b in run]),
-                    np.concatenate([b.arrival_s for b in run]),
+                ShotBatch(  # numbers and times in ingest's own types (int64: no float mixing)
+                    np.concatenate([np.asarray(b.seq, np.int64) for b in run]),
+                    np.concatenate([np.asarray(b.timestamp_s, np.float64) for b in run]),
+                    np.concatenate([np.asarray(b.arrival_s, np.float64) for b in run]),
                     np.concatenate([b.samples for b in run]),
                     {k: np.concatenate([b.aux[k] for b in run]) for k in run[0].aux},
                     flagged,

@@ -303,9 +303,14 @@ class Ingest:
 
     def _newest(self, times: np.ndarray) -> None:
         """The newest instrument time of an accepted shot (what tells a repeat from a new
-        shot under an old number: module docstring)."""
-        if len(times) and np.isfinite(times[-1]):
-            t = float(times[-1])
+        shot under an old number: module docstring): the latest finite time of every shot
+        accepted, so where a batch ends does not matter (it read the last shot's time of each
+        batch, and a batch ending on a NaN time, or on a clock that stepped back, then left
+        a repeat read as a reset, or a reset as a repeat, depending on how shots were
+        batched)."""
+        finite = times[np.isfinite(times)] if len(times) else times
+        if len(finite):
+            t = float(finite.max())
             self._newest_s = t if self._newest_s is None else max(self._newest_s, t)
 
     def _restart(self, cand: _Candidate) -> list[PulseBlock]:

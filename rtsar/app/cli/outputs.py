@@ -37,7 +37,9 @@ def check_outputs_spare_inputs(args) -> None:
     or a file another process writes live (rtsar.sinks.name_claim).  A SigMF recording
     exported onto itself (``export rec.sigmf-meta --sigmf rec``) is the exception: that export
     reads the recording whole first.  An HDF5 output named like another kind of file
-    (``process rec.h5 -o x.png``) is refused too."""
+    (``process rec.h5 -o x.png``) is refused too, and so is a ``--record`` file that exists:
+    an image can be made again from its recording, a recording cannot (``run --record`` over
+    an earlier recording replaced it without a word)."""
     command = getattr(args, "command", None)
     inputs = {}
     for name in INPUT_OPTIONS + COMMAND_INPUTS.get(command, ()):
@@ -72,6 +74,12 @@ def check_outputs_spare_inputs(args) -> None:
             )
     for path in outputs.values():  # a file another process writes live is never replaced
         check_unclaimed(path)
+    record = getattr(args, "record", None)
+    if isinstance(record, str) and Path(record).exists():
+        raise ValueError(
+            f"--record {record}: the file exists, and a recording is never replaced (its raw "
+            "shots cannot be taken again); give a new name, or remove the old file first"
+        )
 
 
 def _values(value) -> list[str]:

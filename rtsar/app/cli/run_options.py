@@ -57,6 +57,6 @@ def add_run_options(source_group, parser) -> None:
         "process of its own behind a bounded queue: shots a slow disk could not take are "
         "counted (record_dropped) and marked in the file, the imaging never waits; a stop "
         "gives the recording 5 s to finish, then gives it up and says how many shots it may "
-        "lack "
+        "lack. A file that exists is refused before the run: a recording is never replaced "
         "(docs/pages/guide/live.md, 'Recording a live run')",
     )

@@ -1,7 +1,9 @@
 """3D from the commands: `process`/`replay --height insal` write height maps beside the image,
 `quicklook --height` draws them (issue 13)."""
 
+import json
 import re
+import shutil
 
 import h5py
 import numpy as np
@@ -366,3 +368,27 @@ def test_height_lines_inside_a_line_jump_are_dropped_not_shifted(tmp_path):
     np.testing.assert_allclose(height[2:4, 0], [2e-4, 3e-4])
     with h5py.File(tmp_path / "j.h5") as f:
         assert f["height_m"].shape[0] <= 12 and f.attrs["inconsistent_heights"] == 1
+
+
+def test_a_height_image_of_a_marked_recording_keeps_its_flagged_lines(insal_recording, tmp_path):
+    """`process RAW.h5 --height insal` of a recording that marks a shot (as `run --record`
+    marks the shots ingest zeroed): the height attributes were written in place of the
+    flagged lines' (flagged_line_runs and flagged_lines lost), not beside them."""
+    d, rec, h, v, c = insal_recording
+    marked = tmp_path / "marked.h5"
+    shutil.copyfile(rec, marked)
+    with h5py.File(marked, "r+") as f:
+        flags = np.zeros(len(f["shots"]), np.uint8)
+        flags[40] = 2  # a shot ingest zeroed (rtsar.sinks.raw_record ZEROED)
+        f.create_dataset("pulse_flags", data=flags)
+        n = json.loads(f.attrs["config"])["processor"]["aperture_pulses"]
+    img = tmp_path / "p.h5"
+    assert (
+        main(["process", str(marked), "-o", str(img), "--lens", "numpy", "--height", "insal"]) == 0
+    )
+    with h5py.File(img, "r") as f:
+        lines = len(f["image"])
+        assert f.attrs["height_method"] == "insal"
+        runs = json.loads(f.attrs["flagged_line_runs"])
+        flagged = [j for j in range(lines) if j <= 40 <= j + n - 1]  # line j sums j … j+N-1
+        assert runs == [[flagged[0], len(flagged)]] and f.attrs["flagged_lines"] == len(flagged)

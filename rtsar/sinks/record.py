@@ -194,7 +194,11 @@ class StripRecorder:
             else:  # not filled: listed, the lines after it keep their true positions
                 self.line_jumps.append([self.next_line, gap])
                 self.next_line = first
-        self.flagged_runs.extend(list(r) for r in header.get("flagged_lines", []))
+        for first, count in header.get("flagged_lines", []):  # runs across strips joined
+            if self.flagged_runs and sum(self.flagged_runs[-1]) == first:
+                self.flagged_runs[-1][1] += count
+            else:
+                self.flagged_runs.append([first, count])
         self.counters = header.get("counters", self.counters)
         self._write(lines)
 

@@ -242,7 +242,7 @@ def cmd_process(args) -> int:
             if receivers:
                 more = [e.flush().lines for e in receivers.values()]
                 _write_heights(img, heights.process(out.lines, *more) + heights.flush())
-                extra = {"height_method": args.height, "height_strips": heights.strips_out}
+                extra |= {"height_method": args.height, "height_strips": heights.strips_out}
             counted = eng.corrections.counters() if eng.corrections else {}
             if counted:  # what each correction did (PGA: blocks estimated and why not, …)
                 extra["correction_counters"] = json.dumps(counted)

@@ -396,8 +396,14 @@ class Pipeline:
         d["link"] = None if self.link is None else self.link.state()  # a silence being told
         if self.height is not None:
             d["height"] = {k: float(v) for k, v in self.height.stage.stats.items()}
+        if final and self._pulse_sinks:  # a recording ends first: the others get its last word
+            for sink in self._pulse_sinks:
+                sink.end(d, self.info)
+            self.stats.counters = self.counters()
+            d["counters"] = {k: int(v) for k, v in self.stats.counters.items()}
         for sink in self.sinks:
-            (sink.end if final else sink.stats)(d, self.info)
+            if not (final and sink in self._pulse_sinks):
+                (sink.end if final else sink.stats)(d, self.info)
         if self.on_stats is not None:
             self.on_stats(d)
 

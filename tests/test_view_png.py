@@ -92,3 +92,41 @@ def test_the_page_server_stopped_by_ctrl_c_exits_130(tmp_path):
     status, _, rest = interrupt_view([endpoint, "--http", "127.0.0.1:0"], serving)
     assert status == 130, rest
     assert "view: interrupted" in rest
+
+
+def test_the_waterfall_keeps_the_last_lines_in_order_whatever_the_strips(rng):
+    """The waterfall is a ring (each strip once rolled the whole buffer: the demo's snapshot
+    fell behind, lost the stream's end and waited out its timeout): its image and positions
+    are the last `lines` lines received, oldest first, for strips of any size."""
+    fall, got = Waterfall(50), []
+    first = 0
+    for n in [3, 7, 1, 40, 2, 64, 5, 11, 50, 9]:  # some longer than the waterfall
+        lines = (rng.standard_normal((n, 6)) + 1j).astype(np.complex64)
+        fall.add(strip_header("s", 0, first, n, 6), lines)
+        got.extend(lines)
+        first += n
+        k = min(len(got), 50)
+        assert fall.filled == k
+        np.testing.assert_array_equal(fall.image[-k:], np.array(got[-k:]))
+        np.testing.assert_array_equal(fall.azimuth_m[-k:], 10.0 + 0.5 * np.arange(first - k, first))
+        assert np.isnan(fall.azimuth_m[: 50 - k]).all()
+
+
+def test_a_snapshot_says_the_strips_it_missed(tmp_path):
+    lines = np.ones((16, 32), np.complex64)
+    strips = [Message("strip", strip_header("s", k, 16 * k, 16, 32), lines) for k in (0, 1, 4)]
+    said = []
+
+    class Stream:
+        def write(self, text):
+            said.append(text)
+
+    class Gappy(Interrupted):
+        counters = {"missed_strips": 2}  # (seq 2 and 3: the subscriber counts them)
+
+    png = tmp_path / "v.png"
+    assert (
+        _snapshot(Gappy(strips, KeyboardInterrupt()), Waterfall(1024), str(png), 50.0, 5, Stream())
+        == 130
+    )
+    assert f"wrote {png}: 48 lines (2 strips missed" in "".join(said)

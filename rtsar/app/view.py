@@ -12,29 +12,48 @@ from .quicklook import save_quicklook, to_db
 
 
 class Waterfall:
-    """The last ``lines`` image lines, newest at the bottom, in dB re the running peak."""
+    """The last ``lines`` image lines, newest at the bottom, in dB re the running peak.
+
+    A ring: a strip's lines are written where the oldest were, and ``image`` / ``azimuth_m``
+    put them in order when read.  (Each strip rolled the whole buffer: 21 MB for the demo's
+    8192 × 320 lines, so at its 500 strips/s a snapshot fell behind, the publisher dropped the
+    strips after, the `end` among them, and `view --png` waited out its timeout.)"""
 
     def __init__(self, lines: int):
         self.lines = int(lines)
-        self.image: np.ndarray | None = None
-        self.azimuth_m: np.ndarray | None = None
+        self._ring: np.ndarray | None = None
+        self._az = np.full(self.lines, np.nan)
         self.range_m: np.ndarray | None = None
         self.filled = 0
+        self._next = 0  # the ring's row the next line goes to
 
     def add(self, header: dict, lines: np.ndarray) -> None:
         nr = lines.shape[1]
-        if self.image is None or self.image.shape[1] != nr:
-            self.image = np.zeros((self.lines, nr), np.complex64)
-            self.azimuth_m = np.full(self.lines, np.nan)
+        if self._ring is None or self._ring.shape[1] != nr:
+            self._ring = np.zeros((self.lines, nr), np.complex64)
+            self._az = np.full(self.lines, np.nan)
             self.range_m = header["range_first_m"] + header["range_step_m"] * np.arange(nr)
-            self.filled = 0
+            self.filled, self._next = 0, 0
         k = min(len(lines), self.lines)
         az = header["azimuth_first_m"] + header["azimuth_step_m"] * np.arange(len(lines))
-        self.image = np.roll(self.image, -k, axis=0)
-        self.azimuth_m = np.roll(self.azimuth_m, -k)
-        self.image[-k:] = lines[-k:]
-        self.azimuth_m[-k:] = az[-k:]
+        rows = (self._next + np.arange(k)) % self.lines
+        self._ring[rows] = lines[-k:]
+        self._az[rows] = az[-k:]
+        self._next = (self._next + k) % self.lines
         self.filled = min(self.lines, self.filled + k)
+
+    def _ordered(self, a: np.ndarray) -> np.ndarray:
+        return np.roll(a, -self._next, axis=0)
+
+    @property
+    def image(self) -> np.ndarray | None:
+        """[lines, range bins], oldest first (zeros before the first line)."""
+        return None if self._ring is None else self._ordered(self._ring)
+
+    @property
+    def azimuth_m(self) -> np.ndarray:
+        """The lines' along-track positions, as ``image`` (NaN before the first line)."""
+        return self._ordered(self._az)
 
 
 def view(
@@ -83,16 +102,19 @@ def _snapshot(sub, fall, png, dynamic_range_db, timeout_s, stream, true_aspect=F
         print("view: no lines received; no snapshot written", file=stream)
         return 1 if interrupted is None else signals.exit_status(interrupted)
     k = fall.filled
+    missed = getattr(sub, "counters", {}).get("missed_strips", 0)
+    gaps = f", missed strips {missed}" if missed else ""
     save_quicklook(
         png,
         fall.image[-k:],
         fall.azimuth_m[-k:],
         fall.range_m,
         dynamic_range_db,
-        title=f"{sub.endpoint}: last {k} lines",
+        title=f"{sub.endpoint}: last {k} lines{gaps}",
         true_aspect=true_aspect,
     )
-    print(f"wrote {png}: {k} lines", file=stream)
+    said = f" ({missed} strips missed: published while this view could not take them)"
+    print(f"wrote {png}: {k} lines{said if missed else ''}", file=stream)
     return 0 if interrupted is None else signals.exit_status(interrupted)
 
 

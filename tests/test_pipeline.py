@@ -454,6 +454,8 @@ def test_parse_rate():
     for bad in ("fast", "0", "-1", "nan"):
         with pytest.raises(ValueError):
             parse_rate(bad)
+    with pytest.raises(ValueError, match="a finite number > 0 .'max': as fast as it goes"):
+        parse_rate("inf")  # (it said "must be > 0" of inf)
 
 
 class FakeClock:

@@ -30,7 +30,9 @@ def parse_rate(text: str | float) -> float | None:
         except ValueError:
             raise ValueError(f"rate must be 'real', 'max' or a factor > 0, got {text!r}") from None
     if not (np.isfinite(value) and value > 0):
-        raise ValueError(f"rate factor must be > 0, got {text!r}")
+        raise ValueError(
+            f"rate factor must be a finite number > 0 ('max': as fast as it goes), got {text!r}"
+        )
     return value
 
 

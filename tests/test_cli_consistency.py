@@ -45,3 +45,17 @@ def test_an_allocation_no_check_foresaw_is_one_line_not_a_traceback(monkeypatch,
     assert main(["presets"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "not enough memory" in err and "128. GiB" in err
+
+
+@pytest.mark.parametrize("command", ["run", "replay", "process"])
+def test_an_unknown_option_is_answered_with_its_commands_usage(command, capsys):
+    """`rtsar run --bogus` printed the top level's usage (`rtsar [-h] [--version] COMMAND`),
+    where a missing option printed the command's own."""
+    given = {"run": [], "replay": ["r.h5"], "process": ["r.h5", "-o", "i.h5"]}[command]
+    argv = [command, *given, "--bogus"]
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    err = capsys.readouterr().err
+    assert stop.value.code == 2
+    assert err.startswith(f"usage: rtsar {command} ")
+    assert f"rtsar {command}: error: unrecognized arguments: --bogus" in err

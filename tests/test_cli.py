@@ -153,6 +153,14 @@ def test_outputs_are_checked_before_the_work(tmp_path, capsys):
         assert main(args) == 2, args
         assert time.perf_counter() - t0 < 5, args
         assert "does not exist" in capsys.readouterr().err
+    # process told it only after preparing its lens (a new user's review): now before
+    rec, scene_file = tmp_path / "rec.h5", tmp_path / "s.toml"
+    scene_file.write_text(SCENE.format(correlator="fft"))
+    assert main(["simulate", str(scene_file), "-o", str(rec)]) == 0
+    capsys.readouterr()
+    assert main(["process", str(rec), "-o", bad + ".h5"]) == 2
+    err = capsys.readouterr().err
+    assert "the folder" in err and "does not exist" in err and "lens" not in err, err
 
 
 def test_an_output_never_replaces_the_commands_input(tmp_path, capsys, monkeypatch):

@@ -10,6 +10,7 @@ try:
 except ModuleNotFoundError:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
+from ...sinks.io import check_writable
 from ...sinks.name_claim import check_unclaimed
 
 # Options naming files a command reads, and files it writes (``--sigmf BASE`` writes
@@ -74,6 +75,7 @@ def check_outputs_spare_inputs(args) -> None:
             )
     for path in outputs.values():  # a file another process writes live is never replaced
         check_unclaimed(path)
+        check_writable(path)  # a missing folder said now (process said it after the lens)
     record = getattr(args, "record", None)
     if isinstance(record, str) and Path(record).exists():
         raise ValueError(

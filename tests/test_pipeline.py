@@ -262,7 +262,7 @@ def test_the_end_message_counts_what_the_recording_finished_with(tiny):
     cfg, scene, shots = tiny
 
     class Recorder(StripSink):
-        wants_pulses = True
+        wants_pulses = ends_first = True
 
         def __init__(self):
             self.handed = self.confirmed = 0
@@ -285,6 +285,16 @@ def test_the_end_message_counts_what_the_recording_finished_with(tiny):
     sinks = [Last(), Recorder(), Last()]  # before and after the recorder in the list
     Pipeline(cfg, replay(cfg, shots[:200]), sinks, PipelineSettings(lens_backend="numpy")).run()
     assert ended == [200, 200]
+
+    class Failing(Recorder):
+        def end(self, d, info):
+            raise OSError("the disk went away")
+
+    ended.clear()  # a file's failed end: the others still get theirs, then the error
+    with pytest.raises(OSError, match="the disk went away"):
+        settings = PipelineSettings(lens_backend="numpy")
+        Pipeline(cfg, replay(cfg, shots[:50]), [Last(), Failing()], settings).run()
+    assert ended == [0]
 
 
 @pytest.mark.parametrize("stages", ["split", "fused"])

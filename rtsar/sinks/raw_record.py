@@ -102,6 +102,7 @@ class ShotRecorder(StripSink):
     never came, within :data:`HURRY_S`."""
 
     wants_pulses = True
+    ends_first = True  # the end message carries the rows the file got
 
     def __init__(
         self,

@@ -306,6 +306,8 @@ class ImageFileSink(StripSink):
     counters of outputs that end first (a recording's final ones), stored in place of the
     run's."""
 
+    ends_first = True  # its lines on disk before a slow recording is waited for
+
     def __init__(self, path: str | Path, source: str, notify=None, settle=None):
         self.recorder = StripRecorder(path, source)
         self.lines = 0

@@ -396,14 +396,21 @@ class Pipeline:
         d["link"] = None if self.link is None else self.link.state()  # a silence being told
         if self.height is not None:
             d["height"] = {k: float(v) for k, v in self.height.stage.stats.items()}
-        if final and self._pulse_sinks:  # a recording ends first: the others get its last word
-            for sink in self._pulse_sinks:
-                sink.end(d, self.info)
-            self.stats.counters = self.counters()
-            d["counters"] = {k: int(v) for k, v in self.stats.counters.items()}
-        for sink in self.sinks:
-            if not (final and sink in self._pulse_sinks):
-                (sink.end if final else sink.stats)(d, self.info)
+        if not final:
+            for sink in self.sinks:
+                sink.stats(d, self.info)
+        else:  # files end first (the image's lines on disk, then the recording), so the end
+            first = [sink for sink in self.sinks if sink.ends_first]  # message has their word
+            try:
+                for sink in first:
+                    sink.end(d, self.info)
+            finally:  # (one that failed: the others still end)
+                if first:
+                    self.stats.counters = self.counters()
+                    d["counters"] = {k: int(v) for k, v in self.stats.counters.items()}
+                for sink in self.sinks:
+                    if sink not in first:
+                        sink.end(d, self.info)
         if self.on_stats is not None:
             self.on_stats(d)
 

@@ -117,9 +117,12 @@ class StripSink:
     dictionary (docs/pages/reference/wire.md); ``end``: the final stats, once; ``counters``: the
     sink's own counters, reported with the run's; ``hurry``: the run is being stopped.  A sink
     with ``wants_pulses`` also receives the stream's pulses as ingest made them (``pulses``).
+    A sink that ``ends_first`` (a file writer: its end flushes and closes the file) is ended
+    before the others, whose end then carries its last counters (a recording's rows).
     """
 
     wants_pulses = False
+    ends_first = False
 
     def pulses(self, block, info: StreamInfo) -> None:
         """Consecutive pulses of the stream (rtsar.stream.ingest.PulseBlock: the shots with

@@ -53,6 +53,7 @@ class Interrupted:
     """A subscriber that delivers ``strips`` then is interrupted by ``exc``."""
 
     endpoint = "tcp://test:1"
+    counters = {"missed_strips": 0}
 
     def __init__(self, strips, exc):
         self.strips, self.exc = list(strips), exc

@@ -102,7 +102,7 @@ def _snapshot(sub, fall, png, dynamic_range_db, timeout_s, stream, true_aspect=F
         print("view: no lines received; no snapshot written", file=stream)
         return 1 if interrupted is None else signals.exit_status(interrupted)
     k = fall.filled
-    missed = getattr(sub, "counters", {}).get("missed_strips", 0)
+    missed = sub.counters["missed_strips"]
     gaps = f", missed strips {missed}" if missed else ""
     save_quicklook(
         png,

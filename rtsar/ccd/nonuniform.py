@@ -207,18 +207,19 @@ class _Tail(threading.Thread):
             self.start()
             _LIVE.add(self)
 
-    def submit(self, end: int, urgent: int) -> None:
-        """Compute the blocks complete at ``end`` pulses, those completing by ``urgent`` first.
+    def due(self, end: int) -> bool:
+        """Whether a tail block ends after the last job's end and by ``end`` pulses.  Not on
+        most pushes of a head block or a few (every tail block is at least two head blocks
+        long, four or more in most plans): those give the thread no job and do not wake it, a
+        wake-up at every push having cost more than the small tail's work (psaltis-jpl's 320
+        bins, N = 512, a line a push: 94-95 µs a push when every push woke it, 64-67 µs now,
+        51 µs with the tail on the caller's thread; 2-core Intel Xeon, 2026-11-29).
+        ``wait_for`` knows those pulses as done once the last job is."""
+        return any(end // b != self._submitted // b for b in self.group.blocks)
 
-        Where no tail block ends after the last job's end and by ``end`` (the pushes of a
-        head block or a few: every tail block is at least two head blocks long, four or more
-        in most plans), there is nothing to compute and the thread is not woken: a wake-up
-        at every push cost more than the small tail's work (psaltis-jpl's 320 bins, N = 512,
-        a line a push: 94-95 µs a push when every push woke it, 64-67 µs now, 51 µs with the
-        tail on the caller's thread; 2-core Intel Xeon, 2026-11-29).  ``wait_for`` knows
-        those pulses as done once the last job is."""
-        if all(end // b == self._submitted // b for b in self.group.blocks):
-            return
+    def submit(self, end: int, urgent: int) -> None:
+        """Compute the blocks complete at ``end`` pulses (``due``), those completing by
+        ``urgent`` first."""
         self._submitted = end
         if not self._threaded:
             self._work((end, urgent))
@@ -260,7 +261,7 @@ class _Tail(threading.Thread):
 
     def wait_for(self, pulses: int) -> None:
         """Block until every tail block completing by pulse count ``pulses`` is in the ring
-        (those after the last job's end come with a later job: ``submit``)."""
+        (those after the last job's end come with a later job: ``due``)."""
         pulses = min(pulses, self._submitted)
         if self.progress >= pulses and self.error is None:
             return
@@ -392,7 +393,7 @@ class NonUniformCorrelator(Correlator):
             tiled.store_lines(chunk, *self._hist, start % rows)
             self.pulses_in = end
             done, blocks = start // lb, end // lb
-            if self._tail.group is not None:
+            if self._tail.group is not None and self._tail.due(end):
                 self._tail.submit(end, self._needed(blocks * lb - 1))
             if blocks > done:
                 events = self._head.events(end)

@@ -16,6 +16,7 @@ import numpy as np
 
 from .. import __version__
 from ..params import config_from_dict
+from ..stream.strips import join_run
 from .io import RECORDING_FORMAT, RECORDING_VERSION, describe_channels
 from .live_file import LiveFile
 from .name_claim import NameClaim
@@ -89,10 +90,8 @@ class _Dropped:
 def add_run(runs: list[list[int]], first: int, count: int) -> None:
     """Pulses ``first`` … ``first + count - 1`` into ``runs`` ([first, count] each): joined to
     the last run where they follow it, else a new run while fewer than MAX_RUNS_LISTED."""
-    if runs and runs[-1][0] + runs[-1][1] == first:
-        runs[-1][1] += count
-    elif len(runs) < MAX_RUNS_LISTED:
-        runs.append([first, count])
+    if len(runs) < MAX_RUNS_LISTED or (runs and sum(runs[-1]) == first):
+        join_run(runs, first, count)
 
 
 class RawFile:

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..params import config_from_dict
 from ..sources.formats.timebase import format_utc, parse_utc
-from ..stream.strips import StreamInfo, Strip, StripSink
+from ..stream.strips import StreamInfo, Strip, StripSink, join_run
 from .h5_output import WriteFailed
 from .image_file import ImageWriter
 from .name_claim import NameClaim
@@ -195,10 +195,7 @@ class StripRecorder:
                 self.line_jumps.append([self.next_line, gap])
                 self.next_line = first
         for first, count in header.get("flagged_lines", []):  # runs across strips joined
-            if self.flagged_runs and sum(self.flagged_runs[-1]) == first:
-                self.flagged_runs[-1][1] += count
-            else:
-                self.flagged_runs.append([first, count])
+            join_run(self.flagged_runs, first, count)
         self.counters = header.get("counters", self.counters)
         self._write(lines)
 

@@ -308,9 +308,8 @@ class Ingest:
         batch, and a batch ending on a NaN time, or on a clock that stepped back, then left
         a repeat read as a reset, or a reset as a repeat, depending on how shots were
         batched)."""
-        finite = times[np.isfinite(times)] if len(times) else times
-        if len(finite):
-            t = float(finite.max())
+        t = float(np.max(times, initial=-np.inf, where=np.isfinite(times)))
+        if t > -np.inf:  # (none finite: nothing to go by)
             self._newest_s = t if self._newest_s is None else max(self._newest_s, t)
 
     def _restart(self, cand: _Candidate) -> list[PulseBlock]:

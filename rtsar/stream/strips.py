@@ -263,6 +263,15 @@ def flag_runs(first: int, flagged: np.ndarray) -> list[tuple[int, int]]:
     return [(first + int(a), int(b - a)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
+def join_run(runs: list[list[int]], first: int, count: int) -> None:
+    """[first, count] onto ``runs``: joined to the last run where it follows it, else a new
+    run (the flagged lines of an image, strip after strip)."""
+    if runs and sum(runs[-1]) == first:
+        runs[-1][1] += count
+    else:
+        runs.append([first, count])
+
+
 def new_stream_id() -> str:
     """A random hex id for a run (a new id tells subscribers the publisher restarted)."""
     return uuid.uuid4().hex[:16]

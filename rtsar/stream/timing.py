@@ -14,7 +14,7 @@ from collections import deque
 import numpy as np
 
 from .ingest import PulseBlock
-from .strips import LineBlock, flag_runs
+from .strips import LineBlock, flag_runs, join_run
 
 
 class RecordedFlags:
@@ -43,10 +43,7 @@ class RecordedFlags:
         flagged = self._marked[high] > self._marked[low]
         self.lines += int(flagged.sum())
         for first, n in flag_runs(int(first_line), flagged):
-            if self.runs and sum(self.runs[-1]) == first:
-                self.runs[-1][1] += n
-            else:
-                self.runs.append([first, n])
+            join_run(self.runs, first, n)
 
 
 class LineTiming:

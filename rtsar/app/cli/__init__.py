@@ -120,7 +120,7 @@ def main(argv=None) -> int:
     args, unknown = parser.parse_known_args(argv)
     if unknown:  # said with the command's own usage, not the top level's (`run --bogus`)
         commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-        owner = commands.choices.get(getattr(args, "command", None) or "", parser)
+        owner = commands.choices.get(args.command or "", parser)
         owner.error(f"unrecognized arguments: {' '.join(unknown)}")
     if not getattr(args, "func", None):
         parser.print_help()

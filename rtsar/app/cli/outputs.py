@@ -77,7 +77,7 @@ def check_outputs_spare_inputs(args) -> None:
         check_unclaimed(path)
         check_writable(path)  # a missing folder said now (process said it after the lens)
     record = getattr(args, "record", None)
-    if isinstance(record, str) and Path(record).exists():
+    if record and Path(record).exists():
         raise ValueError(
             f"--record {record}: the file exists, and a recording is never replaced (its raw "
             "shots cannot be taken again); give a new name, or remove the old file first"

@@ -208,7 +208,7 @@ def test_surface_scene_files_refuse_what_does_not_fit(tmp_path):
 def test_the_3d_demo_simulates_once_then_replays_with_heights(tmp_path, monkeypatch):
     from dataclasses import replace
 
-    from rtsar.app.cli import streaming
+    from rtsar.app.cli import replay as replay_cli
     from rtsar.scene import load_scene
 
     small = tmp_path / "small.toml"
@@ -217,7 +217,7 @@ def test_the_3d_demo_simulates_once_then_replays_with_heights(tmp_path, monkeypa
     # RTSAR_CACHE_DIR and wrote ~/.cache/rtsar)
     monkeypatch.setenv("RTSAR_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setattr(
-        streaming, "load_scene", lambda name: replace(load_scene(small), name="insal-ridge")
+        replay_cli, "load_scene", lambda name: replace(load_scene(small), name="insal-ridge")
     )
     args = ["demo", "insal", "--rate", "max", "--lens", "numpy", "--height-strip-lines", "8"]
     args += ["--endpoint", "ipc://" + str(tmp_path / "pub")]

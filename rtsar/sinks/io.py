@@ -475,14 +475,13 @@ def _channels(f: h5py.File, pulses: int, cut_short: bool = False) -> dict:
 
 
 class Rows:
-    """The first ``rows`` rows of a dataset, read like it (slices, ``[...]``): the datasets of a
-    live recording cut short that grew beyond its whole rows."""
+    """``rows`` rows of a dataset from row ``first``, read like it (slices, ``[...]``): a live
+    recording cut short (its whole rows), the part a replay was asked for (--start)."""
 
-    def __init__(self, ds, rows: int):
-        self._ds = ds
+    def __init__(self, ds, rows: int, first: int = 0):
+        self._ds, self._first = ds, int(first)
         self.shape = (int(rows), *ds.shape[1:])
-        self.dtype = ds.dtype
-        self.ndim = ds.ndim
+        self.dtype, self.ndim = ds.dtype, ds.ndim
 
     def __len__(self) -> int:
         return self.shape[0]
@@ -492,9 +491,10 @@ class Rows:
         if first is Ellipsis:
             first, rest = slice(None), ((Ellipsis,) if rest else ())
         if isinstance(first, slice):
-            first = slice(*first.indices(len(self)))
+            start, stop, step = first.indices(len(self))
+            first = slice(start + self._first, stop + self._first, step)
         elif not -len(self) <= int(first) < len(self):
             raise IndexError(f"row {first} of {len(self)}")
         else:
-            first = int(first) % len(self)
+            first = int(first) % len(self) + self._first
         return self._ds[(first, *rest)]

@@ -12,6 +12,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from ..sinks.io import Rows
 from .base import ShotBatch, Source
 from .pacing import Pacer, next_release, release_chunk
 
@@ -90,20 +91,31 @@ class ReplaySource(Source):
         self.last_release: tuple[int, float] | None = None
 
     @classmethod
-    def from_recording(cls, recording, rate="real", batch: int = 64, channels=()) -> ReplaySource:
+    def from_recording(
+        cls, recording, rate="real", batch: int = 64, channels=(), first: int = 0, count=None
+    ) -> ReplaySource:
         """The recording's shots and its auxiliary ``channels`` (those the processing reads); a
-        live recording's zero pulses (``pulse_flags``) are flagged."""
+        live recording's zero pulses (``pulse_flags``) are flagged.  ``first``, ``count``: the
+        shots first … first + count - 1 only (default: all), read from the file as they go."""
+        total = len(recording.pulse_index)
+        count = total - first if count is None else count
+        if not (0 <= first and 1 <= count and first + count <= total):
+            raise ValueError(f"shots {first} … {first + count - 1} of a recording of {total}")
+        part = slice(first, first + count)
         flags = getattr(recording, "pulse_flags", None)  # (CPHD, SigMF: none)
+        words = _rate_words(rate)
+        if count < total:
+            words += f"; shots {first:,} … {first + count - 1:,} of {total:,}"
         source = cls(
-            recording.shots,
-            recording.pulse_index,
-            recording.time_s,
+            Rows(recording.shots, count, first),
+            recording.pulse_index[part],
+            recording.time_s[part],
             recording.config.geometry.prf_hz,
             rate,
             batch,
-            description=f"replay of {recording.path} ({_rate_words(rate)})",
-            aux={name: recording.channels[name] for name in channels},
-            flagged=None if flags is None else flags != 0,
+            description=f"replay of {recording.path} ({words})",
+            aux={name: Rows(recording.channels[name], count, first) for name in channels},
+            flagged=None if flags is None else flags[part] != 0,
         )
         source.collection_start = getattr(recording, "collection_start", None)
         return source

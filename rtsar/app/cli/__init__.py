@@ -1,7 +1,7 @@
 """The ``rtsar`` command.  ``rtsar COMMAND --help`` explains each command.
 
 One module per command group: ``files`` (presets, simulate, process, quicklook), ``streaming``
-(run, replay, demo, subscribe, keygen), ``view``, ``measure`` (devices, measure, bench,
+(run, subscribe, keygen), ``replay`` (replay, demo), ``view``, ``measure`` (devices, measure, bench,
 tradeoff, table1), ``formats``, ``batch``, ``swath`` (swath-worker), ``spot``; ``options``
 declares the options they share; ``commands`` names them all.  A call imports only the module
 of its command (``rtsar --help`` and ``--version`` none), so the command line starts at once.

@@ -60,3 +60,14 @@ def add_run_options(source_group, parser) -> None:
         "lack. A file that exists is refused before the run: a recording is never replaced "
         "(docs/pages/guide/live.md, 'Recording a live run')",
     )
+
+
+def add_wait_subscribers(s) -> None:
+    """--wait-subscribers (run of a simulated scene, replay, demo)."""
+    s.add_argument(
+        "--wait-subscribers",
+        type=int,
+        default=0,
+        metavar="N",
+        help="wait until N subscribers are connected before starting (default 0)",
+    )

@@ -1,5 +1,5 @@
-"""Streaming commands: ``run``, ``replay``, ``demo``, ``subscribe``, ``keygen`` (``view``: its own
-module)."""
+"""Streaming commands: ``run``, ``subscribe``, ``keygen`` (``replay`` and ``demo``: cli.replay;
+``view``: its own module)."""
 
 from __future__ import annotations
 
@@ -12,18 +12,15 @@ from pathlib import Path
 
 import zmq.auth
 
-from ... import __version__
 from ...ccd import first_line_pulses
-from ...lens.cache import cache_dir  # $RTSAR_CACHE_DIR, else ~/.cache/rtsar
 from ...presets import PRESETS, preset
 from ...scene import DEMO_SCENE, load_scene
-from ...scene.files import BUILT_IN, built_in_scenes
+from ...scene.files import built_in_scenes
 from ...sinks.io import check_writable
 from ...sinks.publish import DEFAULT_ENDPOINT
 from ...sources.channel_map import ChannelMap
 from ...sources.formats.instrument_config import instrument_config
 from ...sources.formats.instrument_file import read_instrument_file
-from ...sources.replay import ReplaySource
 from ...sources.serial import SerialSource
 from ...sources.sim import SimSource
 from ...sources.zmq_in import ZmqSource
@@ -36,12 +33,9 @@ from ..live import (
 )
 from ..live_granularity import block_candidates, block_config, live_correlator, request_of
 from ..subscribe import subscribe
-from .files import simulate_to
-from .inputs import open_input
 from .options import (
     add_pipeline_options,
     add_subscriber_options,
-    check_channels,
     correction_chain,
     die,
     height_stage,
@@ -52,7 +46,7 @@ from .options import (
     warn_outside_swath,
     zmq_endpoint,
 )
-from .run_options import add_run_options
+from .run_options import add_run_options, add_wait_subscribers
 
 
 def channel_map(args, scene) -> ChannelMap | None:
@@ -213,54 +207,6 @@ def cmd_run(args) -> int:
     )
 
 
-def cmd_replay(args) -> int:
-    with open_input(args.recording) as rec:
-        cfg = processor_changes(args, rec.config)
-        strip_lines(args, cfg.geometry.prf_hz)
-        batch = args.max_batch or cfg.processor.micro_batch
-        scene = rec.scene_object()
-        chain = correction_chain(args, cfg, scene, rec.start_along_track_m, rec)
-        heights = height_stage(args, cfg, scene)
-        channels = check_channels(rec, chain, heights)
-        source = ReplaySource.from_recording(rec, args.rate, batch, channels)
-        rate_hz = None if source.factor is None else cfg.geometry.prf_hz * source.factor
-        return run_stream(
-            cfg,
-            source,
-            pipeline_settings(args),
-            args.endpoint,
-            args.delivery,
-            rec.start_along_track_m,
-            args.output,
-            args.curve_key,
-            wait_subscribers=args.wait_subscribers,
-            total_pulses=rec.pulses,
-            expected_rate_hz=rate_hz,
-            corrections=chain,
-            height=heights,
-            physical=physical_ccd(args),
-            stall_timeout_s=args.stall_timeout,
-            curve_clients=args.curve_clients,
-            granularity=request_of(args, rate_hz),
-        )
-
-
-def cmd_demo(args) -> int:
-    scene = load_scene(BUILT_IN / f"{args.which}-ridge.toml")  # never a local file of that name
-    cached = cache_dir() / f"{scene.name}-{__version__}.h5"
-    if not cached.is_file():
-        print(f"demo: simulating {scene.name} once into {cached} …", flush=True)
-        cached.parent.mkdir(parents=True, exist_ok=True)
-        simulate_to(scene, cached)
-    args.recording = str(cached)
-    args.height = args.height or "insal"
-    if not args.correlator and not getattr(args, "physical", None):
-        # Lines as they come (blocks of 16 pulses), not the FFT mode's whole-aperture blocks:
-        # at this PRF the fft correlator published the whole image at the end.
-        args.correlator = "nonuniform"
-    return cmd_replay(args)
-
-
 def _stamp(path) -> tuple | None:
     """(inode, mtime) of a file, None when there is none: tells a file this run wrote."""
     try:
@@ -308,17 +254,6 @@ def cmd_keygen(args) -> int:
         f"wrote {secret} (owner-only: run/replay --curve-key, or subscribe --curve-client-key)"
     )
     return 0
-
-
-def add_wait_subscribers(s) -> None:
-    """--wait-subscribers (run of a simulated scene, replay, demo)."""
-    s.add_argument(
-        "--wait-subscribers",
-        type=int,
-        default=0,
-        metavar="N",
-        help="wait until N subscribers are connected before starting (default 0)",
-    )
 
 
 def _instrument_config(path: str):
@@ -414,53 +349,6 @@ def add_parsers(sub) -> None:
     add_wait_subscribers(s)
     add_pipeline_options(s, "drop")
     s.set_defaults(func=cmd_run)
-
-    s = sub.add_parser(
-        "replay",
-        description="Replay a recording (from `rtsar simulate`, `import` or `run --record`) on "
-        "an absolute schedule "
-        "(start + n/PRF: no drift) and publish strips like `rtsar run`. Lossless by default: "
-        "the replay waits for the slowest subscriber. Use --wait-subscribers 1 when a "
-        "`rtsar subscribe` must see the stream from its first strip.",
-    )
-    s.add_argument(
-        "recording",
-        help="recording from `rtsar simulate` (.h5), or a CPHD (.cphd) or SigMF (.sigmf-meta) "
-        'file (these need pip install "rtsar[formats]"; docs/pages/guide/recordings.md)',
-    )
-    s.add_argument(
-        "--rate",
-        default="real",
-        help="real (recorded PRF, default), max (as fast as possible) or a factor",
-    )
-    add_wait_subscribers(s)
-    add_pipeline_options(s, "lossless")
-    s.set_defaults(func=cmd_replay)
-
-    s = sub.add_parser(
-        "demo",
-        description="Simulate the built-in scene insal-ridge once (a few seconds; the recording "
-        "is cached in rtsar's cache folder: $RTSAR_CACHE_DIR, else ~/.cache/rtsar), then "
-        "replay it at --rate times its PRF through the "
-        "pipeline with height strips (--height insal), publishing image and height strips "
-        "like `rtsar replay`, with the nonuniform correlator unless --correlator says "
-        "otherwise (lines leave every 16 pulses). Watch with `rtsar subscribe -o demo.h5` "
-        "and draw with `rtsar quicklook demo.h5 -o demo.png --height demo-height.png`, or give "
-        "-o here.",
-    )
-    s.add_argument(
-        "which",
-        nargs="?",
-        default="insal",
-        choices=("insal",),
-        help="the demo to run (insal, the default)",
-    )
-    s.add_argument(
-        "--rate", default="5", help="replay rate: a factor of the PRF (default 5: 10 s), or max"
-    )
-    add_wait_subscribers(s)
-    add_pipeline_options(s, "lossless")
-    s.set_defaults(func=cmd_demo, height="insal")
 
     s = sub.add_parser(
         "subscribe",

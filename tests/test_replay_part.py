@@ -1,0 +1,93 @@
+"""`rtsar replay --start/--duration`: a part of a recording through the live pipeline gives the
+whole replay's lines, where the whole replay puts them, for the apertures the part holds."""
+
+import numpy as np
+import pytest
+
+from rtsar.app.cli import main
+from rtsar.app.cli.replay import replayed_part
+from rtsar.sinks.image_file import read_image
+
+SCENE = """
+preset = "tiny"
+seed = 5
+[processor]
+correlator = "{correlator}"
+[[targets]]
+along_track_m = {x}
+slant_range_m = 2000.0
+[[targets]]
+along_track_m = {x2}
+slant_range_m = 1960.0
+amplitude = 0.5
+"""
+
+PRF_HZ, STEP_M, APERTURE = 500.0, 0.5, 64  # the tiny preset's
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("part")
+    scene = folder / "s.toml"
+    scene.write_text(SCENE.format(correlator="nonuniform", x=60.0, x2=120.0))
+    rec = str(folder / "rec.h5")
+    assert main(["simulate", str(scene), "-o", rec, "--pulses", "500"]) == 0
+    return folder, rec
+
+
+def _replay(folder, rec, name, *extra):
+    out = str(folder / name)
+    args = ["replay", rec, "--rate", "max", "--lens", "numpy", "-o", out]
+    assert main(args + ["--endpoint", f"ipc://{folder}/{name}.pub", *extra]) == 0
+    return read_image(out)
+
+
+@pytest.mark.parametrize("start_s, duration_s", [(0.3, 0.5), (0.0, 0.4), (0.55, None)])
+def test_a_part_gives_the_whole_replays_lines_of_the_apertures_it_holds(
+    recording, start_s, duration_s, capsys
+):
+    folder, rec = recording
+    whole, whole_az, whole_r, _ = _replay(folder, rec, "whole.h5")
+    extra = ["--start", str(start_s)] + (
+        [] if duration_s is None else ["--duration", str(duration_s)]
+    )
+    part, part_az, part_r, attrs = _replay(folder, rec, f"part-{start_s}-{duration_s}.h5", *extra)
+    out = capsys.readouterr().out
+    first = round(start_s * PRF_HZ)
+    count = 500 - first if duration_s is None else round(duration_s * PRF_HZ)
+    if count < 500:
+        assert f"shots {first:,} … {first + count - 1:,} of 500" in out
+    np.testing.assert_array_equal(part_r, whole_r)
+    # Every line of the part sits on a line of the whole (same along-track positions).
+    at = np.searchsorted(whole_az, part_az)
+    assert np.all(at < len(whole_az))
+    np.testing.assert_allclose(whole_az[at], part_az, atol=1e-9 * STEP_M)
+    # A line leaves once its whole aperture has arrived: the part gives one line a shot after
+    # its first aperture, each the whole replay's line at that position (float32 sums in
+    # another block order: to 1e-5 of the image's peak).
+    assert len(part_az) == count - APERTURE + 1
+    assert np.abs(part - whole[at]).max() <= 1e-5 * np.abs(whole).max()
+
+
+def test_a_part_outside_the_recording_is_refused_in_one_line(recording, capsys):
+    folder, rec = recording
+    for extra, said in (
+        (["--start", "1.0"], "--start 1 s is at or past the recording's end: it holds 500 shots"),
+        (["--duration", "0.0005"], "--duration 0.0005 s is less than one shot at 500 Hz"),
+        (["--duration", "0"], "must be > 0 seconds"),
+        (["--start", "-1"], "must be >= 0 seconds"),
+    ):
+        try:
+            status = main(["replay", rec, "--rate", "max", *extra])
+        except SystemExit as exc:  # argparse's refusal of the option's value
+            status = exc.code
+        assert status == 2
+        assert said in capsys.readouterr().err
+
+
+def test_the_part_in_shots():
+    assert replayed_part(0.0, None, 500.0, 500) == (0, 500)
+    assert replayed_part(0.3, 0.5, 500.0, 500) == (150, 250)
+    assert replayed_part(0.9, 5.0, 500.0, 500) == (450, 50)  # to the end, not beyond
+    with pytest.raises(ValueError, match="at or past the recording's end"):
+        replayed_part(0.999, None, 500.0, 500)

@@ -59,3 +59,17 @@ def test_an_unknown_option_is_answered_with_its_commands_usage(command, capsys):
     assert stop.value.code == 2
     assert err.startswith(f"usage: rtsar {command} ")
     assert f"rtsar {command}: error: unrecognized arguments: --bogus" in err
+
+
+@pytest.mark.parametrize(
+    "command", [["run"], ["replay", "r.h5"], ["process", "r.h5", "-o", "i.h5"]]
+)
+def test_an_unknown_option_before_the_command_is_answered_with_rtsars_usage(command, capsys):
+    """`rtsar --bogus run` blamed run (`rtsar run: error: …` under run's usage): the words
+    before the command are the top level's."""
+    with pytest.raises(SystemExit) as stop:
+        main(["--bogus", *command])
+    err = capsys.readouterr().err
+    assert stop.value.code == 2
+    assert err.startswith("usage: rtsar [-h] [--version] COMMAND")
+    assert "rtsar: error: unrecognized arguments: --bogus" in err

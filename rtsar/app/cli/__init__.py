@@ -118,9 +118,12 @@ def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(_command_of(argv))
     args, unknown = parser.parse_known_args(argv)
-    if unknown:  # said with the command's own usage, not the top level's (`run --bogus`)
+    if unknown:  # said with the usage of the parser they were given to: `run --bogus` run's,
+        # `--bogus run` the top level's (the words before the command are rtsar's own)
         commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-        owner = commands.choices.get(args.command or "", parser)
+        at = next((i for i, word in enumerate(argv) if not word.startswith("-")), len(argv))
+        own = any(word in argv[:at] for word in unknown)
+        owner = parser if own else commands.choices.get(args.command or "", parser)
         owner.error(f"unrecognized arguments: {' '.join(unknown)}")
     if not getattr(args, "func", None):
         parser.print_help()

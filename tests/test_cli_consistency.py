@@ -73,3 +73,11 @@ def test_an_unknown_option_before_the_command_is_answered_with_rtsars_usage(comm
     assert stop.value.code == 2
     assert err.startswith("usage: rtsar [-h] [--version] COMMAND")
     assert "rtsar: error: unrecognized arguments: --bogus" in err
+
+
+def test_quicklook_names_its_option_for_a_bad_dynamic_range(tmp_path, capsys):
+    """From a new user's review: `quicklook --dynamic-range-db -40` said `dynamic_range_db must
+    be > 0` (the Python name), after reading the image."""
+    args = ["quicklook", str(tmp_path / "none.h5"), "-o", str(tmp_path / "x.png")]
+    assert main([*args, "--dynamic-range-db", "-40"]) == 2
+    assert "--dynamic-range-db must be > 0, got -40" in capsys.readouterr().err

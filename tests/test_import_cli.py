@@ -139,3 +139,85 @@ def test_run_takes_the_instrument_file_for_a_live_link(tmp_path, capsys):
     assert main(args) == 2
     assert "geometry.doppler_centroid_hz: a live run needs it" in capsys.readouterr().err
     assert main(["run", "--instrument", str(toml)]) == 2  # a simulated run has its scene
+
+
+# ---- from a new user's review with the real block: what imported silently and should not ----
+
+
+def test_a_data_key_a_letter_from_one_rtsar_reads_is_refused_not_kept(tmp_path, capsys):
+    """`byteorder = "big"` (for byte_order) was kept as provenance: the big-endian samples were
+    read little-endian, every pulse NaN/Inf, zeroed, and the import said 'wrote' with exit 0."""
+    for typo, meant in (("byteorder", "byte_order"), ("header_byte", "header_bytes")):
+        toml = _instrument(tmp_path, _noise())
+        toml.write_text(toml.read_text() + f"{typo} = 1\n")
+        assert main(["import", str(toml), "-o", str(tmp_path / "x.h5")]) == 2
+        err = capsys.readouterr().err
+        assert f"data.{typo}: unknown key, close to {meant}" in err
+        assert not (tmp_path / "x.h5").exists()
+
+
+def test_data_whose_every_pulse_is_nan_is_refused_and_a_few_are_counted(tmp_path, capsys):
+    bad = _noise()
+    bad[:, 3] = np.nan
+    toml = _instrument(tmp_path, bad)
+    assert main(["import", str(toml), "-o", str(tmp_path / "x.h5")]) == 2
+    assert "every pulse holds NaN/Inf samples: nothing to image" in capsys.readouterr().err
+    assert not (tmp_path / "x.h5").exists()
+    some = _noise(dc=0.25 - 0.5j)
+    some[:7, 3] = np.inf
+    some[7, 5] = 1e30  # finite, in a pulse the import keeps
+    some[7, 5] = 0.25 - 0.5j
+    toml = _instrument(tmp_path, some)
+    assert main(["import", str(toml), "-o", str(tmp_path / "y.h5")]) == 0
+    out = capsys.readouterr()
+    assert "warning: 7 pulses held NaN/Inf samples and were zeroed" in out.err
+    # the DC offset is the kept pulses' mean (the zeroed ones left out)
+    assert f"{_noise()[7:].mean().real:+.4f}" in out.out
+
+
+def test_a_centroid_far_from_the_datas_is_warned_of_and_an_impossible_one_named(tmp_path, capsys):
+    far = _scene_at(120.0, pulses=1600)  # a squint of -880 Hz needs an aperture of 1,490
+    toml = _instrument(tmp_path, far, doppler="doppler_centroid_hz = -880")
+    assert main(["import", str(toml), "-o", str(tmp_path / "a.h5")]) == 0
+    err = capsys.readouterr().err
+    assert "warning: the instrument file's Doppler centroid -880.0 Hz is -1.0 PRF from" in err
+    toml = _instrument(tmp_path, _scene_at(120.0, pulses=600), doppler="doppler_centroid_hz = 130")
+    assert main(["import", str(toml), "-o", str(tmp_path / "b.h5")]) == 0
+    assert "warning" not in capsys.readouterr().err  # within the ambiguity: as given
+    toml = _instrument(tmp_path, _noise(), doppler="doppler_centroid_hz = 2000.0")
+    assert main(["import", str(toml), "-o", str(tmp_path / "c.h5")]) == 2
+    err = capsys.readouterr().err  # a squint too wide for the block names the centroid
+    assert (
+        "fewer than the aperture of 3201 (a squint of -17.4° at the Doppler centroid 2000 Hz" in err
+    )
+
+
+def test_the_collection_start_is_the_files_or_unknown_never_the_import_clock(tmp_path, capsys):
+    toml = _instrument(tmp_path, _noise())
+    assert main(["import", str(toml), "-o", str(tmp_path / "a.h5")]) == 0
+    with h5py.File(tmp_path / "a.h5", "r") as f:
+        assert "collection_start_utc" not in f.attrs
+    toml.write_text(toml.read_text() + 'collection_start_utc = "2002-06-16T02:30:00.5Z"\n')
+    assert main(["import", str(toml), "-o", str(tmp_path / "b.h5")]) == 0
+    with h5py.File(tmp_path / "b.h5", "r") as f:
+        assert f.attrs["collection_start_utc"] == "2002-06-16T02:30:00.500000Z"
+    toml.write_text(toml.read_text().replace("02:30:00.5Z", "yesterday"))
+    assert main(["import", str(toml), "-o", str(tmp_path / "c.h5")]) == 2
+    assert "data.collection_start_utc: the value is not an ISO 8601 time" in capsys.readouterr().err
+    capsys.readouterr()
+
+
+def test_a_folder_or_a_missing_file_is_named_with_its_whole_path(tmp_path, capsys):
+    toml = _instrument(tmp_path, _noise())
+    (tmp_path / "adir.npy").mkdir()
+    toml.write_text(toml.read_text().replace('"block.npy"', '"adir.npy"'))
+    assert main(["import", str(toml), "-o", str(tmp_path / "x.h5")]) == 2
+    assert f"{tmp_path / 'adir.npy'}: a folder, not a file" in capsys.readouterr().err
+    toml.write_text(toml.read_text().replace('"adir.npy"', '"gone.npy"'))
+    assert main(["import", str(toml), "-o", str(tmp_path / "x.h5")]) == 2
+    err = capsys.readouterr().err
+    assert (
+        f"{tmp_path / 'gone.npy'}: no such file (relative to the instrument file's folder)" in err
+    )
+    assert main(["import", str(toml), "-o", str(tmp_path / "x.h5"), "--micro-batch", "0"]) == 2
+    assert "--micro-batch must be an integer >= 1, got 0" in capsys.readouterr().err

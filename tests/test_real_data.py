@@ -54,6 +54,10 @@ def test_import_keeps_the_files_parameters_and_removes_the_dc(focused):
     # The data's own estimate lands within 0.15 PRF of the published value, so in its PRF
     # ambiguity (this block alone measures about -7044 Hz: docs/pages/guide/own-data.md)
     assert abs(estimated - PUBLISHED_CENTROID_HZ) < 0.15 * PRF_HZ
+    # The file gives no collection time: the recording says none, not the import's clock
+    # (a new user's review found 2026 written for a 2002 acquisition).
+    with h5py.File(rec, "r") as f:
+        assert "collection_start_utc" not in f.attrs
 
 
 def test_bright_points_focus_to_theory(focused):

@@ -91,3 +91,24 @@ def test_the_part_in_shots():
     assert replayed_part(0.9, 5.0, 500.0, 500) == (450, 50)  # to the end, not beyond
     with pytest.raises(ValueError, match="at or past the recording's end"):
         replayed_part(0.999, None, 500.0, 500)
+
+
+def test_ctrl_c_before_the_stream_starts_is_said_and_writes_nothing(recording, monkeypatch, capsys):
+    """From a new user's review: Ctrl-C while a replay measured its granularity ended with
+    status 130 and not a word."""
+    from rtsar.app import live
+
+    folder, rec = recording
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(live, "survey_and_compile", interrupted)
+    out = folder / "early.h5"
+    args = ["replay", rec, "-o", str(out), "--endpoint", f"ipc://{folder}/early.pub"]
+    assert main(args) == 130
+    said = capsys.readouterr().out
+    assert (
+        "rtsar: interrupted before the stream started: no shot processed, no file written" in said
+    )
+    assert not out.exists()

@@ -313,10 +313,9 @@ def run_stream(
     given up on), 128 + the signal number when interrupted (130 for Ctrl-C).  ``record``: the
     raw shots' file (rtsar.sinks.raw_record; ``scene``, the scene's dict, goes into it).
     ``expected_rate_hz``: the rate the source should deliver (a simulation's PRF, a paced
-    replay's): a stream processed slower is warned about.
-    ``channel_fix(missing)``: how to give the source the auxiliary channels a stage reads and it
-    lacks (check_source_channels, before anything starts).  ``granularity``: a
-    rtsar.app.live_granularity.GranularityRequest (the blocks chosen at the start), or None."""
+    replay's): a slower stream is warned about.  ``channel_fix(missing)``: how to give the
+    source the auxiliary channels a stage reads and it lacks (check_source_channels, before
+    anything starts).  ``granularity``: a live_granularity.GranularityRequest, or None."""
     try:
         check_source_channels(source, corrections, height, channel_fix)
     except ValueError:
@@ -456,7 +455,9 @@ def run_stream(
             interrupted = exc
             say(f"{signals.describe(exc)}: the pulses already received were finished")
             stats = pipe.join()
-    except KeyboardInterrupt as exc:  # while waiting for subscribers: nothing was processed
+    except KeyboardInterrupt as exc:  # before the stream started: nothing was processed
+        said = f"{signals.describe(exc)} before the stream started: no shot processed"
+        print(f"rtsar: {said}, no file written", file=stream, flush=True)
         return signals.exit_status(exc)
     finally:
         compiling.__exit__(None, None, None)

@@ -118,17 +118,12 @@ def _umask() -> int:
 def describe_channels(config: Config, widths: dict[str, int]) -> str:
     """The ``channels`` attribute of a recording: JSON list of {name, samples_per_shot,
     sample_rate_hz, dtype} of each auxiliary channel (``widths``: name → samples per shot)."""
-    wf = config.waveform
+    fs, n = config.waveform.sample_rate_hz, config.waveform.samples_per_shot
+    # every channel spans the shot's sweep: its rate scales with its length
     return json.dumps(
         [
-            {
-                "name": name,
-                "samples_per_shot": int(width),
-                # every channel spans the shot's sweep: its rate scales with its length
-                "sample_rate_hz": wf.sample_rate_hz * width / wf.samples_per_shot,
-                "dtype": "complex64",
-            }
-            for name, width in sorted(widths.items())
+            dict(name=name, samples_per_shot=int(w), sample_rate_hz=fs * w / n, dtype="complex64")
+            for name, w in sorted(widths.items())
         ]
     )
 
@@ -139,7 +134,7 @@ class RecordingWriter:
     The auxiliary channels are fixed by the first ``write``: every later write must carry the
     same names and lengths (ValueError otherwise), so no channel is ever silently dropped.
     ``collection_start`` (naive UTC; default: now) is the time of ``time_s`` = 0, kept as
-    ``collection_start_utc`` (rtsar.sources.formats.timebase).
+    ``collection_start_utc`` (rtsar.sources.formats.timebase); ``"unknown"``: none kept.
     """
 
     def __init__(
@@ -154,7 +149,8 @@ class RecordingWriter:
         self._out = H5Output(self.path)  # a failed write: WriteFailed, never a crash
         with self._out.writing():
             self._create(config, scene, chunk_pulses)
-            self._f.attrs["collection_start_utc"] = format_utc(collection_start or utc_now())
+            if collection_start != "unknown":
+                self._f.attrs["collection_start_utc"] = format_utc(collection_start or utc_now())
 
     def _create(self, config: Config, scene: dict | None, chunk_pulses: int) -> None:
         self._f = self._out.file

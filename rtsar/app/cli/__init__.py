@@ -30,7 +30,7 @@ EPILOG = f"""examples:
   rtsar simulate scene.toml -o rec.h5        raw shots of a scene
   rtsar process rec.h5 -o img.h5             range + azimuth compression (streaming engine)
   rtsar batch recs/ --out-dir imgs           many recordings through process, on Dask
-  rtsar quicklook img.h5 -o img.png          dB image with axes in metres
+  rtsar quicklook img.h5 -o img.png          dB image, axes in km, m, mm or µm
   rtsar bench                                lens and correlator throughput in one run
   rtsar tradeoff                             what accuracy costs in time: every knob, one run
   rtsar table1                               Psaltis & Wagner's Table 1 from the physical emulation

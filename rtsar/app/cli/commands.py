@@ -13,7 +13,7 @@ COMMANDS = (  # in the order of ``rtsar --help``
      "a real instrument's raw data block (its instrument TOML) as a recording"),
     ("simulate", "files", "simulate the raw shots of a scene into a recording"),
     ("process", "files", "focus a recording through the streaming engine"),
-    ("quicklook", "files", "PNG of an image file (dB, axes in metres)"),
+    ("quicklook", "files", "PNG of an image file (dB; axes in km, m, mm or µm, by their span)"),
     ("run", "streaming",
      "live processing: the demo scene (default), a scene, or a serial instrument"),
     ("replay", "replay",

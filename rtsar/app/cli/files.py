@@ -298,6 +298,8 @@ def _write_heights(img: ImageWriter, strips) -> None:
 
 
 def cmd_quicklook(args) -> int:
+    if not args.dynamic_range_db > 0:  # before the image is read; named as the option
+        return die(f"--dynamic-range-db must be > 0, got {args.dynamic_range_db}")
     image, az, rg, attrs = read_image(args.image)
     spot = json.loads(attrs["spotlight"]) if "spotlight" in attrs else None
     title = Path(args.image).name
@@ -361,7 +363,8 @@ def add_parsers(sub) -> None:
     )
     s.add_argument(
         "recording",
-        help="recording from `rtsar simulate` (.h5), or a CPHD (.cphd) or SigMF (.sigmf-meta) "
+        help="recording from `rtsar simulate`, `import` or `run --record` (.h5), or a CPHD "
+        "(.cphd) or SigMF (.sigmf-meta) "
         'file (these need pip install "rtsar[formats]"; docs/pages/guide/recordings.md)',
     )
     s.add_argument("-o", "--output", required=True, help="image file to write (.h5)")
@@ -371,7 +374,7 @@ def add_parsers(sub) -> None:
     s = sub.add_parser(
         "quicklook",
         description="Write a PNG of an image file: |image| in dB relative to its peak, slant "
-        "range across, along track down, axes in metres.",
+        "range across, along track down, axes as lengths (km, m, mm or µm, by their span).",
     )
     s.add_argument("image", help="image file from `rtsar process` (.h5)")
     s.add_argument("-o", "--output", required=True, help="PNG to write")

@@ -37,6 +37,8 @@ def estimate_centroid(inst, shots: np.ndarray) -> DopplerEstimate:
 
 
 def cmd_import(args) -> int:
+    if args.micro_batch < 1:  # before the data is read
+        return die(f"--micro-batch must be an integer >= 1, got {args.micro_batch}")
     try:
         inst = read_instrument_file(args.instrument)
         if inst.replica_file is not None:
@@ -61,6 +63,7 @@ def cmd_import(args) -> int:
                 print(f"no Doppler centroid from the data: {exc}", file=sys.stderr)
         if inst.doppler_centroid_hz is not None and not args.estimate_doppler:
             f_dc, source = inst.doppler_centroid_hz, "the instrument file's"
+            warn_centroid_apart(f_dc, estimate, inst.prf_hz)
         elif estimate is not None:
             f_dc, source = estimate.centroid_hz, "estimated"
         else:
@@ -70,15 +73,20 @@ def cmd_import(args) -> int:
             )
         try:
             cfg = instrument_config(inst, f_dc, args.micro_batch)
-        except ValueError as exc:  # the parameters together: name the file
-            raise ValueError(f"{args.instrument}: {exc}") from None
+        except ValueError as exc:  # the parameters together: name the file and the centroid
+            raise ValueError(
+                f"{args.instrument}: with the Doppler centroid {f_dc:g} Hz ({source}; "
+                f"geometry.doppler_centroid_hz, --estimate-doppler): {exc}"
+            ) from None
         if inst.extra:  # [data] keys rtsar does not read: kept in the recording, said here
             kept = ", ".join(sorted(inst.extra))
             print(f"kept as provenance, not read: [data] {kept}", file=sys.stderr)
         if pulses < cfg.processor.aperture_pulses:
+            squint = math.degrees(math.asin(cfg.geometry.squint_sin))
             raise ValueError(
                 f"{inst.data_file}: {pulses} pulses, fewer than the aperture of "
-                f"{cfg.processor.aperture_pulses}: no line could be focused"
+                f"{cfg.processor.aperture_pulses} (a squint of {squint:.1f}° at the Doppler "
+                f"centroid {f_dc:g} Hz, {source}): no line could be focused"
             )
     except ValueError as exc:
         return die(str(exc))
@@ -99,11 +107,17 @@ def cmd_import(args) -> int:
     step, prf = g.along_track_step_m, g.prf_hz
     t_first = inst.first_pulse_time_s or 0.0
     with signals.deferred(), replace_when_complete(args.output) as tmp:
-        with RecordingWriter(tmp, cfg, None, chunk_pulses=p.micro_batch) as rec:
+        start = inst.collection_start or "unknown"  # never the import's clock
+        with RecordingWriter(tmp, cfg, None, p.micro_batch, start) as rec:
             for p0, x in _blocks(inst, dc, pulses):
                 signals.check()
                 nonfinite = ~np.isfinite(x).all(axis=1)
                 bad += int(nonfinite.sum())
+                if bad == pulses:  # nothing to image: the samples are read wrongly, or lost
+                    raise ValueError(
+                        f"{inst.data_file}: every pulse holds NaN/Inf samples: nothing to "
+                        "image (raw binary: check data.sample_type and data.byte_order)"
+                    )
                 x[nonfinite] = 0
                 idx = np.arange(p0, p0 + len(x))
                 rec.write(x.astype(np.complex64), idx, t_first + idx / prf, idx * step)
@@ -128,6 +142,20 @@ def cmd_import(args) -> int:
         f"{dt:.1f} s"
     )
     return 0
+
+
+def warn_centroid_apart(f_dc: float, estimate: DopplerEstimate | None, prf_hz: float) -> None:
+    """A warning where the instrument file's Doppler centroid is more than half a PRF from the
+    data's estimate: another ambiguity, or the sign wrong, focuses nothing."""
+    if estimate is None or abs(f_dc - estimate.centroid_hz) <= 0.5 * prf_hz:
+        return
+    print(
+        f"warning: the instrument file's Doppler centroid {f_dc:.1f} Hz is "
+        f"{(f_dc - estimate.centroid_hz) / prf_hz:+.1f} PRF from the data's estimate "
+        f"{estimate.centroid_hz:.1f} Hz (check its sign and ambiguity): it is used as given; "
+        "--estimate-doppler takes the data's",
+        file=sys.stderr,
+    )
 
 
 def _blocks(inst, dc: complex, pulses: int):

@@ -113,7 +113,8 @@ def add_parsers(sub) -> None:
     )
     s.add_argument(
         "recording",
-        help="recording from `rtsar simulate` (.h5), or a CPHD (.cphd) or SigMF (.sigmf-meta) "
+        help="recording from `rtsar simulate`, `import` or `run --record` (.h5), or a CPHD "
+        "(.cphd) or SigMF (.sigmf-meta) "
         'file (these need pip install "rtsar[formats]"; docs/pages/guide/recordings.md)',
     )
     s.add_argument(

@@ -26,12 +26,17 @@ Optional ``[data]`` keys: ``format`` (mat5, mat73, npy or raw; else told by the 
 ``.mat``, the header), ``axes`` ("pulse,sample", the default, or "sample,pulse" for an array
 stored transposed), ``agc_db_file`` (per-pulse receiver gain in dB, a float .npy); for raw binary
 (``.bin``, ``.dat``, ``.raw``): ``sample_type``, ``pulses``, ``samples_per_pulse``,
-``header_bytes`` (0) and ``byte_order`` ("little").  Every problem is a one-line ``ValueError``
-naming the TOML file and the key (and the data file where it is the data file's).
+``header_bytes`` (0) and ``byte_order`` ("little"); ``collection_start_utc`` (ISO 8601, the UTC
+of time_s = 0; without it the recording has no known start).  A key rtsar does not read is kept
+as provenance, unless it is within a letter or two of one it reads (a typo).  Every problem is a
+one-line ``ValueError`` naming the TOML file and the key (and the data file where it is the data
+file's).
 """
 
 from __future__ import annotations
 
+import datetime
+import difflib
 import math
 import sys
 from collections.abc import Iterator
@@ -39,6 +44,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from .timebase import parse_utc
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -51,7 +58,11 @@ GEOMETRY_KEYS = ("effective_velocity_m_per_s", "window_start_s")
 OPTIONAL_GEOMETRY = ("doppler_centroid_hz", "looking", "antenna_length_m", "first_pulse_time_s")
 FORMATS = ("mat5", "mat73", "npy", "raw")
 RAW_KEYS = ("sample_type", "pulses", "samples_per_pulse", "header_bytes", "byte_order")
-DATA_KEYS = ("file", "variable", "format", "axes", "agc_db_file", "first_pulse_time_s") + RAW_KEYS
+DATA_KEYS = (
+    ("file", "variable", "format", "axes", "agc_db_file", "first_pulse_time_s")
+    + ("collection_start_utc",)
+    + RAW_KEYS
+)
 SAMPLE_TYPES = {"cf32": "c8", "cf64": "c16", "ci16": "i2", "ci8": "i1", "cu8": "u1"}
 """Raw sample types and their NumPy codes: ``cf32``/``cf64`` complex, the others I, Q pairs."""
 CU8_OFFSET = 127.5
@@ -85,6 +96,8 @@ class InstrumentFile:
     """How the array is stored: "pulse,sample" (a row per pulse) or "sample,pulse"."""
     raw_layout: dict = field(default_factory=dict)
     """Raw binary only: sample_type, header_bytes, byte_order."""
+    collection_start: datetime.datetime | None = None
+    """The UTC of time_s = 0 (naive), where the file gives it."""
 
 
 class _Checker:
@@ -126,20 +139,39 @@ class _Checker:
         return value
 
     def file(self, section: str, table: dict, key: str) -> Path | None:
+        """A file the key names, relative to the instrument file's folder."""
         if key not in table:
             return None
         if not isinstance(table[key], str):
             raise self.fail(f"{section}.{key}", f"{table[key]!r}: a file name is needed")
-        found = self.path.parent / Path(table[key]).expanduser()
+        found = (self.path.parent / Path(table[key]).expanduser()).absolute()
+        if found.is_dir():
+            raise self.fail(f"{section}.{key}", f"{found}: a folder, not a file")
         if not found.is_file():
-            raise self.fail(f"{section}.{key}", f"{found}: no such file")
+            why = "relative to the instrument file's folder" * (not Path(table[key]).is_absolute())
+            raise self.fail(f"{section}.{key}", f"{found}: no such file {f'({why})' * bool(why)}")
         return found
+
+    def provenance(self, data: dict) -> dict:
+        """The [data] keys rtsar does not read (kept as provenance), but none a letter or two
+        from one it reads: ``byteorder`` for ``byte_order`` would read the samples wrongly."""
+        extra = {k: value for k, value in data.items() if k not in DATA_KEYS}
+        for key in extra:
+            near = difflib.get_close_matches(key, DATA_KEYS, n=1, cutoff=0.75)
+            if near:
+                raise self.fail(
+                    f"data.{key}",
+                    f"unknown key, close to {near[0]} (a typo?); [data] keys rtsar does not read "
+                    "are kept as provenance, but not one so close to a key it reads",
+                )
+        return extra
 
     def npy(self, key: str, file: Path) -> np.ndarray:
         try:
             return np.load(file, mmap_mode="r", allow_pickle=False)
         except (OSError, ValueError) as exc:
-            raise self.fail(key, f"{file}: unreadable as .npy: {exc}") from None
+            why = "pickled objects, not an array" if "allow_pickle" in str(exc) else exc
+            raise self.fail(key, f"{file}: unreadable as .npy: {why}") from None
 
     def raw_layout(self, data: dict) -> dict:
         kind, order = data.get("sample_type"), data.get("byte_order", "little")
@@ -313,8 +345,25 @@ def read_instrument_file(path) -> InstrumentFile:
             why = f"{g.dtype} {g.shape}: finite gains in dB, one per pulse ({shape[0]}), needed"
             raise check.fail("data.agc_db_file", f"{agc}: {why}")
     v["raw_layout"] = check.raw_layout(data) if fmt == "raw" else {}
-    v["extra"] = {k: value for k, value in data.items() if k not in DATA_KEYS}
+    v["extra"] = check.provenance(data)
+    v["collection_start"] = _collection_start(check, data)
     return InstrumentFile(path=path, **v)
+
+
+def _collection_start(check: _Checker, data: dict):
+    """``data.collection_start_utc`` (the UTC of time_s = 0) as a naive UTC datetime; None when
+    not given (the recording then has no known start, never the import's clock)."""
+    if "collection_start_utc" not in data:
+        return None
+    text = data["collection_start_utc"]
+    if isinstance(text, datetime.datetime):  # TOML's own date-time: an offset, or local
+        if text.utcoffset() is None:
+            raise check.fail("data.collection_start_utc", f"{text}: give its offset, e.g. Z")
+        return text.astimezone(datetime.timezone.utc).replace(tzinfo=None)
+    try:
+        return parse_utc(str(text), "the value")
+    except ValueError as exc:
+        raise check.fail("data.collection_start_utc", str(exc)) from None
 
 
 def _complex(x: np.ndarray, offset: float = 0.0) -> np.ndarray:
@@ -404,15 +453,14 @@ def iter_pulse_blocks(
 
 
 def dc_offset(inst: InstrumentFile, block_pulses: int = 256) -> complex:
-    """The mean of all finite samples as the file holds them (before any AGC), block by block.
-
-    Non-finite samples are left out (the importer counts them); 0 if no sample is finite.
-    """
+    """The mean of the samples as the file holds them (before any AGC), block by block, over
+    the pulses whose samples are all finite: those the importer keeps (it zeroes the others).
+    0 where no pulse is."""
     total, count = 0j, 0
     for _, x in _file_blocks(inst, block_pulses):
-        finite = np.isfinite(x)
-        total += complex(x[finite].sum())
-        count += int(finite.sum())
+        kept = x[np.isfinite(x).all(axis=1)]
+        total += complex(kept.sum())
+        count += kept.size
     return total / count if count else 0j
 
 

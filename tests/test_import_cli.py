@@ -221,3 +221,10 @@ def test_a_folder_or_a_missing_file_is_named_with_its_whole_path(tmp_path, capsy
     )
     assert main(["import", str(toml), "-o", str(tmp_path / "x.h5"), "--micro-batch", "0"]) == 2
     assert "--micro-batch must be an integer >= 1, got 0" in capsys.readouterr().err
+
+
+def test_a_missing_instrument_file_is_not_blamed_on_a_key(tmp_path, capsys):
+    """It said `inst.toml: file: cannot read: …`, which reads as the data.file key."""
+    assert main(["import", str(tmp_path / "none.toml"), "-o", str(tmp_path / "x.h5")]) == 2
+    err = capsys.readouterr().err
+    assert f"{tmp_path / 'none.toml'}: the instrument file cannot be read: No such file" in err

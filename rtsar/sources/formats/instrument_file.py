@@ -265,7 +265,8 @@ def read_instrument_file(path) -> InstrumentFile:
     try:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError) as exc:
-        raise check.fail("file", f"cannot read: {exc}") from None
+        why = getattr(exc, "strerror", None) or exc  # (not data.file: the TOML itself)
+        raise ValueError(f"{path}: the instrument file cannot be read: {why}") from None
     except tomllib.TOMLDecodeError as exc:
         raise check.fail("TOML syntax", str(exc)) from None
     for name in doc:

@@ -34,6 +34,7 @@ from ..scene.model import Scene, recorded_scene
 from ..sources.formats.foreign import telemetry_problem
 from ..sources.formats.timebase import format_utc, parse_utc, utc_now
 from .declared import check_read, read_checked, readable_rows, stored_rows
+from .h5_open import open_for_reading
 from .h5_output import H5Output, WriteFailed, is_write_error, reason
 from .name_claim import NameClaim
 from .partials import partial_prefix
@@ -334,18 +335,7 @@ def open_checked(path: str | Path, fmt: str) -> h5py.File:
     path = Path(path)
     if not path.exists():
         raise ValueError(f"{path}: no such file")
-    try:  # a damaged file: OSError, or RuntimeError where its superblock does not read
-        f = h5py.File(path, "r")
-    except (OSError, RuntimeError) as exc:
-        try:  # an image still being written by a live stream (crash-safe SWMR mode)
-            f = h5py.File(path, "r", swmr=True)
-        except (OSError, RuntimeError):
-            if "already open for write" in str(exc):  # a writer died before it closed the file
-                raise ValueError(
-                    f"{path}: its writer did not close it (killed?), and HDF5 refuses it until "
-                    f"`h5clear -s {path}` clears the writer's flag"
-                ) from None
-            raise ValueError(f"{path}: not an HDF5 file ({exc})") from None
+    f = open_for_reading(path)
     found = f.attrs.get("format")
     if found != fmt:
         f.close()

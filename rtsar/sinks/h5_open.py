@@ -1,0 +1,80 @@
+"""Opening an HDF5 file to read, whatever state its writer left it in.
+
+A complete file opens as it is.  A file a live stream is still writing (crash-safe SWMR mode,
+rtsar.sinks.h5_output) refuses a plain open ("already open for write", or a lock) and opens in
+SWMR mode.  A file shorter than its superblock says (HDF5's "truncated file") is either a
+writer's whose disk filled or who was killed mid-flush (its metadata whole, its last rows
+missing: rtsar.sinks.declared reads the rows it holds) or a copy cut short, whose metadata is
+missing: opened in SWMR mode, such a file's first metadata read retries inside HDF5 for over
+ten minutes, deaf to Ctrl-C and SIGTERM.  So a truncated file's metadata (every group and
+dataset, their attributes and chunk indexes) is first read by a child process with a time
+limit; where that does not finish, the file is refused in one line.  Anything else HDF5 cannot
+open is "not an HDF5 file".  Every refusal is a ValueError naming the file.
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+
+PROBE_LIMIT_S = 15.0  # the child's reads take about 0.5 s (mostly Python's start), or for ever
+
+_PROBE = """
+import sys, h5py
+def walk(group):
+    dict(group.attrs)
+    for name in group:
+        item = group[name]
+        if isinstance(item, h5py.Group):
+            walk(item)
+            continue
+        dict(item.attrs)
+        if item.chunks is not None:  # the chunk index: metadata, checksummed, retried
+            for i in range(item.id.get_num_chunks()):
+                item.id.get_chunk_info(i)
+with h5py.File(sys.argv[1], "r", swmr=True) as f:
+    walk(f)
+"""
+
+
+def open_for_reading(path: Path) -> h5py.File:
+    """``path`` opened read-only (SWMR where a writer holds it or left it short); ValueError,
+    one line, where it cannot be read."""
+    try:  # a damaged file: OSError, or RuntimeError where its superblock does not read
+        return h5py.File(path, "r")
+    except (OSError, RuntimeError) as exc:
+        first = str(exc)
+    cut = re.search(r"truncated file: eof = (\d+).*stored_eof = (\d+)", first)
+    if cut and not _metadata_reads(path):
+        held, whole = (int(n) for n in cut.groups())
+        raise ValueError(
+            f"{path}: truncated: it holds {held:,} of its {whole:,} bytes, its structure cut "
+            "off (a copy or a download cut short?)"
+        )
+    if not (cut or re.search("already open for write|unable to lock file", first)):
+        raise ValueError(f"{path}: not an HDF5 file ({first})")
+    try:  # an image still being written by a live stream (crash-safe SWMR mode)
+        return h5py.File(path, "r", swmr=True)
+    except (OSError, RuntimeError):  # a writer died before it closed the file
+        raise ValueError(
+            f"{path}: its writer did not close it (killed?), and HDF5 refuses it until "
+            f"`h5clear -s {path}` clears the writer's flag"
+        ) from None
+
+
+def _metadata_reads(path: Path) -> bool:
+    """Whether a child process reads all of ``path``'s metadata in SWMR mode within
+    PROBE_LIMIT_S (it is killed after)."""
+    try:
+        done = subprocess.run(
+            [sys.executable, "-c", _PROBE, str(path)],
+            capture_output=True,
+            timeout=PROBE_LIMIT_S,
+        )
+    except subprocess.TimeoutExpired:
+        return False
+    return done.returncode == 0

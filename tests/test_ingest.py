@@ -278,12 +278,21 @@ def test_a_recordings_flagged_lines_at_once_equal_the_streamed_ones():
             lo, hi = max(first + k - n - 6, 0), first + k - n + 1
             lo = max(lo, len(streamed))
             streamed += list(timing.lines(lo, np.zeros((hi - lo, 1))).flagged)
-    at_once = RecordedFlags(marked, n)
+    at_once = RecordedFlags(marked, n, pulses)
     for first in range(0, len(streamed), 50):  # other blocks than the streamed ones
         at_once.add(first, min(50, len(streamed) - first))
     want = [j for j in range(len(streamed)) if streamed[j]]
     got = [j for a, c in at_once.runs for j in range(a, a + c)]
     assert got == want and at_once.lines == len(want) > 0
+    # marked as the shots are read (process's zeroed NaN/Inf shots), each before its lines
+    as_read, as_read_done = RecordedFlags(None, n, pulses), 0
+    for first in range(0, pulses, 30):
+        as_read.mark(first, marked[first : first + 30])
+        lines_done = min(max(first + 30 - n + 1, 0), len(streamed))
+        if lines_done > as_read_done:
+            as_read.add(as_read_done, lines_done - as_read_done)
+            as_read_done = lines_done
+    assert as_read.runs == at_once.runs and as_read.lines == at_once.lines
     naive = [j for j in range(pulses - n + 1) if marked[j : j + n].any()]
     assert want == naive
 

@@ -20,30 +20,40 @@ from .strips import LineBlock, flag_runs, join_run
 class RecordedFlags:
     """The flagged lines of an image focused from a recording at once (``rtsar process``):
     line j sums pulses j … j + N - 1, and is flagged when one of them is (as
-    :meth:`LineTiming.lines` decides it while streaming).  ``add(first_line, count)`` for each
-    block of lines written, in order; ``runs``: the flagged lines as [first_line, count] runs
-    (adjacent blocks' runs merged), ``lines`` their number.  ``pulse_flagged``: bool [pulse]
-    (a recording's, 1 byte a pulse), None for a recording that flags nothing."""
+    :meth:`LineTiming.lines` decides it while streaming).  ``pulse_flagged``: bool [pulse], 1
+    byte a pulse (a recording's own flags; None: none yet), which ``mark`` may add to as the
+    shots are read (those zeroed for NaN/Inf), before the lines that hold them are added.
+    ``add(first_line, count)`` for each block of lines written, in order; ``runs``: the flagged
+    lines as [first_line, count] runs (adjacent blocks' runs merged), ``lines`` their number."""
 
-    def __init__(self, pulse_flagged: np.ndarray | None, aperture_pulses: int):
+    def __init__(self, pulse_flagged: np.ndarray | None, aperture_pulses: int, pulses: int):
         self.aperture = int(aperture_pulses)
-        self._marked = None  # flagged pulses before pulse p, p = 0 … P
-        if pulse_flagged is not None and np.any(pulse_flagged):
-            counts = np.cumsum(np.asarray(pulse_flagged, bool), dtype=np.int64)
-            self._marked = np.concatenate([[0], counts])
+        self.flagged = np.zeros(int(pulses), bool)
+        if pulse_flagged is not None:
+            self.flagged[:] = np.asarray(pulse_flagged, bool)
         self.runs: list[list[int]] = []
         self.lines = 0
 
+    def mark(self, first_pulse: int, flagged: np.ndarray) -> None:
+        """Pulses first_pulse … (``flagged``: bool, one a pulse) flagged besides the recording's."""
+        self.flagged[first_pulse : first_pulse + len(flagged)] |= flagged
+
     def add(self, first_line: int, count: int) -> None:
-        if self._marked is None or not count:
+        first, count = int(first_line), int(count)
+        if not count:
             return
-        total = len(self._marked) - 1
-        j = int(first_line) + np.arange(int(count))
-        low, high = np.clip(j, 0, total), np.clip(j + self.aperture, 0, total)
-        flagged = self._marked[high] > self._marked[low]
+        # flagged pulses before each pulse of the lines' apertures (first … first + count + N)
+        window = self.flagged[max(first, 0) : max(first + count + self.aperture - 1, 0)]
+        if not window.any():
+            return
+        before = np.concatenate([[0], np.cumsum(window, dtype=np.int64)])
+        j = np.arange(count) + first - max(first, 0)
+        low = np.clip(j, 0, len(window))
+        high = np.clip(j + self.aperture, 0, len(window))
+        flagged = before[high] > before[low]
         self.lines += int(flagged.sum())
-        for first, n in flag_runs(int(first_line), flagged):
-            join_run(self.runs, first, n)
+        for run_first, n in flag_runs(first, flagged):
+            join_run(self.runs, run_first, n)
 
 
 class LineTiming:

@@ -13,6 +13,7 @@ import numpy as np
 from ...lens import range_axis_m
 from ...lens.plan import make_plan
 from ...presets import PRESETS, preset
+from ...samples import nonfinite_rows
 from ...scene import load_scene
 from ...sinks.image_file import ImageWriter, read_heights, read_image
 from ...sinks.io import RecordingWriter, replace_when_complete
@@ -199,12 +200,13 @@ def cmd_process(args) -> int:
         if args.lens != "numpy":  # which lens runs, on which device, and why
             print(f"rtsar: lens: {why or eng.lens.choice}", file=sys.stderr)
         prog = Progress(rec.pulses, "process")
-        # A live recording's zero pulses (gaps, zeroed shots, shots not recorded): the lines
-        # whose aperture holds one are flagged, as the live run flagged them.
+        # A live recording's zero pulses (gaps, zeroed shots, shots not recorded), and shots
+        # holding NaN/Inf in any channel read (zeroed, every channel, as replay's ingest does):
+        # the lines whose aperture holds one are flagged, as a live run or a replay flags them.
         marked = getattr(rec, "pulse_flags", None)
         marked = None if marked is None else marked != 0
-        flags = RecordedFlags(marked, cfg.processor.aperture_pulses)
-        done = 0
+        flags = RecordedFlags(marked, cfg.processor.aperture_pulses, rec.pulses)
+        done = nonfinite = 0
         t0 = time.perf_counter()
         # The image goes to disk as it is focused (bounded memory), under a temporary name
         # until it is complete.
@@ -222,8 +224,14 @@ def cmd_process(args) -> int:
         ):
             for shots, aux in rec.batches_with_aux(cfg.processor.micro_batch, channels):
                 signals.check()
-                if marked is not None and marked[done : done + len(shots)].any():
-                    shots, aux = _zero_marked(marked[done : done + len(shots)], shots, aux)
+                bad = nonfinite_rows(shots)
+                for a in aux.values():
+                    bad |= nonfinite_rows(a)
+                nonfinite += int(bad.sum())
+                flags.mark(done, bad)
+                zeroed = flags.flagged[done : done + len(shots)]
+                if zeroed.any():
+                    shots, aux = _zero_marked(zeroed, shots, aux)
                 out = eng.push(shots, aux)
                 img.write(out.lines, eng.azimuth_m(out.first_line, len(out.lines)))
                 flags.add(out.first_line, len(out.lines))
@@ -236,7 +244,7 @@ def cmd_process(args) -> int:
             img.write(out.lines, eng.azimuth_m(out.first_line, len(out.lines)))
             flags.add(out.first_line, len(out.lines))
             extra = {}
-            if marked is not None:  # (as run -o writes them: rtsar.sinks.record)
+            if marked is not None or nonfinite:  # (as run -o writes them: rtsar.sinks.record)
                 extra["flagged_line_runs"] = json.dumps(flags.runs)
                 extra["flagged_lines"] = flags.lines
             if receivers:
@@ -248,7 +256,7 @@ def cmd_process(args) -> int:
                 extra["correction_counters"] = json.dumps(counted)
             img.close(
                 lens=eng.lens.backend,
-                nonfinite_pulses=eng.nonfinite_pulses,
+                nonfinite_pulses=nonfinite,
                 **processing_attrs(
                     cfg.processor.correlator,
                     chain.names if chain else (),
@@ -259,16 +267,13 @@ def cmd_process(args) -> int:
             )
         dt = time.perf_counter() - t0
         prog.done(done)
-    if eng.nonfinite_pulses:
-        print(
-            f"warning: {eng.nonfinite_pulses} of {done} shots held NaN/Inf and were zeroed",
-            file=sys.stderr,
-        )
+    if nonfinite:
+        print(f"warning: {nonfinite} of {done} shots held NaN/Inf and were zeroed", file=sys.stderr)
     if flags.lines:
         print(
             f"note: {flags.lines} lines flagged (flagged_line_runs): their aperture holds zero "
-            f"pulses of the recording ({int(marked.sum())} pulses: gaps, zeroed shots, shots "
-            "not recorded, pulse_flags)",
+            f"pulses ({int(flags.flagged.sum())}: the recording's gaps, zeroed shots and shots "
+            "not recorded, pulse_flags, and shots holding NaN/Inf)",
             file=sys.stderr,
         )
     if counted:

@@ -33,6 +33,7 @@ from ..params import Config, config_from_dict
 from ..scene.model import Scene, recorded_scene
 from ..sources.formats.foreign import telemetry_problem
 from ..sources.formats.timebase import format_utc, parse_utc, utc_now
+from ..sources.rows import Rows
 from .declared import check_read, read_checked, readable_rows, stored_rows
 from .h5_open import open_for_reading
 from .h5_output import H5Output, WriteFailed, is_write_error, reason
@@ -458,29 +459,3 @@ def _channels(f: h5py.File, pulses: int, cut_short: bool = False) -> dict:
             raise ValueError(f"channel {name!r} has {ds.shape[0]} shots for {pulses}")
         out[name] = ds if ds.shape[0] == pulses else Rows(ds, pulses)
     return out
-
-
-class Rows:
-    """``rows`` rows of a dataset from row ``first``, read like it (slices, ``[...]``): a live
-    recording cut short (its whole rows), the part a replay was asked for (--start)."""
-
-    def __init__(self, ds, rows: int, first: int = 0):
-        self._ds, self._first = ds, int(first)
-        self.shape = (int(rows), *ds.shape[1:])
-        self.dtype, self.ndim = ds.dtype, ds.ndim
-
-    def __len__(self) -> int:
-        return self.shape[0]
-
-    def __getitem__(self, key):
-        first, rest = (key[0], key[1:]) if isinstance(key, tuple) else (key, ())
-        if first is Ellipsis:
-            first, rest = slice(None), ((Ellipsis,) if rest else ())
-        if isinstance(first, slice):
-            start, stop, step = first.indices(len(self))
-            first = slice(start + self._first, stop + self._first, step)
-        elif not -len(self) <= int(first) < len(self):
-            raise IndexError(f"row {first} of {len(self)}")
-        else:
-            first = int(first) % len(self) + self._first
-        return self._ds[(first, *rest)]

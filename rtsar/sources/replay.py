@@ -12,9 +12,9 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from ..sinks.io import Rows
 from .base import ShotBatch, Source
 from .pacing import Pacer, next_release, release_chunk
+from .rows import Rows
 
 
 def parse_rate(text: str | float) -> float | None:
@@ -106,15 +106,16 @@ class ReplaySource(Source):
         words = _rate_words(rate)
         if count < total:
             words += f"; shots {first:,} … {first + count - 1:,} of {total:,}"
+        part_of = (lambda a: a) if count == total else (lambda a: Rows(a, count, first))
         source = cls(
-            Rows(recording.shots, count, first),
+            part_of(recording.shots),
             recording.pulse_index[part],
             recording.time_s[part],
             recording.config.geometry.prf_hz,
             rate,
             batch,
             description=f"replay of {recording.path} ({words})",
-            aux={name: Rows(recording.channels[name], count, first) for name in channels},
+            aux={name: part_of(recording.channels[name]) for name in channels},
             flagged=None if flags is None else flags[part] != 0,
         )
         source.collection_start = getattr(recording, "collection_start", None)

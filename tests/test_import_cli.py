@@ -152,21 +152,28 @@ def test_a_data_key_a_letter_from_one_rtsar_reads_is_refused_not_kept(tmp_path, 
         toml.write_text(toml.read_text() + f"{typo} = 1\n")
         assert main(["import", str(toml), "-o", str(tmp_path / "x.h5")]) == 2
         err = capsys.readouterr().err
-        assert f"data.{typo}: unknown key, close to {meant}" in err
+        assert f"data.{typo}: unknown key, a letter or two from {meant}" in err
         assert not (tmp_path / "x.h5").exists()
+    # provenance three letters or more from a key rtsar reads is kept (a cold review: a
+    # similarity ratio refused collection_end_utc, last_pulse_time_s, sample_rate)
+    for kept in ("collection_end_utc", "last_pulse_time_s", "sample_rate", "encoding"):
+        toml = _instrument(tmp_path, _noise())
+        toml.write_text(toml.read_text() + f'{kept} = "x"\n')
+        assert main(["import", str(toml), "-o", str(tmp_path / f"{kept}.h5")]) == 0
+        said = [x for x in capsys.readouterr().err.splitlines() if "kept as provenance" in x]
+        assert kept in said[0].split("[data] ")[1].split(", ")
 
 
 def test_data_whose_every_pulse_is_nan_is_refused_and_a_few_are_counted(tmp_path, capsys):
     bad = _noise()
     bad[:, 3] = np.nan
-    toml = _instrument(tmp_path, bad)
-    assert main(["import", str(toml), "-o", str(tmp_path / "x.h5")]) == 2
-    assert "every pulse holds NaN/Inf samples: nothing to image" in capsys.readouterr().err
-    assert not (tmp_path / "x.h5").exists()
+    for doppler in ("doppler_centroid_hz = 0.0", ""):  # said first, whether the file gives it
+        toml = _instrument(tmp_path, bad, doppler=doppler)
+        assert main(["import", str(toml), "-o", str(tmp_path / "x.h5")]) == 2
+        assert "every pulse holds NaN/Inf samples: nothing to image" in capsys.readouterr().err
+        assert not (tmp_path / "x.h5").exists()
     some = _noise(dc=0.25 - 0.5j)
     some[:7, 3] = np.inf
-    some[7, 5] = 1e30  # finite, in a pulse the import keeps
-    some[7, 5] = 0.25 - 0.5j
     toml = _instrument(tmp_path, some)
     assert main(["import", str(toml), "-o", str(tmp_path / "y.h5")]) == 0
     out = capsys.readouterr()

@@ -420,3 +420,20 @@ def test_2d_islr_of_a_finely_sampled_azimuth_axis_upsamples_range(tmp_path):
     m, t = sinc_fractions(10.0)
     islr_2d = 10 * math.log10((t * t - m * m) / (m * m))  # -7.0 dB
     assert json.loads(out.read_text())["points"][0]["islr_db"] == pytest.approx(islr_2d, abs=0.15)
+
+
+def test_an_edge_beyond_the_cuts_reach_is_not_noted(tmp_path):
+    """A new user's review: `the range cut ends at the image edge 28.8 IRWs from the peak (of
+    ±12)`: the chip's least size (±32 pixels) is more than ±12 IRWs of a coarsely sampled axis,
+    and the note compared the edge with the chip, not with the cut's reach."""
+    cfg = preset("tiny")
+    rho_r, rho_a = cfg.waveform.range_resolution_m, cfg.azimuth_resolution_m(2000.0)
+    az = np.arange(-160, 161) * 0.8 * rho_a
+    rg = 1900.0 + np.arange(300) * 0.75 * rho_r  # an IRW about 1.3 pixels: ±12 IRWs ~ 16 px
+    near_edge = rg[24]  # 24 pixels from the first column: ~19 IRWs, within the chip's 32
+    path = tmp_path / "edge.h5"
+    write_image(path, sinc_image([(0.0, near_edge, 1.0)], rho_a, rho_r, az, rg), az, rg, cfg)
+    out = tmp_path / "m.json"
+    assert main(["measure", str(path), "--json", str(out)]) == 0
+    (notes,) = json.loads(out.read_text())["notes"]
+    assert not any("range cut ends at the image edge" in n for n in notes), notes

@@ -72,8 +72,12 @@ def test_a_part_gives_the_whole_replays_lines_of_the_apertures_it_holds(
 def test_a_part_outside_the_recording_is_refused_in_one_line(recording, capsys):
     folder, rec = recording
     for extra, said in (
-        (["--start", "1.0"], "--start 1 s is at or past the recording's end: it holds 500 shots"),
+        (["--start", "1.0"], "--start 1 s is shot 500, past the recording's last: it holds 500"),
+        (["--start", "0.9991"], "0.9991 s is shot 500, past"),  # (< 1 s: rounded to shot 500)
         (["--duration", "0.0005"], "--duration 0.0005 s is less than one shot at 500 Hz"),
+        (["--duration", "0.1"], "the part holds 50 shots, fewer than one aperture (64)"),
+        (["--duration", "inf"], "--duration must be a finite number of seconds, got inf"),
+        (["--start", "inf"], "--start must be a finite number of seconds, got inf"),
         (["--duration", "0"], "must be > 0 seconds"),
         (["--start", "-1"], "must be >= 0 seconds"),
     ):
@@ -85,12 +89,53 @@ def test_a_part_outside_the_recording_is_refused_in_one_line(recording, capsys):
         assert said in capsys.readouterr().err
 
 
+def test_a_parts_collection_start_is_its_first_shots(recording, capsys):
+    """A cold review: a part's image kept the whole recording's collection start, so its
+    SICD timing was early by --start."""
+    import datetime
+
+    from rtsar.sinks.io import open_recording
+
+    folder, rec = recording
+    with open_recording(rec) as r:
+        whole_start = r.collection_start
+    _, _, _, attrs = _replay(folder, rec, "part-start.h5", "--start", "0.3")
+    part_start = datetime.datetime.fromisoformat(attrs["collection_start_utc"].rstrip("Z"))
+    assert part_start - whole_start == datetime.timedelta(seconds=150 / PRF_HZ)
+    capsys.readouterr()
+
+
+def test_a_part_of_a_cphd_recording_replays(recording, tmp_path, capsys):
+    """A cold review: the window read a CPHD channel's shots with a tuple key, which they
+    refuse (a traceback)."""
+    pytest.importorskip("sarkit")
+    folder, rec = recording
+    cphd = tmp_path / "rec.cphd"
+    assert main(["export", rec, "--cphd", str(cphd)]) == 0
+    _, whole_az, _, _ = _replay(folder, rec, "for-cphd.h5", "--start", "0.3")
+    part, part_az, _, _ = _replay(tmp_path, str(cphd), "cphd-part.h5", "--start", "0.3")
+    np.testing.assert_allclose(part_az, whole_az, atol=1e-9)
+    assert len(part_az) == 350 - APERTURE + 1 and np.abs(part).max() > 0
+    capsys.readouterr()
+
+
+def test_run_refuses_a_duration_that_is_not_finite(capsys):
+    for value in ("inf", "nan"):
+        assert main(["run", "--duration", value]) == 2
+        assert f"--duration must be a finite number of seconds > 0, got {value}" in (
+            capsys.readouterr().err
+        )
+
+
 def test_the_part_in_shots():
     assert replayed_part(0.0, None, 500.0, 500) == (0, 500)
     assert replayed_part(0.3, 0.5, 500.0, 500) == (150, 250)
     assert replayed_part(0.9, 5.0, 500.0, 500) == (450, 50)  # to the end, not beyond
-    with pytest.raises(ValueError, match="at or past the recording's end"):
+    with pytest.raises(ValueError, match="past the recording's last"):
         replayed_part(0.999, None, 500.0, 500)
+    with pytest.raises(ValueError, match="fewer than one aperture"):
+        replayed_part(0.9, None, 500.0, 500, 64)  # a part of 50 shots
+    assert replayed_part(0.0, None, 500.0, 50, 64) == (0, 50)  # the whole: as it is
 
 
 def test_ctrl_c_before_the_stream_starts_is_said_and_writes_nothing(recording, monkeypatch, capsys):

@@ -104,7 +104,8 @@ def _edges(peak, chip, region, irw_px, shape, chip_irw, islr_extent):
     out = []
     for a in (0, 1):
         room = min(peak[a], shape[a] - 1 - peak[a])  # pixels to the nearer edge
-        if room < chip[a]:
+        # the cut's reach: ±chip_irw IRWs, within its chip (which has a least size in pixels)
+        if room < min(chip[a], chip_irw * irw_px[a]):
             out.append(
                 f"the {AXES[a]} cut ends at the image edge {room / irw_px[a]:.1f} IRWs from the "
                 f"peak (of ±{chip_irw:g}): its PSLR sees only that far"

@@ -14,7 +14,9 @@ open is "not an HDF5 file".  Every refusal is a ValueError naming the file.
 
 from __future__ import annotations
 
+import ctypes
 import re
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -33,9 +35,8 @@ def walk(group):
             walk(item)
             continue
         dict(item.attrs)
-        if item.chunks is not None:  # the chunk index: metadata, checksummed, retried
-            for i in range(item.id.get_num_chunks()):
-                item.id.get_chunk_info(i)
+        if item.chunks is not None:  # the chunk index (metadata, checksummed), walked once
+            item.id.chunk_iter(lambda info: None)
 with h5py.File(sys.argv[1], "r", swmr=True) as f:
     walk(f)
 """
@@ -49,12 +50,10 @@ def open_for_reading(path: Path) -> h5py.File:
     except (OSError, RuntimeError) as exc:
         first = str(exc)
     cut = re.search(r"truncated file: eof = (\d+).*stored_eof = (\d+)", first)
-    if cut and not _metadata_reads(path):
+    why = _unreadable_structure(path) if cut else None
+    if why:
         held, whole = (int(n) for n in cut.groups())
-        raise ValueError(
-            f"{path}: truncated: it holds {held:,} of its {whole:,} bytes, its structure cut "
-            "off (a copy or a download cut short?)"
-        )
+        raise ValueError(f"{path}: truncated: it holds {held:,} of its {whole:,} bytes, {why}")
     if not (cut or re.search("already open for write|unable to lock file", first)):
         raise ValueError(f"{path}: not an HDF5 file ({first})")
     try:  # an image still being written by a live stream (crash-safe SWMR mode)
@@ -66,15 +65,30 @@ def open_for_reading(path: Path) -> h5py.File:
         ) from None
 
 
-def _metadata_reads(path: Path) -> bool:
-    """Whether a child process reads all of ``path``'s metadata in SWMR mode within
-    PROBE_LIMIT_S (it is killed after)."""
+def _unreadable_structure(path: Path) -> str | None:
+    """Why a child process could not read all of ``path``'s metadata in SWMR mode (None: it
+    could).  The child runs isolated (``-I``: no folder of the caller's on its path), dies with
+    this process (Linux), and is killed after PROBE_LIMIT_S."""
     try:
         done = subprocess.run(
-            [sys.executable, "-c", _PROBE, str(path)],
+            [sys.executable, "-I", "-c", _PROBE, str(path)],
             capture_output=True,
+            text=True,
             timeout=PROBE_LIMIT_S,
+            preexec_fn=_die_with_parent if sys.platform == "linux" else None,
         )
     except subprocess.TimeoutExpired:
-        return False
-    return done.returncode == 0
+        return (
+            f"its structure cut off: its reads did not end in {PROBE_LIMIT_S:g} s (a copy or a "
+            "download cut short?)"
+        )
+    if done.returncode == 0:
+        return None
+    said = (done.stderr.strip().splitlines() or ["no message"])[-1]
+    return f"its structure unreadable ({said}; a copy or a download cut short?)"
+
+
+def _die_with_parent() -> None:
+    """In the child, before it runs: killed (SIGKILL) when its parent dies, even by SIGKILL,
+    so that no probe spins on in HDF5's retries (Linux's PR_SET_PDEATHSIG)."""
+    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG = 1

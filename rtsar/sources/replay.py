@@ -13,6 +13,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from .base import ShotBatch, Source
+from .formats.timebase import shifted
 from .pacing import Pacer, next_release, release_chunk
 from .rows import Rows
 
@@ -118,7 +119,10 @@ class ReplaySource(Source):
             aux={name: part_of(recording.channels[name]) for name in channels},
             flagged=None if flags is None else flags[part] != 0,
         )
-        source.collection_start = getattr(recording, "collection_start", None)
+        start = getattr(recording, "collection_start", None)  # the UTC of time_s = 0
+        if start is not None and first:  # a part: the stream's pulse 0 is shot ``first``
+            start = shifted(start, recording.time_s[first] - recording.time_s[0])
+        source.collection_start = start
         return source
 
     def aux_channels(self) -> tuple[str, ...]:

@@ -4,6 +4,8 @@ read."""
 
 from __future__ import annotations
 
+import numpy as np
+
 
 class Rows:
     """``rows`` rows of a dataset from row ``first``, read like it (slices, ``[...]``): a live
@@ -19,13 +21,20 @@ class Rows:
 
     def __getitem__(self, key):
         first, rest = (key[0], key[1:]) if isinstance(key, tuple) else (key, ())
-        if first is Ellipsis:
-            first, rest = slice(None), ((Ellipsis,) if rest else ())
+        if first is Ellipsis:  # (``[..., k]``: every row, the Ellipsis kept for the rest)
+            first, rest = slice(None), ((Ellipsis, *rest) if rest else ())
         if isinstance(first, slice):
-            start, stop, step = first.indices(len(self))
-            first = slice(start + self._first, stop + self._first, step)
+            rows = range(len(self))[first]  # the rows asked for, any step, within the window
+            if len(rows) and rows.step < 0:  # read forwards (h5py's slices), then reversed
+                forwards = self[(slice(rows[-1], rows[0] + 1, -rows.step), *rest)]
+                return np.asarray(forwards)[::-1]
+            lo = rows[0] if len(rows) else 0
+            first = slice(lo + self._first, lo + len(rows) * rows.step + self._first, rows.step)
+            if not len(rows):
+                first = slice(self._first, self._first)
         elif not -len(self) <= int(first) < len(self):
             raise IndexError(f"row {first} of {len(self)}")
         else:
             first = int(first) % len(self) + self._first
-        return self._ds[(first, *rest)]
+        # a bare slice where nothing follows: a CPHD channel's shots take no tuple
+        return self._ds[(first, *rest) if rest else first]

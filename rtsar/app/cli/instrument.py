@@ -17,7 +17,11 @@ from ...lens import make_lens, make_plan
 from ...params import C_M_PER_S
 from ...sinks.io import RecordingWriter, replace_when_complete
 from ...sources.formats.instrument_config import instrument_config
-from ...sources.formats.instrument_file import dc_offset, iter_pulse_blocks, read_instrument_file
+from ...sources.formats.instrument_file import (
+    dc_and_kept_pulses,
+    iter_pulse_blocks,
+    read_instrument_file,
+)
 from .. import signals
 from ..progress import Progress
 from .options import die
@@ -51,7 +55,12 @@ def cmd_import(args) -> int:
             f"{inst.data_file.name}: {pulses} pulses × {samples} samples ({inst.data_format})",
             file=sys.stderr,
         )
-        dc = dc_offset(inst, IMPORT_BLOCK_PULSES)
+        dc, kept = dc_and_kept_pulses(inst, IMPORT_BLOCK_PULSES)
+        if not kept:  # nothing to image, nor to estimate from: said before anything else
+            raise ValueError(
+                f"{inst.data_file}: every pulse holds NaN/Inf samples: nothing to image (raw "
+                "binary: check data.sample_type and data.byte_order)"
+            )
         head = np.concatenate([x for _, x in _blocks(inst, dc, ESTIMATE_PULSES)])
         head[~np.isfinite(head).all(axis=1)] = 0
         estimate = None
@@ -113,11 +122,6 @@ def cmd_import(args) -> int:
                 signals.check()
                 nonfinite = ~np.isfinite(x).all(axis=1)
                 bad += int(nonfinite.sum())
-                if bad == pulses:  # nothing to image: the samples are read wrongly, or lost
-                    raise ValueError(
-                        f"{inst.data_file}: every pulse holds NaN/Inf samples: nothing to "
-                        "image (raw binary: check data.sample_type and data.byte_order)"
-                    )
                 x[nonfinite] = 0
                 idx = np.arange(p0, p0 + len(x))
                 rec.write(x.astype(np.complex64), idx, t_first + idx / prf, idx * step)

@@ -4,6 +4,8 @@ a built-in scene simulated once, then replayed with height strips)."""
 
 from __future__ import annotations
 
+import math
+
 from ... import __version__
 from ...lens.cache import cache_dir  # $RTSAR_CACHE_DIR, else ~/.cache/rtsar
 from ...scene import load_scene
@@ -27,19 +29,30 @@ from .options import (
 from .run_options import add_wait_subscribers, positive_seconds, seconds_at_least_zero
 
 
-def replayed_part(start_s: float, duration_s: float | None, prf_hz: float, shots: int):
+def replayed_part(
+    start_s: float, duration_s: float | None, prf_hz: float, shots: int, aperture: int = 1
+):
     """(first shot, shots) of ``--start`` and ``--duration``, seconds of the recording at its
     PRF (shot n is recorded at n / PRF), rounded to whole shots; ValueError naming the option
-    for a part that holds no shot."""
+    for a part that is not finite, holds no shot, or (a part, not the whole) fewer than one
+    ``aperture``: no line would be focused."""
+    for option, seconds in (("--start", start_s), ("--duration", duration_s)):
+        if seconds is not None and not math.isfinite(seconds):
+            raise ValueError(f"{option} must be a finite number of seconds, got {seconds}")
     first = round(start_s * prf_hz)
     if first >= shots:
         raise ValueError(
-            f"--start {start_s:g} s is at or past the recording's end: it holds {shots:,} shots, "
-            f"{shots / prf_hz:.6g} s at its {prf_hz:g} Hz"
+            f"--start {start_s:g} s is shot {first:,}, past the recording's last: it holds "
+            f"{shots:,} shots, the last at {(shots - 1) / prf_hz:.6g} s at its {prf_hz:g} Hz"
         )
     count = shots - first if duration_s is None else min(round(duration_s * prf_hz), shots - first)
     if count < 1:
         raise ValueError(f"--duration {duration_s:g} s is less than one shot at {prf_hz:g} Hz")
+    if count < min(aperture, shots):
+        raise ValueError(
+            f"--start/--duration: the part holds {count:,} shots, fewer than one aperture "
+            f"({aperture:,}): no line would be focused"
+        )
     return first, count
 
 
@@ -54,6 +67,7 @@ def cmd_replay(args) -> int:
                 getattr(args, "duration", None),
                 cfg.geometry.prf_hz,
                 len(rec.pulse_index),
+                cfg.processor.aperture_pulses,
             )
         except ValueError as exc:
             return die(f"{args.recording}: {exc}")

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import tempfile
@@ -91,8 +92,8 @@ def warn_slow_first_line(scene, name, args=None) -> None:
 
 
 def cmd_run(args) -> int:
-    if args.duration is not None and args.duration <= 0:
-        return die(f"--duration must be > 0 seconds, got {args.duration}")
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        return die(f"--duration must be a finite number of seconds > 0, got {args.duration}")
     if args.connect_timeout is not None and not args.serial:
         return die(
             "--connect-timeout is for --serial (a ZeroMQ source connects when the "
@@ -182,6 +183,13 @@ def cmd_run(args) -> int:
     warn_slow_first_line(scene, args.scene or scene.name, args)
     pulses = None if args.duration is None else int(args.duration * scene.config.geometry.prf_hz)
     source = SimSource(scene, pulses, warm_from=args.scene or DEMO_SCENE, separate=True)
+    if pulses is not None and pulses > source.total:  # the scene ends first: said, not hidden
+        prf_hz = scene.config.geometry.prf_hz
+        print(
+            f"rtsar: --duration {args.duration:g} s is longer than the scene: the run ends with "
+            f"it, after {source.total:,} pulses ({source.total / prf_hz:g} s)",
+            flush=True,
+        )
     return run_stream(
         scene.config,
         source,

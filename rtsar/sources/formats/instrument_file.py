@@ -36,7 +36,6 @@ file's).
 from __future__ import annotations
 
 import datetime
-import difflib
 import math
 import sys
 from collections.abc import Iterator
@@ -157,12 +156,12 @@ class _Checker:
         from one it reads: ``byteorder`` for ``byte_order`` would read the samples wrongly."""
         extra = {k: value for k, value in data.items() if k not in DATA_KEYS}
         for key in extra:
-            near = difflib.get_close_matches(key, DATA_KEYS, n=1, cutoff=0.75)
+            near = [k for k in DATA_KEYS if _edits(key, k) <= (2 if len(k) >= 6 else 1)]
             if near:
                 raise self.fail(
                     f"data.{key}",
-                    f"unknown key, close to {near[0]} (a typo?); [data] keys rtsar does not read "
-                    "are kept as provenance, but not one so close to a key it reads",
+                    f"unknown key, a letter or two from {near[0]} (a typo?); [data] keys rtsar "
+                    "does not read are kept as provenance, but not one so close to a key it reads",
                 )
         return extra
 
@@ -181,6 +180,20 @@ class _Checker:
             raise self.fail("data.byte_order", f"{order!r}: little or big")
         header = self.integer(data, "header_bytes", 0, 0)
         return {"sample_type": kind, "header_bytes": header, "byte_order": order}
+
+
+def _edits(a: str, b: str) -> int:
+    """The fewest single-letter insertions, deletions, substitutions or swaps of two adjacent
+    letters that turn ``a`` into ``b`` (optimal string alignment distance)."""
+    d = [[i + j if i * j == 0 else 0 for j in range(len(b) + 1)] for i in range(len(a) + 1)]
+    for i in range(1, len(a) + 1):
+        for j in range(1, len(b) + 1):
+            d[i][j] = min(
+                d[i - 1][j] + 1, d[i][j - 1] + 1, d[i - 1][j - 1] + (a[i - 1] != b[j - 1])
+            )
+            if i > 1 and j > 1 and a[i - 1] == b[j - 2] and a[i - 2] == b[j - 1]:
+                d[i][j] = min(d[i][j], d[i - 2][j - 2] + 1)
+    return d[len(a)][len(b)]
 
 
 def _data_format(check: _Checker, data: dict, file: Path) -> str:
@@ -457,12 +470,18 @@ def dc_offset(inst: InstrumentFile, block_pulses: int = 256) -> complex:
     """The mean of the samples as the file holds them (before any AGC), block by block, over
     the pulses whose samples are all finite: those the importer keeps (it zeroes the others).
     0 where no pulse is."""
-    total, count = 0j, 0
+    return dc_and_kept_pulses(inst, block_pulses)[0]
+
+
+def dc_and_kept_pulses(inst: InstrumentFile, block_pulses: int = 256) -> tuple[complex, int]:
+    """(:func:`dc_offset`, the number of pulses whose samples are all finite), in one pass."""
+    total, count, kept_pulses = 0j, 0, 0
     for _, x in _file_blocks(inst, block_pulses):
         kept = x[np.isfinite(x).all(axis=1)]
         total += complex(kept.sum())
         count += kept.size
-    return total / count if count else 0j
+        kept_pulses += len(kept)
+    return (total / count if count else 0j), kept_pulses
 
 
 def load_replica(inst: InstrumentFile) -> np.ndarray | None:

@@ -341,3 +341,31 @@ def test_a_wildcard_bind_prints_an_address_a_browser_can_open():
     assert page_url("0.0.0.0", 8080) == f"http://{socket.gethostname()}:8080/"
     assert page_url("127.0.0.1", 81) == "http://127.0.0.1:81/"
     assert page_url("::1", 81) == "http://[::1]:81/"
+
+
+@pytest.mark.parametrize("signals_sent", [("SIGINT", "SIGINT"), ("SIGTERM", "SIGINT")])
+def test_two_signals_in_a_row_end_the_page_in_two_lines(tmp_path, signals_sent):
+    """A new user's review: `timeout -s INT` (which may signal twice) left 79 lines of asyncio
+    tracebacks in 2 of 25 stops; the second signal landed while the server stopped.  A signal
+    now only asks the serve loop to end."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    args = [sys.executable, "-m", "rtsar", "view", "--http", "0"]
+    args += ["--endpoint", f"ipc://{tmp_path}/none"]
+    view = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert "shows the strips of" in view.stdout.readline()
+        for name in signals_sent:
+            os.kill(view.pid, getattr(signal, name))
+            time.sleep(0.02)
+        out, _ = view.communicate(timeout=30)
+    finally:
+        view.kill()
+    first = signals_sent[0]
+    assert view.returncode == 128 + getattr(signal, first)
+    said = "view: interrupted" if first == "SIGINT" else f"view: stopped by {first}"
+    assert out.strip().splitlines() == [said], out

@@ -25,6 +25,7 @@ import asyncio
 import contextlib
 import math
 import secrets
+import signal
 import socket
 import struct
 import sys
@@ -422,6 +423,9 @@ def serve(
     :class:`ViewServer`."""
 
     async def main() -> int:
+        # A signal only asks the serve loop to end: one raised at any point of the loop (a
+        # second Ctrl-C while the server stops) left asyncio tracebacks behind.
+        stopped = _ask_to_stop_on_signals(asyncio.get_running_loop())
         server = ViewServer(
             endpoint,
             host,
@@ -438,12 +442,15 @@ def serve(
         where = " (all interfaces: this machine's name or address)" * (host in WILDCARDS)
         say(f"view: {url} shows the strips of {endpoint}{where} (Ctrl-C to stop)")
         try:
-            while server.failure is None:
-                await asyncio.sleep(0.5)
+            while server.failure is None and not stopped:
+                await asyncio.sleep(0.1)
+            if stopped:
+                raise _signal_exception(stopped[0])
             say(f"view: the subscriber failed: {server.failure}")
             return 1
         finally:
             await server.stop()
+            _restore_signals(asyncio.get_running_loop())
             if server.refused or server.dropped:  # the lines held back by Said, counted
                 say(
                     f"view: {server.refused} request(s) refused (origin, token), "
@@ -455,3 +462,27 @@ def serve(
     except KeyboardInterrupt as exc:  # 130 for Ctrl-C, 128 + N for a signal: as every command
         say(f"view: {signals.describe(exc)}")
         return signals.exit_status(exc)
+
+
+def _ask_to_stop_on_signals(loop) -> list[int]:
+    """SIGINT, SIGTERM and SIGHUP noted in the list returned (the loop's own handlers, where
+    the platform has them), not raised: the serve loop ends at its next step."""
+    stopped: list[int] = []
+    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
+        with contextlib.suppress(AttributeError, NotImplementedError, RuntimeError, ValueError):
+            loop.add_signal_handler(getattr(signal, name), stopped.append, getattr(signal, name))
+    return stopped
+
+
+def _restore_signals(loop) -> None:
+    """The loop's handlers removed (asyncio would leave the system's defaults: a signal after
+    it killed the process) and rtsar's put back (rtsar.app.signals)."""
+    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
+        with contextlib.suppress(AttributeError, NotImplementedError, RuntimeError, ValueError):
+            loop.remove_signal_handler(getattr(signal, name))
+    signals.install()
+
+
+def _signal_exception(signum: int) -> KeyboardInterrupt:
+    """What a command's signal handler raises for ``signum`` (rtsar.app.signals)."""
+    return KeyboardInterrupt() if signum == signal.SIGINT else signals.Terminated(signum)

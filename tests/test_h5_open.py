@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -133,3 +134,24 @@ def test_a_disk_full_file_of_many_chunks_opens_at_once(tmp_path):
     assert done.returncode == 0, done.stderr
     assert int(done.stdout) == 12_000 * 16
     assert time.perf_counter() - t0 < 10  # the probe's own limit is 15 s
+
+
+def test_the_probe_finds_h5py_where_its_caller_found_it(tmp_path):
+    """A cold review: run isolated (-I), the probe ignored PYTHONPATH and could not import
+    h5py where the caller found it only there (an HPC module system): a disk-full file whose
+    structure is whole was refused.  The child now takes the caller's own path."""
+    import sysconfig
+
+    path = tmp_path / "short.h5"
+    _killed_writers_file(path, 4096, 40)
+    os.truncate(path, path.stat().st_size - 4096)
+    base = getattr(sys, "_base_executable", sys.executable)  # the interpreter, not the venv's
+    found = os.pathsep.join([sysconfig.get_paths()["purelib"], str(Path(__file__).parents[1])])
+    code = "from pathlib import Path; from rtsar.sinks.h5_open import open_for_reading as o; "
+    code += f"print(o(Path({str(path)!r}))['x'].shape[0])"
+    env = {**os.environ, "PYTHONPATH": found}
+    done = subprocess.run(
+        [base, "-c", code], capture_output=True, text=True, timeout=LIMIT_S, env=env
+    )
+    assert done.returncode == 0, done.stderr
+    assert int(done.stdout) > 0

@@ -78,6 +78,7 @@ def test_a_part_outside_the_recording_is_refused_in_one_line(recording, capsys):
         (["--duration", "0.1"], "the part holds 50 shots, fewer than one aperture (64)"),
         (["--duration", "inf"], "--duration must be a finite number of seconds, got inf"),
         (["--start", "inf"], "--start must be a finite number of seconds, got inf"),
+        (["--start", "1e307"], "--start 1e+307 s is more shots than any recording holds"),
         (["--duration", "0"], "must be > 0 seconds"),
         (["--start", "-1"], "must be >= 0 seconds"),
     ):

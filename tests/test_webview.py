@@ -369,3 +369,28 @@ def test_two_signals_in_a_row_end_the_page_in_two_lines(tmp_path, signals_sent):
     assert view.returncode == 128 + getattr(signal, first)
     said = "view: interrupted" if first == "SIGINT" else f"view: stopped by {first}"
     assert out.strip().splitlines() == [said], out
+
+
+def test_a_page_that_cannot_be_served_leaves_rtsars_signal_handlers(capsys):
+    """A cold review: where the port was taken, the loop's signal handlers were added and never
+    removed, and asyncio left the system's defaults (SIGTERM then killed without a word)."""
+    import signal
+    import socket
+
+    from rtsar.app import signals
+    from rtsar.app.webview.server import serve
+
+    before = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    taken = socket.socket()
+    try:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        signals.install()
+        with pytest.raises(OSError, match="cannot serve on"):
+            serve("ipc:///tmp/rtsar-none", "127.0.0.1", taken.getsockname()[1], 64, 50.0)
+        for signum in before:
+            assert signal.getsignal(signum) is signals._raise, signum
+    finally:
+        taken.close()
+        for signum, handler in before.items():
+            signal.signal(signum, handler)

@@ -15,6 +15,7 @@ open is "not an HDF5 file".  Every refusal is a ValueError naming the file.
 from __future__ import annotations
 
 import ctypes
+import json
 import re
 import signal
 import subprocess
@@ -26,7 +27,9 @@ import h5py
 PROBE_LIMIT_S = 15.0  # the child's reads take about 0.5 s (mostly Python's start), or for ever
 
 _PROBE = """
-import sys, h5py
+import json, sys
+sys.path[:] = json.loads(sys.argv[2])  # the caller's own path: not this folder, as -c puts first
+import h5py
 def walk(group):
     dict(group.attrs)
     for name in group:
@@ -67,11 +70,12 @@ def open_for_reading(path: Path) -> h5py.File:
 
 def _unreadable_structure(path: Path) -> str | None:
     """Why a child process could not read all of ``path``'s metadata in SWMR mode (None: it
-    could).  The child runs isolated (``-I``: no folder of the caller's on its path), dies with
-    this process (Linux), and is killed after PROBE_LIMIT_S."""
+    could).  The child imports from this process's own path (not the current folder's modules,
+    which ``-c`` would put first; PYTHONPATH and user installs kept), dies with this process
+    (Linux), and is killed after PROBE_LIMIT_S."""
     try:
         done = subprocess.run(
-            [sys.executable, "-I", "-c", _PROBE, str(path)],
+            [sys.executable, "-c", _PROBE, str(path), json.dumps(sys.path)],
             capture_output=True,
             text=True,
             timeout=PROBE_LIMIT_S,

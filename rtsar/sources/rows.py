@@ -21,8 +21,11 @@ class Rows:
 
     def __getitem__(self, key):
         first, rest = (key[0], key[1:]) if isinstance(key, tuple) else (key, ())
-        if first is Ellipsis:  # (``[..., k]``: every row, the Ellipsis kept for the rest)
-            first, rest = slice(None), ((Ellipsis, *rest) if rest else ())
+        if first is Ellipsis:  # as many whole axes as the rest leaves, the first among them
+            fill = len(self.shape) - len(rest)
+            if fill < 1:  # (``[..., k]`` of one axis: row k)
+                return self[rest]
+            first, rest = slice(None), (*(slice(None),) * (fill - 1), *rest)
         if isinstance(first, slice):
             rows = range(len(self))[first]  # the rows asked for, any step, within the window
             if len(rows) and rows.step < 0:  # read forwards (h5py's slices), then reversed

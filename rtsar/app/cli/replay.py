@@ -39,6 +39,8 @@ def replayed_part(
     for option, seconds in (("--start", start_s), ("--duration", duration_s)):
         if seconds is not None and not math.isfinite(seconds):
             raise ValueError(f"{option} must be a finite number of seconds, got {seconds}")
+        if seconds is not None and not math.isfinite(seconds * prf_hz):
+            raise ValueError(f"{option} {seconds:g} s is more shots than any recording holds")
     first = round(start_s * prf_hz)
     if first >= shots:
         raise ValueError(

@@ -181,10 +181,10 @@ def cmd_run(args) -> int:
     warn_outside_swath(scene)
     strip_lines(args, scene.config.geometry.prf_hz)
     warn_slow_first_line(scene, args.scene or scene.name, args)
-    pulses = None if args.duration is None else int(args.duration * scene.config.geometry.prf_hz)
+    prf_hz = scene.config.geometry.prf_hz  # (a duration of more pulses than the scene's: said)
+    pulses = None if args.duration is None else int(min(args.duration * prf_hz, 2.0**62))
     source = SimSource(scene, pulses, warm_from=args.scene or DEMO_SCENE, separate=True)
     if pulses is not None and pulses > source.total:  # the scene ends first: said, not hidden
-        prf_hz = scene.config.geometry.prf_hz
         print(
             f"rtsar: --duration {args.duration:g} s is longer than the scene: the run ends with "
             f"it, after {source.total:,} pulses ({source.total / prf_hz:g} s)",

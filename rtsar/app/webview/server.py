@@ -383,6 +383,7 @@ class ViewServer:
             await site.start()
         except OSError as exc:
             await self._runner.cleanup()
+            self._runner = None  # (stop() then only closes the subscriber)
             raise OSError(f"cannot serve on {self.host}:{self.port}: {exc.strerror}") from None
         port = self._runner.addresses[0][1]  # the port the system chose for a 0
         self._thread = threading.Thread(target=self._receive, name="view-subscriber", daemon=True)
@@ -423,25 +424,26 @@ def serve(
     :class:`ViewServer`."""
 
     async def main() -> int:
-        # A signal only asks the serve loop to end: one raised at any point of the loop (a
-        # second Ctrl-C while the server stops) left asyncio tracebacks behind.
-        stopped = _ask_to_stop_on_signals(asyncio.get_running_loop())
-        server = ViewServer(
-            endpoint,
-            host,
-            port,
-            lines,
-            dynamic_range_db,
-            curve_server_key,
-            curve_client_key,
-            allowed_origins=allowed_origins,
-            token=token,
-            say=say,
-        )
-        url = await server.start()
-        where = " (all interfaces: this machine's name or address)" * (host in WILDCARDS)
-        say(f"view: {url} shows the strips of {endpoint}{where} (Ctrl-C to stop)")
+        # A signal only asks the loop to end (raised anywhere, one left asyncio tracebacks)
+        loop = asyncio.get_running_loop()
+        stopped = _ask_to_stop_on_signals(loop)
+        server = None
         try:
+            server = ViewServer(
+                endpoint,
+                host,
+                port,
+                lines,
+                dynamic_range_db,
+                curve_server_key,
+                curve_client_key,
+                allowed_origins=allowed_origins,
+                token=token,
+                say=say,
+            )
+            url = await server.start()
+            where = " (all interfaces: this machine's name or address)" * (host in WILDCARDS)
+            say(f"view: {url} shows the strips of {endpoint}{where} (Ctrl-C to stop)")
             while server.failure is None and not stopped:
                 await asyncio.sleep(0.1)
             if stopped:
@@ -449,9 +451,12 @@ def serve(
             say(f"view: the subscriber failed: {server.failure}")
             return 1
         finally:
-            await server.stop()
-            _restore_signals(asyncio.get_running_loop())
-            if server.refused or server.dropped:  # the lines held back by Said, counted
+            try:
+                if server is not None:  # (one that did not start: its subscriber closed)
+                    await server.stop()
+            finally:
+                _restore_signals(loop)
+            if server is not None and (server.refused or server.dropped):  # counted
                 say(
                     f"view: {server.refused} request(s) refused (origin, token), "
                     f"{server.dropped} browser(s) cut for reading nothing"
@@ -464,25 +469,32 @@ def serve(
         return signals.exit_status(exc)
 
 
+_CAUGHT = [getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n)]
+
+
 def _ask_to_stop_on_signals(loop) -> list[int]:
     """SIGINT, SIGTERM and SIGHUP noted in the list returned (the loop's own handlers, where
     the platform has them), not raised: the serve loop ends at its next step."""
     stopped: list[int] = []
-    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
-        with contextlib.suppress(AttributeError, NotImplementedError, RuntimeError, ValueError):
-            loop.add_signal_handler(getattr(signal, name), stopped.append, getattr(signal, name))
+    for signum in _CAUGHT:
+        with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
+            loop.add_signal_handler(signum, stopped.append, signum)
     return stopped
 
 
 def _restore_signals(loop) -> None:
-    """The loop's handlers removed (asyncio would leave the system's defaults: a signal after
-    it killed the process) and rtsar's put back (rtsar.app.signals)."""
-    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
-        with contextlib.suppress(AttributeError, NotImplementedError, RuntimeError, ValueError):
-            loop.remove_signal_handler(getattr(signal, name))
-    signals.install()
+    """The loop's handlers removed (asyncio leaves the system's defaults) and rtsar's put back,
+    the signals held back between the two (one that comes then goes to rtsar's)."""
+    mask = getattr(signal, "pthread_sigmask", lambda how, signals: None)  # (POSIX only)
+    mask(getattr(signal, "SIG_BLOCK", 0), _CAUGHT)
+    try:
+        for signum in _CAUGHT:
+            with contextlib.suppress(NotImplementedError, RuntimeError, ValueError):
+                loop.remove_signal_handler(signum)
+        signals.install()
+    finally:
+        mask(getattr(signal, "SIG_UNBLOCK", 1), _CAUGHT)
 
 
-def _signal_exception(signum: int) -> KeyboardInterrupt:
-    """What a command's signal handler raises for ``signum`` (rtsar.app.signals)."""
+def _signal_exception(signum: int) -> KeyboardInterrupt:  # as rtsar.app.signals raises it
     return KeyboardInterrupt() if signum == signal.SIGINT else signals.Terminated(signum)

@@ -158,3 +158,15 @@ def test_ctrl_c_before_the_stream_starts_is_said_and_writes_nothing(recording, m
         "rtsar: interrupted before the stream started: no shot processed, no file written" in said
     )
     assert not out.exists()
+
+
+def test_run_says_where_the_scene_ends_before_its_duration(tmp_path, capsys):
+    """A new user's review: `rtsar run --duration 30` of the 10 s demo stopped after 10 s
+    without a word."""
+    scene = tmp_path / "s.toml"
+    text = SCENE.format(correlator="nonuniform", x=20.0, x2=40.0)
+    scene.write_text(text.replace('preset = "tiny"', 'preset = "tiny"\npulses = 200'))
+    args = ["run", "--scene", str(scene), "--lens", "numpy", "--duration", "100"]
+    assert main([*args, "--endpoint", f"ipc://{tmp_path}/p"]) == 0
+    out = capsys.readouterr().out
+    assert "--duration 100 s is longer than the scene: the run ends with it, after 200 " in out

@@ -28,6 +28,16 @@ def nonfinite_rows(samples: np.ndarray) -> np.ndarray:
     return ~np.isfinite(x).all(axis=-1)
 
 
+def nonfinite_shots(channels) -> np.ndarray:
+    """bool [shot]: the shots any of ``channels`` (arrays [shot, sample], at least one) holds a
+    NaN or an Inf in: shots ingest and ``rtsar process`` zero in every channel."""
+    channels = iter(channels)
+    bad = nonfinite_rows(next(channels))
+    for samples in channels:
+        bad |= nonfinite_rows(samples)
+    return bad
+
+
 def zero_nonfinite_rows(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(samples with every non-finite row zeroed — a copy only if one was —, the bool mask)."""
     x = np.asarray(samples)

@@ -55,7 +55,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..samples import nonfinite_rows
+from ..samples import nonfinite_shots
 from ..sources.base import ShotBatch
 
 COUNTERS = (
@@ -257,9 +257,7 @@ class Ingest:
             flagged[:] = True
         else:
             channels = {k: np.asarray(a, self.dtype) for k, a in channels.items()}
-            bad = np.zeros(n, bool)
-            for a in channels.values():
-                bad |= nonfinite_rows(a)
+            bad = nonfinite_shots(channels.values())
             if bad.any():
                 c["nonfinite_pulses"] += int(bad.sum())
             marked = None if batch.flagged is None else np.asarray(batch.flagged, bool) & ~bad

@@ -13,7 +13,7 @@ import numpy as np
 from ...lens import range_axis_m
 from ...lens.plan import make_plan
 from ...presets import PRESETS, preset
-from ...samples import nonfinite_rows
+from ...samples import nonfinite_shots
 from ...scene import load_scene
 from ...sinks.image_file import ImageWriter, read_heights, read_image
 from ...sinks.io import RecordingWriter, replace_when_complete
@@ -224,9 +224,7 @@ def cmd_process(args) -> int:
         ):
             for shots, aux in rec.batches_with_aux(cfg.processor.micro_batch, channels):
                 signals.check()
-                bad = nonfinite_rows(shots)
-                for a in aux.values():
-                    bad |= nonfinite_rows(a)
+                bad = nonfinite_shots([shots, *aux.values()])
                 nonfinite += int(bad.sum())
                 flags.mark(done, bad)
                 zeroed = flags.flagged[done : done + len(shots)]

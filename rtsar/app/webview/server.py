@@ -485,7 +485,7 @@ def _ask_to_stop_on_signals(loop) -> list[int]:
 def _restore_signals(loop) -> None:
     """The loop's handlers removed (asyncio leaves the system's defaults) and rtsar's put back,
     the signals held back between the two (one that comes then goes to rtsar's)."""
-    mask = getattr(signal, "pthread_sigmask", lambda how, signals: None)  # (POSIX only)
+    mask = getattr(signal, "pthread_sigmask", lambda how, signums: None)  # (POSIX only)
     mask(getattr(signal, "SIG_BLOCK", 0), _CAUGHT)
     try:
         for signum in _CAUGHT:

@@ -147,8 +147,9 @@ class _Checker:
         if found.is_dir():
             raise self.fail(f"{section}.{key}", f"{found}: a folder, not a file")
         if not found.is_file():
-            why = "relative to the instrument file's folder" * (not Path(table[key]).is_absolute())
-            raise self.fail(f"{section}.{key}", f"{found}: no such file {f'({why})' * bool(why)}")
+            relative = not Path(table[key]).is_absolute()
+            where = " (relative to the instrument file's folder)" * relative
+            raise self.fail(f"{section}.{key}", f"{found}: no such file{where}")
         return found
 
     def provenance(self, data: dict) -> dict:

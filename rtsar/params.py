@@ -286,15 +286,14 @@ class Processor:
                       the migration span in bins range offsets; "fft" shares its transforms
                       (2.3-2.7x the time at 5 offsets), "direct"/"partitioned" run one
                       correlator per offset (~5x)
-    range_migration_domain  where the taps read: "time" (the exact two-dimensional mask,
-                      one tap set per bin offset the range history spans, rtsar.ccd.migration)
-                      or "doppler" (the "fft" correlator only: one T-tap read per azimuth
-                      frequency of each block, rtsar.ccd.doppler_migration; RADARSAT-1's 22
-                      cells of squinted walk cost T multiply-adds, not 22 + T spectral ones)
+    range_migration_domain  where the taps read: "time" (exact 2-D mask, ccd.migration),
+                      "doppler" ("fft" only: a T-tap read per azimuth frequency of each block,
+                      ccd.doppler_migration) or "walk" ("nonuniform" only: pulses shifted by
+                      the linear walk into a turning ring, curvature left out, ccd.walk_deskew)
     """
 
     CORRELATORS = ("direct", "fft", "partitioned", "nonuniform")  # a constant, not a field
-    MIGRATION_DOMAINS = ("time", "doppler")  # a constant, not a field
+    MIGRATION_DOMAINS = ("time", "doppler", "walk")  # a constant, not a field
 
     aperture_pulses: int
     range_bins: int
@@ -373,10 +372,11 @@ class Processor:
                 f"Processor.range_migration_domain must be one of {self.MIGRATION_DOMAINS}, "
                 f"got {self.range_migration_domain!r}"
             )
-        if self.range_migration_domain == "doppler" and self.correlator != "fft":
+        needs = {"doppler": "fft", "walk": "nonuniform"}.get(domain := self.range_migration_domain)
+        if needs not in (None, self.correlator):
             raise ValueError(
-                "Processor.range_migration_domain = 'doppler' needs correlator = 'fft' (it reads "
-                f"the range in each overlap-save block's azimuth spectrum), got {self.correlator!r}"
+                f"Processor.range_migration_domain = {domain!r} needs correlator = {needs!r} "
+                f"(the taps' read is that correlator's), got {self.correlator!r}"
             )
         if self.range_centre_m is not None and not (
             math.isfinite(self.range_centre_m) and self.range_centre_m > 0

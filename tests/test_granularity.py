@@ -352,7 +352,8 @@ def test_the_fft_correlator_s_transform_length_is_the_documented_choice(monkeypa
     monkeypatch.setattr(live_granularity, "measure_costs", _fake_measure(costs))
     chosen = set()
     for rate_hz in (50.0, 314.0, 1257.0, 1885.0, 4000.0, 9000.0):
-        new_cfg, settings, g, words = GranularityRequest(rate_hz).apply(cfg, PipelineSettings())
+        request = GranularityRequest(rate_hz, correlator="fft")  # --correlator fft: fft kept
+        new_cfg, settings, g, words = request.apply(cfg, PipelineSettings())
         # aligned: ingest and the lens a block; strips of the block's lines, at most 64
         u = {b: rate_hz * (53 * US + 40 * US * (b + n - 1) / b + 1e-3 / min(b, 64)) for b in blocks}
         latency = {b: latency_by_hand(rate_hz, b, u[b]) for b in blocks}
@@ -689,12 +690,12 @@ def test_a_live_run_of_an_fft_configuration_runs_the_nonuniform_correlator(monke
     said, rest = words.split("\n")
     assert said.startswith("correlator nonuniform, not the configuration's fft: ")
     assert "--correlator fft keeps fft" in said and rest.startswith("granularity: correlator")
-    # what keeps fft: the command line's --correlator / --fft-length, the physical CCD, Doppler
+    # what keeps fft: the command line's --correlator / --fft-length, the physical CCD, the
+    # time-domain taps (RADARSAT-1's Doppler-domain taps take the walk: tests/test_walk_deskew)
     kept = [
         live_correlator(cfg, given="fft"),
         live_correlator(cfg, fft_length=1024),
         live_correlator(cfg, physical=object()),
-        live_correlator(preset("radarsat1")),  # Doppler-domain taps: fft's alone
         live_correlator(cfg.with_processor(range_migration_taps=8)),  # time domain: a tap each
     ]
     assert all(c.processor.correlator == "fft" and w == "" for c, w in kept)

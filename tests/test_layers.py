@@ -73,6 +73,7 @@ LAZY_ALLOWED = {
     ("rtsar.app.cli.inputs", "rtsar.sources.formats.sigmf_reader"): "sigmf: SigMF inputs only",
     ("rtsar.ccd", "rtsar.ccd.direct"): "numba loads in ~0.4 s: only the correlators using it",
     ("rtsar.ccd", "rtsar.ccd.doppler_migration"): "numba: the Doppler-domain taps only",
+    ("rtsar.ccd", "rtsar.ccd.walk_deskew"): "numba: the walk's ring only",
     ("rtsar.ccd", "rtsar.ccd.nonuniform"): "numba loads in ~0.4 s: only the correlators using it",
     ("rtsar.ccd", "rtsar.ccd.partitioned"): "numba loads in ~0.4 s: only the correlators using it",
     ("rtsar.app.cli.formats", "rtsar.sinks.exports.sicd"): "sarpy loads in ~1 s; --sicd only",

@@ -65,18 +65,23 @@ class Cyclic:
 def pipeline_kinds(cfg) -> tuple[tuple[str, ...], str]:
     """(correlators the pipeline runs compare, the one the other runs use).  A plan whose
     range-migration taps read in the azimuth spectrum (``range_migration_domain = "doppler"``:
-    the radarsat1 preset) runs on the "fft" correlator only; elsewhere partitioned, nonuniform
-    and fft, with partitioned the base."""
+    the radarsat1 preset) runs on the "fft" correlator and on "nonuniform" with the walk's ring
+    (a live run's, rtsar.stream.granularity.live_correlator), fft the base; elsewhere
+    partitioned, nonuniform and fft, with partitioned the base."""
     p = cfg.processor
     if p.range_migration_taps and p.range_migration_domain == "doppler":
-        return ("fft",), "fft"
+        return ("fft", "nonuniform"), "fft"
     return ("partitioned", "nonuniform", "fft"), "partitioned"
 
 
 def with_correlator(cfg, kind: str):
     """``cfg`` with the correlator ``kind``; the Doppler-domain taps are the fft correlator's,
-    so another kind measured alone (plain mask) takes the time-domain setting."""
-    domain = cfg.processor.range_migration_domain if kind == "fft" else "time"
+    so nonuniform takes the walk's ring where the beam is squinted (a live run's), another kind
+    the time-domain setting."""
+    domain = cfg.processor.range_migration_domain
+    if kind != "fft" and domain == "doppler":
+        walk = kind == "nonuniform" and cfg.geometry.squinted
+        domain = "walk" if walk else "time"
     return cfg.with_processor(correlator=kind, range_migration_domain=domain)
 
 
@@ -319,8 +324,10 @@ def bench_pipeline(
         for mb in (8, 16, 64):  # (64: a paced stream's; at "max" the stages take 256)
             label = f"{base_kind}: max rate, max batch {mb}"
             run(label, part, "max", seconds, round_, max_batch=mb)
-        # Placement: lens + CCD in two worker processes, a range half each (rtsar.stream.swath).
-        for kind in [k for k in kinds if k != "fft"]:
+        # Placement: lens + CCD in two worker processes, a range half each (rtsar.stream.swath;
+        # not with range-migration taps, which read across the halves' edge).
+        swath_kinds = [] if cfg.processor.range_migration_taps else kinds
+        for kind in [k for k in swath_kinds if k != "fft"]:
             c = with_correlator(cfg, kind)
             run(f"{kind}: max rate, 2 swath processes", c, "max", seconds, round_, swath_workers=2)
             run(

@@ -51,6 +51,7 @@ KERNEL_MODULES = {
     "rtsar.ccd.partitioned": "partitioned",
     "rtsar.ccd.direct": "direct",
     "rtsar.ccd.doppler_migration": "migration",
+    "rtsar.ccd.walk_deskew": "migration",
     "rtsar.physical.register": "physical",
     "rtsar.scene.tones": "simulator",
     "rtsar.focus.resample": "resampler",
@@ -61,7 +62,7 @@ TASKS = {  # each group: what it compiles, for its line; longest first (cold, ab
     "nonuniform": "the nonuniform correlator (psaltis-jpl, psaltis-max)",
     "partitioned": "the partitioned correlator, one thread and threaded",
     "physical": "the physical CCD emulation",
-    "migration": "the Doppler-domain range migration (radarsat1)",
+    "migration": "the range migration of a squinted beam (radarsat1: Doppler domain, walk)",
     "simulator": "the simulator (pulsed and FMCW scenes)",
     "direct": "the direct shift-register correlator",
     "resampler": "the band-limited resampler (chirp linearization, HCN, PFA)",
@@ -96,7 +97,17 @@ def _compile(name: str) -> None:
     elif name == "physical":
         _push_zeros("psaltis-jpl", physical=PhysicalSettings())
     elif name == "migration":
-        _push_zeros("radarsat1")
+        _push_zeros("radarsat1")  # the file's fft correlator, the Doppler-domain read
+        walk = preset("radarsat1").with_processor(
+            correlator="nonuniform", range_migration_domain="walk"
+        )  # a live run's (rtsar.stream.granularity.live_correlator)
+        range_m = make_plan(walk).range_m
+        ccd = make_ccd(walk, range_m)
+        try:  # an aperture and more: lines come out, read out of the ring
+            ccd.push(np.zeros((ccd.aperture + 16, len(range_m)), np.complex64))
+            ccd.flush()
+        finally:
+            ccd.close()
     elif name == "simulator":
         for scene in ("demo", "sal-demo"):  # a pulsed chirp's kernels, an FMCW chirp's
             Simulator(load_scene(scene)).prepare()

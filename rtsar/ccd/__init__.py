@@ -106,6 +106,17 @@ def make_ccd(config: Config, range_m: np.ndarray, physical=None) -> Correlator:
         return DopplerMigrationCorrelator(
             config, range_m, p.range_migration_taps, p.fft_length, p.precision
         )
+    if p.range_migration_taps and p.range_migration_domain == "walk":
+        from .walk_deskew import WalkDeskewCorrelator  # numba: when asked for
+
+        return WalkDeskewCorrelator(
+            config,
+            range_m,
+            p.range_migration_taps,
+            p.partition_lines,
+            p.tail_block_lines,
+            p.precision,
+        )
     if p.range_migration_taps:
         mask = design_migration_mask(config, range_m)
     else:

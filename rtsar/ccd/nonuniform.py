@@ -150,7 +150,8 @@ def _doubling(n: int, head_lines: int, max_block_lines: int) -> list[tuple[int, 
 class _Group:
     """Segments computed together (the head, or the tail): their spectra, delay lines, scratch."""
 
-    def __init__(self, h: np.ndarray, segments, tiles: int, tile: int, real, tw):
+    def __init__(self, h: np.ndarray, segments, tiles: int, tile: int, real, tw, rotation):
+        self.rotation = rotation  # float64 (w, Q) of tiled.mask_shift
         spectra, segs, offset = [], [], 0
         for d, t, b in segments:
             hr, hi = tiled.tile_spectra(h[d : d + t], b, tile, real)
@@ -174,7 +175,7 @@ class _Group:
     def run(self, events, valid_end: int, ring, out, assign: bool) -> None:
         """tiled.run_blocks on these segments' blocks ``events``."""
         segs, *arrays = self.arrays  # spectra, delay lines, twiddles, work rows (re, im each)
-        tiled.run_blocks(events, valid_end, segs, *ring, *arrays, *out, assign)
+        tiled.run_blocks(events, valid_end, segs, *ring, *arrays, *out, assign, self.rotation)
 
     def events(self, end: int, limit: int | None = None) -> np.ndarray:
         """(segment, block) of the blocks complete at ``end`` pulses (and, with ``limit``,
@@ -298,9 +299,11 @@ class NonUniformCorrelator(Correlator):
     ``head_lines`` L, the tail of the mask in blocks up to ``max_block_lines``.
 
     ``threaded`` (default True) runs the tail segments on their own thread; ``rule``:
-    plan_segments' "optimal" (default) or "doubling".  Relative RMS error against
-    correlate_reference 1.8e-7 in complex64, 1.6e-15 in complex128 (N = 2048, 64 bins; tested
-    to 1e-5 and 1e-12).
+    plan_segments' "optimal" (default) or "doubling".  ``mask_rotation`` (w, Q): a block whose
+    lines centre on pulse m reads mask column (c + Q·round(w·m / Q)) mod bins for column c, the
+    mask turning against the lines (rtsar.ccd.walk_deskew; tiled.mask_shift); None: column
+    c's own.  Relative RMS error against correlate_reference 1.8e-7 in complex64, 1.6e-15 in
+    complex128 (N = 2048, 64 bins; tested to 1e-5 and 1e-12).
     """
 
     CHUNK = 128  # pushes are computed up to this many lines at a time
@@ -313,8 +316,17 @@ class NonUniformCorrelator(Correlator):
         precision: str = "complex64",
         threaded: bool | None = None,
         rule: str = "optimal",
+        mask_rotation: tuple[float, int] | None = None,
     ):
         super().__init__(mask, precision)
+        rotation = np.zeros(2, np.float64)
+        if mask_rotation is not None:
+            w, q = mask_rotation
+            if not (math.isfinite(w) and isinstance(q, int) and q >= 1):
+                raise ValueError(
+                    f"mask_rotation must be (finite w, int Q >= 1), got {mask_rotation}"
+                )
+            rotation[:] = w, q
         n, bins = self.aperture, self.range_bins
         self.block_lines = head_lines
         largest = 1 << (n.bit_length() - 1)  # the largest power of two <= N
@@ -323,12 +335,21 @@ class NonUniformCorrelator(Correlator):
         real = np.float64 if self.dtype == np.complex128 else np.float32
         tile = tiled.tile_columns(bins)
         tiles = -(-bins // tile)
+        if mask_rotation is not None and tiles * tile != bins:
+            raise ValueError(
+                f"a turning mask needs the tiles' width: {bins} bins are {tiles} × {tile} "
+                "columns (rtsar.ccd.walk_deskew.ring_width)"
+            )
         widest = max(b for _, _, b in self.segments)
         self._window_rows = 2 * widest  # rows the widest segment's transform reads
         tw = tiled.twiddles(2 * widest, real)
         h = np.asarray(mask, dtype=np.complex128)[::-1]  # h[q] = mask[N-1-q], float64 formed
-        self._head = _Group(h, self.segments[:1], tiles, tile, real, tw)
-        tail = _Group(h, self.segments[1:], tiles, tile, real, tw) if self.segments[1:] else None
+        self._head = _Group(h, self.segments[:1], tiles, tile, real, tw, rotation)
+        tail = (
+            _Group(h, self.segments[1:], tiles, tile, real, tw, rotation)
+            if self.segments[1:]
+            else None
+        )
         # Rings indexed by pulse (powers of two): the input lines (2 × the widest block and a
         # chunk behind the newest pulse), the tail's sums of the full output (rows up to N
         # ahead of it, a chunk behind) and the head's outputs (the chunk's blocks).

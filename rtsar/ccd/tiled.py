@@ -193,26 +193,58 @@ def _dit_second_half(re, im, twr, twi, stride, out_re, out_im):  # pragma: no co
 
 
 @numba.njit(nogil=True, fastmath=True, cache=True)
-def _enter_and_mac(x_re, x_im, h_re, h_im, d_re, d_im, k, y_re, y_im):  # pragma: no cover
-    # X_k = x enters the delay line at slot k mod P, then y = Σ_p H_p · X_{k-p}; h[f, p] = H_p
-    # and d[f, s] = X_s at frequency f: one contiguous run of P·C values each.  (Indexed, not
-    # sliced: a row view per partition cost 1.7× the time.)
-    n, parts, cols = h_re.shape
-    slot = k % parts
+def _mac_run(x_re, x_im, h_re, h_im, h0, d_re, d_im, slot, c0, run, y_re, y_im):  # pragma: no cover
+    # Columns c0 .. c0+run-1 of the block, multiplied by the spectra's columns h0 ..: X_k = x
+    # enters the delay line at slot k mod P, then y = Σ_p H_p · X_{k-p}; h[f, p] = H_p and
+    # d[f, s] = X_s at frequency f.  (Indexed, not sliced: a row view per partition cost 1.7×
+    # the time.  Unsigned column indices: no negative-index wraparound, so the loops vectorise.)
+    n, parts = h_re.shape[0], h_re.shape[1]
+    a0, b0, m = np.uint64(c0), np.uint64(h0), np.uint64(run)
     for f in range(n):
-        for c in range(cols):  # p = 0: X_k itself, entering the delay line
-            hr, hi, xr, xi = h_re[f, 0, c], h_im[f, 0, c], x_re[f, c], x_im[f, c]
-            d_re[f, slot, c] = xr
-            d_im[f, slot, c] = xi
-            y_re[f, c] = hr * xr - hi * xi
-            y_im[f, c] = hr * xi + hi * xr
+        for c in range(m):  # p = 0: X_k itself, entering the delay line
+            a, b = a0 + c, b0 + c
+            hr, hi, xr, xi = h_re[f, 0, b], h_im[f, 0, b], x_re[f, a], x_im[f, a]
+            d_re[f, slot, a] = xr
+            d_im[f, slot, a] = xi
+            y_re[f, a] = hr * xr - hi * xi
+            y_im[f, a] = hr * xi + hi * xr
         s = slot
         for p in range(1, parts):
             s = s - 1 if s > 0 else parts - 1
-            for c in range(cols):
-                hr, hi, xr, xi = h_re[f, p, c], h_im[f, p, c], d_re[f, s, c], d_im[f, s, c]
-                y_re[f, c] += hr * xr - hi * xi
-                y_im[f, c] += hr * xi + hi * xr
+            for c in range(m):
+                a, b = a0 + c, b0 + c
+                hr, hi, xr, xi = h_re[f, p, b], h_im[f, p, b], d_re[f, s, a], d_im[f, s, a]
+                y_re[f, a] += hr * xr - hi * xi
+                y_im[f, a] += hr * xi + hi * xr
+
+
+@numba.njit(nogil=True, cache=True)
+def _enter_and_mac(x_re, x_im, h_re, h_im, t, shift, d_re, d_im, k, y_re, y_im):  # pragma: no cover
+    # Tile t's block through the spectra h[tile, f, p, c] of mask column (t·C + c + shift) mod
+    # (tiles·C): the mask turned ``shift`` columns against the lines (rtsar.ccd.walk_deskew);
+    # shift 0 reads tile t's own.  At most three contiguous runs of columns.
+    tiles, cols = h_re.shape[0], h_re.shape[3]
+    total = tiles * cols
+    slot = k % h_re.shape[2]
+    c = 0
+    while c < cols:
+        g = (t * cols + c + shift) % total
+        t2 = g // cols
+        c2 = g - t2 * cols
+        run = min(cols - c, cols - c2)
+        _mac_run(x_re, x_im, h_re[t2], h_im[t2], c2, d_re[t], d_im[t], slot, c, run, y_re, y_im)
+        c += run
+
+
+@numba.njit(nogil=True, cache=True)
+def mask_shift(rotation, line) -> int:  # pragma: no cover - compiled
+    """The columns the mask is turned for the block whose lines centre on ``line`` (a pulse
+    index, float): Q·round(w·line / Q) with rotation = (w columns a pulse, quantum Q); 0 where
+    Q is 0."""
+    q = rotation[1]
+    if q == 0:
+        return 0
+    return np.int64(q * np.round(rotation[0] * line / q))
 
 
 @numba.njit(nogil=True, cache=True)
@@ -236,18 +268,20 @@ def _block(
     out_re,
     out_im,
     assign,
+    rotation,
 ):  # pragma: no cover - compiled
     # Block k of the segment seg = (offset, 2B, P, delay) for tile t; pulses ≥ valid_end read
     # as zeros.  Its outputs (pulses kB .. kB+B-1 of the segment) go to the full output's
-    # pulse + delay.  h/d: the flat arrays of all segments' spectra and delay lines.
+    # pulse + delay.  h/d: the flat arrays of all segments' spectra and delay lines; rotation:
+    # mask_shift's, taken at the middle of the block's output lines.
     offset, n, parts, delay = seg[0], seg[1], seg[2], seg[3]
     tiles, rows, width = ring_re.shape
     size = tiles * n * parts * width
     shape = (tiles, n, parts, width)
-    hr = h_re[offset : offset + size].reshape(shape)[t]
-    hi = h_im[offset : offset + size].reshape(shape)[t]
-    dr = d_re[offset : offset + size].reshape(shape)[t]
-    di = d_im[offset : offset + size].reshape(shape)[t]
+    hr = h_re[offset : offset + size].reshape(shape)
+    hi = h_im[offset : offset + size].reshape(shape)
+    dr = d_re[offset : offset + size].reshape(shape)
+    di = d_im[offset : offset + size].reshape(shape)
     block = n // 2
     xr, xi, yr, yi = x_re[t, :n], x_im[t, :n], y_re[t, :n], y_im[t, :n]
     for i in range(n):
@@ -263,7 +297,8 @@ def _block(
                 xi[i, c] = ring_im[t, r, c]
     stride = (tw_re.shape[0] * 2) // n
     _dif(xr, xi, tw_re, tw_im, stride)
-    _enter_and_mac(xr, xi, hr, hi, dr, di, k, yr, yi)
+    shift = mask_shift(rotation, k * block + delay + 0.5 * (block - 1))
+    _enter_and_mac(xr, xi, hr, hi, t, shift, dr, di, k, yr, yi)
     ob_r, ob_i = xr[:block], xi[:block]  # the window is no longer needed
     _dit_second_half(yr, yi, tw_re, tw_im, stride, ob_r, ob_i)
     ring_rows = out_re.shape[1]
@@ -299,12 +334,13 @@ def run_blocks(
     out_re,
     out_im,
     assign,
+    rotation,
 ):  # pragma: no cover - compiled
     """The blocks ``events`` [(segment, block k), ...] in this order on every tile, one tile
     after another on the calling thread.  segs[s] = (offset in h and d, 2B, P, delay); ring:
     the input lines; h, d: all segments' spectra (tile_spectra) and delay lines, flat; tw:
     twiddles; x, y: per-tile work rows; out: the rows the outputs are added to (``assign``:
-    stored) at pulse + delay.
+    stored) at pulse + delay; rotation: float64 (w, Q) of mask_shift ((0, 0): none).
 
     Not a parallel kernel: the head's and the tail's threads (rtsar.ccd.nonuniform) already
     keep two cores busy, and OpenMP's team for the tiles only added its hand-offs and its
@@ -334,6 +370,7 @@ def run_blocks(
                 out_re,
                 out_im,
                 assign,
+                rotation,
             )
 
 

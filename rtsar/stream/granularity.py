@@ -221,14 +221,29 @@ def live_correlator(
     ``psaltis-max --rate 0.25``).  So where the command line names no correlator (``given``:
     --correlator) and no transform length (``fft_length``: --fft-length), a live run runs
     LIVE_CORRELATOR in fft's place; not the emulated CCD (``physical``), nor with
-    range-migration taps: in the Doppler domain they read each block's azimuth spectrum (fft's
-    alone: RADARSAT-1), in the time domain fft shares its transforms among them where
+    time-domain range-migration taps: fft shares its transforms among them where
     nonuniform runs a correlator a tap (8 taps, each correlator alone: psaltis-jpl 26.4
     against 4.7 thousand pulses/s, a cold review's figures), so a run that keeps up on fft
-    could fall behind."""
+    could fall behind.  A squinted beam's Doppler-domain read (fft's alone: RADARSAT-1) gives
+    way to LIVE_CORRELATOR on the walk's ring (rtsar.ccd.walk_deskew): RADARSAT-1's lines leave
+    in head blocks, not in the overlap-save blocks of hundreds of lines that held them ~80 ms."""
     p = config.processor
     taps = bool(p.range_migration_taps)
-    if given or fft_length or physical is not None or p.correlator != "fft" or taps:
+    if given or fft_length or physical is not None or p.correlator != "fft":
+        return config, ""
+    if taps and p.range_migration_domain == "doppler" and config.geometry.squinted:
+        words = (
+            f"correlator {LIVE_CORRELATOR} with the range walk taken out before it, not the "
+            "configuration's fft with the Doppler-domain read: a live run's where the command "
+            "line names no correlator (fft's overlap-save blocks hold a line for up to M - N + 1 "
+            "pulses; the walk's ring leaves the aperture's curvature out, rtsar.ccd.walk_deskew; "
+            "--correlator fft keeps fft)"
+        )
+        return (
+            config.with_processor(correlator=LIVE_CORRELATOR, range_migration_domain="walk"),
+            words,
+        )
+    if taps:
         return config, ""
     words = (
         f"correlator {LIVE_CORRELATOR}, not the configuration's fft: a live run's where the "

@@ -387,13 +387,16 @@ def why_fixed(p, physical=None, copies: int = 1, swath: bool = False) -> str:
     """Why the correlator of Processor ``p`` cannot grow its block in a live run ("" where it
     can): the correlators whose block a config sets, one receiver (``copies`` > 1: --height's
     receivers keep their own correlators), no swath workers, not --physical, not the
-    Doppler-domain range migration."""
+    Doppler-domain range migration, not the walk's ring (rtsar.ccd.walk_deskew: its turn
+    counts pulses from the stream's start, which a correlator built mid-stream does not see)."""
     doppler = p.range_migration_taps and p.range_migration_domain == "doppler"
+    walk = p.range_migration_taps and p.range_migration_domain == "walk"
     return (
         "swath workers correlate in their own processes" if swath
         else "--physical's CCD has no block" if physical is not None
         else "--height's receivers keep their own correlators" if copies > 1
         else "Doppler-domain migration has no block" if doppler
+        else "the walk's ring turns from the stream's first pulse" if walk
         else f"the {p.correlator} correlator has no block" if p.correlator not in GROWING_KINDS
         else ""
     )  # fmt: skip

@@ -1,0 +1,276 @@
+"""A squinted beam's range walk taken out before the CCD: the lines written into a turning ring.
+
+(M2) of rtsar.ccd.migration reads aperture row k of column r at r + Δr_k(r) (M1).  A squinted
+beam's Δr is almost linear in k, a walk of w bins a pulse (RADARSAT-1: w = 0.0335, 24 cells
+across its 716 rows) plus a constant c(r) of each column, with a curvature left over of a
+fraction of a cell (RADARSAT-1: at most 0.45 cell, at the aperture's ends, 0.06 cell RMS over
+the window's energy).  Fitted by least squares over the rows, weighted by the window's energy,
+
+    Δr_k(r) = w·k + c(r) + ε_k(r),                                                       (W1)
+
+the walk is one shift of each whole pulse: written into a ring of W ≥ bins columns at
+
+    ring_n[j] = line_n(j + s_n),   s_n = w·(n + N - 1) + c_mid   (mod W; zero beyond the swath)
+                                                                                         (W2)
+
+every row of line p's aperture (pulse n = p - N + 1 + k) reads ring column
+j = r + c(r) - c_mid - w·p, one column for the whole aperture: a plain azimuth correlation of
+each ring column (eq. 1), which the nonuniform correlator computes with head blocks from one
+line.  Two things turn with the ring.  Line p's column r comes out of ring column
+r + c(r) - c_mid - w·p, read with T taps (the unrotation).  And the range-dependent mask: ring
+column j holds true column r(j) + w·p, so the correlator's mask is built for the ranges r(j)
+(j = r + c(r) - c_mid) and turned by Q·round(w·m / Q) columns for a block whose lines centre
+on pulse m (rtsar.ccd.tiled.mask_shift; Q = MASK_QUANTUM = 1), each line's mask then at most
+1/2 + |w|·B/2 bins from its own.  That bound matters: a squinted mask's linear phase depends
+on range, so a mask δ bins off moves a point in azimuth (RADARSAT-1: turns in steps of 16
+bins taken at each block's first line put its points 0.2-0.3 cell off; blocks of up to 128
+lines, 0.03 cell and an azimuth PSLR of -34 dB), hence steps of one bin and blocks of at most
+about 1/|w| lines (walk_block_lines).
+The guard of W - bins ≥ |w|·N + T + 2 + max|c - c_mid| columns holds zeros, so an aperture
+near one edge never reads the other edge's lines.
+
+What it leaves out is ε, the curvature (the accuracy this costs is measured against the exact
+(M2), correlate_migration_reference, in tests/test_walk_deskew.py and on the RADARSAT-1 block);
+what it saves is (M2)'s one correlation per bin offset (22 + T for RADARSAT-1) or the fft
+correlator's overlap-save blocks (the Doppler-domain read, rtsar.ccd.doppler_migration, needs
+blocks of hundreds of lines): lines leave in the nonuniform correlator's head blocks.  Both
+interpolations read with the T-tap interpolator w_T of rtsar.ccd.migration
+(Processor.range_migration_taps), its weights from a table of PHASES fractional positions.
+No secondary range compression in the lens: the rows read each pulse's own compressed line,
+as (M2)'s do (rtsar.lens.plan).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from . import tiled
+from .base import Correlator, design_mask
+from .migration import interpolation_weights, migration_bins
+from .nonuniform import NonUniformCorrelator
+
+MASK_QUANTUM = 1  # columns the mask turns at a time
+PHASES = 256  # fractional positions of the interpolation table
+
+
+@dataclass(frozen=True)
+class Walk:
+    """The fit (W1): w bins a pulse, c(r) per column, and the curvature it leaves."""
+
+    bins_per_pulse: float
+    offset_bins: np.ndarray  # c(r), float64[bins]
+    curvature_max_bins: float  # max |ε| over the rows the window weighs
+    curvature_rms_bins: float  # RMS of ε over the window's energy
+
+    @property
+    def offset_mid_bins(self) -> float:
+        return float(self.offset_bins[len(self.offset_bins) // 2])
+
+
+def fit_walk(cfg, range_m: np.ndarray) -> Walk:
+    """(W1) for the configuration's mask on the lens's range axis ``range_m``."""
+    shift = migration_bins(cfg, range_m)  # [N, bins], (M1)
+    energy = np.abs(design_mask(cfg, range_m)) ** 2
+    energy = energy / np.maximum(energy.sum(axis=0, keepdims=True), np.finfo(float).tiny)
+    k = np.arange(shift.shape[0], dtype=np.float64)[:, None]
+    k_mean = (energy * k).sum(axis=0)
+    d_mean = (energy * shift).sum(axis=0)
+    var = (energy * (k - k_mean) ** 2).sum(axis=0)
+    cov = (energy * (k - k_mean) * (shift - d_mean)).sum(axis=0)
+    slopes = cov / np.maximum(var, np.finfo(float).tiny)
+    w = float(np.average(slopes))  # the walk is one slope: the squint is one angle
+    offset = d_mean - w * k_mean
+    eps = shift - w * k - offset
+    weighed = energy > 0
+    return Walk(
+        bins_per_pulse=w,
+        offset_bins=offset,
+        curvature_max_bins=float(np.abs(eps[weighed]).max()),
+        curvature_rms_bins=float(np.sqrt((energy * eps * eps).sum(axis=0).max())),
+    )
+
+
+def ring_width(bins: int, walk: Walk, aperture: int, taps: int) -> int:
+    """W: bins and the zero guard of the module docstring, widened to the width of the
+    correlator's tiles (rtsar.ccd.tiled.tile_columns), so that the mask turns across all of
+    them."""
+    spread = float(np.abs(walk.offset_bins - walk.offset_mid_bins).max())
+    guard = math.ceil(abs(walk.bins_per_pulse) * aperture + taps + 2 + spread)
+    width = bins + guard
+    while True:
+        tile = tiled.tile_columns(width)
+        padded = -(-width // tile) * tile
+        if padded == width:
+            return width
+        width = padded
+
+
+def weight_table(taps: int, real) -> np.ndarray:
+    """table[q, j]: w_T's weight of read first + j for a read at first + T/2 - q / PHASES, with
+    first = ⌈pos - T/2⌉ (interpolation_weights' layout, as rtsar.ccd.doppler_migration's)."""
+    _, table = interpolation_weights(0.5 * taps - np.arange(PHASES) / PHASES, taps)
+    return table.astype(real)
+
+
+@numba.njit(nogil=True, cache=True)
+def _first_and_row(pos, taps, phases):  # pragma: no cover - compiled
+    # The first read ⌈pos - T/2⌉ and the weight table's row for a read at ``pos``.
+    first = math.ceil(pos - 0.5 * taps)
+    q = int(round((first + 0.5 * taps - pos) * phases))
+    if q == phases:  # pos = first + T/2 - 1 exactly: the same reads from one bin lower
+        return first - 1, 0
+    return first, q
+
+
+@numba.njit(nogil=True, cache=True)
+def _write_rows(lines, first_pulse, w, s0, table, pad, ring):  # pragma: no cover - compiled
+    # ring[i, j] = line_i read at j + s_n (W2), n = first_pulse + i, modulo W; reads at and
+    # beyond the swath's bins are zeros.  One fraction a row: its weights once per row, over
+    # the row turned into ``pad`` (W + T values) first, so the taps read contiguous values.
+    count, bins = lines.shape
+    width = ring.shape[1]
+    taps, phases = table.shape[1], table.shape[0]
+    for i in range(count):
+        s = w * (first_pulse + i) + s0
+        s -= math.floor(s / width) * width  # s_n mod W in float64: bounded on a stream
+        first, q = _first_and_row(s, taps, phases)
+        src = lines[i]
+        for j in range(width + taps):
+            c = (first + j) % width
+            pad[j] = src[c] if c < bins else 0
+        wt = table[q]
+        row = ring[i]
+        for j in range(width):
+            acc = pad[j] * wt[0]
+            for t in range(1, taps):
+                acc += pad[j + t] * wt[t]
+            row[j] = acc
+
+
+@numba.njit(nogil=True, cache=True)
+def _read_rows(ring_out, first_line, w, offset, table, pad, out):  # pragma: no cover - compiled
+    # out[i, r] = ring_out[i] read at r + offset[r] - w·p, p = first_line + i, modulo W: the
+    # row turned by ⌊w·p⌋ into ``pad`` first; each column's fraction its own (offset).
+    count, bins = out.shape
+    width = ring_out.shape[1]
+    taps, phases = table.shape[1], table.shape[0]
+    for i in range(count):
+        turn = w * (first_line + i)
+        turn -= math.floor(turn / width) * width  # w·p mod W in float64: bounded on a stream
+        base = math.floor(turn)
+        frac = turn - base
+        lo = -taps  # pad[k] = ring_out[(k + lo - base) mod W]: reads from r - T on
+        src = ring_out[i]
+        for k in range(bins + 3 * taps):
+            pad[k] = src[(k + lo - base) % width]
+        row = out[i]
+        for r in range(bins):
+            first, q = _first_and_row(r + offset[r] - frac, taps, phases)
+            wt = table[q]
+            k0 = first - lo
+            acc = pad[k0] * wt[0]
+            for t in range(1, taps):
+                acc += pad[k0 + t] * wt[t]
+            row[r] = acc
+
+
+def walk_block_lines(w: float, head_lines: int, max_block_lines: int) -> int:
+    """The longest block the turning mask allows: a block of B lines shares one turn of the mask,
+    so its lines' columns drift |w|·B bins against it, which moves their peaks in azimuth
+    (RADARSAT-1 points, blocks up to 128: up to 0.03 cell, azimuth PSLR -34 dB against -40 dB
+    of the exact (M2); up to 32: 0.006 cell, -39 dB).  The power of two nearest 1/|w| (RADARSAT-1:
+    32), within [head_lines, max_block_lines]."""
+    if w == 0:
+        return max_block_lines
+    nearest = 1 << max(0, round(math.log2(1.0 / abs(w))))
+    return max(head_lines, min(max_block_lines, nearest))
+
+
+class WalkDeskewCorrelator(Correlator):
+    """(W1)-(W2): the lines shifted into a turning ring, correlated there by the nonuniform
+    correlator (head blocks of ``head_lines``), the lines read back out of it.
+
+    ``taps`` T: the interpolator of both reads (Processor.range_migration_taps); the others are
+    NonUniformCorrelator's.  Output timing is the nonuniform correlator's.
+    """
+
+    def __init__(
+        self,
+        cfg,
+        range_m: np.ndarray,
+        taps: int,
+        head_lines: int = 16,
+        max_block_lines: int = 128,
+        precision: str = "complex64",
+        threaded: bool | None = None,
+    ):
+        if not (isinstance(taps, int) and taps >= 1):
+            raise ValueError(f"taps must be an integer >= 1, got {taps!r}")
+        mask = design_mask(cfg, range_m)
+        super().__init__(mask, precision)
+        n, bins = mask.shape
+        self.walk = fit_walk(cfg, range_m)
+        self.ring_columns = ring_width(bins, self.walk, n, taps)
+        w = self.walk.bins_per_pulse
+        wide = design_mask(cfg, self._ring_range_m(range_m))
+        self.inner = NonUniformCorrelator(
+            wide,
+            head_lines,
+            walk_block_lines(w, head_lines, max_block_lines),
+            precision,
+            threaded,
+            mask_rotation=(w, MASK_QUANTUM),
+        )
+        self.block_lines = self.inner.block_lines
+        real = np.float32 if self.dtype == np.complex64 else np.float64
+        self.taps = taps
+        self._table = weight_table(taps, real)
+        self._s0 = w * (n - 1) + self.walk.offset_mid_bins
+        self._offset = (self.walk.offset_bins - self.walk.offset_mid_bins).astype(np.float64)
+        if np.abs(self._offset).max() >= taps:  # _read_rows' pad reads T columns either side
+            raise ValueError("the columns' walk offsets spread over more than the taps")
+        self._pad = np.zeros(self.ring_columns + 3 * taps, self.dtype)
+
+    def _ring_range_m(self, range_m: np.ndarray) -> np.ndarray:
+        """The range whose mask ring column j holds while the ring is unturned (line 0): the
+        true column r with j = r + c(r) - c_mid, c extended linearly over the guard."""
+        bins = len(range_m)
+        r = np.arange(bins, dtype=np.float64)
+        j = r + self.walk.offset_bins - self.walk.offset_mid_bins
+        cols = np.arange(self.ring_columns, dtype=np.float64)
+        slope = (j[-1] - j[0]) / (bins - 1)
+        true = np.interp(cols, j, r, left=np.nan, right=np.nan)
+        true = np.where(np.isnan(true), r[0] + (cols - j[0]) / slope, true)
+        step_m = (range_m[-1] - range_m[0]) / (bins - 1)
+        return range_m[0] + true * step_m
+
+    def _into_ring(self, lines: np.ndarray) -> np.ndarray:
+        ring = np.empty((len(lines), self.ring_columns), self.dtype)
+        w = self.walk.bins_per_pulse
+        _write_rows(lines, self.pulses_in, w, self._s0, self._table, self._pad, ring)
+        return ring
+
+    def _out_of_ring(self, ring_out: np.ndarray) -> np.ndarray:
+        out = np.empty((len(ring_out), self.range_bins), self.dtype)
+        if len(out):
+            w = self.walk.bins_per_pulse
+            first = self.inner.lines_out - len(out) + self.aperture - 1  # its last pulse's index
+            _read_rows(ring_out, first, w, self._offset, self._table, self._pad, out)
+        self.lines_out += len(out)
+        return out
+
+    def push(self, lines: np.ndarray) -> np.ndarray:
+        lines = self._check(lines)
+        ring = self._into_ring(lines)
+        self.pulses_in += len(lines)
+        return self._out_of_ring(self.inner.push(ring))
+
+    def flush(self) -> np.ndarray:
+        return self._out_of_ring(self.inner.flush())
+
+    def close(self) -> None:
+        self.inner.close()

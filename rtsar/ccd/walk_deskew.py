@@ -139,16 +139,19 @@ def _write_rows(lines, first_pulse, w, s0, table, pad, ring):  # pragma: no cove
         s -= math.floor(s / width) * width  # s_n mod W in float64: bounded on a stream
         first, q = _first_and_row(s, taps, phases)
         src = lines[i]
+        c = first % width  # then counted up, wrapped by a subtraction: no division a sample
         for j in range(width + taps):
-            c = (first + j) % width
             pad[j] = src[c] if c < bins else 0
+            c += 1
+            if c == width:
+                c = 0
         wt = table[q]
         row = ring[i]
-        for j in range(width):
-            acc = pad[j] * wt[0]
-            for t in range(1, taps):
-                acc += pad[j + t] * wt[t]
-            row[j] = acc
+        for j in range(width):  # the taps' loop outside: the columns' loop vectorises
+            row[j] = pad[j] * wt[0]
+        for t in range(1, taps):
+            for j in range(width):
+                row[j] += pad[j + t] * wt[t]
 
 
 @numba.njit(nogil=True, cache=True)
@@ -158,6 +161,9 @@ def _read_rows(ring_out, first_line, w, offset, table, pad, out):  # pragma: no 
     count, bins = out.shape
     width = ring_out.shape[1]
     taps, phases = table.shape[1], table.shape[0]
+    by_tap = np.ascontiguousarray(table.T)  # by_tap[t, q]
+    k0 = np.empty(bins, np.int64)
+    qs = np.empty(bins, np.int64)
     for i in range(count):
         turn = w * (first_line + i)
         turn -= math.floor(turn / width) * width  # w·p mod W in float64: bounded on a stream
@@ -165,17 +171,23 @@ def _read_rows(ring_out, first_line, w, offset, table, pad, out):  # pragma: no 
         frac = turn - base
         lo = -taps  # pad[k] = ring_out[(k + lo - base) mod W]: reads from r - T on
         src = ring_out[i]
+        c = (lo - base) % width
         for k in range(bins + 3 * taps):
-            pad[k] = src[(k + lo - base) % width]
+            pad[k] = src[c]
+            c += 1
+            if c == width:
+                c = 0
         row = out[i]
-        for r in range(bins):
+        for r in range(bins):  # each column's first read and weights, then the taps' passes
             first, q = _first_and_row(r + offset[r] - frac, taps, phases)
-            wt = table[q]
-            k0 = first - lo
-            acc = pad[k0] * wt[0]
-            for t in range(1, taps):
-                acc += pad[k0 + t] * wt[t]
-            row[r] = acc
+            k0[r] = first - lo
+            qs[r] = q
+        for r in range(bins):
+            row[r] = pad[k0[r]] * by_tap[0, qs[r]]
+        for t in range(1, taps):
+            wt = by_tap[t]
+            for r in range(bins):
+                row[r] += pad[k0[r] + t] * wt[qs[r]]
 
 
 def walk_block_lines(w: float, head_lines: int, max_block_lines: int) -> int:

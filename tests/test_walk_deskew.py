@@ -156,3 +156,20 @@ def test_live_runs_take_the_walk_where_the_doppler_read_holds_lines():
     with pytest.raises(ValueError, match="'walk' needs correlator = 'nonuniform'"):
         Processor(8, 8, correlator="fft", range_migration_taps=4, range_migration_domain="walk")
     assert math.isfinite(fit_walk(live, make_plan(live).range_m).bins_per_pulse)
+
+
+def test_the_memory_estimate_counts_one_correlator_on_the_ring():
+    """The memory check (rtsar.stream.memory) counted the walk as T + 2 correlators, as the
+    time-domain taps are (RADARSAT-1: 10x what it holds, enough to refuse a run on a small
+    machine); the estimate now lies between what the ring's correlator holds and 3x that."""
+    from rtsar.stream.memory import estimate_bytes
+
+    cfg = preset("radarsat1").with_processor(correlator="nonuniform", range_migration_domain="walk")
+    ccd = make_ccd(cfg, make_plan(cfg).range_m)
+    inner = ccd.inner
+    groups = [inner._head, inner._tail.group]
+    held = sum(a.nbytes for g in groups for a in g.arrays)
+    held += sum(a.nbytes for ring in (inner._hist, inner._acc, inner._head_out) for a in ring)
+    ccd.close()
+    estimate = estimate_bytes(cfg)
+    assert held <= estimate <= 3 * held

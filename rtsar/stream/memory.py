@@ -49,6 +49,8 @@ def estimate_bytes(
     n, bins = p.aperture_pulses, p.range_bins
     m = p.fft_length or 1 << max(0, (2 * n - 1).bit_length())
     taps = max(1, p.range_migration_taps + 2) if p.range_migration_taps else 1
+    if p.range_migration_taps and p.range_migration_domain == "walk":
+        taps = 1.1  # one correlator on the walk's ring, a few % wider (rtsar.ccd.walk_deskew)
     ccd = {
         "direct": 2 * n * bins,
         "fft": 5 * m * bins,

@@ -19,15 +19,21 @@ each ring column (eq. 1), which the nonuniform correlator computes with head blo
 line.  Two things turn with the ring.  Line p's column r comes out of ring column
 r + c(r) - c_mid - w·p, read with T taps (the unrotation).  And the range-dependent mask: ring
 column j holds true column r(j) + w·p, so the correlator's mask is built for the ranges r(j)
-(j = r + c(r) - c_mid) and turned by Q·round(w·m / Q) columns for a block whose lines centre
-on pulse m (rtsar.ccd.tiled.mask_shift; Q = MASK_QUANTUM = 1), each line's mask then at most
-1/2 + |w|·B/2 bins from its own.  That bound matters: a squinted mask's linear phase depends
-on range, so a mask δ bins off moves a point in azimuth (RADARSAT-1: turns in steps of 16
-bins taken at each block's first line put its points 0.2-0.3 cell off; blocks of up to 128
-lines, 0.03 cell and an azimuth PSLR of -34 dB), hence steps of one bin and blocks of at most
-about 1/|w| lines (walk_block_lines).
-The guard of W - bins ≥ |w|·N + T + 2 + max|c - c_mid| columns holds zeros, so an aperture
-near one edge never reads the other edge's lines.
+(j = r + c(r) - c_mid; the guard's upper half holds the columns below the swath, j - W) and
+turned by Q·round(w·m / Q) columns for a block whose lines centre on pulse m
+(rtsar.ccd.tiled.mask_shift; Q = MASK_QUANTUM = 1), each line's mask then up to
+δ = 1/2 + |w|·B/2 bins from its own.  A mask δ bins off errs by its phase's change with range:
+
+    φ(k, R) = (4π/λ)(sqrt(R² + u_k²) - R) = φ0(R) + ψ(k, R),   φ0(R) = φ(R) at u = u_mid  (W3)
+
+φ0 changes by 0.39 rad a bin at RADARSAT-1's squint (u_mid = 27.5 km): before it was taken out,
+every line carried a sawtooth phase error of up to 0.36 rad, and a point whose line met a turn
+of the mask moved 0.15 cell with an azimuth PSLR of -27 dB (a cold review).  So the mask holds
+exp(-iφ0(R)) · mask(R) and each value read out of the ring gets exp(iφ0) back at its exact
+range, r(j + w·p) (``constant_phase_cycles``; phase in float64, reduced mod 2π).  What the turn
+leaves is ψ's change with range, linear in k: a shift in azimuth of about 0.02 cell a bin of δ
+(walk_block_lines).  The guard of W - bins ≥ |w|·N + T + 2 + max|c - c_mid| columns holds
+zeros, so an aperture near one edge never reads the other edge's lines.
 
 What it leaves out is ε, the curvature (the accuracy this costs is measured against the exact
 (M2), correlate_migration_reference, in tests/test_walk_deskew.py and on the RADARSAT-1 block);
@@ -49,12 +55,13 @@ import numba
 import numpy as np
 
 from . import tiled
-from .base import Correlator, design_mask
+from .base import Correlator, beam_look_back_m, design_mask
 from .migration import interpolation_weights, migration_bins
 from .nonuniform import NonUniformCorrelator
 
 MASK_QUANTUM = 1  # columns the mask turns at a time
 PHASES = 256  # fractional positions of the interpolation table
+MOST_CURVATURE_BINS = 1.0  # the curvature the ring may leave out (RADARSAT-1's: 0.45)
 
 
 @dataclass(frozen=True)
@@ -92,6 +99,15 @@ def fit_walk(cfg, range_m: np.ndarray) -> Walk:
         curvature_max_bins=float(np.abs(eps[weighed]).max()),
         curvature_rms_bins=float(np.sqrt((energy * eps * eps).sum(axis=0).max())),
     )
+
+
+def constant_phase_cycles(range_m: np.ndarray, look_back_m: float, wavelength_m: float):
+    """φ0(R) / 2π of the module docstring, unreduced (float64): the mask's phase at the beam's
+    centre offset u, 2 (sqrt(R² + u²) - R) / λ cycles (rtsar.ccd.base.design_mask's), formed
+    as 2u² / (sqrt(R² + u²) + R) / λ, free of cancellation."""
+    r = np.asarray(range_m, np.float64)
+    u2 = float(look_back_m) ** 2
+    return 2.0 * u2 / (np.sqrt(r * r + u2) + r) / wavelength_m
 
 
 def ring_width(bins: int, walk: Walk, aperture: int, taps: int) -> int:
@@ -155,13 +171,20 @@ def _write_rows(lines, first_pulse, w, s0, table, pad, ring):  # pragma: no cove
 
 
 @numba.njit(nogil=True, cache=True)
-def _read_rows(ring_out, first_line, w, offset, table, pad, out):  # pragma: no cover - compiled
+def _read_rows(ring_out, first_line, w, offset, table, phase, step, pad, out):  # pragma: no cover
     # out[i, r] = ring_out[i] read at r + offset[r] - w·p, p = first_line + i, modulo W: the
-    # row turned by ⌊w·p⌋ into ``pad`` first; each column's fraction its own (offset).
+    # row turned by ⌊w·p⌋ into ``pad`` first, each value given back its phase φ0 there
+    # (``phase``, ``step``: exp(iφ0) and φ0's step to the next column at pad index k, read at
+    # the fraction f of the turn: exp(iφ0 + i·f·step), the step's mean in one exponential and
+    # its departure from it, at most a few mrad, to second order); each column's read its own
+    # fraction (offset).
     count, bins = out.shape
     width = ring_out.shape[1]
     taps, phases = table.shape[1], table.shape[0]
+    span = pad.shape[0]
+    lo = (span - bins - taps) // 2  # pad[k] holds the ring column of mask column k - lo
     by_tap = np.ascontiguousarray(table.T)  # by_tap[t, q]
+    mean_step = step.mean()
     k0 = np.empty(bins, np.int64)
     qs = np.empty(bins, np.int64)
     for i in range(count):
@@ -169,18 +192,19 @@ def _read_rows(ring_out, first_line, w, offset, table, pad, out):  # pragma: no 
         turn -= math.floor(turn / width) * width  # w·p mod W in float64: bounded on a stream
         base = math.floor(turn)
         frac = turn - base
-        lo = -taps  # pad[k] = ring_out[(k + lo - base) mod W]: reads from r - T on
+        g = complex(math.cos(frac * mean_step), math.sin(frac * mean_step))
         src = ring_out[i]
-        c = (lo - base) % width
-        for k in range(bins + 3 * taps):
-            pad[k] = src[c]
+        c = (-lo - base) % width
+        for k in range(span):
+            e = frac * (step[k] - mean_step)
+            pad[k] = src[c] * (phase[k] * g * complex(1.0 - 0.5 * e * e, e))
             c += 1
             if c == width:
                 c = 0
         row = out[i]
         for r in range(bins):  # each column's first read and weights, then the taps' passes
             first, q = _first_and_row(r + offset[r] - frac, taps, phases)
-            k0[r] = first - lo
+            k0[r] = first + lo
             qs[r] = q
         for r in range(bins):
             row[r] = pad[k0[r]] * by_tap[0, qs[r]]
@@ -192,10 +216,11 @@ def _read_rows(ring_out, first_line, w, offset, table, pad, out):  # pragma: no 
 
 def walk_block_lines(w: float, head_lines: int, max_block_lines: int) -> int:
     """The longest block the turning mask allows: a block of B lines shares one turn of the mask,
-    so its lines' columns drift |w|·B bins against it, which moves their peaks in azimuth
-    (RADARSAT-1 points, blocks up to 128: up to 0.03 cell, azimuth PSLR -34 dB against -40 dB
-    of the exact (M2); up to 32: 0.006 cell, -39 dB).  The power of two nearest 1/|w| (RADARSAT-1:
-    32), within [head_lines, max_block_lines]."""
+    so its lines' columns drift up to |w|·B/2 bins from it, each bin about 0.02 cell of azimuth
+    (module docstring).  RADARSAT-1's points at starts 0-29 pulses apart (2026-11-29): tail
+    blocks of 32, up to 0.02 cell off, azimuth PSLR -39.2 to -42.8 dB (the exact (M2): -40 to
+    -42.5); of 16, up to 0.011 cell, the correlator alone 20-30 % slower.  The power of two
+    nearest 1/|w| (RADARSAT-1: 32), within [head_lines, max_block_lines]."""
     if w == 0:
         return max_block_lines
     nearest = 1 << max(0, round(math.log2(1.0 / abs(w))))
@@ -226,9 +251,19 @@ class WalkDeskewCorrelator(Correlator):
         super().__init__(mask, precision)
         n, bins = mask.shape
         self.walk = fit_walk(cfg, range_m)
+        if self.walk.curvature_max_bins > MOST_CURVATURE_BINS:
+            raise ValueError(
+                f"the walk's ring leaves out the aperture's curvature, here "
+                f"{self.walk.curvature_max_bins:.2f} bins (at most {MOST_CURVATURE_BINS:g}): "
+                "use range_migration_domain 'time' (or 'doppler' with the fft correlator)"
+            )
         self.ring_columns = ring_width(bins, self.walk, n, taps)
         w = self.walk.bins_per_pulse
-        wide = design_mask(cfg, self._ring_range_m(range_m))
+        ring_range_m = self._ring_range_m(range_m)
+        # The mask without its constant phase φ0(R) (module docstring), given back on read-out.
+        look_back_m = beam_look_back_m(cfg)
+        cycles = constant_phase_cycles(ring_range_m, look_back_m, cfg.geometry.wavelength_m)
+        wide = design_mask(cfg, ring_range_m) * np.exp(-2j * np.pi * np.mod(cycles, 1.0))
         self.inner = NonUniformCorrelator(
             wide,
             head_lines,
@@ -243,27 +278,45 @@ class WalkDeskewCorrelator(Correlator):
         self._table = weight_table(taps, real)
         self._s0 = w * (n - 1) + self.walk.offset_mid_bins
         self._offset = (self.walk.offset_bins - self.walk.offset_mid_bins).astype(np.float64)
-        if np.abs(self._offset).max() >= taps:  # _read_rows' pad reads T columns either side
-            raise ValueError("the columns' walk offsets spread over more than the taps")
-        self._pad = np.zeros(self.ring_columns + 3 * taps, self.dtype)
+        # _read_rows' pad: the bins and, either side, the taps and the offsets' reach
+        margin = taps + math.ceil(np.abs(self._offset).max()) + 2
+        span = bins + 2 * margin + taps
+        self._pad = np.zeros(span, self.dtype)
+        self._write_pad = np.zeros(self.ring_columns + taps, self.dtype)  # _write_rows'
+
+        mask_col = (np.arange(span) - (span - bins - taps) // 2) % self.ring_columns
+        nxt = (mask_col + 1) % self.ring_columns
+        self._phase = np.exp(2j * np.pi * np.mod(cycles[mask_col], 1.0)).astype(self.dtype)
+        # φ0's step to the next column, formed from the cycles in float64 (no mod-2π jump);
+        # across the guard's seam (outputs never read) set to the mean's
+        step = 2.0 * np.pi * (cycles[nxt] - cycles[mask_col])
+        seam = np.abs(step - np.median(step)) > 0.5
+        self._step = np.where(seam, np.median(step), step)
 
     def _ring_range_m(self, range_m: np.ndarray) -> np.ndarray:
         """The range whose mask ring column j holds while the ring is unturned (line 0): the
-        true column r with j = r + c(r) - c_mid, c extended linearly over the guard."""
+        true column r with j = r + c(r) - c_mid, c extended linearly over the guard, whose
+        upper half holds the columns below the swath (j - W: the near edge's apertures turn
+        into it)."""
         bins = len(range_m)
         r = np.arange(bins, dtype=np.float64)
         j = r + self.walk.offset_bins - self.walk.offset_mid_bins
         cols = np.arange(self.ring_columns, dtype=np.float64)
+        cols = np.where(cols < 0.5 * (bins + self.ring_columns), cols, cols - self.ring_columns)
         slope = (j[-1] - j[0]) / (bins - 1)
         true = np.interp(cols, j, r, left=np.nan, right=np.nan)
-        true = np.where(np.isnan(true), r[0] + (cols - j[0]) / slope, true)
+        true = np.where(
+            np.isnan(true),
+            np.where(cols < j[0], r[0] + (cols - j[0]) / slope, r[-1] + (cols - j[-1]) / slope),
+            true,
+        )
         step_m = (range_m[-1] - range_m[0]) / (bins - 1)
         return range_m[0] + true * step_m
 
     def _into_ring(self, lines: np.ndarray) -> np.ndarray:
         ring = np.empty((len(lines), self.ring_columns), self.dtype)
         w = self.walk.bins_per_pulse
-        _write_rows(lines, self.pulses_in, w, self._s0, self._table, self._pad, ring)
+        _write_rows(lines, self.pulses_in, w, self._s0, self._table, self._write_pad, ring)
         return ring
 
     def _out_of_ring(self, ring_out: np.ndarray) -> np.ndarray:
@@ -271,7 +324,8 @@ class WalkDeskewCorrelator(Correlator):
         if len(out):
             w = self.walk.bins_per_pulse
             first = self.inner.lines_out - len(out) + self.aperture - 1  # its last pulse's index
-            _read_rows(ring_out, first, w, self._offset, self._table, self._pad, out)
+            args = (self._offset, self._table, self._phase, self._step, self._pad)
+            _read_rows(ring_out, first, w, *args, out)
         self.lines_out += len(out)
         return out
 

@@ -6,6 +6,7 @@ Doppler centroid estimated back from the echoes."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from rtsar.analysis.azimuth_response import antenna_gain, azimuth_theory
 from rtsar.analysis.doppler_centroid import estimate_doppler_centroid
 from rtsar.analysis.point_target import analyse_point_target, azimuth_carrier_cycles
 from rtsar.analysis.theory import theoretical_irw_factor
+from rtsar.ccd.base import line_azimuth_m
 from rtsar.lens import make_lens, make_plan
 from rtsar.presets import preset
 from rtsar.scene import Simulator
@@ -122,3 +124,24 @@ def test_the_simulated_echo_sits_where_the_instruments_convention_puts_it():
     lit = np.flatnonzero(np.abs(shot) > 0.5)
     centre = 0.5 * (lit[0] + lit[-1] + 1)  # the chirp's rectangular envelope, its midpoint
     assert centre == pytest.approx((2 * r / C - wf.window_start_s) * wf.sample_rate_hz, abs=0.6)
+
+
+@pytest.mark.parametrize("centroid_hz", [-6900.0, 6900.0])
+@pytest.mark.parametrize("near_first", [True, False])
+def test_a_default_scan_images_targets_at_both_swath_edges(centroid_hz, near_first):
+    """The default scan (rtsar.scene.model.scan_extent) holds every target's image line with a
+    margin of at least 8 lines, whichever squint and whichever edge the first target is at.
+    It covered where the beam sees each target (u_c at its own range) but not where the image
+    puts it (lines trail their apertures by u_mid, at the range centre): 130 m apart at
+    RADARSAT-1's swath edges, and targets 1800 and 2600 m out fell outside an image of
+    1873-2530 m (a cold review)."""
+    cfg = preset("radarsat1")
+    cfg = replace(cfg, geometry=replace(cfg.geometry, doppler_centroid_hz=centroid_hz))
+    edges = make_plan(cfg).range_m[[0, -1]]
+    rs = edges if near_first else edges[::-1]
+    xs = np.array([1800.0, 2600.0])
+    sc = point_scene(cfg, xs, rs)
+    n = cfg.processor.aperture_pulses
+    az = line_azimuth_m(cfg, sc.start_along_track_m, 0, sc.pulses - n + 1)
+    margin_m = 8 * cfg.geometry.along_track_step_m
+    assert az[0] <= xs.min() - margin_m and az[-1] >= xs.max() + margin_m

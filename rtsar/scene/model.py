@@ -242,9 +242,18 @@ def scan_extent(cfg: Config, targets: Targets, start, pulses) -> tuple[float, in
     # Past the first/last target: half an aperture plus 8 azimuth resolutions (at least 8 lines),
     # so the outermost targets' mainlobes and first sidelobes are inside the image.
     margin_m = 0.5 * n * step + max(8 * step, 8 * cfg.azimuth_resolution_m())
-    # A squinted beam sees a target from around its closest approach plus R0 tan θ.
+    # A squinted beam sees a target from around its closest approach plus u_c = R0 tan θ at its
+    # own range; the image's lines trail their apertures by u_mid, u_c at the range centre
+    # (rtsar.ccd.base.line_azimuth_m).  Both must hold the target with the margin: a target at
+    # a swath edge, u_c - u_mid over a hundred metres at RADARSAT-1's squint, was cut off.
     g = cfg.geometry
-    seen = targets.along_track_m + g.beam_centre_offset_m(targets.slant_range_m)
+    u_mid = g.beam_centre_offset_m(cfg.processor.range_centre_m or g.slant_range_m)
+    seen = np.concatenate(
+        [
+            targets.along_track_m + g.beam_centre_offset_m(targets.slant_range_m),
+            targets.along_track_m + u_mid,
+        ]
+    )
     lo = float(seen.min()) if len(targets) else 0.0
     hi = float(seen.max()) if len(targets) else 0.0
     start = float(lo - margin_m if start is None else start)

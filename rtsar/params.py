@@ -424,8 +424,8 @@ class Config:
             if walk_m > 0.25 * self.waveform.range_resolution_m:
                 raise ValueError(
                     f"a Doppler centroid of {g.doppler_centroid_hz:g} Hz walks the echo "
-                    f"{walk_m:.3g} m across the aperture: set Processor.range_migration_taps "
-                    "(e.g. 4) so that the CCD's rows follow it"
+                    f"{walk_m:.3g} m across the aperture: set range_migration_taps "
+                    "(--range-migration-taps, e.g. 8) so that the CCD's rows follow it"
                 )
         if isinstance(self.waveform, FMCWChirp):
             if self.waveform.reference_range_m <= 0:

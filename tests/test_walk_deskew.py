@@ -262,3 +262,47 @@ def test_the_read_out_reaches_any_offset_the_columns_have():
         idx = (first[:, None] + np.arange(taps)) % width
         want = (ring[i][idx] * wt).sum(axis=1)
         np.testing.assert_allclose(out[i], want, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "argv, domain",
+    [
+        (["--correlator", "nonuniform"], "walk"),  # the live run's: its image made again
+        (["--correlator", "partitioned"], "time"),
+        (["--correlator", "fft"], "doppler"),
+        ([], "doppler"),
+        (["--correlator", "nonuniform", "--range-migration-domain", "time"], "time"),
+    ],
+)
+def test_the_command_lines_correlator_takes_its_migration_domain(argv, domain):
+    """`rtsar process rs1.h5 --correlator nonuniform`, as the live banner names it, was refused
+    (the file's Doppler-domain read is fft's, and no option set the domain: a new user could
+    not make the live image again); now each kind takes the domain it reads in, and
+    --range-migration-domain names one outright."""
+    from rtsar.app.cli import build_parser
+    from rtsar.app.cli.options import processor_changes
+    from rtsar.stream.granularity import migration_words
+
+    args = build_parser("process").parse_args(["process", "r.h5", "-o", "i.h5", *argv])
+    p = processor_changes(args, preset("radarsat1")).processor
+    assert p.range_migration_domain == domain
+    words = {"walk": "walk's ring", "time": "exact 2-D mask", "doppler": "azimuth spectrum"}
+    assert migration_words(p).startswith("; range migration 8 taps, read ")
+    assert words[domain] in migration_words(p)
+    bad = ["--correlator", "nonuniform", "--range-migration-domain", "doppler"]
+    args = build_parser("process").parse_args(["process", "r.h5", "-o", "i.h5", *bad])
+    with pytest.raises(ValueError, match="'doppler' needs correlator = 'fft'"):
+        processor_changes(args, preset("radarsat1"))
+
+
+@pytest.mark.slow
+def test_the_banner_says_the_walks_block_does_not_grow():
+    """A live run on the walk's ring keeps its block when behind (why_fixed); the banner's
+    granularity line said nothing of it, where it names the blocks a run may grow to."""
+    from rtsar.app.live_granularity import GranularityRequest
+    from rtsar.stream.pipeline import PipelineSettings
+
+    cfg = preset("radarsat1")
+    chosen, _, _, words = GranularityRequest(1256.98).apply(cfg, PipelineSettings("numpy"))
+    assert chosen.processor.range_migration_domain == "walk"
+    assert "the block does not grow when behind (the walk's ring turns from" in words

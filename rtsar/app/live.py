@@ -17,6 +17,7 @@ from ..params import Config
 from ..scene.effects import REGISTRY as EFFECTS
 from ..sinks.publish import STALL_TIMEOUT_S, ZmqPublisher
 from ..sources.channel_map import ChannelMap
+from ..stream.granularity import migration_words
 from ..stream.pipeline import Pipeline, PipelineSettings
 from . import signals
 from .compile_notice import compile_notice
@@ -430,9 +431,7 @@ def run_stream(
             + (f"; physical CCD, carrier in {physical.carrier}" if physical else "")
             + (f"; height strips of {height.strip_lines} lines" if height is not None else "")
             + (f"; {n.precision}" if n.precision != "complex64" else "")
-            + (
-                f"; range migration {n.range_migration_taps} taps" if n.range_migration_taps else ""
-            ),
+            + (migration_words(n) if n.range_migration_taps else ""),
             file=stream,
             flush=True,
         )

@@ -31,13 +31,7 @@ from ..lens import cl_devices, make_lens, make_plan
 from ..lens.base import survey_devices_first, survey_wanted
 from ..lens.numpy_lens import NumpyLens
 from ..lens.plan import next_pow2
-from ..lens.small_calls import (
-    TIMED_UP_TO,
-    SmallCallsOnCPU,
-    call_cost_s,
-    cpu_limit,
-    route_words,
-)
+from ..lens.small_calls import TIMED_UP_TO, SmallCallsOnCPU, call_cost_s, cpu_limit, route_words
 from ..params import Config, Processor
 from ..sinks.publish import ZmqPublisher
 from ..sinks.wire import strip_header
@@ -113,11 +107,14 @@ class GranularityRequest:
         if costs.lens_cpu_below > 1:
             words += f"; {small_calls_words(costs)}"
         swath = bool(settings.swath_workers)
-        grow = not fixed and not why_fixed(config.processor, physical, copies, swath)
+        why = why_fixed(config.processor, physical, copies, swath)
+        grow = not fixed and not why
         larger = [b for b in blocks if b > g.block_lines] if grow else []
         grow_blocks = (g.block_lines, *larger) if larger else ()
         if grow_blocks:
             words += f"; {growth_words(grow_blocks)}"
+        elif not fixed and why:
+            words += f"; the block does not grow when behind ({why})"
         if self.stages is None:
             words += f"; {g.stages} stages ({stages_words(g)})"
         chosen = block_config(config, g.block_lines, physical)

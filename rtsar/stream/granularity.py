@@ -239,10 +239,10 @@ def live_correlator(
             "pulses; the walk's ring leaves the aperture's curvature out, rtsar.ccd.walk_deskew; "
             "--correlator fft keeps fft)"
         )
-        return (
-            config.with_processor(correlator=LIVE_CORRELATOR, range_migration_domain="walk"),
-            words,
-        )
+        domain = migration_domain_for(config, LIVE_CORRELATOR)
+        return config.with_processor(
+            correlator=LIVE_CORRELATOR, range_migration_domain=domain
+        ), words
     if taps:
         return config, ""
     words = (
@@ -252,6 +252,27 @@ def live_correlator(
         "blocks from 1 line; --correlator fft keeps fft)"
     )
     return config.with_processor(correlator=LIVE_CORRELATOR), words
+
+
+def migration_domain_for(config, correlator: str) -> str:
+    """The range-migration domain ``correlator`` takes in place of the configuration's where
+    that one is another kind's (--correlator): the Doppler-domain read is fft's, the walk's
+    ring nonuniform's (what a live run chooses for a squinted beam, live_correlator); another
+    kind reads in the time domain (the exact 2-D mask, a correlator a bin offset)."""
+    domain = config.processor.range_migration_domain
+    if domain == "doppler" and correlator != "fft":
+        walk = correlator == LIVE_CORRELATOR and config.geometry.squinted
+        return "walk" if walk else "time"
+    if domain == "walk" and correlator != "nonuniform":
+        return "doppler" if correlator == "fft" else "time"
+    return domain
+
+
+def migration_words(p) -> str:
+    """The banner's words for Processor ``p``'s range-migration taps and where they read."""
+    where = {"time": "through the exact 2-D mask", "doppler": "in each block's azimuth spectrum"}
+    read = where.get(p.range_migration_domain, "on the walk's ring, curvature left out")
+    return f"; range migration {p.range_migration_taps} taps, read {read}"
 
 
 def candidate_words(blocks: list[int]) -> str:

@@ -23,7 +23,7 @@ from ...stream.timing import RecordedFlags
 from .. import signals
 from ..progress import Progress
 from ..quicklook import save_height_quicklook, save_quicklook, spotlight_words
-from .inputs import open_input
+from .inputs import open_input, warn_outside_swath
 from .options import (
     add_process_options,
     check_channels,
@@ -32,7 +32,6 @@ from .options import (
     height_stage,
     physical_ccd,
     processor_changes,
-    warn_outside_swath,
 )
 
 

@@ -1,11 +1,13 @@
 """The recordings ``process`` and ``replay`` take: rtsar's HDF5 recordings, CPHD files and
-SigMF recordings (the last two need the optional extra ``formats``), chosen by file name."""
+SigMF recordings (the last two need the optional extra ``formats``), chosen by file name; a
+scene's targets outside the range window, said."""
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
 
+from ...lens import range_axis_m
 from ...sinks.exports.screen import time_order_note
 from ...sinks.io import open_recording
 from ...sources.formats.sigmf_store import sigmf_base
@@ -70,5 +72,17 @@ def note_live_recording(rec) -> None:
         print(
             f"note: {dropped} shots of {rec.path} were not recorded (record_dropped: pulse_flags "
             "4): zero pulses stand in their place, the live image had them",
+            file=sys.stderr,
+        )
+
+
+def warn_outside_swath(scene) -> None:
+    """Say which targets of a scene lie outside the range window (they will not be imaged)."""
+    outside = scene.targets_outside_swath()
+    if outside:
+        rm = range_axis_m(scene.config)
+        print(
+            f"warning: {len(outside)} of {len(scene.targets)} targets (indices {outside[:10]}) "
+            f"lie outside the range window {rm[0]:.6g}–{rm[-1]:.6g} m and will not be imaged",
             file=sys.stderr,
         )

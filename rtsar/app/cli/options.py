@@ -20,6 +20,7 @@ from ...lens import LENS_BACKENDS, range_axis_m
 from ...params import PRECISIONS, Processor
 from ...physical import CARRIERS, paper_ccd
 from ...sinks.endpoint import DEFAULT_ENDPOINT, DELIVERIES, STALL_TIMEOUT_S, endpoint_error
+from ...stream.granularity import migration_domain_for
 from ...stream.pipeline import PipelineSettings
 from ...stream.settings import STAGE_LAYOUTS
 
@@ -82,8 +83,9 @@ def add_correlator_option(g) -> None:
         "one block of latency); partitioned: partitioned overlap-save (low latency, fast); "
         "nonuniform: a short head block and long tail blocks (the partitioned latency, fewer "
         "multiply-adds) (default: the configuration's; a live run at a rate runs nonuniform "
-        "where it names fft, lines as they come, but not with --fft-length, range-migration "
-        "taps or --swath-workers)",
+        "where it names fft, lines as they come, but not with --fft-length, time-domain "
+        "range-migration taps or --swath-workers; a squinted beam's Doppler-domain taps then "
+        "read on the walk's ring, as --correlator nonuniform makes them)",
     )
     g.add_argument(
         "--partition-lines",
@@ -126,8 +128,14 @@ def add_processing_knobs(g) -> None:
         type=int,
         metavar="T",
         help="handle range migration with a T-tap interpolating 2-D mask (0: off, the "
-        "presets' default; use with "
-        "range oversampling 2; ~2-5× the CCD cost)",
+        "presets' default; use with range oversampling 2; ~2-5× the CCD cost)",
+    )
+    g.add_argument(
+        "--range-migration-domain",
+        choices=Processor.MIGRATION_DOMAINS,
+        help="where the taps read: time (exact 2-D mask), doppler (fft only: each block's "
+        "azimuth spectrum), walk (nonuniform only: the squint's walk taken out first, not the "
+        "curvature) (default: the configuration's, or the one --correlator's kind takes)",
     )
     g.add_argument(
         "--correct",
@@ -366,6 +374,10 @@ def processor_changes(args, cfg):
         changes["precision"] = args.precision
     if getattr(args, "range_migration_taps", None) is not None:
         changes["range_migration_taps"] = args.range_migration_taps
+    if getattr(args, "range_migration_domain", None):
+        changes["range_migration_domain"] = args.range_migration_domain
+    elif args.correlator:
+        changes["range_migration_domain"] = migration_domain_for(cfg, args.correlator)
     cfg = cfg.with_processor(**changes) if changes else cfg
     p = cfg.processor
     wf = cfg.waveform
@@ -486,15 +498,3 @@ def strip_lines(args, prf_hz: float) -> None:
         args.strip_lines = max(1, round(args.strip_ms * 1e-3 * prf_hz))
     if args.strip_lines is not None and args.strip_lines < 1:
         raise ValueError(f"--strip-lines must be >= 1, got {args.strip_lines}")
-
-
-def warn_outside_swath(scene) -> None:
-    """Say which targets of a scene lie outside the range window (they will not be imaged)."""
-    outside = scene.targets_outside_swath()
-    if outside:
-        rm = range_axis_m(scene.config)
-        print(
-            f"warning: {len(outside)} of {len(scene.targets)} targets (indices {outside[:10]}) "
-            f"lie outside the range window {rm[0]:.6g}–{rm[-1]:.6g} m and will not be imaged",
-            file=sys.stderr,
-        )

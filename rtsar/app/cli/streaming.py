@@ -34,6 +34,7 @@ from ..live import (
 )
 from ..live_granularity import block_candidates, block_config, live_correlator, request_of
 from ..subscribe import subscribe
+from .inputs import warn_outside_swath
 from .options import (
     add_pipeline_options,
     add_subscriber_options,
@@ -44,7 +45,6 @@ from .options import (
     pipeline_settings,
     processor_changes,
     strip_lines,
-    warn_outside_swath,
     zmq_endpoint,
 )
 from .run_options import add_run_options, add_wait_subscribers

@@ -8,8 +8,8 @@ import math
 
 import numpy as np
 import pytest
+from point_focus import focus_points
 
-from rtsar.analysis.point_target import analyse_point_target, azimuth_carrier_cycles
 from rtsar.ccd import make_ccd
 from rtsar.ccd.doppler_migration import DopplerMigrationCorrelator, doppler_migration_bins
 from rtsar.lens import make_plan
@@ -17,7 +17,6 @@ from rtsar.params import Processor
 from rtsar.presets import preset
 from rtsar.scene import Simulator
 from rtsar.scene.model import point_scene
-from rtsar.stream.engine import process_block
 
 C = 299_792_458.0
 
@@ -81,22 +80,9 @@ def test_streaming_equals_one_block(scene):
 def test_doppler_domain_focuses_as_the_exact_time_domain_mask(scene):
     cfg, sc, shots, xs, rs = scene
     step, cell = cfg.geometry.along_track_step_m, C / (2 * cfg.waveform.sample_rate_hz)
-    reports = {}
-    for domain in ("time", "doppler"):
-        c = cfg.with_processor(range_migration_domain=domain)
-        img, az, rg = process_block(c, shots, "numpy", sc.start_along_track_m)
-        reports[domain] = [
-            analyse_point_target(
-                img,
-                az,
-                rg,
-                x,
-                r,
-                search_radius_m=(60.0, 20.0),
-                azimuth_centre_cycles=azimuth_carrier_cycles(cfg),
-            )
-            for x, r in zip(xs, rs, strict=True)
-        ]
+    start = sc.start_along_track_m
+    reports = {d: focus_points(cfg, shots, start, xs, rs, range_migration_domain=d)
+               for d in ("time", "doppler")}  # fmt: skip
     for t, d, x, r in zip(reports["time"], reports["doppler"], xs, rs, strict=True):
         assert abs(d.azimuth_m - x) / step < 0.05 and abs(d.range_m - r) / cell < 0.05
         assert d.azimuth.irw_m == pytest.approx(t.azimuth.irw_m, rel=0.01)

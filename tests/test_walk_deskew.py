@@ -9,8 +9,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from point_focus import focus_points
 
-from rtsar.analysis.point_target import analyse_point_target, azimuth_carrier_cycles
 from rtsar.ccd import make_ccd
 from rtsar.ccd.nonuniform import NonUniformCorrelator
 from rtsar.ccd.walk_deskew import WalkDeskewCorrelator, fit_walk, walk_block_lines
@@ -19,7 +19,6 @@ from rtsar.params import Processor
 from rtsar.presets import preset
 from rtsar.scene import Simulator
 from rtsar.scene.model import point_scene
-from rtsar.stream.engine import process_block
 from rtsar.stream.granularity import live_correlator
 from rtsar.stream.growth import why_fixed
 
@@ -114,22 +113,6 @@ def test_streaming_equals_one_push(scene):
     whole.close()
     parts.close()
     assert np.array_equal(a, b) and len(a) == len(lines) - cfg.processor.aperture_pulses + 1
-
-
-def focus_points(cfg, shots, start_m, xs, rs, **processor):
-    img, az, rg = process_block(cfg.with_processor(**processor), shots, "numpy", start_m)
-    return [
-        analyse_point_target(
-            img,
-            az,
-            rg,
-            x,
-            r,
-            search_radius_m=(60.0, 20.0),
-            azimuth_centre_cycles=azimuth_carrier_cycles(cfg),
-        )
-        for x, r in zip(xs, rs, strict=True)
-    ]
 
 
 @pytest.mark.slow

@@ -1,0 +1,25 @@
+"""A block focused by rtsar's engine and its points measured: what the range-migration tests
+compare between domains (tests/test_doppler_migration.py, tests/test_walk_deskew.py)."""
+
+from __future__ import annotations
+
+from rtsar.analysis.point_target import analyse_point_target, azimuth_carrier_cycles
+from rtsar.stream.engine import process_block
+
+
+def focus_points(cfg, shots, start_m, xs, rs, **processor):
+    """PointTargetReports of the targets (xs, rs) in ``shots`` focused on the NumPy lens with
+    ``cfg``'s processor changed by ``processor``."""
+    img, az, rg = process_block(cfg.with_processor(**processor), shots, "numpy", start_m)
+    return [
+        analyse_point_target(
+            img,
+            az,
+            rg,
+            x,
+            r,
+            search_radius_m=(60.0, 20.0),
+            azimuth_centre_cycles=azimuth_carrier_cycles(cfg),
+        )
+        for x, r in zip(xs, rs, strict=True)
+    ]

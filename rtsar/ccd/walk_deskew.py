@@ -194,13 +194,13 @@ def _read_rows(ring_out, first_line, w, offset, table, phase, step, pad, out):  
         frac = turn - base
         g = complex(math.cos(frac * mean_step), math.sin(frac * mean_step))
         src = ring_out[i]
-        c = (-lo - base) % width
-        for k in range(span):
-            e = frac * (step[k] - mean_step)
-            pad[k] = src[c] * (phase[k] * g * complex(1.0 - 0.5 * e * e, e))
-            c += 1
-            if c == width:
-                c = 0
+        c, k = (-lo - base) % width, 0
+        while k < span:  # contiguous runs of the ring (at most two): the loop vectorises
+            run = min(span - k, width - c)
+            for t in range(run):
+                e = frac * (step[k + t] - mean_step)
+                pad[k + t] = src[c + t] * (phase[k + t] * g * complex(1.0 - 0.5 * e * e, e))
+            k, c = k + run, 0
         row = out[i]
         for r in range(bins):  # each column's first read and weights, then the taps' passes
             first, q = _first_and_row(r + offset[r] - frac, taps, phases)

@@ -336,7 +336,7 @@ def test_a_surface_scene_is_not_warned_about_its_own_margin(capsys):
     """Issue 37: `simulate insal-ridge`, the docs' own scene, warned that 202 of its 5,145
     scatterers lay outside the range window: the surface reaches 3 bins past it on purpose.
     A listed target outside the window is still told (tests/test_cli.py)."""
-    from rtsar.app.cli.options import warn_outside_swath
+    from rtsar.app.cli.inputs import warn_outside_swath
     from rtsar.scene.files import load_scene
 
     scene = load_scene("insal-ridge")

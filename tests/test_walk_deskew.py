@@ -207,7 +207,7 @@ def test_the_ring_refuses_a_curvature_it_would_drop():
         correlator="nonuniform",
         range_migration_domain="walk",
     )
-    with pytest.raises(ValueError, match=r"curvature, here 1\.87 bins.*'time'"):
+    with pytest.raises(ValueError, match=r"curvature, here 1\.87 bins.*-domain time"):
         make_ccd(cfg, make_plan(cfg).range_m)
 
 
@@ -289,3 +289,39 @@ def test_the_banner_says_the_walks_block_does_not_grow():
     chosen, _, _, words = GranularityRequest(1256.98).apply(cfg, PipelineSettings("numpy"))
     assert chosen.processor.range_migration_domain == "walk"
     assert "the block does not grow when behind (the walk's ring turns from" in words
+
+
+def test_a_plan_whose_curvature_the_ring_would_drop_keeps_its_read():
+    """RADARSAT-1 at twice the wavelength, the same squint and twice the aperture (1.45 bins of
+    curvature): a live run and --correlator nonuniform took the walk's ring, which refuses it,
+    so a run that named nothing failed (a cold review); now the live run keeps fft's
+    Doppler-domain read and --correlator nonuniform takes the time domain."""
+    from rtsar.ccd.migration import walk_leaves_bins
+    from rtsar.stream.granularity import migration_domain_for
+
+    cfg = preset("radarsat1")
+    g = cfg.geometry
+    g2 = replace(g, wavelength_m=2 * g.wavelength_m, doppler_centroid_hz=g.doppler_centroid_hz / 2)
+    cfg2 = replace(cfg, geometry=g2).with_processor(aperture_pulses=1432)
+    assert walk_leaves_bins(cfg2) > 1.0 > walk_leaves_bins(cfg)
+    assert live_correlator(cfg2) == (cfg2, "")
+    assert migration_domain_for(cfg2, "nonuniform") == "time"
+    assert migration_domain_for(cfg, "nonuniform") == "walk"
+
+
+@pytest.mark.slow
+def test_one_range_for_every_columns_mask_turns_no_phase():
+    """per_bin_mask = False: design_mask gives every column the range centre's phase, so the
+    ring takes out and gives back that one φ0, not each column's own (a cold review: a sawtooth
+    of -0.27 to +0.14 rad, the peak -0.10 rad off the exact (M2)'s)."""
+    cfg = preset("radarsat1").with_processor(per_bin_mask=False)
+    xs, rs = np.array([2300.0]), make_plan(cfg).range_m[[1100]]
+    sc = point_scene(cfg, xs, rs, effects=[("antenna_pattern", {"main_lobe_only": True})])
+    shots = Simulator(sc).block(sc.pulses)
+    start = sc.start_along_track_m
+    (t,) = focus_points(cfg, shots, start, xs, rs, range_migration_domain="time")
+    (d,) = focus_points(
+        cfg, shots, start, xs, rs, range_migration_domain="walk", correlator="nonuniform"
+    )
+    assert abs(np.angle(d.peak_value / t.peak_value)) < 0.03
+    assert abs(d.peak_value) == pytest.approx(abs(t.peak_value), rel=0.03)

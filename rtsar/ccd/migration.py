@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import fft as sfft
 
-from ..lens.plan import squint_label_offset_m
+from ..lens.plan import range_axis_m, squint_label_offset_m
 from ..params import Config
 from .base import Correlator, aperture_offsets_m, design_mask
 from .fft import FFTCorrelator
@@ -271,3 +271,50 @@ class FFTMigrationCorrelator(FFTCorrelator):
                 np.multiply(spec[:, lo + o : hi + o], h[:, lo:hi], out=tmp[:, lo:hi])
                 out[:, lo:hi] += tmp[:, lo:hi]
         return out
+
+
+@dataclass(frozen=True)
+class Walk:
+    """The fit (W1) of rtsar.ccd.walk_deskew: w bins a pulse, c(r) per column, and the
+    curvature it leaves."""
+
+    bins_per_pulse: float
+    offset_bins: np.ndarray  # c(r), float64[bins]
+    curvature_max_bins: float  # max |ε| over the rows the window weighs
+    curvature_rms_bins: float  # RMS of ε over the window's energy
+
+    @property
+    def offset_mid_bins(self) -> float:
+        return float(self.offset_bins[len(self.offset_bins) // 2])
+
+
+def fit_walk(cfg, range_m: np.ndarray) -> Walk:
+    """(W1) for the configuration's mask on the lens's range axis ``range_m``."""
+    shift = migration_bins(cfg, range_m)  # [N, bins], (M1)
+    energy = np.abs(design_mask(cfg, range_m)) ** 2
+    energy = energy / np.maximum(energy.sum(axis=0, keepdims=True), np.finfo(float).tiny)
+    k = np.arange(shift.shape[0], dtype=np.float64)[:, None]
+    k_mean = (energy * k).sum(axis=0)
+    d_mean = (energy * shift).sum(axis=0)
+    var = (energy * (k - k_mean) ** 2).sum(axis=0)
+    cov = (energy * (k - k_mean) * (shift - d_mean)).sum(axis=0)
+    slopes = cov / np.maximum(var, np.finfo(float).tiny)
+    w = float(np.average(slopes))  # the walk is one slope: the squint is one angle
+    offset = d_mean - w * k_mean
+    eps = shift - w * k - offset
+    weighed = energy > 0
+    return Walk(
+        bins_per_pulse=w,
+        offset_bins=offset,
+        curvature_max_bins=float(np.abs(eps[weighed]).max()),
+        curvature_rms_bins=float(np.sqrt((energy * eps * eps).sum(axis=0).max())),
+    )
+
+
+MOST_CURVATURE_BINS = 1.0  # the curvature the walk's ring may leave out (RADARSAT-1's: 0.45)
+
+
+def walk_leaves_bins(cfg: Config) -> float:
+    """The curvature, in bins, that the walk's ring (rtsar.ccd.walk_deskew) would leave out of
+    ``cfg``'s plan: fit_walk's largest residual on the lens's range axis."""
+    return fit_walk(cfg, range_axis_m(cfg)).curvature_max_bins

@@ -49,56 +49,17 @@ as (M2)'s do (rtsar.lens.plan).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numba
 import numpy as np
 
 from . import tiled
 from .base import Correlator, beam_look_back_m, design_mask
-from .migration import interpolation_weights, migration_bins
+from .migration import MOST_CURVATURE_BINS, Walk, fit_walk, interpolation_weights
 from .nonuniform import NonUniformCorrelator
 
 MASK_QUANTUM = 1  # columns the mask turns at a time
 PHASES = 256  # fractional positions of the interpolation table
-MOST_CURVATURE_BINS = 1.0  # the curvature the ring may leave out (RADARSAT-1's: 0.45)
-
-
-@dataclass(frozen=True)
-class Walk:
-    """The fit (W1): w bins a pulse, c(r) per column, and the curvature it leaves."""
-
-    bins_per_pulse: float
-    offset_bins: np.ndarray  # c(r), float64[bins]
-    curvature_max_bins: float  # max |ε| over the rows the window weighs
-    curvature_rms_bins: float  # RMS of ε over the window's energy
-
-    @property
-    def offset_mid_bins(self) -> float:
-        return float(self.offset_bins[len(self.offset_bins) // 2])
-
-
-def fit_walk(cfg, range_m: np.ndarray) -> Walk:
-    """(W1) for the configuration's mask on the lens's range axis ``range_m``."""
-    shift = migration_bins(cfg, range_m)  # [N, bins], (M1)
-    energy = np.abs(design_mask(cfg, range_m)) ** 2
-    energy = energy / np.maximum(energy.sum(axis=0, keepdims=True), np.finfo(float).tiny)
-    k = np.arange(shift.shape[0], dtype=np.float64)[:, None]
-    k_mean = (energy * k).sum(axis=0)
-    d_mean = (energy * shift).sum(axis=0)
-    var = (energy * (k - k_mean) ** 2).sum(axis=0)
-    cov = (energy * (k - k_mean) * (shift - d_mean)).sum(axis=0)
-    slopes = cov / np.maximum(var, np.finfo(float).tiny)
-    w = float(np.average(slopes))  # the walk is one slope: the squint is one angle
-    offset = d_mean - w * k_mean
-    eps = shift - w * k - offset
-    weighed = energy > 0
-    return Walk(
-        bins_per_pulse=w,
-        offset_bins=offset,
-        curvature_max_bins=float(np.abs(eps[weighed]).max()),
-        curvature_rms_bins=float(np.sqrt((energy * eps * eps).sum(axis=0).max())),
-    )
 
 
 def constant_phase_cycles(range_m: np.ndarray, look_back_m: float, wavelength_m: float):
@@ -255,14 +216,18 @@ class WalkDeskewCorrelator(Correlator):
             raise ValueError(
                 f"the walk's ring leaves out the aperture's curvature, here "
                 f"{self.walk.curvature_max_bins:.2f} bins (at most {MOST_CURVATURE_BINS:g}): "
-                "use range_migration_domain 'time' (or 'doppler' with the fft correlator)"
+                "--range-migration-domain time, or --correlator fft with 'doppler'"
             )
         self.ring_columns = ring_width(bins, self.walk, n, taps)
         w = self.walk.bins_per_pulse
         ring_range_m = self._ring_range_m(range_m)
         # The mask without its constant phase φ0(R) (module docstring), given back on read-out.
         look_back_m = beam_look_back_m(cfg)
-        cycles = constant_phase_cycles(ring_range_m, look_back_m, cfg.geometry.wavelength_m)
+        phase_range_m = ring_range_m  # the range design_mask's phase takes for each column
+        if not cfg.processor.per_bin_mask:  # its one range for every column: nothing turns
+            centre_m = cfg.processor.range_centre_m or cfg.geometry.slant_range_m
+            phase_range_m = np.full_like(ring_range_m, centre_m)
+        cycles = constant_phase_cycles(phase_range_m, look_back_m, cfg.geometry.wavelength_m)
         wide = design_mask(cfg, ring_range_m) * np.exp(-2j * np.pi * np.mod(cycles, 1.0))
         self.inner = NonUniformCorrelator(
             wide,

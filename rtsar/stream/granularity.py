@@ -36,6 +36,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from ..ccd.migration import MOST_CURVATURE_BINS, walk_leaves_bins
+
 STRIP_DEADLINE_S = 1e-3  # a partial strip waits at most this long for its other lines
 MOST_STRIP_LINES = 64  # lines that wait (a backlog) go out together, at most this many a strip
 FUSE_BELOW = 0.7  # at most this share of the stream's time: lens and correlator on one thread
@@ -225,13 +227,15 @@ def live_correlator(
     nonuniform runs a correlator a tap (8 taps, each correlator alone: psaltis-jpl 26.4
     against 4.7 thousand pulses/s, a cold review's figures), so a run that keeps up on fft
     could fall behind.  A squinted beam's Doppler-domain read (fft's alone: RADARSAT-1) gives
-    way to LIVE_CORRELATOR on the walk's ring (rtsar.ccd.walk_deskew): RADARSAT-1's lines leave
-    in head blocks, not in the overlap-save blocks of hundreds of lines that held them ~80 ms."""
+    way to LIVE_CORRELATOR on the walk's ring (rtsar.ccd.walk_deskew) where the curvature the
+    ring leaves out is at most a bin (walk_keeps_focus): RADARSAT-1's lines leave in head
+    blocks, not in the overlap-save blocks of hundreds of lines that held them ~80 ms."""
     p = config.processor
     taps = bool(p.range_migration_taps)
     if given or fft_length or physical is not None or p.correlator != "fft":
         return config, ""
-    if taps and p.range_migration_domain == "doppler" and config.geometry.squinted:
+    doppler = taps and p.range_migration_domain == "doppler"
+    if doppler and config.geometry.squinted and walk_keeps_focus(config):
         words = (
             f"correlator {LIVE_CORRELATOR} with the range walk taken out before it, not the "
             "configuration's fft with the Doppler-domain read: a live run's where the command "
@@ -254,6 +258,13 @@ def live_correlator(
     return config.with_processor(correlator=LIVE_CORRELATOR), words
 
 
+def walk_keeps_focus(config) -> bool:
+    """Whether the walk's ring leaves out at most MOST_CURVATURE_BINS of curvature on
+    ``config``'s plan (rtsar.ccd.walk_deskew refuses more): where it would not, a live run keeps
+    fft's Doppler-domain read and --correlator nonuniform takes the time domain."""
+    return walk_leaves_bins(config) <= MOST_CURVATURE_BINS
+
+
 def migration_domain_for(config, correlator: str) -> str:
     """The range-migration domain ``correlator`` takes in place of the configuration's where
     that one is another kind's (--correlator): the Doppler-domain read is fft's, the walk's
@@ -262,7 +273,7 @@ def migration_domain_for(config, correlator: str) -> str:
     domain = config.processor.range_migration_domain
     if domain == "doppler" and correlator != "fft":
         walk = correlator == LIVE_CORRELATOR and config.geometry.squinted
-        return "walk" if walk else "time"
+        return "walk" if walk and walk_keeps_focus(config) else "time"
     if domain == "walk" and correlator != "nonuniform":
         return "doppler" if correlator == "fft" else "time"
     return domain

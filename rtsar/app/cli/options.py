@@ -85,7 +85,7 @@ def add_correlator_option(g) -> None:
         "multiply-adds) (default: the configuration's; a live run at a rate runs nonuniform "
         "where it names fft, lines as they come, but not with --fft-length, time-domain "
         "range-migration taps or --swath-workers; a squinted beam's Doppler-domain taps then "
-        "read on the walk's ring, as --correlator nonuniform makes them)",
+        "read on the walk's ring if it leaves out under a bin of curvature, as nonuniform's)",
     )
     g.add_argument(
         "--partition-lines",
@@ -134,8 +134,8 @@ def add_processing_knobs(g) -> None:
         "--range-migration-domain",
         choices=Processor.MIGRATION_DOMAINS,
         help="where the taps read: time (exact 2-D mask), doppler (fft only: each block's "
-        "azimuth spectrum), walk (nonuniform only: the squint's walk taken out first, not the "
-        "curvature) (default: the configuration's, or the one --correlator's kind takes)",
+        "azimuth spectrum), walk (nonuniform only: the squint's walk out first, up to 1 bin "
+        "of curvature left) (default: the configuration's, or the one --correlator's takes)",
     )
     g.add_argument(
         "--correct",

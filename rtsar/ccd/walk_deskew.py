@@ -189,8 +189,9 @@ def walk_block_lines(w: float, head_lines: int, max_block_lines: int) -> int:
 
 
 class WalkDeskewCorrelator(Correlator):
-    """(W1)-(W2): the lines shifted into a turning ring, correlated there by the nonuniform
-    correlator (head blocks of ``head_lines``), the lines read back out of it.
+    """(W1)-(W3): the lines shifted into a turning ring, correlated there by the nonuniform
+    correlator (head blocks of ``head_lines``) with the mask less its constant phase, the lines
+    read back out of it with that phase given back.
 
     ``taps`` T: the interpolator of both reads (Processor.range_migration_taps); the others are
     NonUniformCorrelator's.  Output timing is the nonuniform correlator's.
@@ -248,7 +249,6 @@ class WalkDeskewCorrelator(Correlator):
         span = bins + 2 * margin + taps
         self._pad = np.zeros(span, self.dtype)
         self._write_pad = np.zeros(self.ring_columns + taps, self.dtype)  # _write_rows'
-
         mask_col = (np.arange(span) - (span - bins - taps) // 2) % self.ring_columns
         nxt = (mask_col + 1) % self.ring_columns
         self._phase = np.exp(2j * np.pi * np.mod(cycles[mask_col], 1.0)).astype(self.dtype)

@@ -37,7 +37,7 @@ from ..params import Config
 from ..scene import Simulator, point_scene
 from ..sinks.publish import ZmqPublisher
 from ..sources.replay import ReplaySource, parse_rate
-from ..stream.granularity import MOST_STRIP_LINES, live_correlator
+from ..stream.granularity import MOST_STRIP_LINES, live_correlator, migration_domain_for
 from ..stream.pipeline import Pipeline, PipelineSettings
 from . import bench_alone
 from .bench_alone import ABOVE_ONE, CorrelatorAlone, LensAlone, against_ideal
@@ -75,13 +75,10 @@ def pipeline_kinds(cfg) -> tuple[tuple[str, ...], str]:
 
 
 def with_correlator(cfg, kind: str):
-    """``cfg`` with the correlator ``kind``; the Doppler-domain taps are the fft correlator's,
-    so nonuniform takes the walk's ring where the beam is squinted (a live run's), another kind
-    the time-domain setting."""
-    domain = cfg.processor.range_migration_domain
-    if kind != "fft" and domain == "doppler":
-        walk = kind == "nonuniform" and cfg.geometry.squinted
-        domain = "walk" if walk else "time"
+    """``cfg`` with the correlator ``kind`` and the range-migration domain that kind reads in
+    (rtsar.stream.granularity.migration_domain_for: the Doppler-domain read is fft's, the
+    walk's ring nonuniform's where the beam is squinted, the time domain another kind's)."""
+    domain = migration_domain_for(cfg, kind)
     return cfg.with_processor(correlator=kind, range_migration_domain=domain)
 
 

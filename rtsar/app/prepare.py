@@ -69,17 +69,19 @@ TASKS = {  # each group: what it compiles, for its line; longest first (cold, ab
 }
 
 
-def _push_zeros(preset_name: str, correlator: str | None = None, physical=None) -> None:
-    """Build the CCD of a preset (``correlator``: another kind) and push blocks of zeros
-    through it: its kernels compile (or load) for the shapes a run gives them."""
+def _push_zeros(preset_name: str, correlator: str | None = None, physical=None, **processor):
+    """Build the CCD of a preset (``correlator``: another kind; ``processor``: more of its
+    settings) and push zeros through it, an aperture and more: its kernels compile (or load)
+    for the shapes a run gives them, the lines leaving it included."""
     cfg = preset(preset_name)
     if correlator is not None:
-        cfg = cfg.with_processor(correlator=correlator)
+        processor["correlator"] = correlator
+    cfg = cfg.with_processor(**processor) if processor else cfg
     range_m = make_plan(cfg).range_m
     ccd = make_ccd(cfg, range_m, physical)
     try:
         zeros = np.zeros((16, len(range_m)), np.complex64)
-        for _ in range(2):
+        for _ in range(-(-cfg.processor.aperture_pulses // 16) + 1):
             ccd.push(zeros)
         ccd.flush()
     finally:
@@ -98,16 +100,8 @@ def _compile(name: str) -> None:
         _push_zeros("psaltis-jpl", physical=PhysicalSettings())
     elif name == "migration":
         _push_zeros("radarsat1")  # the file's fft correlator, the Doppler-domain read
-        walk = preset("radarsat1").with_processor(
-            correlator="nonuniform", range_migration_domain="walk"
-        )  # a live run's (rtsar.stream.granularity.live_correlator)
-        range_m = make_plan(walk).range_m
-        ccd = make_ccd(walk, range_m)
-        try:  # an aperture and more: lines come out, read out of the ring
-            ccd.push(np.zeros((ccd.aperture + 16, len(range_m)), np.complex64))
-            ccd.flush()
-        finally:
-            ccd.close()
+        # a live run's (rtsar.stream.granularity.live_correlator)
+        _push_zeros("radarsat1", "nonuniform", range_migration_domain="walk")
     elif name == "simulator":
         for scene in ("demo", "sal-demo"):  # a pulsed chirp's kernels, an FMCW chirp's
             Simulator(load_scene(scene)).prepare()

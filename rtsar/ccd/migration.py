@@ -46,7 +46,7 @@ from scipy import fft as sfft
 
 from ..lens.plan import range_axis_m, squint_label_offset_m
 from ..params import Config
-from .base import Correlator, aperture_offsets_m, design_mask
+from .base import Correlator, aperture_offsets_m, design_mask, mask_window
 from .fft import FFTCorrelator
 
 
@@ -292,7 +292,7 @@ class Walk:
 def fit_walk(cfg, range_m: np.ndarray) -> Walk:
     """(W1) for the configuration's mask on the lens's range axis ``range_m``."""
     shift = migration_bins(cfg, range_m)  # [N, bins], (M1)
-    energy = np.abs(design_mask(cfg, range_m)) ** 2
+    energy = mask_window(cfg, range_m) ** 2  # design_mask's |·|², but its 1/N² and phase
     energy = energy / np.maximum(energy.sum(axis=0, keepdims=True), np.finfo(float).tiny)
     k = np.arange(shift.shape[0], dtype=np.float64)[:, None]
     k_mean = (energy * k).sum(axis=0)
@@ -318,6 +318,6 @@ MOST_CURVATURE_BINS = 1.0  # the curvature the walk's ring may leave out (RADARS
 @functools.lru_cache(maxsize=16)
 def walk_leaves_bins(cfg: Config) -> float:
     """The curvature, in bins, that the walk's ring (rtsar.ccd.walk_deskew) would leave out of
-    ``cfg``'s plan: fit_walk's largest residual on the lens's range axis (0.2-0.3 s for
+    ``cfg``'s plan: fit_walk's largest residual on the lens's range axis (0.1-0.3 s for
     RADARSAT-1's, so kept for the configurations a run asks about again)."""
     return fit_walk(cfg, range_axis_m(cfg)).curvature_max_bins

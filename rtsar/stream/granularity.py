@@ -234,8 +234,8 @@ def live_correlator(
     taps = bool(p.range_migration_taps)
     if given or fft_length or physical is not None or p.correlator != "fft":
         return config, ""
-    doppler = taps and p.range_migration_domain == "doppler"
-    if doppler and config.geometry.squinted and walk_keeps_focus(config):
+    domain = migration_domain_for(config, LIVE_CORRELATOR)
+    if taps and domain == "walk":
         words = (
             f"correlator {LIVE_CORRELATOR} with the range walk taken out before it, not the "
             "configuration's fft with the Doppler-domain read: a live run's where the command "
@@ -243,7 +243,6 @@ def live_correlator(
             "pulses; the walk's ring leaves the aperture's curvature out, rtsar.ccd.walk_deskew; "
             "--correlator fft keeps fft)"
         )
-        domain = migration_domain_for(config, LIVE_CORRELATOR)
         return config.with_processor(
             correlator=LIVE_CORRELATOR, range_migration_domain=domain
         ), words

@@ -24,12 +24,15 @@
  *               broadcast scalar.  Rows are transposed in (and out) with 8×8 shuffles when
  *               L = 8.  Needs 16·L·NFFT bytes of local memory (32·L·NFFT in double).
  *   lens_group  (build with -DGROUP_SIZE=G)  GPUs.  One work-group of G items per pulse, the
- *               line in local memory as real2, barriers between stages.
+ *               line in local memory as real2 (16·NFFT bytes, 32·NFFT in double), barriers
+ *               between stages; with -DSCRATCH_GLOBAL=1 the two lines are the pulse's rows
+ *               of a global scratch buffer instead, for devices whose local memory is smaller
+ *               (NVIDIA's 48 KiB against radarsat1's 4096 points).
  *
  * Build options: NFFT and LOG2_NFFT (a power of two >= 2), S (<= NFFT), BIN_COUNT,
- * BIN_OFFSET (0 <= BIN_OFFSET < NFFT), SIGN1, TWO_PASS (0 or 1), SIGN2, LANES or GROUP_SIZE,
- * and DOUBLE (0 or 1): with DOUBLE=1 every sample, twiddle and sum is a double (the device
- * must support cl_khr_fp64) and the lanes kernel needs twice the local memory.
+ * BIN_OFFSET (0 <= BIN_OFFSET < NFFT), SIGN1, TWO_PASS (0 or 1), SIGN2, LANES or GROUP_SIZE
+ * (with SCRATCH_GLOBAL, 0 or 1), and DOUBLE (0 or 1): with DOUBLE=1 every sample, twiddle and
+ * sum is a double (the device must support cl_khr_fp64) and the lines need twice the memory.
  *
  * Buffers hold complex values as real2, i.e. float2 or double2 (x = real part, y = imaginary
  * part): shots[pulses][S], lines[pulses][BIN_COUNT], pre[S], spectrum[NFFT] (read only if
@@ -49,6 +52,9 @@
 #endif
 #ifndef TWO_PASS
 #define TWO_PASS 0
+#endif
+#ifndef SCRATCH_GLOBAL
+#define SCRATCH_GLOBAL 0
 #endif
 #ifndef SIGN2
 #define SIGN2 (-(SIGN1))
@@ -417,8 +423,18 @@ inline void dft8(real2 *a, const int sign)
     }
 }
 
+/* Where the group's two lines live: local memory, or the pulse's rows of a global scratch
+ * buffer (SCRATCH_GLOBAL=1); either way a barrier orders the group's accesses to them. */
+#if SCRATCH_GLOBAL
+#define BUF __global
+#define BUF_FENCE CLK_GLOBAL_MEM_FENCE
+#else
+#define BUF __local
+#define BUF_FENCE CLK_LOCAL_MEM_FENCE
+#endif
+
 /* One Stockham stage shared by the GROUP_SIZE work-items of the group. */
-inline void stage(__local const real2 *restrict src, __local real2 *restrict dst,
+inline void stage(BUF const real2 *restrict src, BUF real2 *restrict dst,
                   const uint lid, const uint p, const uint R, const int sign,
                   __global const real2 *twiddle, __global const real2 *mul)
 {
@@ -448,20 +464,20 @@ inline void stage(__local const real2 *restrict src, __local real2 *restrict dst
 }
 
 /* FFT of buf[from]; the result lands in buf[from ^ (N_STAGES & 1)]. */
-inline void fft(__local real2 (*buf)[NFFT], const int from, const uint lid, const int sign,
+inline void fft(BUF real2 (*buf)[NFFT], const int from, const uint lid, const int sign,
                 __global const real2 *twiddle, __global const real2 *mul)
 {
     int s = from;
     uint p = 1;
     for (int st = 0; st < N_RADIX8; ++st) {
         stage(buf[s], buf[s ^ 1], lid, p, 8, sign, twiddle, st == 0 ? mul : 0);
-        barrier(CLK_LOCAL_MEM_FENCE);
+        barrier(BUF_FENCE);
         s ^= 1;
         p *= 8;
     }
 #if LAST_RADIX > 1
     stage(buf[s], buf[s ^ 1], lid, p, LAST_RADIX, sign, twiddle, N_RADIX8 == 0 ? mul : 0);
-    barrier(CLK_LOCAL_MEM_FENCE);
+    barrier(BUF_FENCE);
 #endif
 }
 
@@ -472,9 +488,14 @@ void lens_group(__global const real2 *restrict shots,    /* [pulses][S] */
                 __global const real2 *restrict spectrum, /* [NFFT], read if TWO_PASS */
                 __global const real2 *restrict post,     /* [BIN_COUNT] */
                 __global const real2 *restrict twiddle,  /* [NFFT] */
-                const uint pulses)
+                const uint pulses,
+                __global real2 (*scratch)[NFFT])         /* [pulses][2], if SCRATCH_GLOBAL */
 {
+#if SCRATCH_GLOBAL
+    __global real2 (*buf)[NFFT] = scratch + (size_t)get_group_id(0) * 2;
+#else
     __local real2 buf[2][NFFT];
+#endif
     const uint lid = get_local_id(0);
     const uint pulse = get_group_id(0);
     if (pulse >= pulses) /* uniform over the group */
@@ -483,7 +504,7 @@ void lens_group(__global const real2 *restrict shots,    /* [pulses][S] */
 
     for (uint n = lid; n < NFFT; n += GROUP_SIZE)
         buf[0][n] = n < S ? cmul(x[n], pre[n]) : (real2)(0, 0);
-    barrier(CLK_LOCAL_MEM_FENCE);
+    barrier(BUF_FENCE);
 
     fft(buf, 0, lid, SIGN1, twiddle, 0);
     int s = N_STAGES & 1;

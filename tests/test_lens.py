@@ -7,7 +7,7 @@ import pytest
 
 from rtsar.lens import cl_loader  # pyopencl is a core dependency: never skipped for it
 from rtsar.lens.base import compress_reference
-from rtsar.lens.opencl import KERNELS, AOLens
+from rtsar.lens.opencl import KERNELS, AOLens, group_layout
 from rtsar.lens.plan import LensPlan, make_plan, pulsed_replica
 from rtsar.params import FMCWChirp, PulsedChirp
 from rtsar.presets import preset
@@ -114,6 +114,57 @@ def test_odd_plans(kernel, opencl, S, nfft, sign1, two_pass, bin_start, bin_coun
     lens = AOLens(plan, kernel=kernel)
     x = noise(np.random.default_rng(3), 11, S)
     assert rel_rms(lens.compress(x), compress_reference(plan, x)) <= TOL
+
+
+@pytest.mark.parametrize(
+    "S, nfft, sign1, two_pass, bin_start, bin_count",
+    [
+        (2, 2, -1, True, 0, 2),  # a work-group of one item
+        (13, 16, +1, True, -5, 11),  # radix 8 + 2, two items, two passes
+        (100, 256, -1, True, 7, 200),  # radix 8, 8, 4, two passes
+        (30, 32, -1, False, 29, 7),  # radix 8 + 4
+        (3000, 4096, +1, True, -900, 2500),  # radarsat1's length: 64 KiB of lines
+    ],
+)
+@pytest.mark.parametrize("precision", ["complex64", "complex128"])
+@pytest.mark.parametrize("scratch", ["local", "global"])
+def test_group_kernel_with_the_line_local_or_global(
+    scratch, precision, opencl, S, nfft, sign1, two_pass, bin_start, bin_count
+):
+    """The group kernel, the line's two buffers in local memory or in the pulse's rows of a
+    global scratch buffer (before, a device whose local memory was too small refused the
+    plan: NVIDIA's H200, 48 KiB, refused radarsat1's 4096 points), the buffers grown between
+    calls; against the float64 reference."""
+    plan = synthetic_plan(S, nfft, sign1, two_pass, bin_start, bin_count, seed=nfft)
+    try:
+        lens = AOLens(plan, kernel="group", scratch=scratch, precision=precision)
+    except ValueError as exc:  # no double (PoCL's CPU has it: CI runs this); local memory
+        short = scratch == "local" and "scratch='global' keeps the lines" in str(exc)
+        assert short or ("cl_khr_fp64" in str(exc) and precision == "complex128"), exc
+        return
+    assert lens.scratch == scratch
+    tol = TOL if precision == "complex64" else 1e-12
+    rng = np.random.default_rng(5)
+    for pulses in (3, 40, 1):  # grown, then smaller
+        x = noise(rng, pulses, S).astype(lens.dtype)
+        err = rel_rms(lens.compress(x), compress_reference(plan, x))
+        assert err <= tol, (pulses, err)
+
+
+def test_the_group_kernel_s_lines_go_global_where_local_memory_is_too_small():
+    """group_layout: 4·real_bytes·nfft bytes of local memory for the line's two buffers, else
+    global; work-groups of up to 256 items and nfft/8."""
+    h200 = 48 * 1024  # NVIDIA's local memory (H200, as its OpenCL driver reports it)
+    assert group_layout(4096, 4, h200, 1024) == (256, "global")  # radarsat1: 64 KiB
+    assert group_layout(2048, 4, h200, 1024) == (256, "local")  # psaltis-max: 32 KiB
+    assert group_layout(2048, 8, h200, 1024) == (256, "global")  # in double
+    assert group_layout(4096, 4, 64 * 1024, 1024) == (256, "local")  # AMD's 64 KiB
+    assert group_layout(16, 4, h200, 1024) == (2, "local")
+    assert group_layout(4, 4, h200, 1024) == (1, "local")
+    assert group_layout(4096, 4, h200, 200) == (200, "global")
+    assert group_layout(512, 4, h200, 1024, scratch="global") == (64, "global")
+    with pytest.raises(ValueError, match="scratch must be"):
+        group_layout(4096, 4, h200, 1024, scratch="shared")
 
 
 def test_lanes_and_buffer_reuse(opencl):

@@ -54,7 +54,11 @@ def test_opencl_lens_in_double(name, kernel, rng, opencl):
     from rtsar.lens.opencl import AOLens
 
     plan = make_plan(preset(name))
-    lens = AOLens(plan, kernel=kernel, precision="complex128")
+    try:
+        lens = AOLens(plan, kernel=kernel, precision="complex128")
+    except ValueError as exc:  # a GPU's local memory, short of the lanes kernel's one pulse
+        assert kernel == "lanes" and "kernel='group'" in str(exc), exc
+        return
     assert lens.lanes <= 4  # double8 is not built (see rtsar.lens)
     for pulses in (1, 5, 33):  # full and partial lane groups
         x = crandn(rng, pulses, plan.samples_per_shot)

@@ -27,7 +27,7 @@ from . import cl_loader
 from .cl_launch import gil_free_calls, gil_free_enqueue
 from .plan import LensPlan
 
-__all__ = ["KERNELS", "AOLens", "LensJob", "supports_double"]
+__all__ = ["KERNELS", "AOLens", "LensJob", "group_layout", "supports_double"]
 
 KERNELS = ("lanes", "group")
 _MAX_LANES = 8
@@ -53,6 +53,22 @@ def supports_double(device: cl.Device) -> bool:
     except (cl.LogicError, cl.RuntimeError, AttributeError):  # pragma: no cover - driver quirks
         pass
     return "cl_khr_fp64" in device.extensions.split()
+
+
+def group_layout(
+    nfft: int, real_bytes: int, local_bytes: int, most_group: int, scratch: str | None = None
+) -> tuple[int, str]:
+    """(work-group size, "local" or "global") of the group kernel for ``nfft`` points of
+    ``real_bytes`` reals (4, 8) on a device of ``local_bytes`` of local memory and work-groups
+    of at most ``most_group`` items: up to _MAX_GROUP and nfft/8 items, and the line's two
+    buffers (4·real_bytes·nfft bytes) in local memory where they fit there, else in global
+    memory (``scratch``: chosen)."""
+    group = min(_MAX_GROUP, max(1, nfft // 8), int(most_group))
+    if scratch is None:
+        scratch = "local" if 4 * real_bytes * nfft <= local_bytes else "global"
+    if scratch not in ("local", "global"):
+        raise ValueError(f"scratch must be 'local' or 'global', got {scratch!r}")
+    return group, scratch
 
 
 class LensJob:
@@ -159,6 +175,11 @@ class AOLens:
     lanes : int, optional
         Pulses per work-item of the ``"lanes"`` kernel (1, 2, 4 or 8; default 8, fewer if
         the device's local memory is too small; at most 4 in double).
+    scratch : {"local", "global"}, optional
+        Where the ``"group"`` kernel holds a pulse's two lines while it transforms them: local
+        memory (16·nfft bytes, 32·nfft in double), or, the default where the device's local
+        memory is smaller than that (NVIDIA's GPUs: 48 KiB, against 64 KiB for radarsat1's
+        4096 points), the pulse's rows of a buffer in global memory.
     precision : {"complex64", "complex128"}, optional
         Sample type of the input, the arithmetic and the output (``Processor.precision``).
         ``"complex128"`` needs a device with double support (PoCL's CPU device has it);
@@ -186,6 +207,7 @@ class AOLens:
         kernel: str | None = None,
         lanes: int | None = None,
         precision: str = "complex64",
+        scratch: str | None = None,
     ):
         if not isinstance(plan, LensPlan):
             raise TypeError(f"plan must be a LensPlan, got {type(plan).__name__}")
@@ -256,17 +278,27 @@ class AOLens:
                     f"lanes must be 1, 2, 4 or 8 (at most {most} in {precision}), got {lanes}"
                 )
             need = 4 * real_bytes * lanes * nfft
+            if scratch is not None:
+                raise ValueError("scratch is the group kernel's; the lanes kernel has none")
             self.lanes, self.group_size = lanes, 1
             defines["LANES"] = lanes
         else:
-            group = min(_MAX_GROUP, max(1, nfft // 8), int(self.device.max_work_group_size))
-            need = 4 * real_bytes * nfft
+            most = int(self.device.max_work_group_size)
+            group, scratch = group_layout(nfft, real_bytes, local, most, scratch)
+            need = 4 * real_bytes * nfft if scratch == "local" else 0  # two lines
             self.lanes, self.group_size = 1, group
             defines["GROUP_SIZE"] = group
+            defines["SCRATCH_GLOBAL"] = int(scratch == "global")
+        self.scratch = scratch  # where the group kernel's line lives (None: the lanes kernel)
         if need > local:
+            way = (
+                "the group kernel (kernel='group') keeps its lines in global memory"
+                if kernel == "lanes"
+                else "scratch='global' keeps the lines in global memory"
+            )
             raise ValueError(
                 f"nfft={nfft} needs {need} bytes of local memory per work-group; "
-                f"{self.device.name.strip()} has {local}"
+                f"{self.device.name.strip()} has {local}: {way}"
             )
         self.program = cl_loader.build_program(self.context, "lens.cl", defines)
         self._kernel = cl.Kernel(self.program, f"lens_{kernel}")  # own instance: args are state
@@ -300,7 +332,7 @@ class AOLens:
             else None
         )
         self._capacity = 0
-        self._shots_buf = self._lines_buf = None
+        self._shots_buf = self._lines_buf = self._scratch_buf = None
         self._args_lines = None  # the output buffer the kernel's fixed arguments were set with
         self._enqueue = gil_free_enqueue()
         self._calls = gil_free_calls()  # None exactly where _enqueue is (cl_launch._resolve)
@@ -311,7 +343,7 @@ class AOLens:
         p = self.plan
         return (
             f"AOLens(S={p.samples_per_shot}, nfft={p.nfft}, bins={p.bin_count}, "
-            f"two_pass={p.two_pass}, kernel={self.kernel_name!r}, "
+            f"two_pass={p.two_pass}, kernel={self.kernel_name!r}, scratch={self.scratch!r}, "
             f"precision={self.precision!r}, "
             f"device={self.device.name.strip()!r})"
         )
@@ -338,6 +370,10 @@ class AOLens:
         self._lines_buf = cl.Buffer(
             self.context, mf.WRITE_ONLY, capacity * self.plan.bin_count * size
         )
+        if self.scratch == "global":
+            self._scratch_buf = cl.Buffer(
+                self.context, mf.READ_WRITE, capacity * 2 * self.plan.nfft * size
+            )
         self._capacity = capacity
 
     def compress(self, shots: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -409,6 +445,8 @@ class AOLens:
                 kernel.set_arg(1, self._lines_buf)
                 for i, buf in enumerate(self._constants):
                     kernel.set_arg(2 + i, buf)
+                if self.scratch is not None:  # the group kernel's last argument
+                    kernel.set_arg(3 + len(self._constants), self._scratch_buf)
                 self._args_lines = self._lines_buf
             if self._calls is None:
                 kernel.set_arg(2 + len(self._constants), np.uint32(pulses))

@@ -190,6 +190,7 @@ def test_run_output_survives_the_death_of_the_run(tmp_path, kill):
         assert rc == -signal.SIGKILL and not attrs["complete"]
     else:  # SIGTERM ends the run like Ctrl-C: pulses received are finished, file closed
         assert rc == 128 + signal.SIGTERM and attrs["complete"]
+        assert attrs["stopped_by"] == "SIGTERM"  # the image of a run cut short says so
 
 
 @pytest.mark.slow
@@ -230,6 +231,7 @@ def test_a_clean_stream_is_marked_complete(tmp_path, capsys):
     assert main(["run", "--duration", "0.5", "--endpoint", ep, "-o", str(out)]) == 0
     with h5py.File(out, "r") as f:  # a plain reader opens a finished file
         assert f.attrs["complete"] and f["image"].shape[0] > 0
+        assert f.attrs["stopped_by"] == ""  # ended by its --duration, not a signal
     assert not [p for p in os.listdir(tmp_path) if p.startswith(".")]
 
 

@@ -63,10 +63,44 @@ def test_replay_max_into_subscribe_equals_process(tmp_path):
     np.testing.assert_allclose(az_s, az_b, rtol=0, atol=1e-9)
     np.testing.assert_allclose(rg_s, rg_b, rtol=1e-12)
     assert attrs["complete"] and attrs["missing_lines"] == 0 and attrs["missed_strips"] == 0
+    assert attrs["stopped_by"] == ""  # the replay ran to its end
     assert json.loads(attrs["counters"])["pulses_processed"] > 0
     # the recording's collection start travels in the strip header to the subscriber's file
     batch_start = read_image(tmp_path / "batch.h5")[3]["collection_start_utc"]
     assert attrs["collection_start_utc"] == batch_start
+
+
+def test_a_subscriber_keeps_the_signal_that_stopped_the_publisher_s_source(tmp_path, monkeypatch):
+    """The end message's ``stopped_by`` (a paced replay stopped by Ctrl-C 0.3 s in) goes into
+    ``subscribe -o``'s image, which is complete: the stream ended, early."""
+    from rtsar.stream.pipeline import Pipeline
+
+    scene, rec = tmp_path / "s.toml", tmp_path / "r.h5"
+    scene.write_text(SCENE)
+    assert main(["simulate", str(scene), "-o", str(rec)]) == 0
+    wait, calls = Pipeline._wait, []
+
+    def ctrl_c_after_a_while(self):
+        if not calls:
+            calls.append(1)
+            time.sleep(0.3)
+            raise KeyboardInterrupt
+        return wait(self)
+
+    monkeypatch.setattr(Pipeline, "_wait", ctrl_c_after_a_while)
+    ep, codes = free_endpoint(), []
+    sub = threading.Thread(
+        target=lambda: codes.append(
+            main(["subscribe", ep, "-o", str(tmp_path / "sub.h5"), "--timeout", "30"])
+        )
+    )
+    sub.start()
+    args = ["replay", str(rec), "--endpoint", ep, "--wait-subscribers", "1", "--lens", "numpy"]
+    assert main(args + ["--delivery", "lossless"]) == 130
+    sub.join(60)
+    assert codes == [0]
+    *_, attrs = read_image(tmp_path / "sub.h5")
+    assert attrs["complete"] and attrs["stopped_by"] == "SIGINT"
 
 
 def test_a_simulated_run_waits_for_its_subscriber(tmp_path):

@@ -160,6 +160,38 @@ def test_ctrl_c_before_the_stream_starts_is_said_and_writes_nothing(recording, m
     assert not out.exists()
 
 
+def test_a_replay_stopped_by_a_signal_says_so_in_its_image(recording, monkeypatch, capsys):
+    """A paced replay with -o stopped by Ctrl-C 0.3 s in: the pulses received are finished,
+    the file closed and complete, and its ``stopped_by`` names the signal, so it is not taken
+    for the whole replay of a shorter recording (before, nothing told them apart); the whole
+    replay's is empty."""
+    import time
+
+    from rtsar.stream.pipeline import Pipeline
+
+    folder, rec = recording
+    wait = Pipeline._wait
+    calls = []
+
+    def ctrl_c_after_a_while(self):
+        if not calls:
+            calls.append(1)
+            time.sleep(0.3)
+            raise KeyboardInterrupt
+        return wait(self)
+
+    monkeypatch.setattr(Pipeline, "_wait", ctrl_c_after_a_while)
+    out = folder / "stopped.h5"
+    args = ["replay", rec, "--lens", "numpy", "-o", str(out)]
+    assert main(args + ["--endpoint", f"ipc://{folder}/stopped.pub"]) == 130
+    image, _, _, attrs = read_image(out)
+    assert attrs["complete"] and attrs["stopped_by"] == "SIGINT"
+    assert 0 < len(image) < 500 - APERTURE + 1  # a part: 1 s of shots at 500 Hz, stopped early
+    monkeypatch.setattr(Pipeline, "_wait", wait)
+    *_, whole = _replay(folder, rec, "unstopped.h5")
+    assert whole["complete"] and whole["stopped_by"] == ""
+
+
 def test_run_says_where_the_scene_ends_before_its_duration(tmp_path, capsys):
     """A new user's review: `rtsar run --duration 30` of the 10 s demo stopped after 10 s
     without a word."""

@@ -28,6 +28,7 @@ def subscribe(
     sub = StripSubscriber(endpoint, curve_server_key, curve_client_key, hwm_messages=0)
     rec = StripRecorder(output, endpoint)
     final = None
+    stopped_by = ""  # the publisher's source stopped by a signal (its end message says)
     interrupted = None
     print(f"subscribe: connected to {endpoint}; writing {output} (Ctrl-C to stop)", file=stream)
     last = time.perf_counter()
@@ -53,6 +54,8 @@ def subscribe(
                 if msg.header.get("stream_id") == rec.stream_id:
                     counters = msg.header.get("counters")
                     final = counters if is_counters(counters) else rec.counters
+                    stopped_by = msg.header.get("stopped_by", "")
+                    stopped_by = stopped_by if isinstance(stopped_by, str) else ""
                     break
             now = time.perf_counter()
             if now - last > 2.0:
@@ -68,6 +71,7 @@ def subscribe(
         lines = rec.finish(
             final,
             missed_strips=sub.counters["missed_strips"],
+            stopped_by=stopped_by,
             complete=final is not None,
         )
         sub.close()

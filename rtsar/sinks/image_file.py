@@ -3,7 +3,8 @@
 Image (``rtsar process``):  /image complex64 [azimuth, range], /azimuth_m, /range_m float64;
 attributes format="rtsar-image", format_version, config (JSON), source, lens, correlator,
 nonfinite_pulses (shots zeroed because they held NaN/Inf), complete (False while a stream is
-written and in a file whose writer was killed).  With height strips (``--height insal``):
+written and in a file whose writer was killed); live images also stopped_by (the signal that
+stopped the source, else "").  With height strips (``--height insal``):
 /height_m float32 [azimuth, range], /height_valid uint8 (1: coherent and unwrapped) and
 /coherence float32, rows aligned with /image's.
 Layout in docs/pages/reference/files.md.  Complex values are HDF5 compounds of two floats named r

@@ -359,6 +359,7 @@ class ImageFileSink(StripSink):
             self.lines = self.recorder.finish(
                 counters,
                 lens=info.lens_backend,
+                stopped_by=stats.get("stopped_by", ""),  # a signal: the source cut short
                 **processing_attrs(
                     info.config.processor.correlator,
                     info.corrections,

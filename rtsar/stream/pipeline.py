@@ -25,6 +25,7 @@ stage), swath, link (silences), stats, settings, heap (the collector)."""
 
 from __future__ import annotations
 
+import signal
 import threading
 import time
 from collections import deque
@@ -466,7 +467,8 @@ class Pipeline:
         third gives up on finishing."""
         try:
             self._wait()
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:
+            self.stats.stopped_by = signal.Signals(getattr(exc, "signum", signal.SIGINT)).name
             self.stop()
             for more in range(3):
                 try:

@@ -83,6 +83,7 @@ class PipelineStats:
     started_s: float = 0.0
     elapsed_s: float = 0.0
     busy_s: dict = field(default_factory=dict)  # seconds of work per stage
+    stopped_by: str = ""  # the signal that stopped the source ("SIGINT", …), else ""
 
     def as_dict(self) -> dict:
         d = {k: int(v) for k, v in self.counters.items()}
@@ -95,4 +96,5 @@ class PipelineStats:
             "latency_p99_ms": lat.percentile(99) * 1e3,
             "latency_max_ms": lat.max_s * 1e3,
             "stage_busy_s": dict(self.busy_s),
+            "stopped_by": self.stopped_by,
         }

@@ -11,9 +11,6 @@ import sys
 import warnings
 from dataclasses import replace
 
-from scipy.fft import next_fast_len
-
-from ...fft_lengths import is_fast_fft_length
 from ...focus.spec import ORDER as CORRECTIONS
 from ...focus.spec import correct_option
 from ...lens import LENS_BACKENDS, range_axis_m
@@ -23,6 +20,7 @@ from ...sinks.endpoint import DEFAULT_ENDPOINT, DELIVERIES, STALL_TIMEOUT_S, end
 from ...stream.granularity import migration_domain_for
 from ...stream.pipeline import PipelineSettings
 from ...stream.settings import STAGE_LAYOUTS
+from .block_options import check_block_options
 
 
 def die(msg: str) -> int:
@@ -363,13 +361,7 @@ def processor_changes(args, cfg):
     for name in ("micro_batch", "partition_lines", "fft_length", "tail_block_lines"):
         if getattr(args, name, None) is not None:
             changes[name] = getattr(args, name)
-    m, n = changes.get("fft_length"), cfg.processor.aperture_pulses
-    if m is not None and not (m >= n and is_fast_fft_length(m)):
-        rule = f"at least the aperture, N = {n}" if m < n else "a product of 2, 3 and 5"
-        raise ValueError(
-            f"--fft-length {m}: must be {rule} (the least length >= N that is a product of "
-            f"2, 3 and 5 from {max(m, n)} up: {next_fast_len(max(m, n), real=True)})"
-        )
+    check_block_options(args, cfg.processor.aperture_pulses)
     if getattr(args, "precision", None):
         changes["precision"] = args.precision
     if getattr(args, "range_migration_taps", None) is not None:

@@ -1,0 +1,49 @@
+"""A correlator block option that --correlator's correlator does not read is refused in one
+line (rtsar.app.cli.block_options; before, `--correlator fft --partition-lines 8` ran with
+fft's blocks and said nothing)."""
+
+import pytest
+
+from rtsar.app.cli import main
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("blocks")
+    scene = folder / "s.toml"
+    scene.write_text('preset = "tiny"\n[[targets]]\nalong_track_m = 20.0\nslant_range_m = 2000.0\n')
+    rec = folder / "rec.h5"
+    assert main(["simulate", str(scene), "-o", str(rec), "--pulses", "200"]) == 0
+    return rec
+
+
+@pytest.mark.parametrize(
+    "correlator, option, value, readers",
+    [
+        ("fft", "--partition-lines", "8", "partitioned and nonuniform correlators"),
+        ("direct", "--partition-lines", "8", "partitioned and nonuniform correlators"),
+        ("partitioned", "--tail-block-lines", "64", "nonuniform correlator"),
+        ("nonuniform", "--fft-length", "1024", "fft correlator"),
+    ],
+)
+def test_a_block_option_the_correlator_does_not_read_is_refused(
+    correlator, option, value, readers, recording, tmp_path, capsys
+):
+    out = tmp_path / "img.h5"
+    args = ["process", str(recording), "-o", str(out), "--correlator", correlator, option, value]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert f"{option} sets the block of the {readers}; the {correlator} correlator does not" in err
+    assert not out.exists()
+
+
+def test_the_options_a_correlator_reads_are_taken(recording, tmp_path, capsys):
+    """The same options with the correlators that read them: the recording is focused."""
+    for correlator, option, value in (
+        ("partitioned", "--partition-lines", "8"),
+        ("nonuniform", "--tail-block-lines", "64"),
+        ("fft", "--fft-length", "1024"),
+    ):
+        out = tmp_path / f"{correlator}.h5"
+        args = ["process", str(recording), "--correlator", correlator, option, value]
+        assert main(args + ["-o", str(out)]) == 0 and out.exists()

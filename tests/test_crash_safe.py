@@ -248,16 +248,20 @@ w = ImageWriter(sys.argv[1], cfg, np.arange(nr, dtype=float), crash_safe=True, f
 for k in range(3):
     w.write(np.full((4, nr), k + 1, np.complex64), np.arange(4 * k, 4 * k + 4) * 0.5)
 print("written", flush=True)
+told = False
 while True:  # the stream went quiet; the owner calls the idle flush
     time.sleep(0.05)
     w.flush_if_due()
+    if not told and not (w._file.dirty or w._pending):
+        told = True
+        print("flushed", flush=True)  # all on disk (the idle call's flush): killed now
 """
     path = tmp_path / "quiet.h5"
     proc = subprocess.Popen(
         [sys.executable, "-c", code, str(path)], stdout=subprocess.PIPE, text=True
     )
     assert proc.stdout.readline().strip() == "written"
-    time.sleep(0.6)
+    assert proc.stdout.readline().strip() == "flushed"  # (a sleep of 0.6 s raced it before)
     proc.send_signal(signal.SIGKILL)
     proc.wait(10)
     image, az, _, attrs = read_image(path)

@@ -374,9 +374,9 @@ def test_beats_keep_an_idle_worker_and_are_no_pulses(tiny):
     lines of the same pulses without beats."""
     cfg, shots = tiny
     push, pull, shots_ep, results_ep = _coordinator_sockets()
-    t, box, said = _serving(shots_ep, results_ep, 0.5)
+    t, box, said = _serving(shots_ep, results_ep, 1.0)  # (0.5 s: a stall of 0.4 s failed it)
     _setup(push, pull, cfg)
-    for _ in range(15):
+    for _ in range(30):
         time.sleep(0.1)
         push.send_multipart([b"beat"])
     assert t.is_alive() and said == []
@@ -404,20 +404,21 @@ def test_beats_keep_an_idle_worker_and_are_no_pulses(tiny):
 
 def test_swath_workers_beat_while_idle_and_never_wait_to(tiny, rng):
     """The coordinator beats a worker it sends nothing: worker 0 while worker 1 has not yet
-    connected (1 s), then both while the source is idle (1 s; each two of the workers'
-    timeouts); the run then goes on.  A beat never waits: with a worker that reads nothing
+    connected (2 s), then both while the source is idle (2 s; each two of the workers'
+    timeouts, 1 s: a loaded machine's stall of a few tenths is no silence); the run then
+    goes on.  A beat never waits: with a worker that reads nothing
     the pipe fills, the send fails as a stall, and close() still returns at once."""
     cfg, shots = tiny
     bind = f"tcp://127.0.0.1:{_free_port()}"
-    serving = [_serving(*worker_endpoints(bind, 0), 0.5)]
+    serving = [_serving(*worker_endpoints(bind, 0), 1.0)]
     made, opts = {}, {"spawn": False, "bind": bind, "beat_s": 0.1}
     maker = threading.Thread(target=lambda: made.update(w=SwathWorkers(cfg, 2, "numpy", **opts)))
     maker.start()
-    time.sleep(1.0)  # worker 1 starts late (on another host, by hand)
-    serving.append(_serving(*worker_endpoints(bind, 1), 0.5, 1))
+    time.sleep(2.0)  # worker 1 starts late (on another host, by hand)
+    serving.append(_serving(*worker_endpoints(bind, 1), 1.0, 1))
     maker.join(60)
     workers = made["w"]
-    time.sleep(1.0)  # the source is idle
+    time.sleep(2.0)  # the source is idle
     assert all(t.is_alive() and said == [] for t, _, said in serving)
     workers.send(0, shots, False)
     workers.end()

@@ -109,17 +109,15 @@ def test_guard_samples_between_packets_are_no_gap(rng):
 def test_vector_items_over_a_socket(rng):
     shots = _shots(rng, 5)
     ctx = zmq.Context()
-    pub = ctx.socket(zmq.PUB)
+    pub = ctx.socket(zmq.XPUB)  # PUB on the wire; XPUB also tells when the subscriber is there
     port = pub.bind_to_random_port("tcp://127.0.0.1")
-    src = ZmqSource(f"tcp://127.0.0.1:{port}", S, 1e3, 10.0, idle_timeout_s=0.5, context=ctx)
+    src = ZmqSource(f"tcp://127.0.0.1:{port}", S, 1e3, 10.0, idle_timeout_s=2.0, context=ctx)
     got = []
     it = iter(src)
     import threading
 
     def send():
-        import time
-
-        time.sleep(0.3)  # the subscriber connects first (slow joiner)
+        pub.recv()  # the subscription (before: a 0.3 s sleep, a slow joiner's race)
         pub.send(tag_header(10, []) + shots[:2].tobytes())  # vector items 10, 11
         pub.send(tag_header(13, []) + shots[3:].tobytes())  # 12 lost on the way
         pub.send(b"\xf0\x5f\x01garbage")

@@ -47,3 +47,17 @@ def test_the_options_a_correlator_reads_are_taken(recording, tmp_path, capsys):
         out = tmp_path / f"{correlator}.h5"
         args = ["process", str(recording), "--correlator", correlator, option, value]
         assert main(args + ["-o", str(out)]) == 0 and out.exists()
+
+
+@pytest.mark.parametrize("given, runs", [([], "nonuniform"), (["--fft-length", "1024"], "fft")])
+def test_demo_runs_fft_where_fft_length_is_given(given, runs, tmp_path, monkeypatch):
+    """`rtsar demo` runs nonuniform by default, fft where --fft-length asks for it (a cold
+    review: `demo --fft-length 1024` was refused for a --correlator nobody gave)."""
+    from rtsar.app.cli import replay
+
+    seen = []
+    monkeypatch.setattr(replay, "cache_dir", lambda: tmp_path)
+    monkeypatch.setattr(replay, "simulate_to", lambda scene, path: path.touch())
+    monkeypatch.setattr(replay, "cmd_replay", lambda args: seen.append(args.correlator) or 0)
+    assert main(["demo", *given]) == 0
+    assert seen == [runs]

@@ -2,6 +2,7 @@
 any moment, and batch outputs never replace a good file with a partial one (issue 12)."""
 
 import os
+import queue
 import random
 import signal
 import subprocess
@@ -260,8 +261,14 @@ while True:  # the stream went quiet; the owner calls the idle flush
     proc = subprocess.Popen(
         [sys.executable, "-c", code, str(path)], stdout=subprocess.PIPE, text=True
     )
-    assert proc.stdout.readline().strip() == "written"
-    assert proc.stdout.readline().strip() == "flushed"  # (a sleep of 0.6 s raced it before)
+    lines = queue.Queue()  # the child's lines, read on a thread: a silent child fails the test
+    threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout], daemon=True).start()
+    for said in ("written", "flushed"):  # (a sleep of 0.6 s raced the flush before)
+        try:
+            assert lines.get(timeout=60).strip() == said
+        except queue.Empty:
+            proc.kill()
+            raise AssertionError(f"the writer never said {said!r}") from None
     proc.send_signal(signal.SIGKILL)
     proc.wait(10)
     image, az, _, attrs = read_image(path)

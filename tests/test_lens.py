@@ -151,6 +151,20 @@ def test_group_kernel_with_the_line_local_or_global(
         assert err <= tol, (pulses, err)
 
 
+def test_a_group_kernel_over_local_memory_once_built_is_built_with_global_lines(
+    opencl, monkeypatch
+):
+    """The lines fit the device's local memory, the built kernel (with what its compiler
+    keeps there) does not: built again with global lines, not failed at its first launch."""
+    monkeypatch.setattr(AOLens, "_local_used", lambda self: 1 << 40)
+    plan = synthetic_plan(13, 16, +1, True, -5, 11)
+    lens = AOLens(plan, kernel="group")
+    assert lens.scratch == "global"
+    x = noise(np.random.default_rng(4), 5, 13)
+    assert rel_rms(lens.compress(x), compress_reference(plan, x)) <= TOL
+    assert AOLens(plan, kernel="group", scratch="local").scratch == "local"  # asked for
+
+
 def test_the_group_kernel_s_lines_go_global_where_local_memory_is_too_small():
     """group_layout: 4·real_bytes·nfft bytes of local memory for the line's two buffers, else
     global; work-groups of up to 256 items and nfft/8."""

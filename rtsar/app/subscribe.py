@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import sys
 import time
 
@@ -54,8 +55,9 @@ def subscribe(
                 if msg.header.get("stream_id") == rec.stream_id:
                     counters = msg.header.get("counters")
                     final = counters if is_counters(counters) else rec.counters
-                    stopped_by = msg.header.get("stopped_by", "")
-                    stopped_by = stopped_by if isinstance(stopped_by, str) else ""
+                    stopped_by = msg.header.get("stopped_by", "")  # a signal's name only
+                    named = isinstance(stopped_by, str) and stopped_by in signal.Signals.__members__
+                    stopped_by = stopped_by if named else ""
                     break
             now = time.perf_counter()
             if now - last > 2.0:

@@ -283,7 +283,7 @@ class AOLens:
             self.lanes, self.group_size = lanes, 1
             defines["LANES"] = lanes
         else:
-            most = int(self.device.max_work_group_size)
+            most, chosen = int(self.device.max_work_group_size), scratch is None
             group, scratch = group_layout(nfft, real_bytes, local, most, scratch)
             need = 4 * real_bytes * nfft if scratch == "local" else 0  # two lines
             self.lanes, self.group_size = 1, group
@@ -302,6 +302,11 @@ class AOLens:
             )
         self.program = cl_loader.build_program(self.context, "lens.cl", defines)
         self._kernel = cl.Kernel(self.program, f"lens_{kernel}")  # own instance: args are state
+        if kernel == "group" and scratch == "local" and chosen and self._local_used() > local:
+            # the lines fit, but not with what the compiler keeps in local memory itself
+            self.scratch, defines["SCRATCH_GLOBAL"] = "global", 1
+            self.program = cl_loader.build_program(self.context, "lens.cl", defines)
+            self._kernel = cl.Kernel(self.program, "lens_group")
 
         mf = cl.mem_flags
         twiddle = np.exp(-2j * np.pi * np.arange(nfft) / nfft)  # float64, cast below
@@ -338,6 +343,14 @@ class AOLens:
         self._calls = gil_free_calls()  # None exactly where _enqueue is (cl_launch._resolve)
         self._pulses_arg = None  # the pulse count the kernel's argument holds
         self._lock = threading.Lock()
+
+    def _local_used(self) -> int:
+        """Bytes of local memory the built kernel takes a work-group (0 where not told)."""
+        try:
+            info = cl.kernel_work_group_info.LOCAL_MEM_SIZE
+            return int(self._kernel.get_work_group_info(info, self.device))
+        except (cl.Error, AttributeError):  # pragma: no cover - a driver that does not say
+            return 0
 
     def __repr__(self) -> str:
         p = self.plan

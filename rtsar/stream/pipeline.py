@@ -468,7 +468,9 @@ class Pipeline:
         try:
             self._wait()
         except KeyboardInterrupt as exc:
-            self.stats.stopped_by = signal.Signals(getattr(exc, "signum", signal.SIGINT)).name
+            if self._ended and not self._ended[0].is_set():  # the source cut short, not ended
+                signum = getattr(exc, "signum", signal.SIGINT)
+                self.stats.stopped_by = signal.Signals(signum).name
             self.stop()
             for more in range(3):
                 try:

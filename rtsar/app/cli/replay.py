@@ -113,8 +113,9 @@ def cmd_demo(args) -> int:
     args.height = args.height or "insal"
     if not args.correlator and not getattr(args, "physical", None):
         # Lines as they come (blocks of 16 pulses), not the FFT mode's whole-aperture blocks:
-        # at this PRF the fft correlator published the whole image at the end.
-        args.correlator = "nonuniform"
+        # at this PRF the fft correlator published the whole image at the end; fft where
+        # --fft-length asks for it (a live run's rule, rtsar.stream.granularity).
+        args.correlator = "fft" if getattr(args, "fft_length", None) else "nonuniform"
     return cmd_replay(args)
 
 

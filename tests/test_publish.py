@@ -73,23 +73,12 @@ def test_replay_max_into_subscribe_equals_process(tmp_path):
 def test_a_subscriber_keeps_the_signal_that_stopped_the_publisher_s_source(tmp_path, monkeypatch):
     """The end message's ``stopped_by`` (a paced replay stopped by Ctrl-C after its first
     strip) goes into ``subscribe -o``'s image, which is complete: the stream ended, early."""
-    from rtsar.stream.pipeline import Pipeline
+    from test_replay_part import ctrl_c_once
 
     scene, rec = tmp_path / "s.toml", tmp_path / "r.h5"
     scene.write_text(SCENE)
     assert main(["simulate", str(scene), "-o", str(rec)]) == 0
-    wait, calls = Pipeline._wait, []
-
-    def ctrl_c_after_the_first_strip(self):
-        if calls:
-            return wait(self)
-        calls.append(1)
-        deadline = time.monotonic() + 60
-        while not self.own["strips_published"] and time.monotonic() < deadline:
-            time.sleep(0.005)
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(Pipeline, "_wait", ctrl_c_after_the_first_strip)
+    ctrl_c_once(monkeypatch, lambda pipe: pipe.own["strips_published"] > 0)
     ep, codes = free_endpoint(), []
     sub = threading.Thread(
         target=lambda: codes.append(

@@ -61,3 +61,22 @@ def test_demo_runs_fft_where_fft_length_is_given(given, runs, tmp_path, monkeypa
     monkeypatch.setattr(replay, "cmd_replay", lambda args: seen.append(args.correlator) or 0)
     assert main(["demo", *given]) == 0
     assert seen == [runs]
+
+
+def test_a_block_option_the_recording_s_correlator_does_not_read_is_refused(
+    recording, tmp_path, capsys
+):
+    """Without --correlator, process (and replay --rate max, which make no live choice) run
+    the recording's correlator, fft in the presets: --partition-lines is refused there, and
+    taken by a paced replay, which runs nonuniform (a cold review: a configured correlator
+    was not checked)."""
+    out = tmp_path / "img.h5"
+    for command in (["process"], ["replay", "--rate", "max", "--endpoint", f"ipc://{tmp_path}/p"]):
+        args = [*command, str(recording), "-o", str(out), "--partition-lines", "8"]
+        assert main(args) == 2
+        said = capsys.readouterr().err
+        assert "--partition-lines sets the block of the partitioned and nonuniform" in said
+        assert "the recording's fft correlator does not read it" in said and not out.exists()
+    args = ["replay", str(recording), "--rate", "4", "-o", str(out), "--partition-lines", "8"]
+    assert main(args + ["--lens", "numpy", "--endpoint", f"ipc://{tmp_path}/q.pub"]) == 0
+    assert out.exists()

@@ -17,16 +17,18 @@ BLOCK_OPTIONS = {
 }
 
 
-def check_block_options(args, aperture_pulses: int) -> None:
-    """ValueError where a block option given does not apply to ``--correlator``'s correlator,
-    or ``--fft-length`` is shorter than the aperture or not a product of 2, 3 and 5."""
-    kind = getattr(args, "correlator", None)
+def check_block_options(args, aperture_pulses: int, configured: str | None = None) -> None:
+    """ValueError where a block option given does not apply to ``--correlator``'s correlator
+    (without one, ``configured``: the recording's, where the command runs it as it is), or
+    ``--fft-length`` is shorter than the aperture or not a product of 2, 3 and 5."""
+    given = getattr(args, "correlator", None)
+    kind, whose = (given, "the") if given else (configured, "the recording's")
     for option, (name, kinds) in BLOCK_OPTIONS.items():
         if kind and getattr(args, name, None) is not None and kind not in kinds:
             readers = " and ".join(kinds) + (" correlators" if len(kinds) > 1 else " correlator")
             raise ValueError(
-                f"{option} sets the block of the {readers}; the {kind} correlator does not "
-                "read it (leave it out, or name another --correlator)"
+                f"{option} sets the block of the {readers}; {whose} {kind} correlator does "
+                "not read it (leave it out, or name another --correlator)"
             )
     m, n = getattr(args, "fft_length", None), aperture_pulses
     if m is not None and not (m >= n and is_fast_fft_length(m)):

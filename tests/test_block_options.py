@@ -80,3 +80,16 @@ def test_a_block_option_the_recording_s_correlator_does_not_read_is_refused(
     args = ["replay", str(recording), "--rate", "4", "-o", str(out), "--partition-lines", "8"]
     assert main(args + ["--lens", "numpy", "--endpoint", f"ipc://{tmp_path}/q.pub"]) == 0
     assert out.exists()
+
+
+def test_a_live_run_that_keeps_fft_refuses_partition_lines(recording, tmp_path, capsys):
+    """A paced replay runs nonuniform where its configuration names fft, but keeps fft with
+    --fft-length: --partition-lines is then refused when the granularity is chosen (before,
+    ignored without a word)."""
+    out = tmp_path / "img.h5"
+    args = ["replay", str(recording), "--rate", "4", "--fft-length", "128", "-o", str(out)]
+    args += ["--partition-lines", "8", "--lens", "numpy", "--endpoint", f"ipc://{tmp_path}/r"]
+    assert main(args) == 2
+    said = capsys.readouterr().err
+    assert "--partition-lines sets the block of the partitioned and nonuniform" in said
+    assert "this run keeps fft, which does not read it" in said and not out.exists()

@@ -173,15 +173,18 @@ def stages_words(g) -> str:
 def block_candidates(
     p: Processor, physical=None, given: int | None = None, given_fft: int | None = None
 ) -> tuple[list, str]:
-    """(the blocks to choose among, why there is one only or ""): the partitioned and the
-    nonuniform correlators' head block L, 1, 2, 4, … up to MOST_STRIP_LINES (64) or the
-    configuration's partition_lines where larger, at most the aperture (a rate that no block
-    of 16 keeps up with gets larger ones before it drops shots; ``given``: --partition-lines);
-    the fft correlator's block M - N + 1 for the transform lengths M = the least product of
-    2, 3 and 5 >= N - 1 + b for b = 1, 2, 4, …, each once, below the configuration's M, and
-    that M (``given_fft``: --fft-length); the direct and physical CCDs release a line a
-    pulse, so their block is the strip's: 1 … 16."""
+    """(the blocks to choose among, why there is one only or ""): the partitioned and nonuniform
+    correlators' head block L, 1, 2, 4, … up to MOST_STRIP_LINES (64: a rate no block of 16
+    keeps up with gets larger ones) or partition_lines where larger, at most the aperture
+    (``given``: --partition-lines, refused with fft); fft's M - N + 1 for M = the least 2·3·5
+    product >= N - 1 + b, b = 1, 2, 4, …, each once, below the configuration's M, and that M
+    (``given_fft``: --fft-length); the direct and physical CCDs: the strip's block, 1 … 16."""
     if physical is None and p.correlator == "fft":
+        if given:  # (a live run keeps fft with --fft-length, time-domain taps, swath workers)
+            raise ValueError(
+                "--partition-lines sets the block of the partitioned and nonuniform correlators;"
+                " this run keeps fft, which does not read it (or name --correlator nonuniform)"
+            )
         n = p.aperture_pulses
         if given_fft:
             return [given_fft - n + 1], "--fft-length"

@@ -233,10 +233,13 @@ def test_the_read_out_reaches_any_offset_the_columns_have():
         first_line,
         w,
         offset,
-        weight_table(taps, np.float64),
+        np.ascontiguousarray(weight_table(taps, np.float64).T),
         np.ones(span, np.complex128),
         np.zeros(span),
+        0.0,
         np.zeros(span, np.complex128),
+        np.empty(bins, np.int64),
+        np.empty(bins, np.int64),
         out,
     )
     for i in range(3):

@@ -132,22 +132,21 @@ def _write_rows(lines, first_pulse, w, s0, table, pad, ring):  # pragma: no cove
 
 
 @numba.njit(nogil=True, cache=True)
-def _read_rows(ring_out, first_line, w, offset, table, phase, step, pad, out):  # pragma: no cover
+def _read_rows(
+    ring_out, first_line, w, offset, by_tap, phase, step, mean_step, pad, k0, qs, out
+):  # pragma: no cover
     # out[i, r] = ring_out[i] read at r + offset[r] - w·p, p = first_line + i, modulo W: the
     # row turned by ⌊w·p⌋ into ``pad`` first, each value given back its phase φ0 there
     # (``phase``, ``step``: exp(iφ0) and φ0's step to the next column at pad index k, read at
-    # the fraction f of the turn: exp(iφ0 + i·f·step), the step's mean in one exponential and
-    # its departure from it, at most a few mrad, to second order); each column's read its own
-    # fraction (offset).
+    # the fraction f of the turn: exp(iφ0 + i·f·step), the step's mean (``mean_step``) in one
+    # exponential and its departure from it, at most a few mrad, to second order); each
+    # column's read its own fraction (offset).  by_tap[t, q]: the weight table by tap; k0, qs:
+    # each column's first read and table row, scratch.
     count, bins = out.shape
     width = ring_out.shape[1]
-    taps, phases = table.shape[1], table.shape[0]
+    taps, phases = by_tap.shape[0], by_tap.shape[1]
     span = pad.shape[0]
     lo = (span - bins - taps) // 2  # pad[k] holds the ring column of mask column k - lo
-    by_tap = np.ascontiguousarray(table.T)  # by_tap[t, q]
-    mean_step = step.mean()
-    k0 = np.empty(bins, np.int64)
-    qs = np.empty(bins, np.int64)
     for i in range(count):
         turn = w * (first_line + i)
         turn -= math.floor(turn / width) * width  # w·p mod W in float64: bounded on a stream
@@ -242,6 +241,8 @@ class WalkDeskewCorrelator(Correlator):
         real = np.float32 if self.dtype == np.complex64 else np.float64
         self.taps = taps
         self._table = weight_table(taps, real)
+        self._by_tap = np.ascontiguousarray(self._table.T)  # _read_rows' [tap, row]
+        self._k0, self._qs = np.empty(bins, np.int64), np.empty(bins, np.int64)  # its scratch
         self._s0 = w * (n - 1) + self.walk.offset_mid_bins
         self._offset = (self.walk.offset_bins - self.walk.offset_mid_bins).astype(np.float64)
         # _read_rows' pad: the bins and, either side, the taps and the offsets' reach
@@ -257,6 +258,7 @@ class WalkDeskewCorrelator(Correlator):
         step = 2.0 * np.pi * (cycles[nxt] - cycles[mask_col])
         seam = np.abs(step - np.median(step)) > 0.5
         self._step = np.where(seam, np.median(step), step)
+        self._mean_step = float(self._step.mean())
 
     def _ring_range_m(self, range_m: np.ndarray) -> np.ndarray:
         """The range whose mask ring column j holds while the ring is unturned (line 0): the
@@ -289,8 +291,8 @@ class WalkDeskewCorrelator(Correlator):
         if len(out):
             w = self.walk.bins_per_pulse
             first = self.inner.lines_out - len(out) + self.aperture - 1  # its last pulse's index
-            args = (self._offset, self._table, self._phase, self._step, self._pad)
-            _read_rows(ring_out, first, w, *args, out)
+            args = (self._offset, self._by_tap, self._phase, self._step, self._mean_step)
+            _read_rows(ring_out, first, w, *args, self._pad, self._k0, self._qs, out)
         self.lines_out += len(out)
         return out
 

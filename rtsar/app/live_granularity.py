@@ -180,7 +180,7 @@ def block_candidates(
     product >= N - 1 + b, b = 1, 2, 4, …, each once, below the configuration's M, and that M
     (``given_fft``: --fft-length); the direct and physical CCDs: the strip's block, 1 … 16."""
     if physical is None and p.correlator == "fft":
-        if given:  # (a live run keeps fft with --fft-length, time-domain taps, swath workers)
+        if given:  # (a live run at a rate keeps fft with --fft-length or time-domain taps)
             raise ValueError(
                 "--partition-lines sets the block of the partitioned and nonuniform correlators;"
                 " this run keeps fft, which does not read it (or name --correlator nonuniform)"

@@ -23,7 +23,6 @@ from ...stream.timing import RecordedFlags
 from .. import signals
 from ..progress import Progress
 from ..quicklook import save_height_quicklook, save_quicklook, spotlight_words
-from .block_options import check_block_options
 from .inputs import open_input, warn_outside_swath
 from .options import (
     add_process_options,
@@ -150,11 +149,7 @@ def process_setup(args, rec, retro_from=None):
     channels they read); a request it refuses is a ValueError.  ``retro_from``: the recording
     a bare ``pra`` finds its retro-reflector in (a first pass over it); ``batch`` checks its
     files with this before its cluster starts."""
-    p = rec.config.processor  # process runs the recording's correlator where none is named
-    check_block_options(
-        args, p.aperture_pulses, None if getattr(args, "physical", None) else p.correlator
-    )
-    cfg = processor_changes(args, rec.config)
+    cfg = processor_changes(args, rec.config, as_configured=True)
     scene = rec.scene_object()
     chain = correction_chain(args, cfg, scene, rec.start_along_track_m, retro_from)
     heights = height_stage(args, cfg, scene)

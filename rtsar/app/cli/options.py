@@ -346,8 +346,11 @@ def add_subscriber_options(s) -> None:
 
 
 # ---- options → library objects ---------------------------------------------------------------
-def processor_changes(args, cfg):
-    """The configuration with the processor knobs given on the command line."""
+def processor_changes(args, cfg, as_configured: bool = False):
+    """The configuration with the processor knobs given on the command line.
+    ``as_configured``: the command runs the configuration's correlator where --correlator
+    names none (process, batch, replay --rate max; not a live run at a rate, which may run
+    another), so the block options are checked against it too (check_block_options)."""
     if getattr(args, "device", None) is not None and getattr(args, "lens", None) == "numpy":
         raise ValueError("--device names an OpenCL device; --lens numpy runs no OpenCL")
     changes = {}
@@ -361,7 +364,9 @@ def processor_changes(args, cfg):
     for name in ("micro_batch", "partition_lines", "fft_length", "tail_block_lines"):
         if getattr(args, name, None) is not None:
             changes[name] = getattr(args, name)
-    check_block_options(args, cfg.processor.aperture_pulses)
+    physical = getattr(args, "physical", None)
+    configured = cfg.processor.correlator if as_configured and not physical else None
+    check_block_options(args, cfg.processor.aperture_pulses, configured)
     if getattr(args, "precision", None):
         changes["precision"] = args.precision
     if getattr(args, "range_migration_taps", None) is not None:

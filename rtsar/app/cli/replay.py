@@ -13,7 +13,6 @@ from ...scene.files import BUILT_IN
 from ...sources.replay import ReplaySource
 from ..live import run_stream
 from ..live_granularity import request_of
-from .block_options import check_block_options
 from .files import simulate_to
 from .inputs import open_input
 from .options import (
@@ -61,10 +60,8 @@ def replayed_part(
 
 def cmd_replay(args) -> int:
     with open_input(args.recording) as rec:
-        p = rec.config.processor  # at --rate max no live choice: the recording's correlator
-        max_rate = args.rate == "max" and not getattr(args, "physical", None)
-        check_block_options(args, p.aperture_pulses, p.correlator if max_rate else None)
-        cfg = processor_changes(args, rec.config)
+        # at --rate max no live choice of correlator: the recording's runs
+        cfg = processor_changes(args, rec.config, as_configured=args.rate == "max")
         strip_lines(args, cfg.geometry.prf_hz)
         batch = args.max_batch or cfg.processor.micro_batch
         try:

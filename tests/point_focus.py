@@ -1,7 +1,10 @@
-"""A block focused by rtsar's engine and its points measured: what the range-migration tests
-compare between domains (tests/test_doppler_migration.py, tests/test_walk_deskew.py)."""
+"""A block focused by rtsar's engine and its points measured, and a correlator fed in pieces:
+what the range-migration tests compare (tests/test_doppler_migration.py,
+tests/test_walk_deskew.py)."""
 
 from __future__ import annotations
+
+import numpy as np
 
 from rtsar.analysis.point_target import analyse_point_target, azimuth_carrier_cycles
 from rtsar.stream.engine import process_block
@@ -23,3 +26,13 @@ def focus_points(cfg, shots, start_m, xs, rs, **processor):
         )
         for x, r in zip(xs, rs, strict=True)
     ]
+
+
+def pushed_in_pieces(ccd, lines, sizes=(37, 500, 1, 260)) -> np.ndarray:
+    """``ccd``'s lines for ``lines`` pushed in pieces of ``sizes`` in turn, then flushed."""
+    outs, i = [], 0
+    while i < len(lines):
+        n = sizes[len(outs) % len(sizes)]
+        outs.append(ccd.push(lines[i : i + n]))
+        i += n
+    return np.concatenate([*outs, ccd.flush()])

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from point_focus import focus_points
+from point_focus import focus_points, pushed_in_pieces
 
 from rtsar.ccd import make_ccd
 from rtsar.ccd.doppler_migration import DopplerMigrationCorrelator, doppler_migration_bins
@@ -65,13 +65,7 @@ def test_streaming_equals_one_block(scene):
     assert isinstance(whole, DopplerMigrationCorrelator)
     a = np.concatenate([whole.push(lines), whole.flush()])
     parts = make_ccd(cfg, plan.range_m)
-    sizes = [37, 500, 1, 260]
-    outs, i = [], 0
-    while i < len(lines):
-        n = sizes[len(outs) % len(sizes)]
-        outs.append(parts.push(lines[i : i + n]))
-        i += n
-    b = np.concatenate(outs + [parts.flush()])
+    b = pushed_in_pieces(parts, lines)
     assert a.shape == b.shape
     assert np.array_equal(a, b)
 

@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from point_focus import focus_points
+from point_focus import focus_points, pushed_in_pieces
 
 from rtsar.ccd import make_ccd
 from rtsar.ccd.nonuniform import NonUniformCorrelator
@@ -104,12 +104,7 @@ def test_streaming_equals_one_push(scene):
     assert isinstance(whole, WalkDeskewCorrelator)
     a = np.concatenate([whole.push(lines), whole.flush()])
     parts = make_ccd(cfg, plan.range_m)
-    sizes, outs, i = [37, 500, 1, 260], [], 0
-    while i < len(lines):
-        n = sizes[len(outs) % len(sizes)]
-        outs.append(parts.push(lines[i : i + n]))
-        i += n
-    b = np.concatenate([*outs, parts.flush()])
+    b = pushed_in_pieces(parts, lines)
     whole.close()
     parts.close()
     assert np.array_equal(a, b) and len(a) == len(lines) - cfg.processor.aperture_pulses + 1

@@ -36,3 +36,20 @@ def pushed_in_pieces(ccd, lines, sizes=(37, 500, 1, 260)) -> np.ndarray:
         outs.append(ccd.push(lines[i : i + n]))
         i += n
     return np.concatenate([*outs, ccd.flush()])
+
+
+def whole_and_in_pieces(cfg, shots):
+    """(the correlator's class, its lines for the NumPy lens's lines of ``shots`` pushed at
+    once, the same pushed in pieces, those lens lines): make_ccd's correlator of ``cfg``."""
+    from rtsar.ccd import make_ccd
+    from rtsar.lens import make_lens, make_plan
+
+    plan = make_plan(cfg)
+    lines = make_lens(plan, "numpy").compress(shots)
+    whole, parts = make_ccd(cfg, plan.range_m), make_ccd(cfg, plan.range_m)
+    try:
+        a = np.concatenate([whole.push(lines), whole.flush()])
+        return type(whole), a, pushed_in_pieces(parts, lines), lines
+    finally:
+        whole.close()
+        parts.close()

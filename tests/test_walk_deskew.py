@@ -9,12 +9,12 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from point_focus import focus_points, pushed_in_pieces
+from point_focus import focus_points, whole_and_in_pieces
 
 from rtsar.ccd import make_ccd
 from rtsar.ccd.nonuniform import NonUniformCorrelator
 from rtsar.ccd.walk_deskew import WalkDeskewCorrelator, fit_walk, walk_block_lines
-from rtsar.lens import make_lens, make_plan
+from rtsar.lens import make_plan
 from rtsar.params import Processor
 from rtsar.presets import preset
 from rtsar.scene import Simulator
@@ -98,15 +98,8 @@ def scene():
 def test_streaming_equals_one_push(scene):
     cfg, _, shots, *_ = scene
     cfg = cfg.with_processor(correlator="nonuniform", range_migration_domain="walk")
-    plan = make_plan(cfg)
-    lines = make_lens(plan, "numpy").compress(shots)
-    whole = make_ccd(cfg, plan.range_m)
-    assert isinstance(whole, WalkDeskewCorrelator)
-    a = np.concatenate([whole.push(lines), whole.flush()])
-    parts = make_ccd(cfg, plan.range_m)
-    b = pushed_in_pieces(parts, lines)
-    whole.close()
-    parts.close()
+    kind, a, b, lines = whole_and_in_pieces(cfg, shots)
+    assert issubclass(kind, WalkDeskewCorrelator)
     assert np.array_equal(a, b) and len(a) == len(lines) - cfg.processor.aperture_pulses + 1
 
 

@@ -471,6 +471,8 @@ def test_a_recorder_killed_at_random_moments_leaves_a_readable_recording(tmp_pat
 
 
 def test_a_killed_live_run_leaves_a_recording_process_focuses(tmp_path, capsys):
+    from test_record_stops import _recorder_of
+
     scene_file = tmp_path / "s.toml"
     scene_file.write_text(SCENE.replace("pulses = 300", "pulses = 20000"))
     raw = tmp_path / "raw.h5"
@@ -482,9 +484,17 @@ def test_a_killed_live_run_leaves_a_recording_process_focuses(tmp_path, capsys):
         while not raw.exists() and time.monotonic() < deadline:
             time.sleep(0.05)
         time.sleep(1.2)
+        recorders = _recorder_of(proc.pid)
     finally:
         proc.send_signal(signal.SIGKILL)
         proc.wait(10)
+    # The recorder process sees its run die, writes what it received and closes the file:
+    # read once it has (read while it reopened the file for its final attributes, a clean
+    # CI run found attributes half written, 1 run in 8 under load).
+    deadline = time.monotonic() + 30
+    while any(_alive(pid) for pid in recorders) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert recorders and not any(_alive(pid) for pid in recorders)
     with open_recording(raw) as rec:
         assert rec.pulses >= 64 and not rec.attrs["complete"]
     assert main(["process", str(raw), "-o", str(tmp_path / "p.h5"), "--lens", "numpy"]) == 0

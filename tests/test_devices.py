@@ -1,9 +1,11 @@
 """Every OpenCL device is a candidate: probed, checked against the float64 reference, measured;
 the default is the fastest that builds; --lens auto takes OpenCL only where it is faster."""
 
+import copy
 import json
 import subprocess
 import sys
+import types
 
 import numpy as np
 import pytest
@@ -255,6 +257,28 @@ def test_survey_is_cached_per_machine_and_measured_again_when_devices_change(
     monkeypatch.setattr(cl_devices, "_survey", None)
     cl_devices.survey()
     assert len(calls) == 2 and len(read_json("opencl-devices.json")["surveys"]) == 2
+
+
+def test_the_default_reason_says_when_its_survey_was_measured(monkeypatch, tmp_path):
+    # A run quotes the survey's rate beside its own figures of the same lens (rtsar bench:
+    # 76,190 pulses/s from a survey of the evening before, 117,057 in its own table): the
+    # reason says when that rate was measured, from the file as from this process.
+    monkeypatch.setenv("RTSAR_CACHE_DIR", str(tmp_path))
+    reports = [_report(0, 50_000.0), _report(1, 90_000.0)]
+    monkeypatch.setattr(cl_devices, "list_devices", lambda: [None, None])
+    monkeypatch.setattr(cl_devices, "describe", lambda i, d: copy.deepcopy(reports[i]))
+    monkeypatch.setattr(cl_devices, "probe_all", lambda r, *a: (r, {"64": 5.0}))
+    monkeypatch.setattr(cl_devices, "_survey", None)
+    clock = types.SimpleNamespace(strftime=lambda fmt: "2026-11-29T23:25:14+0100")
+    monkeypatch.setattr(cl_devices, "time", clock)
+    cl_devices.survey()
+    why = cl_devices.default_device()[1]
+    assert why.endswith("dev0, 50,000; surveyed 2026-11-29 22:25 UTC)"), why
+    monkeypatch.setattr(cl_devices, "_survey", None)  # a later process: the kept survey's date
+    clock.strftime = lambda fmt: "2026-11-30T09:00:00+0000"
+    assert cl_devices.survey()[1].rates == {"64": 90_000.0}
+    assert cl_devices.default_device()[1].endswith("surveyed 2026-11-29 22:25 UTC)")
+    assert cl_devices.surveyed_words("not a date") == ""
 
 
 def test_a_driver_that_crashes_while_probing_is_refused_not_fatal(monkeypatch):

@@ -21,6 +21,7 @@ fastest that builds.
 
 from __future__ import annotations
 
+import datetime
 import hashlib
 import json
 import os
@@ -166,6 +167,7 @@ def fingerprint(reports: list[DeviceReport]) -> str:
 _lock = threading.RLock()
 _survey: list[DeviceReport] | None = None
 _survey_key: str | None = None
+_survey_at: str = ""  # when it was measured ("%Y-%m-%dT%H:%M:%S%z"; "" where not known)
 
 
 def measure(
@@ -183,6 +185,7 @@ def measure(
                 "its own; a second or two each; kept for later runs)"
             )
         measured, numpy_rates = probe_all(reports, preset_name, batches, seconds)
+        at = time.strftime("%Y-%m-%dT%H:%M:%S%z")
         hung = any("no answer within" in (r.reason or r.note or "") for r in measured)
         if preset_name == SURVEY_PRESET and SURVEY_BATCH in [int(b) for b in batches]:
             key = fingerprint(reports)
@@ -190,7 +193,7 @@ def measure(
                 kept = _surveys(read_json(_CACHE))
                 kept[key] = {
                     "fingerprint": key,
-                    "measured_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                    "measured_at": at,
                     "preset": SURVEY_PRESET,
                     "devices": [asdict(r) for r in measured],
                 }
@@ -198,7 +201,7 @@ def measure(
                 for old_key in newest[:-KEEP_SURVEYS]:
                     del kept[old_key]
                 write_json(_CACHE, {"surveys": kept})
-            _keep(measured, key)
+            _keep(measured, key, at)
         return measured, numpy_rates
 
 
@@ -241,7 +244,7 @@ def _known_survey() -> list[DeviceReport] | None:
         if found and any(r.rates and rates_or_none(r.rates) is None for r in found):
             found = None  # a damaged rate (NaN, negative, not a number) is measured again
         if found and [identity(r) for r in found] == [identity(r) for r in reports]:
-            return _keep(found, key)
+            return _keep(found, key, str(cached.get("measured_at", "")))
     return None
 
 
@@ -262,10 +265,23 @@ def survey_fingerprint() -> str:
     return _survey_key or ""
 
 
-def _keep(reports: list[DeviceReport], key: str) -> list[DeviceReport]:
-    global _survey, _survey_key
-    _survey, _survey_key = reports, key
+def _keep(reports: list[DeviceReport], key: str, at: str) -> list[DeviceReport]:
+    global _survey, _survey_key, _survey_at
+    _survey, _survey_key, _survey_at = reports, key, at
     return reports
+
+
+def surveyed_words(at: str | None = None) -> str:
+    """When the survey's figures were measured, in UTC ("surveyed 2026-11-29 23:25 UTC";
+    ``at`` as the cache keeps it, default this process's survey; "" where unknown).  A run
+    quotes a kept survey's rate beside its own figures of the same lens: the date says why
+    they can differ (a shared machine's speed swings 2x from hour to hour)."""
+    at = _survey_at if at is None else at
+    try:
+        when = datetime.datetime.strptime(at, "%Y-%m-%dT%H:%M:%S%z")
+    except ValueError:
+        return ""
+    return f"surveyed {when.astimezone(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC"
 
 
 def ranked(reports: list[DeviceReport]) -> list[DeviceReport]:
@@ -291,10 +307,11 @@ def default_device(say=None) -> tuple[DeviceReport | None, str]:
         )
         return best, why
     second = ok[1]
+    when = surveyed_words()
     return best, (
         f"the fastest of {len(ok)} OpenCL devices that build the lens: "
         f"{best.rate():,.0f} pulses/s at batch {SURVEY_BATCH} on {SURVEY_PRESET} "
-        f"(next: {second.short_label}, {second.rate() or 0:,.0f})"
+        f"(next: {second.short_label}, {second.rate() or 0:,.0f}{'; ' + when if when else ''})"
     )
 
 

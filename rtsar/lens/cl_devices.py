@@ -13,10 +13,11 @@ anew and shows it all).
 
 The default device (no ``--device``, no ``RTSAR_OPENCL_DEVICE``) is the fastest device that
 builds and computes the lens right, at batch 64 on ``psaltis-max``; with one such device, that
-one.  A device asked for is a case-insensitive part of ``"platform / device"`` (as before), of
-``"platform driver / device"`` or of ``"platform version / device (driver version)"`` (a driver
-version tells two PoCLs apart), or its index in ``rtsar devices``; several matches: the
-fastest that builds.
+one.  A survey again keeps the default before unless another device is DEFAULT_MARGIN faster
+(``kept_default``).  A device asked for is a case-insensitive part of ``"platform / device"``
+(as before), of ``"platform driver / device"`` or of ``"platform version / device (driver
+version)"`` (a driver version tells two PoCLs apart), or its index in ``rtsar devices``;
+several matches: the fastest that builds.
 """
 
 from __future__ import annotations
@@ -65,6 +66,11 @@ __all__ = [
 
 ENV_DEVICE = "RTSAR_OPENCL_DEVICE"
 _CACHE = "opencl-devices.json"
+# A survey again (`rtsar devices`) names another default only where it is this much faster than
+# the default before: two devices within it swap places on the machine's noise (2-core Xeon,
+# 2026-11-30, five runs of `rtsar devices`: Intel's runtime 118,414 against PoCL 3.0's
+# 122,897 pulses/s at batch 64, the default moved to PoCL, and back at the next run).
+DEFAULT_MARGIN = 0.10
 KEEP_SURVEYS = 8  # fingerprints kept (checkouts, driver versions): the newest
 
 
@@ -168,6 +174,7 @@ _lock = threading.RLock()
 _survey: list[DeviceReport] | None = None
 _survey_key: str | None = None
 _survey_at: str = ""  # when it was measured ("%Y-%m-%dT%H:%M:%S%z"; "" where not known)
+_survey_kept: str = ""  # the full label of a default kept within DEFAULT_MARGIN ("": none)
 
 
 def measure(
@@ -189,19 +196,22 @@ def measure(
         hung = any("no answer within" in (r.reason or r.note or "") for r in measured)
         if preset_name == SURVEY_PRESET and SURVEY_BATCH in [int(b) for b in batches]:
             key = fingerprint(reports)
+            kept = _surveys(read_json(_CACHE))
+            stays = kept_default(measured, str(kept.get(key, {}).get("default", "")))
             if not hung:  # a hang may be this moment's: the next run asks again
-                kept = _surveys(read_json(_CACHE))
                 kept[key] = {
                     "fingerprint": key,
                     "measured_at": at,
                     "preset": SURVEY_PRESET,
                     "devices": [asdict(r) for r in measured],
+                    "default": next((r.full_label for r in ranked(measured, stays)), ""),
+                    "kept": stays,  # the default before, kept within DEFAULT_MARGIN
                 }
                 newest = sorted(kept, key=lambda k: str(kept[k].get("measured_at", "")))
                 for old_key in newest[:-KEEP_SURVEYS]:
                     del kept[old_key]
                 write_json(_CACHE, {"surveys": kept})
-            _keep(measured, key, at)
+            _keep(measured, key, at, stays)
         return measured, numpy_rates
 
 
@@ -244,7 +254,8 @@ def _known_survey() -> list[DeviceReport] | None:
         if found and any(r.rates and rates_or_none(r.rates) is None for r in found):
             found = None  # a damaged rate (NaN, negative, not a number) is measured again
         if found and [identity(r) for r in found] == [identity(r) for r in reports]:
-            return _keep(found, key, str(cached.get("measured_at", "")))
+            stays = kept_default(found, str(cached.get("kept", "")))
+            return _keep(found, key, str(cached.get("measured_at", "")), stays)
     return None
 
 
@@ -265,9 +276,9 @@ def survey_fingerprint() -> str:
     return _survey_key or ""
 
 
-def _keep(reports: list[DeviceReport], key: str, at: str) -> list[DeviceReport]:
-    global _survey, _survey_key, _survey_at
-    _survey, _survey_key, _survey_at = reports, key, at
+def _keep(reports: list[DeviceReport], key: str, at: str, stays: str = "") -> list[DeviceReport]:
+    global _survey, _survey_key, _survey_at, _survey_kept
+    _survey, _survey_key, _survey_at, _survey_kept = reports, key, at, stays
     return reports
 
 
@@ -284,11 +295,25 @@ def surveyed_words(at: str | None = None) -> str:
     return f"surveyed {when.astimezone(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC"
 
 
-def ranked(reports: list[DeviceReport]) -> list[DeviceReport]:
+def ranked(reports: list[DeviceReport], kept: str | None = None) -> list[DeviceReport]:
     """The devices that build the lens and compute it right, the fastest first (at
-    ``SURVEY_BATCH``; one left untimed last)."""
-    ok = [r for r in reports if r.reason is None]
-    return sorted(ok, key=lambda r: -(r.rate() or 0.0))
+    ``SURVEY_BATCH``; one left untimed last), except the default before where it was kept
+    (``kept``, its full label: kept_default; default the survey's own)."""
+    ok = sorted((r for r in reports if r.reason is None), key=lambda r: -(r.rate() or 0.0))
+    kept = _survey_kept if kept is None else kept
+    stays = [r for r in ok if kept and r.full_label == kept]
+    return stays + [r for r in ok if r not in stays]
+
+
+def kept_default(reports: list[DeviceReport], before: str) -> str:
+    """The full label of the default before (``before``) where it stays the default of
+    ``reports``: it builds and is timed, the fastest is not DEFAULT_MARGIN faster, and it is
+    not the fastest itself; else "" (the fastest is the default)."""
+    ok = ranked(reports, "")
+    same = [r for r in ok if before and r.full_label == before and r.rate()]
+    if not same or same[0] is ok[0]:
+        return ""
+    return before if (ok[0].rate() or 0.0) <= (1 + DEFAULT_MARGIN) * same[0].rate() else ""
 
 
 def default_device(say=None) -> tuple[DeviceReport | None, str]:
@@ -308,10 +333,18 @@ def default_device(say=None) -> tuple[DeviceReport | None, str]:
         return best, why
     second = ok[1]
     when = surveyed_words()
+    when = f"; {when}" if when else ""
+    if _survey_kept and best.full_label == _survey_kept:
+        return best, (
+            f"the default before, kept: {best.rate():,.0f} pulses/s at batch {SURVEY_BATCH} "
+            f"on {SURVEY_PRESET}, within {DEFAULT_MARGIN:.0%} of the fastest of {len(ok)} "
+            f"OpenCL devices that build the lens ({second.short_label}, "
+            f"{second.rate() or 0:,.0f}{when})"
+        )
     return best, (
         f"the fastest of {len(ok)} OpenCL devices that build the lens: "
         f"{best.rate():,.0f} pulses/s at batch {SURVEY_BATCH} on {SURVEY_PRESET} "
-        f"(next: {second.short_label}, {second.rate() or 0:,.0f}{'; ' + when if when else ''})"
+        f"(next: {second.short_label}, {second.rate() or 0:,.0f}{when})"
     )
 
 

@@ -417,6 +417,50 @@ def test_a_reader_following_the_live_file_does_not_stop_its_final_attributes(tmp
     assert image.shape[0] == 32 and attrs["complete"] and attrs["counters"] == '{"x": 1}'
 
 
+FINISHES_SLOWLY = """
+import sys, time, numpy as np
+from rtsar.presets import preset
+from rtsar.sinks import live_file
+from rtsar.sinks.image_file import ImageWriter
+
+def reopened(*args, **kw):  # the reopening for the final attributes, then a pause before them
+    out = live_file.H5Output.__wrapped__(*args, **kw)
+    print("finishing", flush=True)
+    time.sleep(1.0)
+    return out
+
+reopened.__wrapped__ = live_file.H5Output
+cfg = preset("tiny")
+nr = cfg.processor.range_bins
+w = ImageWriter(sys.argv[1], cfg, np.arange(nr, dtype=float), crash_safe=True)
+w.write(np.ones((32, nr), np.complex64), np.arange(32) * 0.5)
+w.flush()
+live_file.H5Output = reopened
+w.close(counters='{"x": 1}')
+"""
+
+
+def test_a_file_read_while_its_writer_finishes_it_is_read_once_finished(tmp_path):
+    """A recording read within a second of killing `rtsar run` (its recorder process was still
+    adding the final attributes) failed in h5py ("bad version number for attribute message"),
+    or read as incomplete.  The writer says in its claim on the name that it is finishing, and
+    a reader waits for the claim's release: the file it opens is the finished one."""
+    path = tmp_path / "img.h5"
+    writer = subprocess.Popen(
+        [sys.executable, "-c", FINISHES_SLOWLY, str(path)], stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert writer.stdout.readline().strip() == "finishing"
+        t0 = time.monotonic()
+        image, _, _, attrs = read_image(path)
+        waited_s = time.monotonic() - t0
+    finally:
+        writer.communicate(timeout=60)
+    assert writer.returncode == 0
+    assert image.shape[0] == 32 and attrs["complete"] and attrs["counters"] == '{"x": 1}'
+    assert 0.3 < waited_s < 30  # (the writer's pause is 1 s from the line read)
+
+
 def test_a_growing_file_read_between_its_two_resizes_gives_matching_lines(tmp_path):
     """From a kill review: read_image on a growing file returned more image rows than azimuth
     positions in 7 of 5865 reads (the writer grows the image, then the axis)."""

@@ -23,6 +23,11 @@ from pathlib import Path
 
 import h5py
 
+from .name_claim import wait_while_finishing
+
+# A finishing writer takes a few hundred ms (its final attributes); past this, the file opens
+# as it is (a writer hung there: what it holds is read, or refused in one line).
+FINISHING_WAIT_S = 10.0
 PROBE_LIMIT_S = 15.0  # the child's reads take about 0.5 s (mostly Python's start), or for ever
 
 _PROBE = """
@@ -46,7 +51,9 @@ with h5py.File(sys.argv[1], "r", swmr=True) as f:
 
 def open_for_reading(path: Path) -> h5py.File:
     """``path`` opened read-only (SWMR where a writer holds it or left it short); ValueError,
-    one line, where it cannot be read."""
+    one line, where it cannot be read.  A writer finishing the file (its final attributes:
+    rtsar.sinks.name_claim) is waited for, at most FINISHING_WAIT_S."""
+    wait_while_finishing(path, FINISHING_WAIT_S)
     try:  # a damaged file: OSError, or RuntimeError where its superblock does not read
         return h5py.File(path, "r")
     except (OSError, RuntimeError) as exc:

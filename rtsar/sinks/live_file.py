@@ -204,6 +204,8 @@ class LiveFile:
             # readers open, as one killed mid-stream does.  (Reopened normally, the file would
             # carry HDF5's open-for-writing flag, and no reader would open it until `h5clear
             # -s`.)
+            if self._claim is not None:  # readers wait until the claim is released
+                self._claim.finishing()
             with self.reported():
                 self._out.close()
             self.saved_rows = self.rows

@@ -6,6 +6,12 @@ file.  The claim is an empty hidden file beside the output, named like the write
 (rtsar.sinks.partials.partial_prefix), under an exclusive ``flock`` that the system drops when the
 process dies, however it dies: a claim whose lock is held refuses the name to another writer,
 one left unlocked by a dead writer is removed by the next.
+
+A crash-safe file's last step closes it and opens it again for its final attributes
+(rtsar.sinks.live_file); a reader that opens it meanwhile can read them half written (h5py:
+"bad version number for attribute message", seen within a second of killing ``rtsar run``: the
+recorder process finishing the recording).  The writer says so in its claim (``finishing``),
+and a reader waits for the claim's release before it opens the file (``wait_while_finishing``).
 """
 
 from __future__ import annotations
@@ -13,9 +19,12 @@ from __future__ import annotations
 import fcntl
 import glob
 import os
+import time
 from pathlib import Path
 
 from .partials import partial_prefix, remove_stale_partials
+
+FINISHING = b"finishing"  # the claim's content while its writer writes the final attributes
 
 
 class NameClaim:
@@ -61,6 +70,14 @@ class NameClaim:
         """The locked descriptor (None once released)."""
         return self._fd
 
+    def finishing(self) -> None:
+        """The writer's last step begins (module docstring): readers wait for the release."""
+        if self._fd is not None:
+            try:
+                os.pwrite(self._fd, FINISHING, 0)
+            except OSError:  # (readers then open as they would have)
+                pass
+
     def release(self) -> None:
         if self._fd is not None:
             self.path.unlink(missing_ok=True)
@@ -75,6 +92,27 @@ def check_unclaimed(path: str | Path) -> None:
     refusal = _refusal(Path(path))
     if refusal:
         raise ValueError(refusal)
+
+
+def wait_while_finishing(path: str | Path, most_s: float, poll_s: float = 0.02) -> float:
+    """Seconds waited, at most ``most_s``, while another process's claim on ``path`` says it is
+    finishing the file (module docstring); 0 where none is."""
+    path, start = Path(path), time.monotonic()
+    prefix = glob.escape(f".{path.name}.partial-")
+    while time.monotonic() - start < most_s:
+        marks = path.parent.glob(prefix + "*-writing")
+        if not any(_says(m, FINISHING) and _held(m) for m in marks):
+            break
+        time.sleep(poll_s)
+    return time.monotonic() - start
+
+
+def _says(mark: Path, content: bytes) -> bool:
+    try:
+        with open(mark, "rb") as f:
+            return f.read(len(content)) == content
+    except OSError:  # removed meanwhile: released
+        return False
 
 
 def _refusal(path: Path, mine: Path | None = None) -> str | None:

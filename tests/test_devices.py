@@ -316,6 +316,21 @@ def test_a_survey_again_keeps_the_default_unless_another_is_clearly_faster(monke
     assert best.index == 1 and why.startswith("the default before, kept")
     best, why = survey_again(135_000.0, 0.0)  # the default before is not timed: the fastest
     assert best.index == 0 and why.startswith("the fastest of 2")
+    # --device naming both runs the faster of them, kept default or not (a cold review)
+    survey_again(118_414.0, 110_000.0)
+    best, why = survey_again(112_000.0, 118_000.0)  # 1 is faster; 0 stays the default
+    assert best.index == 0 and why.startswith("the default before, kept")
+    _, why = cl_devices.chosen_device("Platform")
+    assert "names 2 devices ([1] Platform1 1.0 / dev1, [0] Platform0" in why
+    # A survey kept before the default was written down: its fastest was the default then.
+    cache = read_json("opencl-devices.json")
+    for entry in cache["surveys"].values():
+        entry.pop("default"), entry.pop("kept")
+    cl_devices.write_json("opencl-devices.json", cache)
+    monkeypatch.setattr(cl_devices, "_survey", None)
+    assert cl_devices.default_device()[0].index == 1  # (nothing kept: the fastest)
+    best, why = survey_again(112_000.0, 107_000.0)
+    assert best.index == 1 and why.startswith("the default before, kept"), why
 
 
 def test_a_driver_that_crashes_while_probing_is_refused_not_fatal(monkeypatch):

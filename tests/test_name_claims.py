@@ -1,12 +1,15 @@
 """Every writer honours a live writer's claim on its file name (issue 29): a name another
 rtsar process is writing now is refused in one line, exit status 2, before any work."""
 
+import errno
+import os
 import subprocess
 import sys
 
 import pytest
 
 from rtsar.app.cli import main
+from rtsar.sinks import name_claim
 
 SCENE = """
 preset = "tiny"
@@ -115,3 +118,59 @@ def test_an_output_being_written_is_claimed_for_the_whole_write(tmp_path):
     assert "another rtsar process (pid" in said and "is writing it now" in said
     assert path.read_bytes() == b"an image"
     assert [p.name for p in tmp_path.iterdir()] == ["img.h5"]  # the claim went with the write
+
+
+FINISHER = """
+import sys
+from rtsar.sinks.name_claim import NameClaim
+claim = NameClaim(sys.argv[1])
+claim.finishing()
+print("finishing", flush=True)
+sys.stdin.read()
+"""
+
+
+def test_a_reader_waits_only_for_a_live_writer_finishing_and_changes_nothing(tmp_path, monkeypatch):
+    # (A cold review of the wait for a writer's final attributes, rtsar.sinks.name_claim.)
+    path = tmp_path / "img.h5"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", FINISHER, str(path)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert proc.stdout.readline().strip() == "finishing"
+        (mark,) = tmp_path.glob(".img.h5.partial-*-writing")
+        assert name_claim.is_finishing(path)
+        waited = name_claim.wait_while_finishing(path, 0.3, poll_s=0.05)
+        assert 0.3 <= waited < 5  # a live writer finishing: waited for, up to the bound
+        # A reader of another account may only read the mark: it waits all the same.
+        real_open = os.open
+
+        def read_only(p, flags, *a):
+            if str(p) == str(mark) and flags & (os.O_WRONLY | os.O_RDWR):
+                raise PermissionError(13, "Permission denied", str(p))
+            return real_open(p, flags, *a)
+
+        monkeypatch.setattr(name_claim.os, "open", read_only)
+        assert name_claim.wait_while_finishing(path, 0.2, poll_s=0.05) >= 0.2
+        # Where locks do not work, nothing would end a dead writer's mark: not waited for.
+        monkeypatch.setattr(name_claim.fcntl, "flock", _no_locks)
+        assert name_claim.wait_while_finishing(path, 5.0) < 1.0
+        monkeypatch.undo()
+    finally:
+        proc.communicate("", timeout=30)
+    # The writer killed while finishing leaves its mark unlocked: a reader does not wait for
+    # it and does not remove it (that is a writer's to do, with write access to the folder).
+    mark.write_bytes(name_claim.FINISHING)
+    assert name_claim.wait_while_finishing(path, 5.0) < 1.0 and mark.exists()
+    # This process's own claim, finishing: never waited for by its own reads.
+    mine = name_claim.NameClaim(tmp_path / "own.h5")
+    mine.finishing()
+    assert name_claim.wait_while_finishing(tmp_path / "own.h5", 5.0) < 1.0
+    mine.release()
+
+
+def _no_locks(fd, op):
+    raise OSError(errno.ENOLCK, "No locks available")

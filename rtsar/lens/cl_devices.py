@@ -197,7 +197,7 @@ def measure(
         if preset_name == SURVEY_PRESET and SURVEY_BATCH in [int(b) for b in batches]:
             key = fingerprint(reports)
             kept = _surveys(read_json(_CACHE))
-            stays = kept_default(measured, str(kept.get(key, {}).get("default", "")))
+            stays = kept_default(measured, _default_of(kept.get(key, {})))
             if not hung:  # a hang may be this moment's: the next run asks again
                 kept[key] = {
                     "fingerprint": key,
@@ -303,6 +303,18 @@ def ranked(reports: list[DeviceReport], kept: str | None = None) -> list[DeviceR
     kept = _survey_kept if kept is None else kept
     stays = [r for r in ok if kept and r.full_label == kept]
     return stays + [r for r in ok if r not in stays]
+
+
+def _default_of(entry: dict) -> str:
+    """The full label of the default a kept survey named (one written before the field: its
+    fastest, the default it gave); "" where none."""
+    if isinstance(entry.get("default"), str):
+        return entry["default"]
+    try:
+        reports = [DeviceReport(**d) for d in entry.get("devices", [])]
+    except TypeError:
+        return ""
+    return next((r.full_label for r in ranked(reports, "")), "")
 
 
 def kept_default(reports: list[DeviceReport], before: str) -> str:
@@ -462,7 +474,7 @@ def chosen_device(device: cl.Device | str | None = None, say=None) -> tuple[cl.D
             raise RuntimeError(f"no OpenCL device matches {wanted!r}{source}; available: {names}")
         if len(matches) == 1:
             return devices[matches[0].index], f"asked for: {asked}"
-        order = {r.index: k for k, r in enumerate(ranked(survey(say=say)))}
+        order = {r.index: k for k, r in enumerate(ranked(survey(say=say), ""))}  # fastest
         matches.sort(key=lambda r: order.get(r.index, len(order) + r.index))
         names = ", ".join(f"[{r.index}] {r.short_label}" for r in matches)
         why = (

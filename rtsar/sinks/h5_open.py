@@ -23,7 +23,7 @@ from pathlib import Path
 
 import h5py
 
-from .name_claim import wait_while_finishing
+from .name_claim import is_finishing, wait_while_finishing
 
 # A finishing writer takes a few hundred ms (its final attributes); past this, the file opens
 # as it is (a writer hung there: what it holds is read, or refused in one line).
@@ -52,8 +52,18 @@ with h5py.File(sys.argv[1], "r", swmr=True) as f:
 def open_for_reading(path: Path) -> h5py.File:
     """``path`` opened read-only (SWMR where a writer holds it or left it short); ValueError,
     one line, where it cannot be read.  A writer finishing the file (its final attributes:
-    rtsar.sinks.name_claim) is waited for, at most FINISHING_WAIT_S."""
+    rtsar.sinks.name_claim) is waited for, at most FINISHING_WAIT_S, and where it began to
+    while the file was opened, the file is opened again once it has finished."""
     wait_while_finishing(path, FINISHING_WAIT_S)
+    f = _open(path)
+    if is_finishing(path):
+        f.close()
+        wait_while_finishing(path, FINISHING_WAIT_S)
+        f = _open(path)
+    return f
+
+
+def _open(path: Path) -> h5py.File:
     try:  # a damaged file: OSError, or RuntimeError where its superblock does not read
         return h5py.File(path, "r")
     except (OSError, RuntimeError) as exc:

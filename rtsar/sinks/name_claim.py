@@ -28,10 +28,11 @@ FINISHING = b"finishing"  # the claim's content while its writer writes the fina
 
 
 class NameClaim:
-    """This process's claim on ``path`` (module docstring): the empty file ``.NAME.partial-
-    OWNER-writing``, locked until :meth:`release`.  ValueError when another running process
-    holds a claim on the name.  Temporaries of the name that killed writers left are removed
-    first (rtsar.sinks.partials.remove_stale_partials)."""
+    """This process's claim on ``path`` (module docstring): the file ``.NAME.partial-
+    OWNER-writing``, empty (FINISHING once its writer finishes), locked until
+    :meth:`release`.  ValueError when another running process holds a claim on the name.
+    Temporaries of the name that killed writers left are removed first
+    (rtsar.sinks.partials.remove_stale_partials)."""
 
     def __init__(self, path: str | Path):
         path = Path(path)
@@ -96,23 +97,44 @@ def check_unclaimed(path: str | Path) -> None:
 
 def wait_while_finishing(path: str | Path, most_s: float, poll_s: float = 0.02) -> float:
     """Seconds waited, at most ``most_s``, while another process's claim on ``path`` says it is
-    finishing the file (module docstring); 0 where none is."""
+    finishing the file (module docstring); 0 where none is.  A reader's look changes nothing:
+    it needs no write access (another account's reader waits too) and removes no mark; a mark
+    it cannot lock (a file system without locks) is not waited for, as nothing would end it."""
     path, start = Path(path), time.monotonic()
-    prefix = glob.escape(f".{path.name}.partial-")
+    prefix, mine = f".{path.name}.partial-", partial_prefix(path)
     while time.monotonic() - start < most_s:
-        marks = path.parent.glob(prefix + "*-writing")
-        if not any(_says(m, FINISHING) and _held(m) for m in marks):
+        marks = path.parent.glob(glob.escape(prefix) + "*-writing")
+        if not any(_finishing(m) for m in marks if not m.name.startswith(mine)):
             break
         time.sleep(poll_s)
     return time.monotonic() - start
 
 
-def _says(mark: Path, content: bytes) -> bool:
+def is_finishing(path: str | Path) -> bool:
+    """Whether another process's claim on ``path`` says it is finishing the file now."""
+    path = Path(path)
+    prefix, mine = f".{path.name}.partial-", partial_prefix(path)
+    marks = path.parent.glob(glob.escape(prefix) + "*-writing")
+    return any(_finishing(m) for m in marks if not m.name.startswith(mine))
+
+
+def _finishing(mark: Path) -> bool:
+    """A running writer holds ``mark`` and it says FINISHING (read only; never removed)."""
     try:
-        with open(mark, "rb") as f:
-            return f.read(len(content)) == content
-    except OSError:  # removed meanwhile: released
+        fd = os.open(mark, os.O_RDONLY)
+    except OSError:  # removed meanwhile (released), or not ours to read
         return False
+    try:
+        if os.pread(fd, len(FINISHING), 0) != FINISHING:
+            return False
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)  # taken: no writer holds it
+    except BlockingIOError:
+        return True
+    except OSError:  # no locks here: a dead writer's mark would be waited for every time
+        return False
+    finally:
+        os.close(fd)
+    return False
 
 
 def _refusal(path: Path, mine: Path | None = None) -> str | None:

@@ -33,8 +33,9 @@ def add_parsers(sub) -> None:
         "probed in a process of its own: the lens kernel of --preset built, 8 pulses compared "
         "with the float64 reference, pulses/s timed at each batch size; the NumPy lens of the "
         "same plan beside them.  Says which device runs the lens by default (the fastest that "
-        "builds, on psaltis-max at batch 64) and why a device is refused.  About 1-2 s a "
-        "device.  Exit status 1 where no device can run the lens.",
+        "builds, on psaltis-max at batch 64; the default before stays unless another is over "
+        "10 % faster) and why a device is refused.  About 1-2 s a device.  Exit status 1 "
+        "where no device can run the lens.",
     )
     devices.add_arguments(s)
     s.set_defaults(func=devices.run)

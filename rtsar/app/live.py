@@ -392,8 +392,7 @@ def run_stream(
                 file=stream,
                 flush=True,
             )
-        if hasattr(source, "prepare"):  # a simulated source readies its kernels too
-            source.prepare()
+        getattr(source, "prepare", lambda: None)()  # a simulated source readies its kernels
         chosen = None
         if granularity is not None:
             note = lambda m: print(f"rtsar: {m}", file=stream, flush=True)  # noqa: E731
@@ -440,18 +439,19 @@ def run_stream(
         for line in (chosen or "").splitlines():  # the correlator's, then the granularity's
             print(f"rtsar: {line}", file=stream, flush=True)
         if wait_subscribers:
-            print(
-                f"waiting for {wait_subscribers} subscriber(s) on {endpoint} …",
-                file=stream,
-                flush=True,
-            )
+            waiting = f"waiting for {wait_subscribers} subscriber(s) on {endpoint} …"
+            print(waiting, file=stream, flush=True)
             publisher.wait_for_subscribers(wait_subscribers)
         streaming.append(True)
-        pipe.start()
         try:
+            with signals.held():  # started whole: a Ctrl-C meanwhile is raised after it
+                pipe.start()
             stats = pipe.join()
         except KeyboardInterrupt as exc:
+            if not pipe.stats.started_s:  # came before the start began: nothing started
+                raise
             interrupted = exc
+            pipe.interrupted(exc)  # (join did already, but not for one raised before it)
             say(f"{signals.describe(exc)}: the pulses already received were finished")
             stats = pipe.join()
     except KeyboardInterrupt as exc:  # before the stream started: nothing was processed

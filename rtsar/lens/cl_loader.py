@@ -26,7 +26,7 @@ from .cl_devices import (
     list_devices,
     select_device,
 )
-from .cl_probe import first_line
+from .cl_probe import first_line, keeps_signal_handlers
 from .cl_sources import kernel_path, kernel_source, kernels_dir
 
 __all__ = [
@@ -62,6 +62,7 @@ def default_queue(device: cl.Device | str | None = None) -> cl.CommandQueue:
     return default_context_queue(device)[1]
 
 
+@keeps_signal_handlers()
 def default_context_queue(device: cl.Device | str | None = None):
     """``(context, queue)`` shared by every user of the selected device.
 
@@ -109,6 +110,7 @@ def _define(name: str, value) -> str:
     return f"-D{name}={text}"
 
 
+@keeps_signal_handlers()
 def build_program(
     context: cl.Context,
     name: str,
@@ -166,6 +168,7 @@ _probes: dict[str, str | None] = {}
 _PROBE_KERNEL = "__kernel void probe(__global float *x) { x[get_global_id(0)] *= 2.0f; }"
 
 
+@keeps_signal_handlers()
 def probe(device: cl.Device | str | None = None, say=None) -> str | None:
     """None if the OpenCL lens can run on the device asked for, else why not (one line).
 

@@ -12,9 +12,11 @@ error becomes that device's ``reason``.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import signal
 import subprocess
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -36,6 +38,7 @@ __all__ = [
     "describe",
     "first_line",
     "identity",
+    "keeps_signal_handlers",
     "list_devices",
     "probe_all",
     "throughput",
@@ -98,7 +101,29 @@ def _kind(device_type: int) -> str:
 
 _found: list | None = None  # the devices, listed once a process (the drivers do not change)
 
+_KEPT_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
 
+
+class keeps_signal_handlers(contextlib.ContextDecorator):
+    """The process's handlers of SIGINT, SIGTERM and SIGHUP as they were before the block or
+    the call (main thread only): an OpenCL driver built on LLVM (PoCL, Intel's CPU runtime)
+    puts handlers of its own on them as it loads, builds or makes a context, ones the system
+    resets to the default while they run, so that a second signal then killed rtsar outright
+    (rtsar.app.signals, which puts rtsar's back again before a run's stream)."""
+
+    def __enter__(self):
+        main = threading.current_thread() is threading.main_thread()
+        names = [n for n in _KEPT_SIGNALS if hasattr(signal, n)] if main else []
+        self._saved = [(getattr(signal, n), signal.getsignal(getattr(signal, n))) for n in names]
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for signum, handler in self._saved:
+            if handler is not None:  # (None: set outside Python; nothing to put back)
+                signal.signal(signum, handler)
+
+
+@keeps_signal_handlers()
 def list_devices(hint: str = "") -> list[cl.Device]:
     """All OpenCL devices of all platforms, in the loader's order; RuntimeError if none.
     Listed once a process (about 20 ms a listing with three drivers)."""

@@ -375,8 +375,7 @@ class Pipeline:
         """All counters: source, ingest, corrections, sinks and pipeline."""
         c = dict(self.source.counters)
         c.update(self.ingest.counters)
-        if self.corrections:
-            c.update(self.corrections.counters())
+        c.update(self.corrections.counters() if self.corrections else {})
         for sink in self.sinks:
             c.update(sink.counters())
         for part in (self.link, self.swath, self.growth):  # silences, refusals, growths
@@ -388,9 +387,8 @@ class Pipeline:
         self.stats.elapsed_s = time.perf_counter() - self.stats.started_s
         self.stats.counters = self.counters()
         d = self.stats.as_dict()
-        d["queue_fill"] = {
-            q.name: q.size / q.capacity for q in (self.q_shots, self.q_lines, self.q_image)
-        }
+        queues = (self.q_shots, self.q_lines, self.q_image)
+        d["queue_fill"] = {q.name: q.size / q.capacity for q in queues}
         d["latency_recent_median_ms"] = self.stats.latency.recent_percentile(50) * 1e3
         d["latency_recent_p99_ms"] = self.stats.latency.recent_percentile(99) * 1e3
         d["final"] = final
@@ -454,6 +452,12 @@ class Pipeline:
             heap.thaw(self)
             raise
 
+    def interrupted(self, exc: KeyboardInterrupt) -> None:
+        """Stopped by a signal ``exc``: said in stopped_by where it cut the source short."""
+        if self._ended and not self._ended[0].is_set():
+            self.stats.stopped_by = signal.Signals(getattr(exc, "signum", signal.SIGINT)).name
+        self.stop()
+
     def stop(self) -> None:
         """Stop the source; what is in flight is still processed and published, promptly: the
         sinks stop waiting on stalled subscribers."""
@@ -468,10 +472,7 @@ class Pipeline:
         try:
             self._wait()
         except KeyboardInterrupt as exc:
-            if self._ended and not self._ended[0].is_set():  # the source cut short, not ended
-                signum = getattr(exc, "signum", signal.SIGINT)
-                self.stats.stopped_by = signal.Signals(signum).name
-            self.stop()
+            self.interrupted(exc)
             for more in range(3):
                 try:
                     self._wait()

@@ -166,6 +166,43 @@ def test_a_recording_that_exists_is_never_replaced(tmp_path, capsys):
     assert raw.read_bytes() == b"an earlier scan"
 
 
+def test_no_other_output_replaces_a_recording(tmp_path, capsys):
+    """A new user's trial: `simulate -o` replaced a live recording, and `process -o` and
+    `run -o` made images over recordings, each without a word.  A live recording is replaced
+    by nothing; another recording only by a command that writes recordings."""
+    scene_file = tmp_path / "s.toml"
+    scene_file.write_text(SCENE)
+    sim, live = tmp_path / "sim.h5", tmp_path / "live.h5"
+    assert main(["simulate", str(scene_file), "-o", str(sim)]) == 0
+    with h5py.File(sim, "r") as f:  # a live recording is one the recorder marked so
+        shots = f["shots"][:]
+    with h5py.File(live, "w") as f:
+        f.attrs.update({"format": "rtsar-recording", "recorded_live": True})
+        f["shots"] = shots
+    capsys.readouterr()
+    before = {p: p.read_bytes() for p in (sim, live)}
+    ep = ["--endpoint", "ipc://" + str(tmp_path / "pub")]
+    refused = {
+        live: [
+            ["simulate", str(scene_file), "-o", str(live)],
+            ["process", str(sim), "-o", str(live), "--lens", "numpy"],
+        ],
+        sim: [
+            ["process", str(live), "-o", str(sim), "--lens", "numpy"],
+            ["run", "--scene", str(scene_file), "-o", str(sim), "--lens", "numpy", *ep],
+        ],
+    }
+    for path, commands in refused.items():
+        for argv in commands:
+            assert main(argv) == 2, argv
+            err = capsys.readouterr().err
+            kind = "a live recording" if path == live else "a recording"
+            assert f"{path} is {kind} ({len(shots):,} shots), and a recording is never" in err
+    assert {p: p.read_bytes() for p in (sim, live)} == before
+    assert main(["simulate", str(scene_file), "-o", str(sim)]) == 0  # a simulation again
+    assert "wrote" in capsys.readouterr().out
+
+
 def test_a_serial_run_records_its_gaps_flags_and_restart_as_ingest_saw_them(tmp_path, capsys):
     s = preset("tiny").waveform.samples_per_shot
     frames, sent = _frames(s)

@@ -10,7 +10,8 @@ try:
 except ModuleNotFoundError:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
-from ...sinks.io import check_writable
+from ...sinks.h5_open import open_for_reading
+from ...sinks.io import RECORDING_FORMAT, check_writable
 from ...sinks.name_claim import check_unclaimed
 
 # Options naming files a command reads, and files it writes (``--sigmf BASE`` writes
@@ -26,6 +27,7 @@ HDF5_OUTPUT_COMMANDS = (
     "simulate", "process", "run", "replay", "subscribe", "demo", "spot-simulate", "spotlight",
     "import",
 )  # fmt: skip
+RECORDING_COMMANDS = ("simulate", "import", "spot-simulate")  # -o writes a recording
 NOT_HDF5_SUFFIXES = (
     ".png", ".jpg", ".jpeg", ".gif", ".pdf", ".svg", ".tif", ".tiff", ".csv", ".json", ".txt",
     ".md", ".toml", ".cphd", ".nitf", ".ntf", ".sigmf", ".sigmf-meta", ".sigmf-data",
@@ -76,12 +78,39 @@ def check_outputs_spare_inputs(args) -> None:
     for path in outputs.values():  # a file another process writes live is never replaced
         check_unclaimed(path)
         check_writable(path)  # a missing folder said now (process said it after the lens)
+        refuse_replacing_a_recording(command, path)
     record = getattr(args, "record", None)
     if record and Path(record).exists():
         raise ValueError(
             f"--record {record}: the file exists, and a recording is never replaced (its raw "
             "shots cannot be taken again); give a new name, or remove the old file first"
         )
+
+
+def refuse_replacing_a_recording(command: str | None, path: Path) -> None:
+    """ValueError where ``path`` is a recording the command would replace: one recorded live
+    (``run --record``: its shots cannot be taken again) by any command, another (simulated,
+    imported) by any but the commands that write recordings (``process rec2.h5 -o rec.h5``
+    made an image of the only copy of a recording, ``simulate -o`` replaced a live one, both
+    without a word: a new user's trial)."""
+    try:
+        with open(path, "rb") as raw:  # (not HDF5: not a recording, nothing to open)
+            if raw.read(8) != b"\x89HDF\r\n\x1a\n":
+                return
+        with open_for_reading(path) as f:
+            kind, live = f.attrs.get("format"), bool(f.attrs.get("recorded_live", False))
+            shots = f["shots"].shape[0] if "shots" in f else 0
+    except (OSError, ValueError, KeyError):  # not ours to judge: the writer's own checks
+        return
+    if kind != RECORDING_FORMAT or (command in RECORDING_COMMANDS and not live):
+        return
+    what = "a live recording" if live else "a recording"
+    raise ValueError(
+        f"{path} is {what} ({shots:,} shots), and a recording is never replaced by "
+        f"{'another' if command in RECORDING_COMMANDS else 'an image or another output'}"
+        f"{' (its shots cannot be taken again)' if live else ''}; give a new name, or "
+        "remove it first"
+    )
 
 
 def _values(value) -> list[str]:

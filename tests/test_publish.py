@@ -562,3 +562,27 @@ def test_dropping_delivery_reads_subscriptions_at_most_every_poll_period(
         assert len(seen) == looks
     finally:
         pub.close()
+
+
+def test_an_endpoint_in_use_names_the_ways_out():
+    # A new user's trial: a second `rtsar run` said only "Address already in use".
+    first = ZmqPublisher("tcp://127.0.0.1:*")
+    try:
+        said = "in use.*; another program publishes there: give --endpoint"
+        with pytest.raises(ValueError, match=said):
+            ZmqPublisher(first.endpoint)
+    finally:
+        first.close()
+
+
+def test_a_terminal_status_line_fits_the_terminal_and_clears_the_rest(monkeypatch):
+    import os
+    import shutil
+
+    from rtsar.app.progress import terminal_line
+
+    monkeypatch.setattr(shutil, "get_terminal_size", lambda *a: os.terminal_size((80, 24)))
+    line = terminal_line("t=   1.0 s  " + "x" * 150)
+    assert line.startswith("\r") and line.endswith("\x1b[K")
+    assert len(line) - len("\r\x1b[K") == 79  # one column spare: no wrap at the edge
+    assert terminal_line("short") == "\rshort\x1b[K"

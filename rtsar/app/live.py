@@ -23,6 +23,7 @@ from . import signals
 from .compile_notice import compile_notice
 from .live_granularity import survey_and_compile
 from .live_outputs import LiveOutputs
+from .progress import terminal_line
 
 # Counters that describe normal work; every other counter that is not zero is shown, so nothing
 # that went wrong is hidden from the status line.
@@ -361,7 +362,7 @@ def run_stream(
         if (final and (tty or now - last[0] >= 1.0)) or now - last[0] >= every_s:
             last[0] = now
             line = format_status(d, total_pulses)
-            stream.write(("\r" + line + "  ") if tty else (line + "\n"))
+            stream.write(terminal_line(line) if tty else (line + "\n"))
             stream.flush()
 
     interrupted = None

@@ -8,6 +8,7 @@ the simulator's compilation), so its line is not printed and its time is not ext
 
 from __future__ import annotations
 
+import shutil
 import sys
 import time
 
@@ -44,7 +45,7 @@ class Progress:
             f"{self.label}: {done}/{self.total} {self.unit} ({100 * done / self.total:5.1f} %), "
             f"{rate:,.{1 if rate < 10 else 0}f} {self.unit}/s, eta {eta:5.1f} s {extra}"
         )
-        self.stream.write(("\r" + msg + "   ") if self.tty else (msg + "\n"))
+        self.stream.write(terminal_line(msg) if self.tty else (msg + "\n"))
         self.stream.flush()
         if done >= self.total and not self.tty:
             self._last = float("inf")  # the final line is printed once
@@ -54,3 +55,11 @@ class Progress:
             self.update(done, extra, final=True)
         if self.tty:
             self.stream.write("\n")
+
+
+def terminal_line(text: str) -> str:
+    """``text`` redrawn over the terminal's current line: cut to its width (a longer line wraps,
+    and each redraw left a fragment above: a new user's 80 columns held 123-126 characters)
+    and the rest of the line cleared."""
+    width = shutil.get_terminal_size().columns
+    return "\r" + text[: max(width - 1, 20)] + "\x1b[K"

@@ -139,7 +139,10 @@ class ZmqPublisher(StripSink):
             s.close(0)
             if self._auth is not None:
                 self._auth.stop()
-            raise ValueError(f"cannot bind {endpoint}: {exc}") from None
+            hint = ""
+            if exc.errno == zmq.EADDRINUSE:  # another run publishes there (rtsar's default)
+                hint = "; another program publishes there: give --endpoint, or RTSAR_ENDPOINT"
+            raise ValueError(f"cannot bind {endpoint}: {exc}{hint}") from None
         if curve_secret_key is None and not is_local_endpoint(endpoint):  # once it is bound
             (warn or _warn)(
                 f"warning: publishing on {endpoint} beyond loopback without encryption "

@@ -67,6 +67,14 @@ def test_errors_are_clear(tmp_path, capsys):
         f["x"] = 1
     assert main(["quicklook", str(junk), "-o", str(tmp_path / "x.png")]) == 2
     assert "expected an rtsar-image file" in capsys.readouterr().err
+    with h5py.File(junk, "a") as f:  # a recording where an image is wanted, and back
+        f.attrs["format"] = "rtsar-recording"
+    assert main(["quicklook", str(junk), "-o", str(tmp_path / "x.png")]) == 2
+    assert "; a recording: `rtsar process REC.h5 -o IMG.h5` focuses it" in capsys.readouterr().err
+    with h5py.File(junk, "a") as f:
+        f.attrs["format"] = "rtsar-image"
+    assert main(["export", str(junk), "--cphd", str(tmp_path / "x.cphd")]) == 2
+    assert "; an image: `rtsar quicklook` draws it" in capsys.readouterr().err
     assert main(["simulate", str(tmp_path / "nope.toml"), "-o", str(tmp_path / "r.h5")]) == 2
 
 

@@ -332,6 +332,13 @@ class Recording:
         self.close()
 
 
+# What a file of the other kind is for, said where it was given for one (a new user's trial).
+_FOCUS_IT = "; a recording: `rtsar process REC.h5 -o IMG.h5` focuses it"
+_DRAW_IT = "; an image: `rtsar quicklook` draws it, `rtsar export IMG.h5 --sicd F` writes SICD"
+_KIND_HINTS = {("rtsar-image", "rtsar-recording"): _FOCUS_IT}
+_KIND_HINTS[("rtsar-recording", "rtsar-image")] = _DRAW_IT
+
+
 def open_checked(path: str | Path, fmt: str) -> h5py.File:
     path = Path(path)
     if not path.exists():
@@ -340,7 +347,8 @@ def open_checked(path: str | Path, fmt: str) -> h5py.File:
     found = f.attrs.get("format")
     if found != fmt:
         f.close()
-        raise ValueError(f"{path}: expected an {fmt} file, found format={found!r}")
+        hint = _KIND_HINTS.get((fmt, found), "")
+        raise ValueError(f"{path}: expected an {fmt} file, found format={found!r}{hint}")
     newest = RECORDING_VERSION if fmt == RECORDING_FORMAT else FORMAT_VERSION
     if int(f.attrs.get("format_version", -1)) > newest:
         f.close()

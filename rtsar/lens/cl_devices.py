@@ -310,11 +310,11 @@ def _default_of(entry: dict) -> str:
     fastest, the default it gave); "" where none."""
     if isinstance(entry.get("default"), str):
         return entry["default"]
-    try:
+    try:  # (a damaged survey, its rates not numbers: none)
         reports = [DeviceReport(**d) for d in entry.get("devices", [])]
-    except TypeError:
+        return next((r.full_label for r in ranked(reports, "")), "")
+    except (TypeError, ValueError):
         return ""
-    return next((r.full_label for r in ranked(reports, "")), "")
 
 
 def kept_default(reports: list[DeviceReport], before: str) -> str:

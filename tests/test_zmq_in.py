@@ -284,3 +284,21 @@ def test_one_short_packet_costs_its_own_number_not_the_streams_scale(rng):
     assert seqs == [*range(good), *range(good + 1, 2 * good + 1)]  # one number lost, no more
     for k, (_, _, samples) in enumerate(out):
         np.testing.assert_array_equal(samples, shots[k])
+
+
+def test_an_instrument_without_a_configuration_is_said_to_be_the_demos(tmp_path, capsys):
+    # A new user's trial: `run --zmq-in` without --preset ran the demo's configuration and
+    # the banner never said so (a real instrument's shots would be focused as the demo's).
+    from rtsar.app.cli import main
+
+    pub = zmq.Context.instance().socket(zmq.PUB)
+    port = pub.bind_to_random_port("tcp://127.0.0.1")
+    try:
+        argv = ["run", "--zmq-in", f"tcp://127.0.0.1:{port}", "--duration", "0.5"]
+        argv += ["--lens", "numpy", "--endpoint", "ipc://" + str(tmp_path / "pub")]
+        assert main(argv) == 0
+    finally:
+        pub.close(0)
+    out = capsys.readouterr().out
+    assert "no --preset, --scene or --instrument: the instrument is taken to be the demo" in out
+    assert "(480 samples a shot at 1600 Hz)" in out

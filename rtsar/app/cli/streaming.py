@@ -120,6 +120,14 @@ def cmd_run(args) -> int:
         else:
             described = load_scene(args.scene or DEMO_SCENE)
             cfg, start_m = described.config, described.start_along_track_m
+            if not args.scene:  # said: a real instrument would be focused as the demo's
+                w = cfg.waveform
+                print(
+                    "rtsar: no --preset, --scene or --instrument: the instrument is taken to be "
+                    f"the demo scene's ({w.samples_per_shot} samples a shot at "
+                    f"{cfg.geometry.prf_hz:g} Hz); name yours with --preset or --instrument",
+                    flush=True,
+                )
         cfg = processor_changes(args, cfg)
         strip_lines(args, cfg.geometry.prf_hz)
         # The stages before the source: their errors come before a port opens.

@@ -25,7 +25,6 @@ import pyopencl as cl
 from ..samples import precision_dtype
 from . import cl_loader
 from .cl_launch import gil_free_calls, gil_free_enqueue
-from .cl_probe import keeps_signal_handlers
 from .plan import LensPlan
 
 __all__ = ["KERNELS", "AOLens", "LensJob", "group_layout", "supports_double"]
@@ -199,7 +198,6 @@ class AOLens:
     fallback_reason: str | None = None
     choice: str | None = None  # what runs and why (set by make_lens)
 
-    @keeps_signal_handlers()  # a driver's build or context takes them (cl_probe)
     def __init__(
         self,
         plan: LensPlan,

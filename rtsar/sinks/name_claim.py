@@ -100,12 +100,8 @@ def wait_while_finishing(path: str | Path, most_s: float, poll_s: float = 0.02) 
     finishing the file (module docstring); 0 where none is.  A reader's look changes nothing:
     it needs no write access (another account's reader waits too) and removes no mark; a mark
     it cannot lock (a file system without locks) is not waited for, as nothing would end it."""
-    path, start = Path(path), time.monotonic()
-    prefix, mine = f".{path.name}.partial-", partial_prefix(path)
-    while time.monotonic() - start < most_s:
-        marks = path.parent.glob(glob.escape(prefix) + "*-writing")
-        if not any(_finishing(m) for m in marks if not m.name.startswith(mine)):
-            break
+    start = time.monotonic()
+    while time.monotonic() - start < most_s and is_finishing(path):
         time.sleep(poll_s)
     return time.monotonic() - start
 

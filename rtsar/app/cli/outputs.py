@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import h5py
+
 try:
     import tomllib
 except ModuleNotFoundError:  # pragma: no cover - Python 3.10
@@ -94,9 +96,8 @@ def refuse_replacing_a_recording(command: str | None, path: Path) -> None:
     made an image of the only copy of a recording, ``simulate -o`` replaced a live one, both
     without a word: a new user's trial)."""
     try:
-        with open(path, "rb") as raw:  # (not HDF5: not a recording, nothing to open)
-            if raw.read(8) != b"\x89HDF\r\n\x1a\n":
-                return
+        if not h5py.is_hdf5(path):  # (not HDF5, or no file: not a recording)
+            return
         with open_for_reading(path) as f:
             kind, live = f.attrs.get("format"), bool(f.attrs.get("recorded_live", False))
             shots = f["shots"].shape[0] if "shots" in f else 0

@@ -185,12 +185,13 @@ def test_run_output_survives_the_death_of_the_run(tmp_path, kill):
     time.sleep(1.0)
     proc.send_signal(kill)
     rc = proc.wait(30)
+    said = proc.stderr.read()[-2000:]  # what the run said, shown where the test fails
     image, az, _, attrs = read_image(out)
-    assert len(image) > 0 and np.isfinite(az).all()
+    assert len(image) > 0 and np.isfinite(az).all(), said
     if kill == signal.SIGKILL:
         assert rc == -signal.SIGKILL and not attrs["complete"]
     else:  # SIGTERM ends the run like Ctrl-C: pulses received are finished, file closed
-        assert rc == 128 + signal.SIGTERM and attrs["complete"]
+        assert rc == 128 + signal.SIGTERM and attrs["complete"], f"status {rc}: {said}"
         assert attrs["stopped_by"] == "SIGTERM"  # the image of a run cut short says so
 
 

@@ -27,22 +27,21 @@ import math
 import secrets
 import signal
 import socket
-import struct
 import sys
 import threading
 import time
-import zlib
 from collections import deque
 from dataclasses import dataclass, field
+from errno import EADDRINUSE
 from importlib import resources
 
-import numpy as np
 from aiohttp import WSMsgType, web
 
 from ...sinks.client import StripSubscriber
 from .. import signals
 from .access import origin_refusal, token_refusal
 from .frames import Cursor, LiveFrames
+from .icon import icon_png
 
 STATIC = resources.files(__package__) / "static"
 SILENCE_S = 5.0  # no message for this long: the page says the publisher is silent
@@ -88,28 +87,6 @@ class Said:
         self._last[kind] = now
         unsaid = self._unsaid.pop(kind, 0)
         self.say(line + (f" (and {unsaid} more since the last such line)" if unsaid else ""))
-
-
-def icon_png(size: int = 16) -> bytes:
-    """The page's icon, drawn here: a grey PNG of ``size`` × ``size`` pixels, a waterfall's
-    rows brighter towards the newest (the bottom) and one bright point target with its
-    sidelobes.  Served as /favicon.ico, so a browser's request for it is answered."""
-    y, x = np.mgrid[0:size, 0:size]
-    grey = 30 + (90 * y) // max(size - 1, 1)
-    cy, cx = size * 3 // 8, size * 5 // 8
-    grey = np.where((y == cy) ^ (x == cx), 150, grey)  # the sidelobes: a cross
-    grey = np.where((abs(y - cy) <= 1) & (abs(x - cx) <= 1), 255, grey).astype(np.uint8)
-    raw = b"".join(b"\0" + row.tobytes() for row in grey)  # filter type 0 on each row
-
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        body = kind + data
-        return struct.pack(">I", len(data)) + body + struct.pack(">I", zlib.crc32(body))
-
-    header = struct.pack(">IIBBBBB", size, size, 8, 0, 0, 0, 0)  # 8-bit grey, no interlace
-    return b"".join(
-        [b"\x89PNG\r\n\x1a\n", chunk(b"IHDR", header), chunk(b"IDAT", zlib.compress(raw))]
-        + [chunk(b"IEND", b"")]
-    )
 
 
 def _stderr(message: str) -> None:
@@ -384,7 +361,10 @@ class ViewServer:
         except OSError as exc:
             await self._runner.cleanup()
             self._runner = None  # (stop() then only closes the subscriber)
-            raise OSError(f"cannot serve on {self.host}:{self.port}: {exc.strerror}") from None
+            hint = "; --http PORT names another (0: the system's choice)"
+            hint *= exc.errno == EADDRINUSE  # (another program serves there)
+            where = f"{self.host}:{self.port}"
+            raise OSError(f"cannot serve on {where}: {exc.strerror}{hint}") from None
         port = self._runner.addresses[0][1]  # the port the system chose for a 0
         self._thread = threading.Thread(target=self._receive, name="view-subscriber", daemon=True)
         self._thread.start()

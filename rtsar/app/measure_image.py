@@ -21,7 +21,9 @@ Method (also in ``rtsar measure --help``):
   with the same rules: range, the window's response (IRW = 0.886 ρR × its broadening,
   ρR = c/2B); azimuth, the correlator's own response to a point (rtsar.analysis
   .azimuth_response: the mask with its window sliding along the exact range history, times the
-  scene's antenna pattern with ``--scene``; ρA = λR/2L without a beam).
+  scene's antenna pattern with ``--scene``, or for a real instrument's echoes (an image of a
+  recording ``rtsar import`` made: ``instrument_file``) the two-way sinc² of its configured
+  antenna; ρA = λR/2L without a beam).
 * **Notes** per point (``notes``, beside ``points``): a sidelobe-free cut, another found point
   on a cut or in the ISLR region (its PSLR/ISLR are then that point's), a cut or region cut
   short by the image edge.
@@ -47,6 +49,7 @@ from ..analysis.islr2d import islr_2d_db, islr_2d_from_ratios_db, region_over_ma
 from ..analysis.point_target import analyse_point_target, azimuth_carrier_cycles
 from ..analysis.theory import theoretical_irw_factor, theoretical_pslr_db
 from ..scene.effects import load_effects
+from ..scene.effects.antenna import AntennaPattern
 from ..scene.files import load_point_targets, load_scene, load_surface_scene
 from ..sinks.image_file import image_config, read_heights, read_image
 from ..sinks.io import write_text_when_complete
@@ -220,6 +223,8 @@ def measure_image(
     if scene is not None:
         gain = scene_antenna_gain(scene, cfg, path)
         targets = load_point_targets(scene)
+    elif attrs.get("instrument_file") and not spot:  # a real instrument's echoes: its beam
+        gain = antenna_gain(AntennaPattern(cfg))
     if spot:
         try:
             theory = SpotTheory(cfg, json.loads(attrs["spotlight"]))
@@ -314,6 +319,10 @@ def measure_image(
             "along the exact range history"
             + (
                 ", times the scene's antenna pattern"
+                if gain is not None and scene
+                else f", times the instrument's two-way beam (a uniform "
+                f"{cfg.geometry.antenna_length_m:g} m aperture's sinc², the image's "
+                "configuration; the echoes are the instrument's: instrument_file)"
                 if gain is not None
                 else (
                     ", no antenna pattern (the scene has none)"

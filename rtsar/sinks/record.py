@@ -33,10 +33,15 @@ MAX_FILL_BYTES = 64 << 20  # the most zeros written for one gap of missing lines
 
 
 def collection_attrs(rec) -> dict:
-    """The image attribute that carries a recording's collection start (none where unknown):
-    the SICD's Timeline/CollectStart (rtsar.sources.formats.timebase)."""
+    """The image attributes a recording passes on: its collection start (none where unknown),
+    the SICD's Timeline/CollectStart (rtsar.sources.formats.timebase); and, for a real
+    instrument's echoes (``rtsar import``), the instrument file they came with
+    (``instrument_file``: seen through the instrument's own antenna beam, which ``rtsar
+    measure`` then holds the image to)."""
     start = getattr(rec, "collection_start", None)
-    return {} if start is None else {"collection_start_utc": format_utc(start)}
+    out = {} if start is None else {"collection_start_utc": format_utc(start)}
+    instrument = getattr(rec, "attrs", {}).get("instrument_file")
+    return out | ({"instrument_file": str(instrument)} if instrument else {})
 
 
 def collection_from_header(header: dict) -> dict:

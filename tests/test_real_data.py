@@ -144,3 +144,24 @@ def test_the_live_replay_on_the_walks_ring_images_as_process(focused, tmp_path):
         assert abs(near["along_track_m"] - p["along_track_m"]) < 0.1 * step_m
         assert abs(near["range_m"] - p["range_m"]) < 0.1 * cell_m
         assert near["peak"] == pytest.approx(p["peak"], rel=0.05)
+
+
+def test_a_chirp_of_the_wrong_sign_is_told_at_import(focused, tmp_path, capsys):
+    """A new user's review: with chirp_rate_hz_per_s of the wrong sign the block compressed to
+    nothing (peak -21 dB) and import blamed the Doppler centroid.  The contrast of the echoes
+    compressed with the given chirp and with the other sign's (rtsar.analysis.chirp_sign) tells
+    the sign: the published down-chirp compresses the block sharper, and an up-chirp written in
+    its place is told, the key named."""
+    text = (SHARED / "instrument.toml").read_text()
+    assert "chirp_rate_hz_per_s = -0.72135e12" in text
+    wrong = text.replace("chirp_rate_hz_per_s = -0.72135e12", "chirp_rate_hz_per_s = 0.72135e12")
+    wrong = wrong.replace('file = "vancouver', f'file = "{SHARED}/vancouver')
+    toml = tmp_path / "wrong-sign.toml"
+    toml.write_text(wrong)
+    capsys.readouterr()
+    assert main(["import", str(toml), "-o", str(tmp_path / "w.h5")]) == 0
+    said = capsys.readouterr().err
+    assert "compress sharper with the chirp of the other sign" in said, said
+    assert "radar.chirp_rate_hz_per_s" in said
+    assert main(["import", str(SHARED / "instrument.toml"), "-o", str(tmp_path / "r.h5")]) == 0
+    assert "other sign" not in capsys.readouterr().err

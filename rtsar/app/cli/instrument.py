@@ -11,6 +11,7 @@ import time
 import h5py
 import numpy as np
 
+from ...analysis.chirp_sign import chirp_sign_contrasts, chirp_sign_warning
 from ...analysis.doppler_centroid import DopplerEstimate, estimate_doppler_centroid
 from ...ccd.base import squint_aperture_pulses
 from ...lens import make_lens, make_plan
@@ -40,6 +41,17 @@ def estimate_centroid(inst, shots: np.ndarray) -> DopplerEstimate:
     return estimate_doppler_centroid(lines, inst.prf_hz, cfg.geometry.wavelength_m, bin_m)
 
 
+def check_chirp_sign(inst, shots: np.ndarray) -> None:
+    """A warning where the first ESTIMATE_PULSES ``shots`` compress sharper with the chirp of
+    the other sign (rtsar.analysis.chirp_sign): a wrong sign compresses nothing, and its
+    range walk then misleads the Doppler centroid's estimate too."""
+    lens = make_lens(make_plan(instrument_config(inst, 0.0)), "numpy")
+    given, flipped = chirp_sign_contrasts(lens, shots[:ESTIMATE_PULSES])
+    said = chirp_sign_warning(given, flipped, "radar.chirp_rate_hz_per_s")
+    if said:
+        print(said, file=sys.stderr)
+
+
 def cmd_import(args) -> int:
     if args.micro_batch < 1:  # before the data is read
         return die(f"--micro-batch must be an integer >= 1, got {args.micro_batch}")
@@ -65,6 +77,7 @@ def cmd_import(args) -> int:
         head[~np.isfinite(head).all(axis=1)] = 0
         estimate = None
         if len(head) >= 16:
+            check_chirp_sign(inst, head)
             try:
                 estimate = estimate_centroid(inst, head)
                 print(f"estimated from the data: {estimate.summary()}", file=sys.stderr)

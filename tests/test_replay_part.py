@@ -75,7 +75,7 @@ def test_a_part_outside_the_recording_is_refused_in_one_line(recording, capsys):
         (["--start", "1.0"], "--start 1 s is shot 500, past the recording's last: it holds 500"),
         (["--start", "0.9991"], "0.9991 s is shot 500, past"),  # (< 1 s: rounded to shot 500)
         (["--duration", "0.0005"], "--duration 0.0005 s is less than one shot at 500 Hz"),
-        (["--duration", "0.1"], "the part holds 50 shots, fewer than one aperture (64)"),
+        (["--duration", "0.1"], "the part holds 50 shots, fewer than the CCD's 64 rows"),
         (["--duration", "inf"], "--duration must be a finite number of seconds, got inf"),
         (["--start", "inf"], "--start must be a finite number of seconds, got inf"),
         (["--start", "1e307"], "--start 1e+307 s is more shots than any recording holds"),
@@ -134,7 +134,7 @@ def test_the_part_in_shots():
     assert replayed_part(0.9, 5.0, 500.0, 500) == (450, 50)  # to the end, not beyond
     with pytest.raises(ValueError, match="past the recording's last"):
         replayed_part(0.999, None, 500.0, 500)
-    with pytest.raises(ValueError, match="fewer than one aperture"):
+    with pytest.raises(ValueError, match="fewer than the CCD.s"):
         replayed_part(0.9, None, 500.0, 500, 64)  # a part of 50 shots
     assert replayed_part(0.0, None, 500.0, 50, 64) == (0, 50)  # the whole: as it is
 

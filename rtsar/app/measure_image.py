@@ -48,6 +48,7 @@ from ..analysis.detect import find_point_targets
 from ..analysis.islr2d import islr_2d_db, islr_2d_from_ratios_db, region_over_main
 from ..analysis.point_target import analyse_point_target, azimuth_carrier_cycles
 from ..analysis.theory import theoretical_irw_factor, theoretical_pslr_db
+from ..ccd.base import azimuth_cell_m
 from ..scene.effects import load_effects
 from ..scene.effects.antenna import AntennaPattern
 from ..scene.files import load_point_targets, load_scene, load_surface_scene
@@ -107,10 +108,9 @@ class Theory:
         self.range_ratio = region_over_main(rw, ISLR_EXTENT_IRW)
 
     def cell_m(self, slant_range_m: float) -> tuple[float, float]:
-        """The resolution cells (ρA = λR/2L, ρR = c/2B) the search radii and offsets count in."""
-        return self.config.azimuth_resolution_m(
-            slant_range_m
-        ), self.config.waveform.range_resolution_m
+        """The resolution cells (ρA = λR/2L, L the aperture a column uses; ρR = c/2B) the search
+        radii and offsets count in."""
+        return azimuth_cell_m(self.config, slant_range_m), self.config.waveform.range_resolution_m
 
     def at(self, slant_range_m: float) -> dict:
         az = azimuth_theory(self.config, slant_range_m, self.gain, CHIP_IRW, ISLR_EXTENT_IRW)

@@ -87,6 +87,15 @@ def squint_aperture_pulses(cfg: Config) -> int:
     return rows
 
 
+def azimuth_cell_m(cfg: Config, slant_range_m: float | None = None) -> float:
+    """λR/(2L), unweighted (Crouch eq. 4.8), with L the aperture each range column uses:
+    squint_aperture_pulses rows (Config.azimuth_resolution_m takes all N; a squinted plan's
+    CCD holds N = aperture + the rows its beam centre walks, RADARSAT-1 668 + 48)."""
+    g = cfg.geometry
+    r = g.slant_range_m if slant_range_m is None else slant_range_m
+    return g.wavelength_m * r / (2.0 * squint_aperture_pulses(cfg) * g.along_track_step_m)
+
+
 def mask_window(cfg: Config, range_m: np.ndarray) -> np.ndarray:
     """The azimuth window of each mask column, float64[N, len(range_m)].
 

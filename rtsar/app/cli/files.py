@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from dataclasses import replace
@@ -10,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...ccd.base import azimuth_cell_m, squint_aperture_pulses
 from ...lens import range_axis_m
 from ...lens.plan import make_plan
 from ...presets import PRESETS, preset
@@ -40,6 +42,8 @@ def cmd_presets(args) -> int:
     for name in PRESETS:
         c = preset(name)
         rm = range_axis_m(c)
+        aperture_m = squint_aperture_pulses(c) * c.geometry.along_track_step_m  # a column's
+        r0 = c.geometry.slant_range_m
         rows.append(
             {
                 "preset": name,
@@ -47,14 +51,15 @@ def cmd_presets(args) -> int:
                 "slant_range_m": c.geometry.slant_range_m,
                 "swath_m": [float(rm[0]), float(rm[-1])],
                 "range_resolution_m": c.waveform.range_resolution_m,
-                "azimuth_resolution_m": c.azimuth_resolution_m(),
+                "azimuth_resolution_m": azimuth_cell_m(c),
                 "aperture_pulses": c.processor.aperture_pulses,
+                "column_aperture_pulses": squint_aperture_pulses(c),
                 "range_bins": c.processor.range_bins,
                 "samples_per_shot": c.waveform.samples_per_shot,
                 "prf_hz": c.geometry.prf_hz,
                 "illuminated_length_m": c.geometry.illuminated_length_m,
-                "synthetic_aperture_m": c.synthetic_aperture_m,
-                "range_curvature_m": c.range_curvature_m,
+                "synthetic_aperture_m": aperture_m,
+                "range_curvature_m": math.hypot(r0, 0.5 * aperture_m) - r0,
             }
         )
     if args.json:
@@ -74,7 +79,10 @@ def cmd_presets(args) -> int:
             f"{r['samples_per_shot']:7d} {r['prf_hz']:8g} {r['illuminated_length_m']:10.4g} "
             f"{r['synthetic_aperture_m']:10.4g} {r['range_curvature_m']:10.3g}"
         )
-    print("(lengths in metres; rho_A = λR/2L unweighted, Crouch eq. 4.8)")
+    print(
+        "(lengths in metres; rho_A = λR/2L unweighted, Crouch eq. 4.8, L the aperture a range "
+        "column uses: N rows, less those a squinted beam's centre walks across the swath)"
+    )
     return 0
 
 

@@ -52,8 +52,9 @@ def replayed_part(
         raise ValueError(f"--duration {duration_s:g} s is less than one shot at {prf_hz:g} Hz")
     if count < min(aperture, shots):
         raise ValueError(
-            f"--start/--duration: the part holds {count:,} shots, fewer than one aperture "
-            f"({aperture:,}): no line would be focused"
+            f"--start/--duration: the part holds {count:,} shots, fewer than the CCD's "
+            f"{aperture:,} rows (the aperture, and a squinted beam's walk across the swath): "
+            "no line would be focused"
         )
     return first, count
 

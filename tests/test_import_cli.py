@@ -147,12 +147,19 @@ def test_run_takes_the_instrument_file_for_a_live_link(tmp_path, capsys):
 def test_a_data_key_a_letter_from_one_rtsar_reads_is_refused_not_kept(tmp_path, capsys):
     """`byteorder = "big"` (for byte_order) was kept as provenance: the big-endian samples were
     read little-endian, every pulse NaN/Inf, zeroed, and the import said 'wrote' with exit 0."""
-    for typo, meant in (("byteorder", "byte_order"), ("header_byte", "header_bytes")):
+    # and a key rtsar reads with a word left out (a second review: collection_start and
+    # agc_db were kept, so no UTC start was set and no gain divided out, exit 0)
+    for typo, meant in (
+        ("byteorder", "byte_order"),
+        ("header_byte", "header_bytes"),
+        ("collection_start", "collection_start_utc"),
+        ("agc_db", "agc_db_file"),
+    ):
         toml = _instrument(tmp_path, _noise())
         toml.write_text(toml.read_text() + f"{typo} = 1\n")
         assert main(["import", str(toml), "-o", str(tmp_path / "x.h5")]) == 2
         err = capsys.readouterr().err
-        assert f"data.{typo}: unknown key, a letter or two from {meant}" in err
+        assert f"data.{typo}: unknown key, a near miss of {meant}" in err
         assert not (tmp_path / "x.h5").exists()
     # provenance three letters or more from a key rtsar reads is kept (a cold review: a
     # similarity ratio refused collection_end_utc, last_pulse_time_s, sample_rate)
@@ -162,6 +169,20 @@ def test_a_data_key_a_letter_from_one_rtsar_reads_is_refused_not_kept(tmp_path, 
         assert main(["import", str(toml), "-o", str(tmp_path / f"{kept}.h5")]) == 0
         said = [x for x in capsys.readouterr().err.splitlines() if "kept as provenance" in x]
         assert kept in said[0].split("[data] ")[1].split(", ")
+
+
+def test_a_squint_past_90_degrees_names_the_carrier_and_the_velocity_too(tmp_path, capsys):
+    """A carrier written in MHz's place (5.3e6 for 5.3e9) made the centroid a 90-degree squint,
+    and the line named only geometry.doppler_centroid_hz (a new user's review)."""
+    toml = _instrument(tmp_path, _noise(), doppler="doppler_centroid_hz = -6900.0")
+    text = toml.read_text()
+    carrier = next(x for x in text.splitlines() if x.startswith("carrier_hz"))
+    toml.write_text(text.replace(carrier, "carrier_hz = 5.3e6"))
+    assert main(["import", str(toml), "-o", str(tmp_path / "x.h5")]) == 2
+    err = capsys.readouterr().err
+    assert "geometry.doppler_centroid_hz" in err and "a 90 degree squint" in err
+    assert "radar.carrier_hz 5.3e+06, a wavelength of 56.56 m" in err
+    assert "geometry.effective_velocity_m_per_s" in err
 
 
 def test_data_whose_every_pulse_is_nan_is_refused_and_a_few_are_counted(tmp_path, capsys):

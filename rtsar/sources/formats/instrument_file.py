@@ -28,7 +28,8 @@ stored transposed), ``agc_db_file`` (per-pulse receiver gain in dB, a float .npy
 (``.bin``, ``.dat``, ``.raw``): ``sample_type``, ``pulses``, ``samples_per_pulse``,
 ``header_bytes`` (0) and ``byte_order`` ("little"); ``collection_start_utc`` (ISO 8601, the UTC
 of time_s = 0; without it the recording has no known start).  A key rtsar does not read is kept
-as provenance, unless it is within a letter or two of one it reads (a typo).  Every problem is a
+as provenance, unless it is within a letter or two of one it reads, or is one it reads
+with a word left out (a typo).  Every problem is a
 one-line ``ValueError`` naming the TOML file and the key (and the data file where it is the data
 file's).
 """
@@ -44,6 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .key_typos import near_miss
 from .timebase import parse_utc
 
 if sys.version_info >= (3, 11):
@@ -153,16 +155,16 @@ class _Checker:
         return found
 
     def provenance(self, data: dict) -> dict:
-        """The [data] keys rtsar does not read (kept as provenance), but none a letter or two
-        from one it reads: ``byteorder`` for ``byte_order`` would read the samples wrongly."""
+        """The [data] keys rtsar does not read (kept as provenance), but none a near miss of
+        one it reads (rtsar.sources.formats.key_typos)."""
         extra = {k: value for k, value in data.items() if k not in DATA_KEYS}
         for key in extra:
-            near = [k for k in DATA_KEYS if _edits(key, k) <= (2 if len(k) >= 6 else 1)]
+            near = [k for k in DATA_KEYS if near_miss(key, k)]
             if near:
                 raise self.fail(
                     f"data.{key}",
-                    f"unknown key, a letter or two from {near[0]} (a typo?); [data] keys rtsar "
-                    "does not read are kept as provenance, but not one so close to a key it reads",
+                    f"unknown key, a near miss of {near[0]} (a typo?); [data] keys rtsar does "
+                    "not read are kept as provenance, but not one so close to a key it reads",
                 )
         return extra
 
@@ -181,20 +183,6 @@ class _Checker:
             raise self.fail("data.byte_order", f"{order!r}: little or big")
         header = self.integer(data, "header_bytes", 0, 0)
         return {"sample_type": kind, "header_bytes": header, "byte_order": order}
-
-
-def _edits(a: str, b: str) -> int:
-    """The fewest single-letter insertions, deletions, substitutions or swaps of two adjacent
-    letters that turn ``a`` into ``b`` (optimal string alignment distance)."""
-    d = [[i + j if i * j == 0 else 0 for j in range(len(b) + 1)] for i in range(len(a) + 1)]
-    for i in range(1, len(a) + 1):
-        for j in range(1, len(b) + 1):
-            d[i][j] = min(
-                d[i - 1][j] + 1, d[i][j - 1] + 1, d[i - 1][j - 1] + (a[i - 1] != b[j - 1])
-            )
-            if i > 1 and j > 1 and a[i - 1] == b[j - 2] and a[i - 2] == b[j - 1]:
-                d[i][j] = min(d[i][j], d[i - 2][j - 2] + 1)
-    return d[len(a)][len(b)]
 
 
 def _data_format(check: _Checker, data: dict, file: Path) -> str:
@@ -302,7 +290,12 @@ def read_instrument_file(path) -> InstrumentFile:
     v["doppler_centroid_hz"] = dc_hz
     limit_hz = v["effective_velocity_m_per_s"] * v["carrier_hz"] / C_M_PER_S  # (2 v / lambda) / 2
     if dc_hz is not None and abs(dc_hz) >= limit_hz:
-        why = f"{dc_hz:g} Hz: |value| >= v / wavelength = {limit_hz:.6g} Hz, a 90 degree squint"
+        why = (
+            f"{dc_hz:g} Hz: |value| >= v / wavelength = {limit_hz:.6g} Hz, a 90 degree squint "
+            f"(with radar.carrier_hz {v['carrier_hz']:g}, a wavelength of "
+            f"{C_M_PER_S / v['carrier_hz']:.4g} m, and geometry.effective_velocity_m_per_s "
+            f"{v['effective_velocity_m_per_s']:g}: one of the three is wrong)"
+        )
         raise check.fail("geometry.doppler_centroid_hz", why)
     v["looking"] = geometry.get("looking", "right")
     if v["looking"] not in ("right", "left"):

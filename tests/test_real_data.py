@@ -165,3 +165,32 @@ def test_a_chirp_of_the_wrong_sign_is_told_at_import(focused, tmp_path, capsys):
     assert "radar.chirp_rate_hz_per_s" in said
     assert main(["import", str(SHARED / "instrument.toml"), "-o", str(tmp_path / "r.h5")]) == 0
     assert "other sign" not in capsys.readouterr().err
+
+
+def test_a_sigmf_copy_of_the_block_says_its_start_is_unknown_and_where_it_came_from(
+    focused, tmp_path, capsys
+):
+    """A new user's review: `export --sigmf` of the imported block said nothing of its unknown
+    collection start (the page says the exports do) and left out what import did (the DC
+    offset removed, the centroid's source and estimate, the instrument file).  Now the global
+    object says both, export notes the start, and an image of the SigMF copy is held to the
+    instrument's beam as the recording's is."""
+    import json as json_
+
+    pytest.importorskip("sigmf")
+    rec, _, _ = focused
+    capsys.readouterr()
+    assert main(["export", str(rec), "--sigmf", str(tmp_path / "rs1")]) == 0
+    assert "keeps no collection start" in capsys.readouterr().err
+    meta = json_.loads((tmp_path / "rs1.sigmf-meta").read_text())["global"]
+    assert meta["rtsar:collection_start_utc"] == "unknown"
+    kept = meta["rtsar:provenance"]
+    assert kept["instrument_file"].endswith("instrument.toml")
+    assert kept["doppler_centroid_source"] == "the instrument file's"
+    assert kept["instrument_extra"]["first_range_cell"] == 760
+    with h5py.File(rec, "r") as f:
+        assert kept["dc_offset_removed"] == pytest.approx(list(f.attrs["dc_offset_removed"]))
+    img = tmp_path / "img.h5"
+    assert main(["process", str(tmp_path / "rs1.sigmf-meta"), "-o", str(img)]) == 0
+    with h5py.File(img, "r") as f:
+        assert f.attrs["instrument_file"] == kept["instrument_file"]

@@ -108,6 +108,12 @@ def cmd_export(args) -> int:
                 f"wrote {info['base']}.sigmf-meta/-data: {info['shots']} shots{more} "
                 f"({time.perf_counter() - t0:.1f} s)"
             )
+            if not info["start_known"]:
+                print(
+                    f"note: {args.input} keeps no collection start: the SigMF captures have no "
+                    "core:datetime, and rtsar:collection_start_utc says unknown",
+                    file=sys.stderr,
+                )
     return 0
 
 

@@ -14,7 +14,10 @@ so generic tools see each gated window as a stream of its own, and one annotatio
 ``rtsar:samples_per_shot``, ``rtsar:config`` and ``rtsar:scene`` (JSON objects), and
 ``rtsar:channels``: every auxiliary channel of a version 2 recording is a SigMF recording of its
 own beside it, ``OUT.NAME.sigmf-data``/``-meta`` (its own sample rate and shot length), listed
-there by name and file.  rtsar.sources.formats.sigmf_reader reads all of it back.
+there by name and file.  rtsar.sources.formats.sigmf_reader reads all of it back.  Also global:
+``rtsar:collection_start_utc`` ("unknown" where the recording kept none, as the CPHD export's),
+and ``rtsar:provenance``: what ``rtsar import`` recorded of a real instrument's block (its
+files, the DC offset removed, the Doppler centroid's source and the data's estimate).
 
 A spotlight recording (rtsar.spot) keeps its geometry in ``rtsar:scene`` and its per-shot
 ``rtsar:along_track_m`` is the arc position R₀θ_n; each annotation adds the station's position
@@ -46,6 +49,32 @@ except ImportError:  # the optional extra "formats"
 
 BLOCK = 4096  # shots copied at a time
 SIGMF_MAX_FREQUENCY_HZ = 1e12  # the schema's bound on core:frequency
+
+
+PROVENANCE_ATTRS = (  # what `rtsar import` did to a real instrument's samples, and from what
+    "instrument_file",
+    "instrument_data_file",
+    "instrument_extra",
+    "dc_offset_removed",
+    "doppler_centroid_source",
+    "doppler_centroid_estimated_hz",
+    "nonfinite_pulses_zeroed",
+)
+
+
+def provenance_of(rec) -> dict:
+    """The recording's provenance attributes (PROVENANCE_ATTRS) as JSON values: a SigMF copy of
+    an imported block says where its samples came from and what was done to them."""
+    attrs = getattr(rec, "attrs", {})
+    out = {}
+    for key in PROVENANCE_ATTRS:
+        if key in attrs:
+            value = attrs[key]
+            value = value.tolist() if hasattr(value, "tolist") else value
+            if isinstance(value, float) and not np.isfinite(value):
+                value = None  # (no estimate: JSON has no NaN)
+            out[key] = json.loads(value) if key == "instrument_extra" else value
+    return out
 
 
 def _chirp(cfg) -> dict:
@@ -155,6 +184,7 @@ def _write_all(rec, base: Path, files: list) -> dict:
             f"{rec.path}: {rec.pulses} shots, the spotlight geometry plans {len(station)}"
         )
     channels, nonfinite = [], {}
+    start = getattr(rec, "collection_start", None)
     for (name, ds), pair in zip(rec.channels.items(), files, strict=False):
         width = ds.shape[1]
         cbase = base.with_name(f"{base.name}.{name}")
@@ -195,12 +225,15 @@ def _write_all(rec, base: Path, files: list) -> dict:
             "rtsar:scene": json.loads(json.dumps(rec.scene or {})),
             "rtsar:start_along_track_m": float(rec.start_along_track_m),
             "rtsar:channels": channels,
+            "rtsar:collection_start_utc": "unknown" if start is None else format_utc(start),
+            "rtsar:provenance": provenance_of(rec),
         },
         annotations,
         rec,
     )
     return {
         "base": str(base),
+        "start_known": start is not None,
         "shots": rec.pulses,
         "channels": [c["name"] for c in channels],
         "nonfinite": {name: n for name, n in nonfinite.items() if n},

@@ -33,6 +33,7 @@ class ForeignRecording:
     closer: object = None
     collection_start: datetime.datetime | None = None  # UTC of time_s = 0 (None: unknown)
     notes: list = field(default_factory=list)  # one line each the reader has to say (warnings)
+    attrs: dict = field(default_factory=dict)  # provenance kept with it (an imported block's)
 
     def batches(self, size: int) -> Iterator[np.ndarray]:
         for i in range(0, self.pulses, size):

@@ -324,6 +324,9 @@ def open_sigmf(path: str | Path, config=None) -> ForeignRecording:
             )
         channels = _channels(store, name, g, pulses)
         collection_start = _capture_times(captures, first_shots, time_s, bool(per_shot))
+        provenance = g.get("rtsar:provenance", {})  # (rtsar.sinks.exports.sigmf_export)
+        if not isinstance(provenance, dict):
+            raise ValueError("rtsar:provenance is not a JSON object")
     except (ValueError, KeyError, TypeError, OverflowError, AttributeError) as exc:
         raise ValueError(f"{meta}: {exc}") from None
     return ForeignRecording(
@@ -338,6 +341,7 @@ def open_sigmf(path: str | Path, config=None) -> ForeignRecording:
         channels,
         position,
         collection_start=collection_start,
+        attrs={k: v if isinstance(v, str) else json.dumps(v) for k, v in provenance.items()},
     )
 
 

@@ -202,3 +202,32 @@ def test_tradeoff_labels_clear_every_text_and_the_figure_edge(tmp_path, figures)
         if a[2].overlaps(b[2])
     ]
     assert not overlaps, overlaps
+
+
+def test_white_at_a_percentile_saturates_the_few_bright_points_and_says_so(tmp_path, figures):
+    """A real scene's quicklook drawn from its peak (a ship) left the land 44 dB down, mostly
+    black (a new user's review of RADARSAT-1's).  --white-at P puts 0 dB at the P-th
+    percentile of |image|: pixels above it saturate, the rest keep their dB, and the colour bar
+    names the reference."""
+    cfg = preset("tiny")
+    rng = np.random.default_rng(3)
+    img = (rng.rayleigh(1.0, (64, 64)) * 1e-3).astype(np.complex64)  # land, ~60 dB down
+    img[10, 20] = 1.0  # one ship
+    path = tmp_path / "img.h5"
+    write_image(path, img, np.arange(64.0), 2000 + np.arange(64.0), cfg)
+    mag = np.abs(img)
+    ref = np.percentile(mag, 99)  # the reference, from NumPy's percentile
+    db = quicklook.to_db(img, 30.0, 99.0)
+    assert db.max() == 0.0 and np.mean(db == 0.0) >= 0.01  # the top 1 % saturates
+    below = mag < ref
+    expected = np.clip(20 * np.log10(mag[below] / ref), -30, 0)
+    assert np.allclose(db[below], expected, atol=1e-4)
+    assert np.array_equal(quicklook.to_db(img, 30.0), quicklook.to_db(img, 30.0, 100.0))
+    assert quicklook.to_db(img, 30.0).max() == 0.0 and quicklook.to_db(img, 30.0)[10, 20] == 0
+    out = tmp_path / "q.png"
+    assert main(["quicklook", str(path), "-o", str(out), "--white-at", "99"]) == 0
+    labels = [a.get_ylabel() for a in figures[-1].axes]
+    assert "dB re the 99th percentile" in labels
+    assert main(["quicklook", str(path), "-o", str(out)]) == 0
+    assert "dB re peak" in [a.get_ylabel() for a in figures[-1].axes]
+    assert main(["quicklook", str(path), "-o", str(out), "--white-at", "0"]) == 2

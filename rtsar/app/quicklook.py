@@ -37,17 +37,27 @@ def save_figure(fig, path, **kwargs) -> None:
         fig.savefig(path, **kwargs)
 
 
-def to_db(image: np.ndarray, dynamic_range_db: float) -> np.ndarray:
-    """20·log10(|image| / max|image|), clipped at -dynamic_range_db (all-zero image → floor)."""
+def to_db(image: np.ndarray, dynamic_range_db: float, white_at: float = 100.0) -> np.ndarray:
+    """20·log10(|image| / ref), clipped to [-dynamic_range_db, 0] (all-zero image → floor):
+    ref the ``white_at`` percentile of |image| (100: its peak; 99.9: a real scene's few bright
+    points saturate and the rest of it shows)."""
     mag = np.abs(np.asarray(image))
     peak = float(mag.max()) if mag.size else 0.0
     if not np.isfinite(peak):
         raise ValueError("image holds non-finite values")
-    if peak == 0.0:
+    ref = peak if white_at >= 100.0 else float(np.percentile(mag, white_at))
+    if ref == 0.0:  # (a percentile of zeros: the peak, where there is one)
+        ref = peak
+    if ref == 0.0:
         return np.full(mag.shape, -dynamic_range_db)
     with np.errstate(divide="ignore"):
-        db = 20.0 * np.log10(mag / peak)
-    return np.maximum(db, -dynamic_range_db)
+        db = 20.0 * np.log10(mag / ref)
+    return np.clip(db, -dynamic_range_db, 0.0)
+
+
+def reference_words(white_at: float) -> str:
+    """The colour bar's words for the 0 dB reference."""
+    return "dB re peak" if white_at >= 100.0 else f"dB re the {white_at:g}th percentile"
 
 
 @dataclass(frozen=True)
@@ -140,12 +150,15 @@ def quicklook_figure(
     title: str = "",
     true_aspect: bool | None = None,
     spotlight: bool = False,
+    white_at: float = 100.0,
 ):
     """The figure of :func:`save_quicklook` (the caller closes it)."""
     plt = file_pyplot()
 
     if dynamic_range_db <= 0:
         raise ValueError("dynamic_range_db must be > 0")
+    if not 0.0 < white_at <= 100.0:
+        raise ValueError(f"white_at must be a percentile in (0, 100], got {white_at!r}")
     image = np.asarray(image)
     if image.ndim != 2 or image.shape[0] == 0 or image.shape[1] == 0:
         raise ValueError(f"image must be a non-empty 2-D array, got shape {image.shape}")
@@ -154,7 +167,7 @@ def quicklook_figure(
             f"azimuth_m ({len(azimuth_m)}) and range_m ({len(range_m)}) must match the image's "
             f"{image.shape[0]} lines x {image.shape[1]} columns"
         )
-    db = to_db(image, dynamic_range_db)
+    db = to_db(image, dynamic_range_db, white_at)
     axes = image_axes(azimuth_m, range_m, spotlight)
     if true_aspect is None:  # true aspect where it fits a figure, else fill it and say so
         true_aspect = _true_aspect_fits(axes)
@@ -172,7 +185,7 @@ def quicklook_figure(
     ax.set_xlabel(axes.xlabel)
     ax.set_ylabel(axes.ylabel)
     ax.set_title(title)
-    fig.colorbar(im, ax=ax, label="dB re peak")
+    fig.colorbar(im, ax=ax, label=reference_words(white_at))
     fig.tight_layout()
     if not true_aspect and not 0.9 <= vertical_stretch(fig, ax, axes) <= 1.1:
         # Say how far the picture is from one metre = one metre: the two-line title moves the
@@ -211,8 +224,10 @@ def save_quicklook(
     title: str = "",
     true_aspect: bool | None = None,
     spotlight: bool = False,
+    white_at: float = 100.0,
 ) -> None:
-    """Write a PNG: range across, azimuth (along track) down, grey scale in dB.
+    """Write a PNG: range across, azimuth (along track) down, grey scale in dB (0 dB, white, at
+    the ``white_at`` percentile of |image|: its peak by default).
 
     ``true_aspect``: True, one metre is as long on both axes, so a focused point looks round;
     False, the image fills the figure; None (default), true aspect where that gives a figure
@@ -222,7 +237,7 @@ def save_quicklook(
     """
     plt = file_pyplot()
     fig = quicklook_figure(
-        image, azimuth_m, range_m, dynamic_range_db, title, true_aspect, spotlight
+        image, azimuth_m, range_m, dynamic_range_db, title, true_aspect, spotlight, white_at
     )
     save_figure(fig, path)
     plt.close(fig)

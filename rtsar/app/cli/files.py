@@ -310,6 +310,8 @@ def _write_heights(img: ImageWriter, strips) -> None:
 def cmd_quicklook(args) -> int:
     if not args.dynamic_range_db > 0:  # before the image is read; named as the option
         return die(f"--dynamic-range-db must be > 0, got {args.dynamic_range_db}")
+    if not 0 < args.white_at <= 100:
+        return die(f"--white-at must be a percentile in (0, 100], got {args.white_at}")
     image, az, rg, attrs = read_image(args.image)
     spot = json.loads(attrs["spotlight"]) if "spotlight" in attrs else None
     title = Path(args.image).name
@@ -324,6 +326,7 @@ def cmd_quicklook(args) -> int:
         title=title,
         true_aspect=args.true_aspect,
         spotlight=spot is not None,
+        white_at=args.white_at,
     )
     print(f"wrote {args.output}")
     if args.height:
@@ -383,8 +386,9 @@ def add_parsers(sub) -> None:
 
     s = sub.add_parser(
         "quicklook",
-        description="Write a PNG of an image file: |image| in dB relative to its peak, slant "
-        "range across, along track down, axes as lengths (km, m, mm or µm, by their span).",
+        description="Write a PNG of an image file: |image| in dB relative to its peak (or "
+        "to a percentile, --white-at), slant range across, along track down, axes as lengths "
+        "(km, m, mm or µm, by their span).",
     )
     s.add_argument("image", help="image file from `rtsar process` (.h5)")
     s.add_argument("-o", "--output", required=True, help="PNG to write")
@@ -392,7 +396,15 @@ def add_parsers(sub) -> None:
         "--dynamic-range-db",
         type=float,
         default=50.0,
-        help="dB below the peak shown as black (default 50)",
+        help="dB below white shown as black (default 50)",
+    )
+    s.add_argument(
+        "--white-at",
+        type=float,
+        default=100.0,
+        metavar="PERCENTILE",
+        help="0 dB (white) at this percentile of |image| (default 100: the peak); e.g. 99.9 "
+        "for a real scene, whose few bright points (ships) would leave the rest dark",
     )
     s.add_argument(
         "--height",

@@ -111,6 +111,7 @@ def run_tradeoff(
                 _reference(scene, cfg, refs),
                 scene.targets,
                 gain_fit=bool(scene.effects),
+                extra_ranges_m=[t[1] for t in scene.extra_targets],
             )
             rows.append(
                 {

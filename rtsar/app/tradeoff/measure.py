@@ -195,15 +195,18 @@ class Quality:
     position_error_cells: float  # worst, in resolution cells (either axis)
 
 
-def _reports(cfg: Config, image, az, rg, targets):
-    """Point-target analysis of each target on a range crop that excludes the other targets (they
-    share the azimuth position, so a full-width range cut would count them as sidelobes)."""
+def _reports(cfg: Config, image, az, rg, targets, extra_ranges_m=()):
+    """Point-target analysis of each target on a range crop that excludes the other targets and
+    the scene's extra points at ``extra_ranges_m`` (a retro-reflector: they share the azimuth
+    span, so a range cut reaching them would count them as sidelobes; the phase-errors scene's
+    retro 40 bins away read as a range PSLR of +19 dB)."""
     rho_r = cfg.waveform.range_resolution_m
     spacing = abs(rg[1] - rg[0])
     ranges = np.array([r for _, _, r in targets])
     out = []
     for _, x, r in targets:
         others = np.abs(np.delete(ranges, np.flatnonzero(ranges == r)[0]) - r)
+        others = np.concatenate([others, np.abs(np.asarray(extra_ranges_m, float) - r)])
         half = int(min(64, 0.5 * others.min() / spacing)) if len(others) else 64
         centre = int(np.argmin(np.abs(rg - r)))
         crop = slice(max(0, centre - half), min(len(rg), centre + half + 1))
@@ -221,9 +224,11 @@ def _reports(cfg: Config, image, az, rg, targets):
     return out
 
 
-def measure_quality(cfg: Config, image, az, rg, reference, targets, gain_fit=False) -> Quality:
-    reps = _reports(cfg, image, az, rg, targets)
-    refs = _reports(cfg, reference, az, rg, targets)
+def measure_quality(
+    cfg: Config, image, az, rg, reference, targets, gain_fit=False, extra_ranges_m=()
+) -> Quality:
+    reps = _reports(cfg, image, az, rg, targets, extra_ranges_m)
+    refs = _reports(cfg, reference, az, rg, targets, extra_ranges_m)
     rho_r = cfg.waveform.range_resolution_m
     rw = window(
         cfg.processor.range_window,

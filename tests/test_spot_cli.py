@@ -154,3 +154,25 @@ def test_a_bistatic_channel_that_was_never_recorded_says_what_to_simulate(
     assert err.count("\n") == 1 and str(rec) in err
     assert "bistatic_range_m" in err and "bistatic_angle_deg" in err
     assert not out.exists()
+
+
+def test_progressive_images_come_every_k_shots_whatever_the_sources_blocks(scene_file):
+    """A review: `--every 1000` imaged at 1024, 2048, … shots, the recording's blocks of 1,024
+    (spotlight.md and --help: every K shots).  The blocks are now cut where an image is due;
+    the last image is the whole aperture's, equal to the batch one."""
+    from rtsar.app.spotlight import progressive
+
+    scene = load_spot_scene(scene_file)
+    settings = PfaSettings(extent_m=(1.6e-3, 1.6e-3))
+    plan = PolarFormatPlan(scene.config, scene.geometry, settings=settings)
+    data = SpotlightSimulator(scene).block()[0]
+    total, every, block = len(data), 40, 64
+    shots = []
+    blocks = (data[i : i + block] for i in range(0, total, block))
+    last = progressive(blocks, plan, every, lambda header, image: shots.append(header["shots"]))
+    assert shots[-1] == total
+    first_ready = shots[0]  # the first image waits for a k_x extent common to every row
+    assert first_ready % every == 0 or first_ready < 2 * every
+    assert all(s % every == 0 for s in shots[1:-1]), shots
+    assert all(b - a == every for a, b in zip(shots[1:-1], shots[2:-1], strict=False)), shots
+    assert np.max(np.abs(last - _batch(scene_file))) < 1e-5

@@ -163,8 +163,12 @@ def progressive(blocks, plan: PolarFormatPlan, every: int, publish=None) -> np.n
     total = len(plan.psi)
     image = None
     for block in blocks:
-        for i in range(0, len(block), every):
-            stream.push(block[i : i + every])
+        i = 0
+        while i < len(block):  # cut where an image is due: a source's blocks (1,024 shots from
+            due = next_at - stream.count  # a recording) put one there at 1,024, 2,048, … for 1,000
+            take = min(len(block) - i, due if due > 0 else 1)  # (not ready: shot by shot)
+            stream.push(block[i : i + take])
+            i += take
             if (stream.count >= next_at and stream.ready()) or stream.count == total:
                 image = stream.image()
                 final = stream.count == total

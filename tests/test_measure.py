@@ -437,3 +437,20 @@ def test_an_edge_beyond_the_cuts_reach_is_not_noted(tmp_path):
     assert main(["measure", str(path), "--json", str(out)]) == 0
     (notes,) = json.loads(out.read_text())["notes"]
     assert not any("range cut ends at the image edge" in n for n in notes), notes
+
+
+def test_at_takes_a_negative_along_track_position_as_given(tmp_path):
+    """A review: `--at -0.005,1.5012576` (the crouch-pga example's -26 dB point) failed with
+    "expected at least one argument": argparse took the value for an option."""
+    cfg = preset("tiny")
+    rho_r, rho_a = cfg.waveform.range_resolution_m, cfg.azimuth_resolution_m(2000.0)
+    az = np.arange(-160, 161) * 0.8 * rho_a
+    rg = 1900.0 + np.arange(0, 400) * 0.75 * rho_r
+    x0 = -20.3 * rho_a
+    path, out = tmp_path / "neg.h5", tmp_path / "m.json"
+    write_image(path, sinc_image([(x0, 2000.0, 1.0)], rho_a, rho_r, az, rg), az, rg, cfg)
+    for at in ([f"{x0:.6g},2000"], [f"{x0:.6g},2000", f"{-x0:.6g},2000"]):
+        assert main(["measure", str(path), "--json", str(out), "--at", *at]) == 0
+        first = json.loads(out.read_text())["points"][0]
+        assert first["along_track_m"] == pytest.approx(x0, abs=0.01 * rho_a)
+    assert main(["measure", str(path), "--at", "-5"]) == 2  # still a position's error

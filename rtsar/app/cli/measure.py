@@ -3,8 +3,14 @@
 
 from __future__ import annotations
 
+import re
+
 from .. import bench, devices, measure_image, table1, tradeoff
 from .options import die
+
+# A negative number, or a position "X,R" whose X is negative (argparse's own matcher takes the
+# bare number only and would read "-0.005,1.5" as an unknown option).
+NEGATIVE_POSITION = re.compile(r"^-\d*\.?\d+([eE][-+]?\d+)?(,[-+]?[\d.eE+-]+)*$")
 
 
 def cmd_measure(args) -> int:
@@ -81,8 +87,12 @@ def add_parsers(sub) -> None:
         metavar="X,R",
         help="measure the brightest pixel within 2 resolution cells of along track X, slant "
         "range R (metres) instead of finding points; several positions after one --at, or "
-        "--at repeated",
+        "--at repeated; a negative X as it is (--at -0.005,1.5)",
     )
+    # "-0.005,1.5" is a position, not an option: argparse takes only a bare negative number so
+    # (a review: --at -0.005,1.5 said "expected at least one argument")
+    if hasattr(s, "_negative_number_matcher"):
+        s._negative_number_matcher = NEGATIVE_POSITION
     s.add_argument("--json", metavar="OUT", help="also write the report as JSON")
     s.add_argument(
         "--threshold-db",

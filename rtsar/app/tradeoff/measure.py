@@ -195,11 +195,15 @@ class Quality:
     position_error_cells: float  # worst, in resolution cells (either axis)
 
 
-def _reports(cfg: Config, image, az, rg, targets, extra_ranges_m=()):
+ERROR_SCENE_CELLS = 8.0  # along track, where a scene's injected errors may move a point
+
+
+def _reports(cfg: Config, image, az, rg, targets, extra_ranges_m=(), azimuth_cells=3.0):
     """Point-target analysis of each target on a range crop that excludes the other targets and
     the scene's extra points at ``extra_ranges_m`` (a retro-reflector: they share the azimuth
     span, so a range cut reaching them would count them as sidelobes; the phase-errors scene's
-    retro 40 bins away read as a range PSLR of +19 dB)."""
+    retro 40 bins away read as a range PSLR of +19 dB).  Each point is looked for within
+    ``azimuth_cells`` resolution cells along track of where it should be (and 3 in range)."""
     rho_r = cfg.waveform.range_resolution_m
     spacing = abs(rg[1] - rg[0])
     ranges = np.array([r for _, _, r in targets])
@@ -217,7 +221,7 @@ def _reports(cfg: Config, image, az, rg, targets, extra_ranges_m=()):
                 rg[crop],
                 near_azimuth_m=x,
                 near_range_m=r,
-                search_radius_m=(3 * cfg.azimuth_resolution_m(r), 3 * rho_r),
+                search_radius_m=(azimuth_cells * cfg.azimuth_resolution_m(r), 3 * rho_r),
                 chip=chip_lines(cfg, r),
             )
         )
@@ -227,7 +231,14 @@ def _reports(cfg: Config, image, az, rg, targets, extra_ranges_m=()):
 def measure_quality(
     cfg: Config, image, az, rg, reference, targets, gain_fit=False, extra_ranges_m=()
 ) -> Quality:
-    reps = _reports(cfg, image, az, rg, targets, extra_ranges_m)
+    """The quality of ``image`` against ``reference``.  ``gain_fit`` (a scene of injected
+    errors): the error after the best complex gain, and each point looked for within
+    ERROR_SCENE_CELLS along track (a correction that cannot see a linear phase, PGA, moves the
+    image by a few cells: its focus is measured where the point went, the move is its position
+    error; within 3 cells the tradeoff measured the crouch-sal PGA row off the point, a review:
+    IRW 0.63, PSLR +8.5 dB, where the point, 4.5 cells on, had 1.00 and -12.9 dB)."""
+    cells = ERROR_SCENE_CELLS if gain_fit else 3.0
+    reps = _reports(cfg, image, az, rg, targets, extra_ranges_m, cells)
     refs = _reports(cfg, reference, az, rg, targets, extra_ranges_m)
     rho_r = cfg.waveform.range_resolution_m
     rw = window(

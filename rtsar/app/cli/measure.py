@@ -132,7 +132,7 @@ def add_parsers(sub) -> None:
         "range migration, physical CCD) and each correction on scenes whose targets stress it; "
         "measures image error against a float64 reference, IRW/PSLR/ISLR/position of point "
         "targets, pulses/s and the line latency at the PRF, in one run.  Writes JSON, Markdown "
-        "and a Pareto plot (PNG).  Not a test: about 4 minutes on 2 cores (--quick: about a "
+        "and a Pareto plot (PNG).  Not a test: about 6 minutes on 2 cores (--quick: about a "
         "minute).",
     )
     tradeoff.add_arguments(s)

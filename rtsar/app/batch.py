@@ -3,8 +3,9 @@
 Each recording is one Dask task that runs the very ``process`` command in a worker process, so a
 batch image is the image ``rtsar process`` writes for the same file and options (tested bit for
 bit with one lens named: with ``--lens auto`` each chooses where it runs, and the two lenses
-agree to ~1e-7 of the peak).  The lens is built inside the task, in the worker: its OpenCL context is the worker
-process's shared one (``rtsar.lens.cl_loader.default_queue``), created there and never pickled.
+agree to ~1e-7 of the peak).  The lens is built inside the task, in the worker: its OpenCL
+context is the worker process's shared one (``rtsar.lens.cl_loader.default_queue``), created
+there and never pickled.
 
 Failures are per file.  A file that ``process`` refuses (a malformed recording, a missing
 channel, an unwritable output) is reported with its one-line reason and not retried: the same

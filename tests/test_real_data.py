@@ -130,7 +130,14 @@ def test_the_live_replay_on_the_walks_ring_images_as_process(focused, tmp_path):
         "nonuniform",
         "walk",
     )
+    # The replay's image keeps what the recording says of itself (a cold review): the
+    # instrument it came from (so measure holds it to the beam, as process's image) and no
+    # collection start, where the replay had written the processor's clock (2026 for 2002).
+    with h5py.File(live, "r") as f:
+        assert f.attrs["instrument_file"].endswith("instrument.toml")
+        assert "collection_start_utc" not in f.attrs
     assert main(["measure", str(live), "--max-points", "10", "--json", str(js)]) == 0
+    assert "the instrument's two-way beam" in json.loads(js.read_text())["method"]["azimuth_theory"]
     points = json.loads(js.read_text())["points"]
     step_m = cfg.geometry.along_track_step_m
     cell_m = 299_792_458.0 / (2 * cfg.waveform.sample_rate_hz)

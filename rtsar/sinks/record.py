@@ -70,6 +70,13 @@ def processing_attrs(
     }
 
 
+def instrument_from_header(header: dict) -> dict:
+    """The image attribute of a strip header's ``instrument_file`` (a real instrument's echoes:
+    rtsar measure then holds the image to its beam); none where absent or empty."""
+    name = header.get("instrument_file")
+    return {"instrument_file": name} if isinstance(name, str) and name else {}
+
+
 def processing_from_header(header: dict) -> dict:
     """lens + processing_attrs from a strip header's ``processing`` (rtsar.sinks.wire), what a
     subscriber's image records of how the strips were made; {} where it is absent or not of
@@ -155,6 +162,7 @@ class StripRecorder:
                 source=self.source,
                 first_line=first,
                 **collection_from_header(header),
+                **instrument_from_header(header),
             )
             self.stream_id = header.get("stream_id")
             self.processing = processing_from_header(header)

@@ -51,6 +51,7 @@ def strip_fixed_fields(info: StreamInfo) -> dict:
         "config": info.config_dict,
         "height_strips": info.heights,
         "height_kind": info.height_kind,
+        "instrument_file": info.instrument_file,
         "processing": {
             "lens": info.lens_backend,
             "correlator": info.config.processor.correlator,

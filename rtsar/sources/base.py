@@ -136,8 +136,13 @@ class Source(ABC):
         self.failure: str | None = None
         self.notify = None
         # The time of the stream's pulse 0 (naive UTC) where the source knows it (a replayed
-        # recording's collection start); None: the pipeline takes the first shot's arrival.
+        # recording's collection start); None: the pipeline takes the first shot's arrival,
+        # unless ``clock_is_start`` is False (a replay of a recording that kept none: unknown).
         self.collection_start = None
+        self.clock_is_start = True
+        # The instrument file of a real instrument whose echoes these are (an imported
+        # recording's, run --instrument's): its images are held to the instrument's own beam.
+        self.instrument_file = ""
 
     def _say(self, message: str) -> None:
         if self.notify is not None:

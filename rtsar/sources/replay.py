@@ -123,6 +123,8 @@ class ReplaySource(Source):
         if start is not None and first:  # a part: the stream's pulse 0 is shot ``first``
             start = shifted(start, recording.time_s[first] - recording.time_s[0])
         source.collection_start = start
+        source.clock_is_start = False  # a replay's processing time is not its collection's
+        source.instrument_file = str(getattr(recording, "attrs", {}).get("instrument_file") or "")
         return source
 
     def aux_channels(self) -> tuple[str, ...]:

@@ -89,9 +89,8 @@ class Pipeline:
             )
         self.source = source
         # A live source's silences are told (``notify``) and end the run at link_timeout_s.
-        self.link = None
-        if source.live:
-            self.link = LinkWatch(config.geometry.prf_hz, notify, link_timeout_s, source.close)
+        prf = config.geometry.prf_hz
+        self.link = LinkWatch(prf, notify, link_timeout_s, source.close) if source.live else None
         self.sinks = list(sinks)
         for sink in self.sinks:  # a wrong object fails here, not in a stage thread mid-stream
             if not isinstance(sink, StripSink):
@@ -146,6 +145,7 @@ class Pipeline:
             correction_specs=tuple(corrections.specs) if corrections else (),
             physical=None if physical is None else physical.to_dict(),
             collection_start_utc=utc_text(getattr(source, "collection_start", None)),
+            instrument_file=str(getattr(source, "instrument_file", "") or ""),
         ))  # fmt: skip
         self.swath = None  # lens + CCD in worker processes (rtsar.stream.swath)
         if s.swath_workers:
@@ -177,7 +177,7 @@ class Pipeline:
                     break
                 if self.link is not None and len(batch):
                     self.link.heard(int(batch.seq[0]), int(batch.seq[-1]))
-                if len(batch):
+                if len(batch) and getattr(self.source, "clock_is_start", True):
                     self.info.first_shot_at(float(batch.arrival_s[0]))
                 if not self.q_shots.put(batch, block=not live):
                     self.own["dropped_pulses"] += len(batch)

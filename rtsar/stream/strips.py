@@ -77,6 +77,7 @@ class StreamInfo:
     # recording's own, else the processor's clock at the first shot's arrival (set once, by
     # the source stage, before any strip or recorded pulse exists)
     collection_start_utc: str | None = None
+    instrument_file: str = ""  # a real instrument's echoes: its file (rtsar.sources.base)
 
     def __post_init__(self):
         if not self.config_dict:

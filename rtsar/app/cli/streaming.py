@@ -158,6 +158,7 @@ def cmd_run(args) -> int:
                 connect_timeout_s=args.connect_timeout,
                 notify=lambda message: print(message, flush=True),
             )
+        source.instrument_file = str(getattr(args, "instrument", None) or "")
         return run_stream(
             cfg,
             source,

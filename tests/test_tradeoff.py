@@ -158,17 +158,21 @@ def test_a_retro_beside_the_targets_is_not_measured_as_their_range_sidelobe():
     image = image.astype(np.complex64)
     target = [(0, 0.0, float(rg[60]))]
     q_without = measure_quality(cfg, image, az, rg, image, target)
-    q_with = measure_quality(cfg, image, az, rg, image, target, extra_ranges_m=[float(rg[100])])
+    q_with = measure_quality(cfg, image, az, rg, image, target, extra=[(0.0, float(rg[100]))])
     assert q_without.rg_pslr_db > 0  # the retro, read as a sidelobe
     assert q_with.rg_pslr_db == pytest.approx(-13.26, abs=0.5)  # the sinc's own
+    # a point at the target's own range far along track is not beside it: the crop stays
+    far = [(0.0, float(rg[100])), (1e6, float(rg[60]))]
+    q_far = measure_quality(cfg, image, az, rg, image, target, extra=far)
+    assert q_far.rg_pslr_db == pytest.approx(q_with.rg_pslr_db, abs=1e-6)
 
 
 def test_a_point_a_correction_moved_is_measured_where_it_went_on_an_error_scene():
     """A review: PGA moves the image by the linear phase it cannot see (4.5 cells on the
     crouch-sal PGA scene), and within 3 cells the tradeoff measured a sidelobe: IRW ratio 0.63,
     PSLR +8.5 dB.  On a scene of injected errors a point is looked for within
-    ERROR_SCENE_CELLS along track; its move is the position error."""
-    from rtsar.app.tradeoff.measure import ERROR_SCENE_CELLS, measure_quality
+    MOVED_CELLS along track on a PGA row; its move is the position error."""
+    from rtsar.app.tradeoff.measure import MOVED_CELLS, measure_quality
 
     cfg = preset("tiny")
     rho_a = cfg.azimuth_resolution_m(2000.0)
@@ -176,15 +180,15 @@ def test_a_point_a_correction_moved_is_measured_where_it_went_on_an_error_scene(
     az = (np.arange(rows) - rows // 2) * 0.5 * rho_a
     rg = 1950.0 + np.arange(cols) * 1.0
     k = np.arange(cols)[None, :]
-    moved = 4.5  # cells along track, under ERROR_SCENE_CELLS
-    assert moved < ERROR_SCENE_CELLS
+    moved = 4.5  # cells along track, under MOVED_CELLS
+    assert moved < MOVED_CELLS
     reference = np.outer(np.sinc(az / rho_a), np.sinc(k[0] - 50.0)).astype(np.complex64)
     image = np.outer(np.sinc(az / rho_a - moved), np.sinc(k[0] - 50.0)).astype(np.complex64)
     target = [(0, 0.0, float(rg[50]))]
-    q = measure_quality(cfg, image, az, rg, reference, target, gain_fit=True)
+    q = measure_quality(cfg, image, az, rg, reference, target, gain_fit=True, moves=True)
     assert q.az_pslr_db == pytest.approx(-13.26, abs=0.3)
     assert q.position_error_cells == pytest.approx(moved, abs=0.05)
-    # a scene without injected errors keeps the 3-cell look (its points do not move): there
-    # the moved point is not found where it went
-    plain = measure_quality(cfg, image, az, rg, reference, target)
+    # a row of another correction keeps the 3-cell look (its points do not move): there the
+    # moved point is not found where it went
+    plain = measure_quality(cfg, image, az, rg, reference, target, gain_fit=True)
     assert abs(plain.position_error_cells - moved) > 0.3

@@ -111,7 +111,8 @@ def run_tradeoff(
                 _reference(scene, cfg, refs),
                 scene.targets,
                 gain_fit=bool(scene.effects),
-                extra_ranges_m=[t[1] for t in scene.extra_targets],
+                extra=[(t[0], t[1]) for t in scene.extra_targets],
+                moves=any(c.split(":")[0] == "pga" for c in v.corrections),
             )
             rows.append(
                 {

@@ -195,23 +195,28 @@ class Quality:
     position_error_cells: float  # worst, in resolution cells (either axis)
 
 
-ERROR_SCENE_CELLS = 8.0  # along track, where a scene's injected errors may move a point
+MOVED_CELLS = 8.0  # along track: where a correction blind to linear phase may move a point
+LEAST_CROP = 4  # bins each side of a target, whatever stands beside it
 
 
-def _reports(cfg: Config, image, az, rg, targets, extra_ranges_m=(), azimuth_cells=3.0):
+def _reports(cfg: Config, image, az, rg, targets, extra=(), azimuth_cells=3.0):
     """Point-target analysis of each target on a range crop that excludes the other targets and
-    the scene's extra points at ``extra_ranges_m`` (a retro-reflector: they share the azimuth
-    span, so a range cut reaching them would count them as sidelobes; the phase-errors scene's
-    retro 40 bins away read as a range PSLR of +19 dB).  Each point is looked for within
-    ``azimuth_cells`` resolution cells along track of where it should be (and 3 in range)."""
+    the scene's extra points ``extra`` (along track, range m) within the azimuth chip (a
+    retro-reflector: a range cut reaching it would count it as a sidelobe; the phase-errors
+    scene's retro 40 bins away read as a range PSLR of +19 dB), at least LEAST_CROP bins each
+    way.  Each point is looked for within ``azimuth_cells`` resolution cells along track of
+    where it should be (and 3 in range)."""
     rho_r = cfg.waveform.range_resolution_m
     spacing = abs(rg[1] - rg[0])
     ranges = np.array([r for _, _, r in targets])
     out = []
     for _, x, r in targets:
         others = np.abs(np.delete(ranges, np.flatnonzero(ranges == r)[0]) - r)
-        others = np.concatenate([others, np.abs(np.asarray(extra_ranges_m, float) - r)])
+        reach_m = chip_lines(cfg, r) * cfg.geometry.along_track_step_m
+        beside = [abs(er - r) for ex, er in extra if abs(ex - x) <= reach_m]
+        others = np.concatenate([others, np.asarray(beside, float)])
         half = int(min(64, 0.5 * others.min() / spacing)) if len(others) else 64
+        half = max(half, LEAST_CROP)
         centre = int(np.argmin(np.abs(rg - r)))
         crop = slice(max(0, centre - half), min(len(rg), centre + half + 1))
         out.append(
@@ -229,17 +234,18 @@ def _reports(cfg: Config, image, az, rg, targets, extra_ranges_m=(), azimuth_cel
 
 
 def measure_quality(
-    cfg: Config, image, az, rg, reference, targets, gain_fit=False, extra_ranges_m=()
+    cfg: Config, image, az, rg, reference, targets, gain_fit=False, extra=(), moves=False
 ) -> Quality:
     """The quality of ``image`` against ``reference``.  ``gain_fit`` (a scene of injected
-    errors): the error after the best complex gain, and each point looked for within
-    ERROR_SCENE_CELLS along track (a correction that cannot see a linear phase, PGA, moves the
-    image by a few cells: its focus is measured where the point went, the move is its position
-    error; within 3 cells the tradeoff measured the crouch-sal PGA row off the point, a review:
-    IRW 0.63, PSLR +8.5 dB, where the point, 4.5 cells on, had 1.00 and -12.9 dB)."""
-    cells = ERROR_SCENE_CELLS if gain_fit else 3.0
-    reps = _reports(cfg, image, az, rg, targets, extra_ranges_m, cells)
-    refs = _reports(cfg, reference, az, rg, targets, extra_ranges_m)
+    errors): the error after the best complex gain.  ``moves`` (a correction that cannot see
+    a linear phase, PGA, which moves the image by a few cells): each point looked for within
+    MOVED_CELLS along track, its focus measured where it went and the move its position
+    error (within 3 cells the tradeoff measured the crouch-sal PGA row off the point, a review:
+    IRW 0.63, PSLR +8.5 dB, where the point, 4.5 cells on, had 1.00 and -12.9 dB); other rows
+    look within 3 cells (a wider look finds a defocused image's brightest blob at its edge).
+    ``extra``: the scene's other points, (along track, range) m."""
+    reps = _reports(cfg, image, az, rg, targets, extra, MOVED_CELLS if moves else 3.0)
+    refs = _reports(cfg, reference, az, rg, targets, extra)
     rho_r = cfg.waveform.range_resolution_m
     rw = window(
         cfg.processor.range_window,

@@ -201,3 +201,9 @@ def test_a_sigmf_copy_of_the_block_says_its_start_is_unknown_and_where_it_came_f
     assert main(["process", str(tmp_path / "rs1.sigmf-meta"), "-o", str(img)]) == 0
     with h5py.File(img, "r") as f:
         assert f.attrs["instrument_file"] == kept["instrument_file"]
+    # a SigMF copy of the copy keeps the values as they were (a cold review: read back, they
+    # had turned into JSON strings)
+    again = tmp_path / "again"
+    assert main(["export", str(tmp_path / "rs1.sigmf-meta"), "--sigmf", str(again)]) == 0
+    meta2 = json_.loads((tmp_path / "again.sigmf-meta").read_text())["global"]
+    assert meta2["rtsar:provenance"] == kept

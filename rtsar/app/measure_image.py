@@ -322,7 +322,9 @@ def measure_image(
                 if gain is not None and scene
                 else f", times the instrument's two-way beam (a uniform "
                 f"{cfg.geometry.antenna_length_m:g} m aperture's sinc², the image's "
-                "configuration; the echoes are the instrument's: instrument_file)"
+                "configuration: the instrument file's antenna, or where it gives none the one "
+                "`rtsar import` assumed, whose Doppler band 2V/D is 0.75 PRF; the echoes are "
+                "the instrument's: instrument_file)"
                 if gain is not None
                 else (
                     ", no antenna pattern (the scene has none)"

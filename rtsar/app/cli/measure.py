@@ -10,7 +10,7 @@ from .options import die
 
 # A negative number, or a position "X,R" whose X is negative (argparse's own matcher takes the
 # bare number only and would read "-0.005,1.5" as an unknown option).
-NEGATIVE_POSITION = re.compile(r"^-\d*\.?\d+([eE][-+]?\d+)?(,[-+]?[\d.eE+-]+)*$")
+NEGATIVE_POSITION = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?(,[-+]?[\d.eE+-]+)*$")
 
 
 def cmd_measure(args) -> int:

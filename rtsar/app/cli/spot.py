@@ -104,7 +104,11 @@ def add_parsers(sub) -> None:
         help="range zoom per shot: czt (DFT interpolant by chirp-z, default) or sinc (24 taps)",
     )
     s.add_argument(
-        "--every", type=int, metavar="K", help="stream: a progressive image every K shots"
+        "--every",
+        type=int,
+        metavar="K",
+        help="stream: a progressive image every K shots (the first once the shots so far span "
+        "a k_x extent common to every range row: at K unless K is very small)",
     )
     s.add_argument(
         "--publish",

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...ccd.base import squint_aperture_pulses
 from ...params import C_M_PER_S, Config, FMCWChirp
 from ...windows import band_response_width, impulse_response_width, window, window_at
 
@@ -72,8 +73,10 @@ def range_resolution(cfg: Config) -> Resolution:
 
 
 def azimuth_resolution(cfg: Config, range_m: float) -> Resolution:
-    """The azimuth (SICD Col) axis at closest-approach range ``range_m``: support 2Nd/(λR)."""
+    """The azimuth (SICD Col) axis at closest-approach range ``range_m``: support 2Nd/(λR), N
+    the rows a range column's window covers (rtsar.ccd.base.squint_aperture_pulses: all the
+    CCD's rows broadside, fewer where a squinted beam's centre walks across the swath)."""
     g, p = cfg.geometry, cfg.processor
-    aperture_m = p.aperture_pulses * g.along_track_step_m
-    bw = 2.0 * aperture_m / (g.wavelength_m * range_m)
-    return Resolution(bw, p.azimuth_window, band_weights(p.azimuth_window, p.aperture_pulses))
+    rows = squint_aperture_pulses(cfg)
+    bw = 2.0 * rows * g.along_track_step_m / (g.wavelength_m * range_m)
+    return Resolution(bw, p.azimuth_window, band_weights(p.azimuth_window, rows))

@@ -73,7 +73,8 @@ def provenance_of(rec) -> dict:
             value = value.tolist() if hasattr(value, "tolist") else value
             if isinstance(value, float) and not np.isfinite(value):
                 value = None  # (no estimate: JSON has no NaN)
-            out[key] = json.loads(value) if key == "instrument_extra" else value
+            extra = key == "instrument_extra" and isinstance(value, str)  # (an h5 attribute)
+            out[key] = json.loads(value) if extra else value
     return out
 
 

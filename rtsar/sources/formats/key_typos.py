@@ -13,9 +13,13 @@ def near_miss(key: str, read: str) -> bool:
 
 
 def one_word_short(key: str, read: str) -> bool:
-    """Whether ``key`` is the key ``read`` with one of its words (between underscores) left
-    out: ``collection_start`` for ``collection_start_utc``, ``agc_db`` for ``agc_db_file``."""
+    """Whether ``key``, of two words or more, is the key ``read`` with one of its words
+    (between underscores) left out: ``collection_start`` for ``collection_start_utc``,
+    ``agc_db`` for ``agc_db_file`` (a cold review: one word, ``type`` for ``sample_type``,
+    refused provenance as common as a mode's name)."""
     words, full = key.split("_"), read.split("_")
+    if len(words) < 2:  # a single word (type, order, header) is provenance of its own
+        return False
     return len(full) == len(words) + 1 and any(
         full[:i] + full[i + 1 :] == words for i in range(len(full))
     )

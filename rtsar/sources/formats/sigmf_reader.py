@@ -341,7 +341,7 @@ def open_sigmf(path: str | Path, config=None) -> ForeignRecording:
         channels,
         position,
         collection_start=collection_start,
-        attrs={k: v if isinstance(v, str) else json.dumps(v) for k, v in provenance.items()},
+        attrs=dict(provenance),  # JSON values, as the export wrote them
     )
 
 

@@ -28,9 +28,9 @@ stored transposed), ``agc_db_file`` (per-pulse receiver gain in dB, a float .npy
 (``.bin``, ``.dat``, ``.raw``): ``sample_type``, ``pulses``, ``samples_per_pulse``,
 ``header_bytes`` (0) and ``byte_order`` ("little"); ``collection_start_utc`` (ISO 8601, the UTC
 of time_s = 0; without it the recording has no known start).  A key rtsar does not read is kept
-as provenance, unless it is within a letter or two of one it reads, or is one it reads
-with a word left out (a typo).  Every problem is a
-one-line ``ValueError`` naming the TOML file and the key (and the data file where it is the data
+as provenance, unless it is a near miss of one it reads (rtsar.sources.formats.key_typos: a
+letter or two from it, or it with a word left out).  Every problem is a one-line
+``ValueError`` naming the TOML file and the key (and the data file where it is the data
 file's).
 """
 

@@ -104,21 +104,22 @@ _found: list | None = None  # the devices, listed once a process (the drivers do
 _KEPT_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
 
 
-class keeps_signal_handlers(contextlib.ContextDecorator):
+@contextlib.contextmanager
+def keeps_signal_handlers():
     """The process's handlers of SIGINT, SIGTERM and SIGHUP as they were before the block or
     the call (main thread only): an OpenCL driver built on LLVM (PoCL, Intel's CPU runtime)
     puts handlers of its own on them as it loads, builds or makes a context, ones the system
     resets to the default while they run, so that a second signal then killed rtsar outright
-    (rtsar.app.signals, which puts rtsar's back again before a run's stream)."""
-
-    def __enter__(self):
-        main = threading.current_thread() is threading.main_thread()
-        names = [n for n in _KEPT_SIGNALS if hasattr(signal, n)] if main else []
-        self._saved = [(getattr(signal, n), signal.getsignal(getattr(signal, n))) for n in names]
-        return self
-
-    def __exit__(self, *exc) -> None:
-        for signum, handler in self._saved:
+    (rtsar.app.signals, which puts rtsar's back again before a run's stream).  A generator's
+    context manager, so each decorated call keeps its own (one instance shared by every call
+    of a decorated function had let a call on another thread overwrite the main thread's)."""
+    main = threading.current_thread() is threading.main_thread()
+    names = [n for n in _KEPT_SIGNALS if hasattr(signal, n)] if main else []
+    saved = [(getattr(signal, n), signal.getsignal(getattr(signal, n))) for n in names]
+    try:
+        yield
+    finally:
+        for signum, handler in saved:
             if handler is not None:  # (None: set outside Python; nothing to put back)
                 signal.signal(signum, handler)
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...ccd.base import azimuth_cell_m, squint_aperture_pulses
+from ...ccd.base import squint_aperture_pulses
 from ...lens import range_axis_m
 from ...lens.plan import make_plan
 from ...presets import PRESETS, preset
@@ -42,8 +42,8 @@ def cmd_presets(args) -> int:
     for name in PRESETS:
         c = preset(name)
         rm = range_axis_m(c)
-        aperture_m = squint_aperture_pulses(c) * c.geometry.along_track_step_m  # a column's
-        r0 = c.geometry.slant_range_m
+        column = squint_aperture_pulses(c)  # pulses of a range column's aperture
+        aperture_m, r0 = column * c.geometry.along_track_step_m, c.geometry.slant_range_m
         rows.append(
             {
                 "preset": name,
@@ -51,9 +51,9 @@ def cmd_presets(args) -> int:
                 "slant_range_m": c.geometry.slant_range_m,
                 "swath_m": [float(rm[0]), float(rm[-1])],
                 "range_resolution_m": c.waveform.range_resolution_m,
-                "azimuth_resolution_m": azimuth_cell_m(c),
+                "azimuth_resolution_m": c.geometry.wavelength_m * r0 / (2.0 * aperture_m),
                 "aperture_pulses": c.processor.aperture_pulses,
-                "column_aperture_pulses": squint_aperture_pulses(c),
+                "column_aperture_pulses": column,
                 "range_bins": c.processor.range_bins,
                 "samples_per_shot": c.waveform.samples_per_shot,
                 "prf_hz": c.geometry.prf_hz,

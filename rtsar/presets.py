@@ -51,10 +51,10 @@ def _radarsat1() -> Config:
     # opening 6.5956 ms after the pulse centre, PRF 1256.98 Hz, 7062 m/s, the Doppler centroid
     # -6900 Hz (1.58° of squint: the echo walks 195 m/s, 22 range cells across the 668-pulse
     # aperture).  The CCD holds the aperture plus the 47 rows the squinted beam's centre moves
-    # across the 2048 bins.  8 range-migration taps (the samples are only 1.07x the chirp band,
-    # where 4 Lanczos taps widen the range response by 6 %), read in each block's azimuth
-    # spectrum (rtsar.ccd.doppler_migration): 8 multiply-adds a sample where the time-domain
-    # taps need 31 spectral ones for the walk.
+    # across the 2048 bins.  16 range-migration taps (the samples are only 1.07x the chirp
+    # band: rtsar.ccd.migration.taps_for_band; 8 taps widen the Taylor range response 2.0 %,
+    # 16 taps 0.6 %), read in each block's azimuth spectrum (rtsar.ccd.doppler_migration):
+    # 16 multiply-adds a sample where the time-domain taps need 39 spectral ones for the walk.
     return Config(
         PulsedChirp(
             bandwidth_hz=0.72135e12 * 41.75e-6,
@@ -78,7 +78,7 @@ def _radarsat1() -> Config:
             range_window="taylor",
             azimuth_window="taylor",
             fft_length=2048,
-            range_migration_taps=8,
+            range_migration_taps=16,
             range_migration_domain="doppler",
         ),
     )

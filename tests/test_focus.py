@@ -29,16 +29,6 @@ def curvature_bias_cells(cfg, windows):
     return float(np.sum(w * x**2 / (2 * r)) / np.sum(w)) / cfg.waveform.range_resolution_m
 
 
-def range_pslr_floor_db(cfg):
-    """-30 dB, except where the range-migration taps interpolate lines sampled less than 1.2x
-    their band (radarsat1: 32.317 MHz for 30.1 MHz): an 8-tap Lanczos read there lifts a Taylor
-    range response's sidelobes to -28.4 dB (16 taps: -29.5; measured; the time-domain taps
-    alike), so -27 dB; a range-oversampled pulsed lens is the cure (not built yet)."""
-    wf = cfg.waveform
-    sparse = wf.kind == "pulsed" and wf.sample_rate_hz < 1.2 * wf.bandwidth_hz
-    return -27.0 if sparse and cfg.processor.range_migration_taps else -30.0
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("windows", ["rect", "taylor"])
 @pytest.mark.parametrize("name", sorted(PRESETS))
@@ -61,7 +51,7 @@ def test_point_targets_focus_as_theory_says(name, windows):
             assert abs(t.range_pslr_db - RECT_PSLR_DB) <= 1.5, (where, t.range_pslr_db)
         else:
             assert t.azimuth_pslr_db <= -30.0, (where, t.azimuth_pslr_db)
-            assert t.range_pslr_db <= range_pslr_floor_db(cfg), (where, t.range_pslr_db)
+            assert t.range_pslr_db <= -30.0, (where, t.range_pslr_db)
 
 
 def test_antenna_pattern_broadens_azimuth_as_predicted():

@@ -16,14 +16,17 @@ from rtsar.ccd import CORRELATORS, make_correlator
 from rtsar.ccd.base import aperture_offsets_m, correlate_reference, design_mask
 from rtsar.ccd.fft import FFTCorrelator
 from rtsar.ccd.migration import (
+    EDGE_LOSS_DB,
     FFTMigrationCorrelator,
     MigrationCorrelator,
     MigrationMask,
     correlate_migration_reference,
     design_migration_mask,
+    edge_gain_db,
     interpolation_weights,
     migration_bins,
     shift_lines,
+    taps_for_band,
 )
 from rtsar.lens.plan import make_plan
 from rtsar.params import Processor
@@ -255,3 +258,25 @@ def test_crouch_point_target_loses_its_range_bias():
     assert abs(irw4 - 1) < 0.01 and abs(irw4 - 1) < abs(irw0 - 1)
     assert abs(pslr4 - -13.26) < 0.4
     assert az4 < 1 / 32
+
+
+def test_taps_for_a_band_are_the_fewest_that_keep_its_edge():
+    """The gain taps_for_band weighs is the interpolator's own: a tone at the band's edge read
+    between its samples through the weights comes out that much smaller (averaged over the
+    fractional positions).  RADARSAT-1's 30.1 MHz sampled at 32.317 MHz needs 16 taps (8 lose
+    3.1 dB at its edge); a band 1.2x over, or less, keeps 8."""
+    edge = 0.5 * 30.1e6 / 32.317e6
+    n = np.arange(-64, 65)
+    tone = np.exp(2j * np.pi * edge * n)
+    for taps in (8, 16):
+        gains = []
+        for u in np.arange(64) / 64:
+            first, w = interpolation_weights(np.array([u]), taps)
+            read = np.sum(w[0] * tone[64 + first[0] + np.arange(taps)])
+            gains.append(abs(read / np.exp(2j * np.pi * edge * u)))
+        assert 20 * np.log10(np.mean(gains)) == pytest.approx(edge_gain_db(taps, edge), abs=1e-9)
+    assert edge_gain_db(8, edge) < -EDGE_LOSS_DB <= edge_gain_db(16, edge)
+    assert taps_for_band(2 * edge) == 16
+    assert taps_for_band(1 / 1.2) == taps_for_band(0.5) == 8
+    with pytest.raises(ValueError, match="not in"):
+        taps_for_band(1.1)

@@ -107,8 +107,11 @@ def test_streaming_equals_one_push(scene):
 def test_the_walks_ring_focuses_as_the_exact_time_domain_mask(scene):
     """Against (M2), correlate_migration_reference's model: the curvature the ring leaves out
     and the mask's turn in steps cost RADARSAT-1's points at most 0.025 cell of azimuth and
-    0.05 of range, 0.1 rad of phase (measured 0.06), 1 % of azimuth width, 10 % of range
-    width and 6 % of peak (the edge point, whose aperture the swath cuts; 1-2 % inside)."""
+    0.08 of range (measured 0.069 at the near edge, whose aperture the swath cuts; 0.017
+    inside: the exact mask's 0.001), 0.1 rad of phase (measured 0.06), 1 % of azimuth width,
+    10 % of range width (6.3 % at the near edge, 1.6-3.8 % inside; more taps do not narrow
+    it: 32 taps, 5.5 %) and 6 % of peak (the edge point; 1-2 % inside).  Measured about
+    zero, the range band straddling the DFT's split, the range had read within 0.05 cell."""
     cfg, sc, shots, xs, rs = scene
     step, cell = cfg.geometry.along_track_step_m, C / (2 * cfg.waveform.sample_rate_hz)
     start = sc.start_along_track_m
@@ -117,7 +120,7 @@ def test_the_walks_ring_focuses_as_the_exact_time_domain_mask(scene):
         cfg, shots, start, xs, rs, range_migration_domain="walk", correlator="nonuniform"
     )
     for t, d, x, r in zip(exact, walk, xs, rs, strict=True):
-        assert abs(d.azimuth_m - x) / step < 0.025 and abs(d.range_m - r) / cell < 0.05
+        assert abs(d.azimuth_m - x) / step < 0.025 and abs(d.range_m - r) / cell < 0.08
         assert abs(np.angle(d.peak_value / t.peak_value)) < 0.1
         assert d.azimuth.irw_m == pytest.approx(t.azimuth.irw_m, rel=0.01)
         assert d.range.irw_m == pytest.approx(t.range.irw_m, rel=0.10)
@@ -261,7 +264,7 @@ def test_the_command_lines_correlator_takes_its_migration_domain(argv, domain):
     p = processor_changes(args, preset("radarsat1")).processor
     assert p.range_migration_domain == domain
     words = {"walk": "walk's ring", "time": "exact 2-D mask", "doppler": "azimuth spectrum"}
-    assert migration_words(p).startswith("; range migration 8 taps, read ")
+    assert migration_words(p).startswith("; range migration 16 taps, read ")
     assert words[domain] in migration_words(p)
     bad = ["--correlator", "nonuniform", "--range-migration-domain", "doppler"]
     args = build_parser("process").parse_args(["process", "r.h5", "-o", "i.h5", *bad])

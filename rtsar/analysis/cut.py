@@ -5,8 +5,9 @@ One implementation serves the tests and the reports, so both measure the same th
 Conventions
 -----------
 * Interpolation is band-limited: the samples are taken as one period of a periodic, band-limited
-  signal (FFT zero-padding; the Nyquist bin of an even length is split in two halves).  Values
-  between samples are evaluated exactly from the DFT, so peak positions and values are not
+  signal (FFT zero-padding; the Nyquist bin of an even length is split in two halves), about
+  a gap in the band where the band straddles that split (interpolation.band_centre_cycles).
+  Values between samples are evaluated exactly from the DFT, so peak positions and values are not
   limited to the upsampled grid.  The wrap-around stretch after the last sample (interpolated
   between the last and the first sample) is not data and is never analysed.
 * Powers are ``|x|**2``.  The *mainlobe* runs from the first minimum (null) on the left of the
@@ -30,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import fft as _fft
 
-from .interpolation import check_factor, refine_max, upsample
+from .interpolation import band_centre_cycles, check_factor, refine_max, upsample
 
 
 @dataclass(frozen=True)
@@ -261,6 +262,11 @@ def analyse_cut(
         raise ValueError(f"islr_extent must be > 0, got {islr_extent!r}")
 
     n = x.size
+    # A band across the DFT's split (a squinted image's range cut) is interpolated about its
+    # own centre, and the peak's phase put back (rtsar.analysis.interpolation).
+    centre = band_centre_cycles(x)
+    if centre:
+        x = x * np.exp(-2j * np.pi * centre * np.arange(n))
     spectrum = _fft.fft(x)
     # Keep only the stretch [0, n-1] samples: beyond it the interpolant wraps to sample 0.
     y = upsample(x, factor)[: (n - 1) * factor + 1]
@@ -282,6 +288,7 @@ def analyse_cut(
         i_peak / factor,
     )
     peak_power = abs(v_peak) ** 2
+    v_peak *= complex(np.exp(2j * np.pi * centre * t_peak))
 
     def refine_sidelobe(i_side: int) -> float:
         _, v_side = refine_max(

@@ -21,7 +21,7 @@ import numpy as np
 from scipy import fft as _fft
 
 from .cut import mainlobe
-from .interpolation import upsample
+from .interpolation import band_centre_cycles, upsample
 from .point_target import PointTargetReport
 from .theory import THEORY_PAD_FACTOR
 
@@ -62,6 +62,12 @@ def islr_2d_db(
     if azimuth_centre_cycles:  # a squinted image's spectrum to baseband (analyse_point_target)
         rows = np.arange(spans[0][0], spans[0][1])
         chip *= np.exp(-2j * np.pi * azimuth_centre_cycles * rows)[:, None]
+    for axis in (0, 1):  # a band still across the DFT's split: off it (analyse_point_target)
+        through = [int(round(centre[a])) - spans[a][0] for a in (0, 1)]
+        through[axis] = slice(None)  # the cut through the peak along this axis
+        if band := band_centre_cycles(chip[tuple(through)]):
+            shape = (-1, 1) if axis == 0 else (1, -1)
+            chip *= np.exp(-2j * np.pi * band * np.arange(chip.shape[axis])).reshape(shape)
     # Per axis: a long, finely sampled axis needs no upsampling, a short coarse one its full
     # factor (one shared factor left a ~1 px/IRW range axis un-upsampled beside a 9000-line
     # azimuth chip: -8.6 dB for -7.0).  Memory: at most MAX_UPSAMPLED or the chip per axis.

@@ -13,7 +13,7 @@ from scipy import fft as _fft
 from scipy import optimize as _opt
 
 from .cut import CutMetrics, analyse_cut, finite_number
-from .interpolation import check_factor, synthesis_vector
+from .interpolation import band_centre_cycles, check_factor, synthesis_vector
 
 #: Extent of the local 2-D upsampling around the brightest pixel (pixels each way).
 _LOCAL_HALF_WIDTH_PX = 2
@@ -118,7 +118,10 @@ def analyse_point_target(
         Centre of the image's azimuth spectrum in cycles per line: a squinted image keeps its
         Doppler centroid, f_dc / PRF (mod 1: azimuth_carrier_cycles).  The chip
         is brought to baseband before any band-limited interpolation (about zero frequency it
-        would split the spectrum) and the peak's phase restored.  0: broadside.
+        would split the spectrum) and the peak's phase restored.  0: broadside.  A band that
+        still straddles the split on either axis (a squinted image's range band always does
+        where its samples barely exceed the band) is moved off it the same way, about the
+        centre the chip's own spectrum gives (rtsar.analysis.interpolation.band_centre_cycles).
     pslr_extent : float or None, optional
         Half-width in IRWs of the PSLR's search (see :func:`analyse_cut`; default: the chip).
 
@@ -177,6 +180,14 @@ def analyse_point_target(
     centre_a = float(azimuth_centre_cycles)
     if centre_a:  # a squinted image: its azimuth spectrum to baseband first
         chip_img = chip_img * _carrier(na, centre_a, ca)[:, None]
+    # What still straddles the DFT's split (the range band of a squinted image; an azimuth
+    # band given no centre) is moved off it (rtsar.analysis.interpolation), as the cuts
+    # through the brightest pixel show it: the target's, where the whole chip's is clutter's.
+    more_a = band_centre_cycles(chip_img[:, cr])
+    centre_r = band_centre_cycles(chip_img[ca])
+    if more_a or centre_r:
+        chip_img = chip_img * _carrier(na, more_a, ca)[:, None] * _carrier(nr, centre_r, cr)
+    centre_a += more_a
     spectrum_2d = _fft.fft2(chip_img)
 
     # 2-D upsampled grid of +-2 pixels around the brightest pixel (within the chip's data).
@@ -191,7 +202,7 @@ def analyse_point_target(
     local = synth_a @ spectrum_2d @ synth_r.T / (na * nr)
     ka, kr = np.unravel_index(int(np.argmax(np.abs(local))), local.shape)
     a_star, r_star, value = _refine_peak_2d(spectrum_2d, float(ta[ka]), float(tr[kr]), factor)
-    value *= np.exp(2j * np.pi * centre_a * (a_star - ca))
+    value *= np.exp(2j * np.pi * (centre_a * (a_star - ca) + centre_r * (r_star - cr)))
 
     # Cuts through the refined peak, interpolated band-limited across the other axis.
     az_cut = _fft.fft(chip_img, axis=1) @ synthesis_vector(nr, r_star) / nr

@@ -11,6 +11,7 @@ import sys
 import warnings
 from dataclasses import replace
 
+from ...ccd.migration import EDGE_LOSS_DB, edge_gain_db, taps_for_band
 from ...focus.spec import ORDER as CORRECTIONS
 from ...focus.spec import correct_option
 from ...lens import LENS_BACKENDS, range_axis_m
@@ -378,12 +379,14 @@ def processor_changes(args, cfg, as_configured: bool = False):
     cfg = cfg.with_processor(**changes) if changes else cfg
     p = cfg.processor
     wf = cfg.waveform
-    if p.range_migration_taps and wf.kind == "pulsed" and p.range_migration_taps < 8:
-        # a pulsed lens has no oversampling knob: its samples cover the chirp band fs/B times
+    band = wf.bandwidth_hz / wf.sample_rate_hz if wf.kind == "pulsed" else 0.0  # no oversampling
+    if p.range_migration_taps and band and p.range_migration_taps < (enough := taps_for_band(band)):
+        loss_db = -edge_gain_db(p.range_migration_taps, band / 2)
         warnings.warn(
             f"--range-migration-taps {p.range_migration_taps} on a critically sampled range "
-            f"axis (fs/B = {wf.sample_rate_hz / wf.bandwidth_hz:.2f}) interpolates less "
-            "accurately; 8 taps or more (docs/pages/reference/tradeoff.md)",
+            f"axis (fs/B = {1 / band:.2f}) loses {loss_db:.1f} dB at the band's edge and "
+            f"widens the range response; {enough} taps or more lose "
+            f"under {EDGE_LOSS_DB:g} dB (rtsar.ccd.migration.taps_for_band)",
             stacklevel=2,
         )
     elif p.range_migration_taps and p.range_oversampling < 2 and wf.kind == "fmcw":

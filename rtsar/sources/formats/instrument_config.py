@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+from ...ccd.migration import taps_for_band
 from ...lens.plan import next_pow2, range_axis_m
 from ...params import C_M_PER_S, Config, Geometry, Processor, PulsedChirp
 from .instrument_file import InstrumentFile
@@ -28,10 +29,6 @@ from .instrument_file import InstrumentFile
 #: Doppler bandwidth processed when the file gives no antenna length, as a fraction of the PRF
 #: (strip-map radars sample their Doppler band at 1.2 to 1.5 times its width).
 DEFAULT_BANDWIDTH_OF_PRF = 0.75
-#: Range-migration taps of an instrument's processor (Lanczos, a = 4; rtsar.ccd.migration): a
-#: radar's samples often cover the chirp band only 1.1x over, where 4 taps (a = 2) widen the
-#: range response by ~6 % (RADARSAT-1, 1.07x: 6 % with 4 taps, 2 % with 8).
-INSTRUMENT_TAPS = 8
 
 
 def instrument_config(
@@ -83,6 +80,7 @@ def _processor(rows: int, wf: PulsedChirp, micro_batch: int) -> Processor:
         correlator="fft",
         fft_length=next_pow2(2 * rows),
         micro_batch=micro_batch,
-        range_migration_taps=INSTRUMENT_TAPS,
+        # a radar's samples often cover the chirp band only 1.1x over: taps for the band's edge
+        range_migration_taps=taps_for_band(wf.bandwidth_hz / wf.sample_rate_hz),
         range_migration_domain="doppler",
     )

@@ -425,7 +425,7 @@ class Config:
                 raise ValueError(
                     f"a Doppler centroid of {g.doppler_centroid_hz:g} Hz walks the echo "
                     f"{walk_m:.3g} m across the aperture: set range_migration_taps "
-                    "(--range-migration-taps, e.g. 8) so that the CCD's rows follow it"
+                    "(--range-migration-taps, e.g. 16) so that the CCD's rows follow it"
                 )
         if isinstance(self.waveform, FMCWChirp):
             if self.waveform.reference_range_m <= 0:

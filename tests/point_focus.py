@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rtsar.analysis.point_target import analyse_point_target, azimuth_carrier_cycles
+from rtsar.analysis.point_target import analyse_point_target, image_centres
 from rtsar.stream.engine import process_block
 
 
@@ -22,7 +22,7 @@ def focus_points(cfg, shots, start_m, xs, rs, **processor):
             x,
             r,
             search_radius_m=(60.0, 20.0),
-            azimuth_centre_cycles=azimuth_carrier_cycles(cfg),
+            **image_centres(cfg),
         )
         for x, r in zip(xs, rs, strict=True)
     ]

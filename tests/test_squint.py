@@ -13,7 +13,7 @@ import pytest
 
 from rtsar.analysis.azimuth_response import antenna_gain, azimuth_theory
 from rtsar.analysis.doppler_centroid import estimate_doppler_centroid
-from rtsar.analysis.point_target import analyse_point_target, azimuth_carrier_cycles
+from rtsar.analysis.point_target import analyse_point_target, image_centres
 from rtsar.analysis.theory import theoretical_irw_factor
 from rtsar.ccd.base import line_azimuth_m
 from rtsar.lens import make_lens, make_plan
@@ -53,14 +53,14 @@ def test_the_scene_is_hard(squinted):
 
 def _measured(squinted):
     """(true along track, true range, the point's report) for each target, measured about the
-    image's declared Doppler centroid."""
+    image's declared spectral centres: the Doppler centroid, and the range band's."""
     cfg, _, _, _, image, az, rg, xs, rs = squinted
-    carrier = azimuth_carrier_cycles(cfg)
+    centres = image_centres(cfg)
     return [
         (
             x,
             r,
-            analyse_point_target(image, az, rg, x, r, (60.0, 20.0), azimuth_centre_cycles=carrier),
+            analyse_point_target(image, az, rg, x, r, (60.0, 20.0), **centres),
         )
         for x, r in zip(xs, rs, strict=True)
     ]
@@ -90,6 +90,27 @@ def test_widths_against_theory(squinted):
         assert rep.azimuth.irw_m == pytest.approx(theory, rel=0.01)
         assert rep.range.irw_m == pytest.approx(range_irw, rel=0.012)
         assert rep.range.pslr_db < -33.0
+
+
+def test_the_range_band_sits_where_the_geometry_declares_it(squinted):
+    """image_centres declares the range band 2 (cos θ - 1) δr / λ cycles a bin off zero, from
+    the geometry alone (sin θ = -λ f_dc / 2V); each point's range cut through its peak
+    measures it (the lag-one phase, the centroid of its power spectrum) within 0.003 cycle:
+    -0.0643 against -0.0626.  0.063 cycle puts the band, 0.93 of the bins, across the DFT's
+    split, where the analysis interpolated it about zero until it was declared."""
+    cfg, g, *_ = squinted
+    cell_m = C / (2 * cfg.waveform.sample_rate_hz)
+    cos_theta = math.sqrt(1.0 - (g.wavelength_m * g.doppler_centroid_hz / (2 * g.speed_mps)) ** 2)
+    declared = image_centres(cfg)["range_centre_cycles"]
+    assert declared == pytest.approx(2 * (cos_theta - 1) * cell_m / g.wavelength_m, rel=1e-6)
+    assert declared < -0.5 * (1 - cfg.waveform.bandwidth_hz / cfg.waveform.sample_rate_hz)
+    image = squinted[4]
+    for _, _, rep in _measured(squinted):
+        row = image[int(round(rep.peak_px[0]))].astype(complex)
+        c = int(round(rep.peak_px[1]))
+        cut = row[c - 64 : c + 65]
+        measured = np.angle(np.sum(cut[1:] * np.conj(cut[:-1]))) / (2 * np.pi)
+        assert measured == pytest.approx(declared, abs=3e-3)
 
 
 def test_doppler_centroid_estimated_back(squinted):
@@ -151,3 +172,24 @@ def test_a_default_scan_images_targets_at_both_swath_edges(centroid_hz, near_fir
     az = line_azimuth_m(cfg, sc.start_along_track_m, 0, sc.pulses - n + 1)
     margin_m = 8 * cfg.geometry.along_track_step_m
     assert az[0] <= xs.min() - margin_m and az[-1] >= xs.max() + margin_m
+
+
+def test_the_chirp_the_fixed_window_holds_is_the_simulated_echos():
+    """chirp_fraction_held against the simulator's echo, counted sample by sample: of an echo
+    from the range of bin j, the share of its P chirp samples inside the S-sample window
+    (the whole chirp on S - P + 1 of the 2048 bins; RADARSAT-1's window start, no squint)."""
+    from rtsar.app.measure_notes import window_notes
+    from rtsar.lens.plan import chirp_fraction_held, range_axis_m
+
+    cfg = preset("radarsat1")
+    cfg = replace(cfg, geometry=replace(cfg.geometry, doppler_centroid_hz=0.0))
+    held, axis = chirp_fraction_held(cfg), range_axis_m(cfg)
+    wf = cfg.waveform
+    assert np.count_nonzero(held == 1.0) == wf.samples_per_shot - wf.pulse_samples + 1
+    for j in (5, 400, 1000, 1700, 2040):
+        scene = point_scene(cfg, [0.0], [axis[j]], pulses=1, start_along_track_m=0.0)
+        lit = np.count_nonzero(np.abs(Simulator(scene).block(1)[0]) > 0.5)
+        assert held[j] == pytest.approx(lit / wf.pulse_samples, abs=1.5 / wf.pulse_samples), j
+    notes = window_notes([{"range_m": axis[1974]}, {"range_m": axis[1000]}], cfg)
+    assert f"holds {100 * held[1974]:.0f} % of this echo's chirp" in notes[0][0]
+    assert notes[1] == []

@@ -109,7 +109,7 @@ def test_the_walks_ring_focuses_as_the_exact_time_domain_mask(scene):
     and the mask's turn in steps cost RADARSAT-1's points at most 0.025 cell of azimuth and
     0.08 of range (measured 0.069 at the near edge, whose aperture the swath cuts; 0.017
     inside: the exact mask's 0.001), 0.1 rad of phase (measured 0.06), 1 % of azimuth width,
-    10 % of range width (6.3 % at the near edge, 1.6-3.8 % inside; more taps do not narrow
+    10 % of range width (6.3 % at the near edge, 0.2-3.8 % elsewhere; more taps do not narrow
     it: 32 taps, 5.5 %) and 6 % of peak (the edge point; 1-2 % inside).  Measured about
     zero, the range band straddling the DFT's split, the range had read within 0.05 cell."""
     cfg, sc, shots, xs, rs = scene

@@ -26,7 +26,7 @@ from ..scene.effects import load_effects
 from ..stream.engine import focus_batches
 from ..windows import window
 from .azimuth_response import SINC_IRW, antenna_gain, azimuth_theory
-from .point_target import analyse_point_target, azimuth_carrier_cycles
+from .point_target import analyse_point_target, image_centres
 from .theory import theoretical_irw_factor, theoretical_pslr_db
 
 
@@ -152,7 +152,7 @@ def run_point_targets(
             near_range_m=r,
             search_radius_m=(3 * rho_a, 3 * rho_r),
             chip=(chip, chip_rg),
-            azimuth_centre_cycles=azimuth_carrier_cycles(cfg),
+            **image_centres(cfg),
         )
         results.append(
             TargetResult(

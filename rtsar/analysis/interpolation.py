@@ -8,7 +8,7 @@ That interpolant is the signal's only where its band leaves the DFT's split at �
 sample empty.  A band that straddles it is cut in two and the halves interpolated a sample
 rate apart: a squinted image's range spectrum sits 2 (cos θ - 1) δr / λ cycles a bin off zero
 (the mask's phase (4π/λ)(sqrt(R² + u²) - R) changes with R; RADARSAT-1: -0.063 cycle a bin,
-its band 0.935 of the sample rate wide), and its range cut measured 4-9 % wide with the
+its band 0.93 of the sample rate wide), and its range cut measured 3-9 % wide with the
 sidelobes 1 dB up.  :func:`band_centre_cycles` finds such a band's centre, to be taken out
 before interpolating and put back after.
 """
@@ -102,7 +102,10 @@ def band_centre_cycles(x: np.ndarray, axis: int = -1) -> float:
 
     The power spectrum along ``axis`` (summed over the other axes), summed over stretches
     2·SPLIT_HALF_WIDTH wide, is least at the band's gap; where the band straddles the split
-    (GAP_DEPTH, GAP_CONTRAST), ``x · exp(-2πi c n)`` with the returned c puts the gap there.
+    (GAP_DEPTH, GAP_CONTRAST), ``x · exp(-2πi c n)`` with the returned c puts the gap's middle
+    there.  A gap must hold a stretch: one narrower than 2·SPLIT_HALF_WIDTH + 1 bin (a band
+    over 0.97 of the circle; RADARSAT-1's range cut over fewer than ~57 samples) is not found,
+    so callers that know a band's centre declare it (point_target.image_centres).
     Elsewhere 0, so a band already clear of the split, or one that fills the whole circle (a
     critically sampled sinc: no gap), is interpolated as it is.  A gap, not the power's
     centroid: a real chirp's band is lopsided (RADARSAT-1's centroid sits 0.03 cycle from
@@ -116,17 +119,18 @@ def band_centre_cycles(x: np.ndarray, axis: int = -1) -> float:
     p = np.abs(_fft.fft(x, axis=axis)) ** 2
     if x.ndim > 1:
         p = p.sum(axis=tuple(a for a in range(x.ndim) if a != axis))
-    half = round(SPLIT_HALF_WIDTH * n)  # 0 (single bins) below 96 samples
+    half = round(SPLIT_HALF_WIDTH * n)  # 0 (single bins) up to 32 samples
     stretch = np.zeros(n)
     for k in range(-half, half + 1):  # circular sums over 2·half + 1 bins
         stretch += np.roll(p, -k)
     mean, split = float(stretch.mean()), float(stretch[n // 2])
-    gap = int(np.argmin(stretch))
     low = stretch <= GAP_DEPTH * mean
-    one_gap = int(np.count_nonzero(low & ~np.roll(low, 1))) == 1  # notches come in rows
-    deep = one_gap and stretch[gap] * GAP_CONTRAST <= split
+    starts = np.flatnonzero(low & ~np.roll(low, 1))
+    one_gap = len(starts) == 1  # notches come in rows
+    deep = one_gap and float(stretch.min()) * GAP_CONTRAST <= split
     if not (mean > 0 and deep and split >= GAP_DEPTH * mean):
         return 0.0
+    gap = (int(starts[0]) + (int(np.count_nonzero(low)) - 1) // 2) % n  # the gap's middle
     return float(((gap - n // 2) / n + 0.5) % 1.0 - 0.5)
 
 

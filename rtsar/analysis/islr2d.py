@@ -21,7 +21,7 @@ import numpy as np
 from scipy import fft as _fft
 
 from .cut import mainlobe
-from .interpolation import band_centre_cycles, upsample
+from .interpolation import upsample
 from .point_target import PointTargetReport
 from .theory import THEORY_PAD_FACTOR
 
@@ -36,14 +36,14 @@ def islr_2d_db(
     range_spacing_m: float,
     upsample_factor: int = 16,
     islr_extent: float = 10.0,
-    azimuth_centre_cycles: float = 0.0,
 ) -> float:
     """2-D ISLR (dB, module docstring) of the point ``report`` found in ``image[azimuth, range]``.
 
     ``report`` gives the 2-D peak (pixels) and the IRWs (m); the spacings convert them to
     pixels.
     The region is clipped to the image; ``-inf`` without sidelobe energy, ``nan`` never.
-    ``azimuth_centre_cycles``: the image's azimuth spectral centre (a squinted image's).
+    The chip is interpolated about the spectral centres the report's was
+    (``report.centre_cycles``: a squinted image's, analyse_point_target).
     """
     img = np.asarray(image)
     irw_px = (
@@ -59,15 +59,11 @@ def islr_2d_db(
         c = int(round(centre[axis]))
         spans.append((max(c - half, 0), min(c + half, img.shape[axis] - 1) + 1))
     chip = img[spans[0][0] : spans[0][1], spans[1][0] : spans[1][1]].astype(np.complex128)
-    if azimuth_centre_cycles:  # a squinted image's spectrum to baseband (analyse_point_target)
-        rows = np.arange(spans[0][0], spans[0][1])
-        chip *= np.exp(-2j * np.pi * azimuth_centre_cycles * rows)[:, None]
-    for axis in (0, 1):  # a band still across the DFT's split: off it (analyse_point_target)
-        through = [int(round(centre[a])) - spans[a][0] for a in (0, 1)]
-        through[axis] = slice(None)  # the cut through the peak along this axis
-        if band := band_centre_cycles(chip[tuple(through)]):
+    for axis, band in enumerate(report.centre_cycles):  # to baseband, as the report's chip
+        if band:
             shape = (-1, 1) if axis == 0 else (1, -1)
-            chip *= np.exp(-2j * np.pi * band * np.arange(chip.shape[axis])).reshape(shape)
+            where = np.arange(spans[axis][0], spans[axis][1]).reshape(shape)
+            chip *= np.exp(-2j * np.pi * band * where)
     # Per axis: a long, finely sampled axis needs no upsampling, a short coarse one its full
     # factor (one shared factor left a ~1 px/IRW range axis un-upsampled beside a 9000-line
     # azimuth chip: -8.6 dB for -7.0).  Memory: at most MAX_UPSAMPLED or the chip per axis.

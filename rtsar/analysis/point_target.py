@@ -12,6 +12,7 @@ import numpy as np
 from scipy import fft as _fft
 from scipy import optimize as _opt
 
+from ..lens.plan import range_axis_m
 from .cut import CutMetrics, analyse_cut, finite_number
 from .interpolation import band_centre_cycles, check_factor, synthesis_vector
 
@@ -34,9 +35,12 @@ class PointTargetReport:
     range_m : float
         Range position (m) of the 2-D peak on the image's range axis.
     peak_value : complex
-        Complex value at the interpolated 2-D peak.
+        Complex value at the interpolated 2-D peak (each cut's ``peak_phase_rad`` is its phase).
     peak_px : (float, float)
         The 2-D peak in (fractional) image pixels (row, column).
+    centre_cycles : (float, float)
+        The (azimuth, range) spectral centres, cycles a pixel, the chip was interpolated about:
+        the ones declared, or those band_centre_cycles found (0: about zero).
     """
 
     azimuth: CutMetrics
@@ -45,6 +49,7 @@ class PointTargetReport:
     range_m: float
     peak_value: complex
     peak_px: tuple[float, float] = (math.nan, math.nan)
+    centre_cycles: tuple[float, float] = (0.0, 0.0)
 
 
 def _uniform_axis(axis, n: int, name: str) -> tuple[float, float]:
@@ -83,7 +88,8 @@ def analyse_point_target(
     upsample_factor: int = 16,
     *,
     islr_extent: float = 10.0,
-    azimuth_centre_cycles: float = 0.0,
+    azimuth_centre_cycles: float | None = None,
+    range_centre_cycles: float | None = None,
     pslr_extent: float | None = None,
 ) -> PointTargetReport:
     """Locate and measure a point target in a complex image ``[azimuth, range]``.
@@ -114,14 +120,14 @@ def analyse_point_target(
         Upsampling factor for the 2-D peak search and the cuts (default 16).
     islr_extent : float, optional
         ISLR sidelobe region half-width in IRWs (see :func:`analyse_cut`).
-    azimuth_centre_cycles : float, optional
-        Centre of the image's azimuth spectrum in cycles per line: a squinted image keeps its
-        Doppler centroid, f_dc / PRF (mod 1: azimuth_carrier_cycles).  The chip
-        is brought to baseband before any band-limited interpolation (about zero frequency it
-        would split the spectrum) and the peak's phase restored.  0: broadside.  A band that
-        still straddles the split on either axis (a squinted image's range band always does
-        where its samples barely exceed the band) is moved off it the same way, about the
-        centre the chip's own spectrum gives (rtsar.analysis.interpolation.band_centre_cycles).
+    azimuth_centre_cycles, range_centre_cycles : float or None, optional
+        Centre of the image's spectrum along each axis, cycles a pixel, where the caller knows
+        it (``image_centres(config)``): a squinted image keeps its Doppler centroid in azimuth,
+        f_dc / PRF, and a range band 2 (cos θ - 1) δr / λ off zero.  The chip is brought to
+        baseband before any band-limited interpolation (about zero a band across the DFT's
+        split is cut in two, rtsar.analysis.interpolation) and the peak's phase restored.
+        None: not known; a band the cut through the brightest pixel shows straddling the
+        split is moved off it the same way (interpolation.band_centre_cycles), else none.
     pslr_extent : float or None, optional
         Half-width in IRWs of the PSLR's search (see :func:`analyse_cut`; default: the chip).
 
@@ -177,17 +183,18 @@ def analyse_point_target(
     chip_img = img[a0:a1, r0:r1].astype(np.complex128)
     na, nr = chip_img.shape
     ca, cr = ia - a0, ir - r0
-    centre_a = float(azimuth_centre_cycles)
-    if centre_a:  # a squinted image: its azimuth spectrum to baseband first
-        chip_img = chip_img * _carrier(na, centre_a, ca)[:, None]
-    # What still straddles the DFT's split (the range band of a squinted image; an azimuth
-    # band given no centre) is moved off it (rtsar.analysis.interpolation), as the cuts
-    # through the brightest pixel show it: the target's, where the whole chip's is clutter's.
-    more_a = band_centre_cycles(chip_img[:, cr])
-    centre_r = band_centre_cycles(chip_img[ca])
-    if more_a or centre_r:
-        chip_img = chip_img * _carrier(na, more_a, ca)[:, None] * _carrier(nr, centre_r, cr)
-    centre_a += more_a
+    # Spectra to baseband first: the declared centres, or where none is declared a band the
+    # cut through the brightest pixel shows across the DFT's split (the target's cut: the
+    # whole chip's spectrum is the clutter's).
+    centre_a, centre_r = (
+        float(given) if given is not None else band_centre_cycles(cut)
+        for given, cut in (
+            (azimuth_centre_cycles, chip_img[:, cr]),
+            (range_centre_cycles, chip_img[ca]),
+        )
+    )
+    if centre_a or centre_r:
+        chip_img = chip_img * _carrier(na, centre_a, ca)[:, None] * _carrier(nr, centre_r, cr)
     spectrum_2d = _fft.fft2(chip_img)
 
     # 2-D upsampled grid of +-2 pixels around the brightest pixel (within the chip's data).
@@ -227,8 +234,9 @@ def analyse_point_target(
         peak_near=r_star,
         pslr_extent=pslr_extent,
     )
-    az = replace(az, peak_index=az.peak_index + a0)
-    rg = replace(rg, peak_index=rg.peak_index + r0)
+    phase = math.atan2(value.imag, value.real)  # the cuts' own are the baseband chip's
+    az = replace(az, peak_index=az.peak_index + a0, peak_phase_rad=phase)
+    rg = replace(rg, peak_index=rg.peak_index + r0, peak_phase_rad=phase)
     return PointTargetReport(
         azimuth=az,
         range=rg,
@@ -236,6 +244,7 @@ def analyse_point_target(
         range_m=rg_origin + (r0 + r_star) * rg_spacing,
         peak_value=value,
         peak_px=(float(a0 + a_star), float(r0 + r_star)),
+        centre_cycles=(centre_a, centre_r),
     )
 
 
@@ -244,6 +253,28 @@ def azimuth_carrier_cycles(config) -> float:
     [-1/2, 1/2): its Doppler centroid over the PRF (lines are one pulse apart; 0 broadside)."""
     g = config.geometry
     return float(np.mod(g.doppler_centroid_hz / g.prf_hz + 0.5, 1.0) - 0.5)
+
+
+def range_carrier_cycles(config) -> float:
+    """The range spectrum's centre of an image a configuration focuses, cycles per bin: the
+    mask's phase (4π/λ)(sqrt(R² + u²) - R) with u = R tan θ at a column's beam centre
+    changes by (4π/λ)(cos θ - 1) a metre of range, 2 (cos θ - 1) δr / λ cycles a bin of δr
+    (RADARSAT-1: -0.063; the focused points measure -0.064), in [-1/2, 1/2); 0 broadside."""
+    s = config.geometry.squint_sin
+    cos_minus_1 = -s * s / (1.0 + math.sqrt(1.0 - s * s))  # cos θ - 1, free of cancellation
+    r = range_axis_m(config)
+    step_m = float(r[1] - r[0]) if len(r) > 1 else 0.0
+    cycles = 2.0 * cos_minus_1 * step_m / config.geometry.wavelength_m
+    return float(np.mod(cycles + 0.5, 1.0) - 0.5)
+
+
+def image_centres(config) -> dict:
+    """analyse_point_target's declared spectral centres of an image a configuration focuses:
+    ``analyse_point_target(..., **image_centres(cfg))``."""
+    return {
+        "azimuth_centre_cycles": azimuth_carrier_cycles(config),
+        "range_centre_cycles": range_carrier_cycles(config),
+    }
 
 
 def _carrier(n: int, centre: float, origin: int) -> np.ndarray:

@@ -46,7 +46,7 @@ from ..analysis.acceptance import SINC_IRW, range_weights
 from ..analysis.azimuth_response import antenna_gain, azimuth_theory
 from ..analysis.detect import find_point_targets
 from ..analysis.islr2d import islr_2d_db, islr_2d_from_ratios_db, region_over_main
-from ..analysis.point_target import analyse_point_target, azimuth_carrier_cycles
+from ..analysis.point_target import analyse_point_target, image_centres
 from ..analysis.theory import theoretical_irw_factor, theoretical_pslr_db
 from ..ccd.base import azimuth_cell_m
 from ..scene.effects import load_effects
@@ -58,7 +58,7 @@ from ..spot.geometry import geometry_from_dict
 from ..spot.pfa import PfaSettings, PolarFormatPlan
 from ..topo.insar import height_error
 from ..windows import impulse_response_width, window
-from .measure_notes import NO_SIDELOBE_DB, point_notes
+from .measure_notes import NO_SIDELOBE_DB, point_notes, window_notes
 
 POINT_KEYS = (
     "along_track_m",
@@ -253,7 +253,7 @@ def measure_image(
         positions = [(float(az[i]), float(rg[j])) for i, j in found]
     points, theories, truth, reports = [], [], [], []
     config = getattr(theory, "config", None)  # a spotlight image's theory has none: no squint
-    carrier = 0.0 if config is None else azimuth_carrier_cycles(config)
+    centres = {} if config is None else image_centres(config)  # a spotlight image: found
     for x, r in positions:
         th = theory.at(r)
         chip = tuple(
@@ -271,12 +271,12 @@ def measure_image(
             chip=chip,
             upsample_factor=UPSAMPLE,
             islr_extent=ISLR_EXTENT_IRW,
-            azimuth_centre_cycles=carrier,
+            **centres,
             pslr_extent=CHIP_IRW,
         )
         widths = (rep.azimuth.irw_m, rep.range.irw_m)
         islr = (
-            islr_2d_db(image, rep, d_az, d_rg, UPSAMPLE, ISLR_EXTENT_IRW, carrier)
+            islr_2d_db(image, rep, d_az, d_rg, UPSAMPLE, ISLR_EXTENT_IRW)
             if all(math.isfinite(w) for w in widths)
             else math.nan  # no -3 dB width within the chip: not a point (reported as null)
         )
@@ -299,6 +299,9 @@ def measure_image(
     notes = point_notes(
         points, theories, reports, others, image.shape, (az, rg), CHIP_IRW, ISLR_EXTENT_IRW
     )
+    if config is not None:  # an instrument's fixed window may cut an echo's chirp
+        for mine, cut in zip(notes, window_notes(points, config), strict=True):
+            mine.extend(cut)
     report = {
         "image": str(path),
         "method": {

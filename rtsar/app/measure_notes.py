@@ -10,12 +10,18 @@ JSON, parallel to ``points``; printed under the table):
 * a cut or the ISLR region that the image edge cuts short;
 * an ISLR more than CLUTTER_DB above its theory with no neighbour to blame: the energy about
   the point (clutter, speckle, noise) dominates, and the ISLR measures the scene, not the
-  response.
+  response;
+* an echo whose chirp an instrument's fixed receive window cut (window_notes): its band is
+  part of the chirp's, and its range width more than the theory's, which takes the whole.
 """
 
 from __future__ import annotations
 
 import math
+
+import numpy as np
+
+from ..lens.plan import chirp_fraction_held, range_axis_m
 
 NO_SIDELOBE_DB = -100.0  # a "sidelobe" lower than this is rounding: complex64 images hold
 # ~7 digits, and a noise-free point's cuts read -150 to -180 dB beyond a beam-limited response
@@ -128,3 +134,30 @@ def _excess_db(measured, theory) -> float | None:
 
 def _at(axis, index: float) -> float:
     return float(axis[0] + index * (axis[1] - axis[0]))
+
+
+HELD_WHOLE = 0.99  # an echo with less of its chirp inside the receive window gets a note
+
+
+def window_notes(points, config) -> list[list[str]]:
+    """A sentence per point whose echo's chirp the receive window holds less than HELD_WHOLE
+    of (rtsar.lens.plan.chirp_fraction_held at its range): on RADARSAT-1's block, the ship
+    1.6 times the range theory sits where the window holds 55 % of its chirp."""
+    held = chirp_fraction_held(config)
+    axis = range_axis_m(config)
+    order = np.argsort(axis)
+    whole = axis[held >= HELD_WHOLE]
+    span = f"{whole.min():.1f} … {whole.max():.1f} m" if len(whole) else "none"
+    out = []
+    for p in points:
+        f = float(np.interp(p["range_m"], axis[order], held[order]))
+        out.append(
+            [
+                f"the receive window holds {100 * f:.0f} % of this echo's chirp (the whole chirp: "
+                f"{span}): its band is that part of the chirp's, its range response up to "
+                f"{1 / f:.2g} times the theory's width"
+            ]
+            if 0 < f < HELD_WHOLE
+            else []
+        )
+    return out

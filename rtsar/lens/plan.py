@@ -89,6 +89,21 @@ def _pulsed_lags(cfg: Config) -> tuple[int, int]:
     return first, valid
 
 
+def chirp_fraction_held(cfg: Config) -> np.ndarray:
+    """Per output bin, the fraction of a pulsed echo's chirp inside the receive window: 1 on
+    the S - P + 1 lags free of wrap-around; an instrument's fixed window keeps the echoes
+    whose centre it holds (_pulsed_lags), and those near its ends keep part of their chirp,
+    so their band, and their range response, is about that fraction of the chirp's
+    (RADARSAT-1: 1 on ~700 of the 2048 bins).  Ones for FMCW."""
+    wf = cfg.waveform
+    if not isinstance(wf, PulsedChirp):
+        return np.ones(cfg.processor.range_bins)
+    first, _ = _pulsed_lags(cfg)
+    lags = first + np.arange(cfg.processor.range_bins)
+    s, p = wf.samples_per_shot, wf.pulse_samples
+    return np.clip((np.minimum(lags + p, s) - np.maximum(lags, 0)) / p, 0.0, 1.0)
+
+
 def receive_window_open_s(cfg: Config) -> float:
     """Two-way delay at which the pulsed receiver's window (the AO aperture) opens, counted
     from the start of the transmitted pulse (the echo of range R starts 2R/c after it).

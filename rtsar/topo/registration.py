@@ -57,7 +57,9 @@ def shift_image(image: np.ndarray, azimuth_px: float, range_px: float, taps: int
     Azimuth: the integer part by indexing, the fraction by a ``taps``-point windowed sinc (a local
     operation, so a block of lines gives the same rows as the whole image ``taps``/2 lines away
     from the block's ends).  Rows and columns whose sample point falls outside the image are
-    zero and not valid.
+    zero and not valid.  Both interpolate about zero frequency: an image whose band sits off
+    zero (a squinted one's, rtsar.analysis.interpolation) needs its centre taken out first;
+    the interferometric presets are broadside.
     """
     x = np.asarray(image, np.complex128)
     rows, cols = x.shape

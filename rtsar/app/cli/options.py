@@ -11,7 +11,7 @@ import sys
 import warnings
 from dataclasses import replace
 
-from ...ccd.migration import EDGE_LOSS_DB, edge_gain_db, taps_for_band
+from ...ccd.migration import edge_gain_db, taps_for_band
 from ...focus.spec import ORDER as CORRECTIONS
 from ...focus.spec import correct_option
 from ...lens import LENS_BACKENDS, range_axis_m
@@ -385,8 +385,8 @@ def processor_changes(args, cfg, as_configured: bool = False):
         warnings.warn(
             f"--range-migration-taps {p.range_migration_taps} on a critically sampled range "
             f"axis (fs/B = {1 / band:.2f}) loses {loss_db:.1f} dB at the band's edge and "
-            f"widens the range response; {enough} taps or more lose "
-            f"under {EDGE_LOSS_DB:g} dB (rtsar.ccd.migration.taps_for_band)",
+            f"widens the range response; {enough} taps lose "
+            f"{-edge_gain_db(enough, band / 2):.1f} dB (rtsar.ccd.migration.taps_for_band)",
             stacklevel=2,
         )
     elif p.range_migration_taps and p.range_oversampling < 2 and wf.kind == "fmcw":

@@ -124,7 +124,9 @@ def cmd_import(args) -> int:
         f"processor: aperture {rows} pulses ({bandwidth_hz:.0f} Hz of Doppler) in a CCD of "
         f"{p.aperture_pulses} rows, squint {math.degrees(math.asin(g.squint_sin)):.3f}°, "
         f"{wf.samples_per_shot} range bins of {0.5 * C_M_PER_S / wf.sample_rate_hz:.3f} m, "
-        f"range migration {p.range_migration_taps} taps",
+        f"range migration {p.range_migration_taps} taps (the fewest that lose under 2 dB at "
+        f"the edge of a band {wf.bandwidth_hz / wf.sample_rate_hz:.2f} of the sample rate; "
+        "process and replay take --range-migration-taps)",
         file=sys.stderr,
     )
     prog = Progress(pulses, "import")

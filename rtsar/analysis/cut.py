@@ -216,6 +216,7 @@ def analyse_cut(
     islr_extent: float = 10.0,
     peak_near: float | None = None,
     pslr_extent: float | None = None,
+    centre_cycles: float | None = None,
 ) -> CutMetrics:
     """Measure peak, IRW, PSLR and ISLR of a 1-D complex impulse response.
 
@@ -239,6 +240,10 @@ def analyse_cut(
     pslr_extent : float or None, optional
         Half-width, in IRWs from the peak, of the region where the PSLR's sidelobe is sought
         (default: the whole cut).
+    centre_cycles : float or None, optional
+        The cut's spectral centre, cycles a sample, where the caller knows it (0: baseband);
+        None: a band that straddles the DFT's split is found (interpolation.band_centre_cycles).
+        The cut is interpolated about it and the peak's phase put back.
 
     Returns
     -------
@@ -264,7 +269,7 @@ def analyse_cut(
     n = x.size
     # A band across the DFT's split (a squinted image's range cut) is interpolated about its
     # own centre, and the peak's phase put back (rtsar.analysis.interpolation).
-    centre = band_centre_cycles(x)
+    centre = band_centre_cycles(x) if centre_cycles is None else float(centre_cycles)
     if centre:
         x = x * np.exp(-2j * np.pi * centre * np.arange(n))
     spectrum = _fft.fft(x)

@@ -224,6 +224,7 @@ def analyse_point_target(
         islr_extent=islr_extent,
         peak_near=a_star,
         pslr_extent=pslr_extent,
+        centre_cycles=0.0,  # the chip's spectra are at baseband now
     )
     rg = analyse_cut(
         rg_cut,
@@ -233,6 +234,7 @@ def analyse_point_target(
         islr_extent=islr_extent,
         peak_near=r_star,
         pslr_extent=pslr_extent,
+        centre_cycles=0.0,
     )
     phase = math.atan2(value.imag, value.real)  # the cuts' own are the baseband chip's
     az = replace(az, peak_index=az.peak_index + a0, peak_phase_rad=phase)

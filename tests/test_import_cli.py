@@ -258,3 +258,13 @@ def test_a_missing_instrument_file_is_not_blamed_on_a_key(tmp_path, capsys):
     assert main(["import", str(tmp_path / "none.toml"), "-o", str(tmp_path / "x.h5")]) == 2
     err = capsys.readouterr().err
     assert f"{tmp_path / 'none.toml'}: the instrument file cannot be read: No such file" in err
+
+
+def test_a_required_data_key_missing_names_its_near_miss(tmp_path, capsys):
+    """`fiel` for `file` (a new user's `varible` for `variable` said only that data.variable
+    was missing): the line names the key written."""
+    toml = _instrument(tmp_path, _noise())
+    toml.write_text(toml.read_text().replace('file = "block.npy"', 'fiel = "block.npy"'))
+    assert main(["import", str(toml), "-o", str(tmp_path / "x.h5")]) == 2
+    err = capsys.readouterr().err
+    assert "data.file: missing; data.fiel is a near miss of it (a typo?)" in err

@@ -119,11 +119,18 @@ class _Checker:
                 raise self.fail(f"{name}.{key}", f"unknown key; known: {', '.join(known)}")
         return table
 
+    def missing(self, section: str, table: dict, key: str, why: str = "missing") -> ValueError:
+        """A required key absent, named with a key present that is a near miss of it (a new
+        user's `varible` said only that data.variable was missing)."""
+        near = [k for k in table if near_miss(k, key)]
+        hint = f"; {section}.{near[0]} is a near miss of it (a typo?)" if near else ""
+        return self.fail(f"{section}.{key}", why + hint)
+
     def number(self, section: str, table: dict, key: str, positive=True, required=True):
         name, value = f"{section}.{key}", table.get(key)
         if value is None:
             if required:
-                raise self.fail(name, "missing")
+                raise self.missing(section, table, key)
             return None
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise self.fail(name, f"{value!r}: a number is needed")
@@ -134,7 +141,7 @@ class _Checker:
     def integer(self, data: dict, key: str, default=None, minimum: int = 1) -> int:
         value = data.get(key, default)
         if value is None:
-            raise self.fail(f"data.{key}", "missing (raw binary data needs it)")
+            raise self.missing("data", data, key, "missing (raw binary data needs it)")
         if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
             raise self.fail(f"data.{key}", f"{value!r}: an integer >= {minimum} is needed")
         return value
@@ -203,7 +210,8 @@ def _data_format(check: _Checker, data: dict, file: Path) -> str:
 def _stored_shape(check: _Checker, data: dict, fmt: str, file: Path, variable) -> tuple:
     """The array's shape as stored (MATLAB's shape for .mat); complex samples checked."""
     if fmt in ("mat5", "mat73") and not isinstance(variable, str):
-        raise check.fail("data.variable", "missing (a MATLAB file needs the variable's name)")
+        why = "missing (a MATLAB file needs the variable's name)"
+        raise check.missing("data", data, "variable", why)
     if fmt == "mat5":  # is it complex? seen on loading (iter_pulse_blocks)
         import scipy.io
 
@@ -307,7 +315,7 @@ def read_instrument_file(path) -> InstrumentFile:
     v["first_pulse_time_s"] = check.number(where, doc[where], "first_pulse_time_s", False, False)
 
     if "file" not in data:
-        raise check.fail("data.file", "missing")
+        raise check.missing("data", data, "file")
     file = v["data_file"] = check.file("data", data, "file")
     try:
         fmt = v["data_format"] = _data_format(check, data, file)

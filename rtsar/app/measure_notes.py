@@ -144,13 +144,14 @@ def window_notes(points, config) -> list[list[str]]:
     of (rtsar.lens.plan.chirp_fraction_held at its range): on RADARSAT-1's block, the ship
     1.6 times the range theory sits where the window holds 55 % of its chirp."""
     held = chirp_fraction_held(config)
-    axis = range_axis_m(config)
-    order = np.argsort(axis)
+    if held.min() >= HELD_WHOLE:  # FMCW, or a window the plan took whole chirps from
+        return [[] for _ in points]
+    axis = range_axis_m(config)  # a pulsed plan's: increasing with the lag
     whole = axis[held >= HELD_WHOLE]
     span = f"{whole.min():.1f} … {whole.max():.1f} m" if len(whole) else "none"
     out = []
     for p in points:
-        f = float(np.interp(p["range_m"], axis[order], held[order]))
+        f = float(np.interp(p["range_m"], axis, held))
         out.append(
             [
                 f"the receive window holds {100 * f:.0f} % of this echo's chirp (the whole chirp: "

@@ -168,7 +168,7 @@ class Pipeline:
 
     # ---- stages ---------------------------------------------------------------------------
     def _source_stage(self) -> None:
-        live = self.source.live
+        live, stamps_start = self.source.live, getattr(self.source, "clock_is_start", True)
         if self.link is not None:  # the silence is timed from here, not from the pipeline's build
             self.link.start()
         try:
@@ -177,7 +177,7 @@ class Pipeline:
                     break
                 if self.link is not None and len(batch):
                     self.link.heard(int(batch.seq[0]), int(batch.seq[-1]))
-                if len(batch) and getattr(self.source, "clock_is_start", True):
+                if len(batch) and stamps_start:
                     self.info.first_shot_at(float(batch.arrival_s[0]))
                 if not self.q_shots.put(batch, block=not live):
                     self.own["dropped_pulses"] += len(batch)

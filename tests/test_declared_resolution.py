@@ -57,7 +57,11 @@ def _exported(tmp_path, name, windows):
     targets = [(-4.0 * irw_az, r0 - 5.0 * irw_rg), (4.0 * irw_az, r0 + 5.0 * irw_rg)]
     lines = int(14 * irw_az / g.along_track_step_m) + 64
     pulses = cfg.processor.aperture_pulses + lines
-    start = -0.5 * (pulses - 1) * g.along_track_step_m
+    # A squinted beam (sin θ = -λ f_dc / 2V) sees a target from R0 tan θ further along the
+    # track than its closest approach: the track starts that much later (0 broadside).
+    sin_t = -g.wavelength_m * g.doppler_centroid_hz / (2.0 * g.along_track_step_m * g.prf_hz)
+    look_m = r0 * sin_t / np.sqrt(1.0 - sin_t**2)
+    start = -0.5 * (pulses - 1) * g.along_track_step_m + look_m
     d = cfg.to_dict()
     d.update(pulses=pulses, start_along_track_m=start)
     d["targets"] = [{"along_track_m": x, "slant_range_m": r} for x, r in targets]
@@ -70,9 +74,26 @@ def _exported(tmp_path, name, windows):
         return cfg, r.metadata.xmltree, r.read_image(), targets, out
 
 
+def declared_centres(x, row_ss: float, col_ss: float) -> dict:
+    """The centres of the pixels' spectra, cycles a sample, that the SICD declares: its
+    DeltaKCOAPoly (constant here; none written: 0) times the sample spacing, as
+    analyse_point_target takes them (a squinted image's band sits off zero, and a measure
+    about zero cuts it in two)."""
+
+    def cycles(axis: str, ss: float) -> float:
+        poly = x.load(f"{{*}}Grid/{{*}}{axis}/{{*}}DeltaKCOAPoly")
+        k = 0.0 if poly is None else float(np.asarray(poly).flat[0])
+        return (k * ss + 0.5) % 1.0 - 0.5
+
+    return {
+        "azimuth_centre_cycles": cycles("Col", col_ss),
+        "range_centre_cycles": cycles("Row", row_ss),
+    }
+
+
 def _measured(pixels, xml, x0):
     """(range, azimuth) -3 dB widths (m) of the target at ``x0`` along track, from the pixels
-    and the declared sample spacings alone."""
+    and the declared sample spacings and spectral centres alone."""
     x = sksicd.XmlHelper(xml)
     row_ss, col_ss = x.load("{*}Grid/{*}Row/{*}SS"), x.load("{*}Grid/{*}Col/{*}SS")
     col_irw = x.load("{*}Grid/{*}Col/{*}ImpRespWid")
@@ -87,16 +108,18 @@ def _measured(pixels, xml, x0):
         None,
         (2 * col_irw, 0.0),
         chip=int(3 * col_irw / col_ss),
+        **declared_centres(x, row_ss, col_ss),
     )
     return rep.range.irw_m, rep.azimuth.irw_m
 
 
-# The squinted preset's SICD export is refused (test_sicd_refuses_a_squinted_image).
-BROADSIDE = sorted(n for n in PRESETS if not preset(n).geometry.squinted)
+# Every preset, the squinted radarsat1 among them (tests/test_sicd_squint.py: what its SICD
+# adds for the squint).
+STRIP_MAP = sorted(PRESETS)
 
 
 @pytest.mark.parametrize("windows", WINDOWS, ids=["-".join(w) for w in WINDOWS])
-@pytest.mark.parametrize("name", BROADSIDE)
+@pytest.mark.parametrize("name", STRIP_MAP)
 def test_sicd_declares_the_resolution_and_spacing_its_pixels_measure(tmp_path, name, windows):
     cfg, xml, pixels, targets, _ = _exported(tmp_path, name, windows)
     x = sksicd.XmlHelper(xml)
@@ -115,6 +138,7 @@ def test_sicd_declares_the_resolution_and_spacing_its_pixels_measure(tmp_path, n
             None,
             (2 * declared["Col"], 0.0),
             chip=int(3 * declared["Col"] / col_ss),
+            **declared_centres(x, row_ss, col_ss),
         )
         found.append((rep.azimuth_m, rep.range_m, rep))
     rep = found[0][2]
@@ -283,27 +307,11 @@ def test_sal_demo_sicd_is_valid_for_sarpy(tmp_path):
     assert open_complex(str(out)).get_sicds_as_tuple()[0].is_valid(recursive=True)
 
 
-def test_sicd_refuses_a_squinted_image(tmp_path):
-    """A squinted image keeps its Doppler centroid in its azimuth spectrum; rtsar's SICD would
-    declare the support centred on zero, so the export says so instead of writing it."""
-    from rtsar.sinks.exports.sicd import write_sicd
-    from rtsar.sinks.image_file import ImageWriter
-
-    cfg = preset("radarsat1")
-    path = tmp_path / "sq.h5"
-    rm = np.arange(8) * 4.6 + 990e3
-    with ImageWriter(path, cfg, rm, source="test") as img:
-        img.write(np.ones((4, 8), np.complex64), np.arange(4) * 5.6)
-        img.close()
-    with pytest.raises(ValueError, match="squinted"):
-        write_sicd(path, tmp_path / "sq.nitf")
-
-
 def test_a_squinted_plans_declared_azimuth_width_is_what_its_points_measure():
     """A cold review: the azimuth width declared for a squinted plan took all N rows of the CCD
     (radarsat1: 8.27 m), where each range column's window covers fewer (668 of 716: the rest
-    are the rows the beam's centre walks across the swath); its points measure 8.88 m.  (SICD
-    export refuses squinted images for now; the declared width is the one it would write.)"""
+    are the rows the beam's centre walks across the swath); its points measure 8.88 m.  (The
+    declared width is the one its SICD writes.)"""
     from rtsar.analysis.acceptance import run_point_targets
     from rtsar.sinks.exports.resolution import azimuth_resolution
 

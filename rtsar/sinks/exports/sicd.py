@@ -23,11 +23,13 @@ from __future__ import annotations
 
 import datetime
 import logging
+import math
 from pathlib import Path
 
 import numpy as np
 
 from ... import __version__
+from ...ccd.base import beam_look_back_m
 from ...params import C_M_PER_S
 from ...sources.formats.geometry import LocalFrame, platform_height_m
 from ...sources.formats.requirements import require_formats
@@ -73,10 +75,14 @@ def sicd_structure(
     scp_local = np.array([x_scp, np.sqrt(r_scp**2 - h**2), 0.0])
     scp = frame.to_ecf(scp_local)
     n = proc.aperture_pulses
-    x_start = float(azimuth_m[0]) - 0.5 * (n - 1) * geo.along_track_step_m
+    # Pulse 0's platform position: line 0's aperture centre less its zero-Doppler offset u_mid
+    # (rtsar.ccd.base.line_azimuth_m; 0 broadside).
+    half_m = 0.5 * (n - 1) * geo.along_track_step_m
+    x_start = float(azimuth_m[0]) - half_m + beam_look_back_m(cfg)
     t_of = lambda x: (x - x_start) / speed  # noqa: E731 - the track's time at position x
     t_scp = t_of(x_scp)
-    duration = t_of(float(azimuth_m[-1]) + 0.5 * (n - 1) * geo.along_track_step_m)
+    duration = t_of(float(azimuth_m[-1]) + half_m + beam_look_back_m(cfg))
+    squint = _squint_terms(cfg, r_scp)
     arp0 = frame.to_ecf([x_start, 0.0, h])
     vel = frame.vectors_to_ecf([speed, 0.0, 0.0])
     arp_scp = arp0 + vel * t_scp
@@ -121,14 +127,19 @@ def sicd_structure(
         "Grid": {
             "ImagePlane": "SLANT",
             "Type": "RGZERO",
-            "TimeCOAPoly": {"Coefs": [[t_scp, 1.0 / speed]]},
-            "Row": _direction(u_row, d_rg, range_resolution(cfg), 2.0 * f0 / C_M_PER_S),
+            "TimeCOAPoly": {
+                "Coefs": [[t_scp + squint["coa_s"], 1.0 / speed], [squint["coa_s_per_m"], 0.0]]
+            },
+            "Row": _direction(
+                u_row, d_rg, range_resolution(cfg), 2.0 * f0 / C_M_PER_S, None, squint["row_dk"]
+            ),
             "Col": _direction(
                 u_col,
                 d_az,
                 azimuth_resolution(cfg, r_scp),
                 0.0,
                 None if azimuth_irw is None else float(azimuth_irw(cfg, r_scp)),
+                squint["col_dk"],
             ),
         },
         "Timeline": {
@@ -158,7 +169,10 @@ def sicd_structure(
                 {
                     "TxPulseLength": duration_pulse,
                     "TxRFBandwidth": wf.bandwidth_hz,
-                    "TxFreqStart": f0 - wf.bandwidth_hz / 2,
+                    # a down-chirp (rate < 0) starts at the top of its band (SICD's rate is
+                    # signed: start + rate · length is where the sweep ends)
+                    "TxFreqStart": f0
+                    - math.copysign(0.5, wf.chirp_rate_hz_per_s) * wf.bandwidth_hz,
                     "TxFMRate": wf.chirp_rate_hz_per_s,
                     **_receiver(wf, f0),
                     "index": 1,
@@ -191,7 +205,7 @@ def sicd_structure(
                 "R_CA_SCP": r_scp,
                 "FreqZero": f0,
                 "DRateSFPoly": {"Coefs": [[1.0]]},
-                "DopCentroidPoly": {"Coefs": [[0.0]]},  # broadside: zero Doppler centroid
+                "DopCentroidPoly": {"Coefs": [[geo.doppler_centroid_hz]]},  # constant: rtsar's
                 "DopCentroidCOA": True,
             },
         },
@@ -211,25 +225,56 @@ def sicd_structure(
     return sicd
 
 
-def _direction(u, ss, res: Resolution, kctr, irw_m: float | None = None) -> dict:
+def _squint_terms(cfg, r_scp: float) -> dict:
+    """What a squint of sin θ = -λ f_dc / 2V adds to an INCA image's grid: the centre of
+    aperture trails closest approach by R0 tan θ / V (rtsar.params.Geometry
+    beam_centre_offset_m), ``coa_s`` at the SCP's range and ``coa_s_per_m`` more a metre of
+    range; the spatial frequencies at that centre sit off KCtr by -2 sin θ / λ = f_dc / V along
+    track (``col_dk``: INCA's DopCentroidPoly times TimeCAPoly's slope, as SICD requires) and
+    2 (cos θ - 1) / λ in range (``row_dk``: the component of 2/λ along the closest-approach
+    direction).  All zero broadside, where none is written."""
+    geo = cfg.geometry
+    if not geo.squinted:
+        return {"coa_s": 0.0, "coa_s_per_m": 0.0, "row_dk": None, "col_dk": None}
+    speed, s = geo.speed_mps, geo.squint_sin
+    cos_less_one = -s * s / (1.0 + math.sqrt(1.0 - s * s))  # cos θ - 1, without cancellation
+    return {
+        "coa_s": geo.beam_centre_offset_m(r_scp) / speed,
+        "coa_s_per_m": geo.squint_tan / speed,
+        "row_dk": 2.0 * cos_less_one / geo.wavelength_m,
+        "col_dk": geo.doppler_centroid_hz / speed,
+    }
+
+
+def _direction(
+    u, ss, res: Resolution, kctr, irw_m: float | None = None, dk_coa: float | None = None
+) -> dict:
     """A Grid direction (Row or Col) of sample spacing ``ss`` and resolution ``res`` (its
-    declared -3 dB width ``irw_m`` where given)."""
+    declared -3 dB width ``irw_m`` where given), its support centred ``dk_coa`` cycles/m off
+    KCtr (DeltaKCOAPoly, constant; None: on it, and not written)."""
     bw = res.bandwidth_cycles_per_m
     if not (0 < bw < np.inf and 0 < ss < np.inf):
         raise ValueError(f"an impulse-response bandwidth of {bw:g} cycles/m: no SICD grid")
     # SICD: ImpRespBW <= DeltaK2 - DeltaK1 and |DeltaK| <= 1/(2 SS) (sarpy checks both).  An
     # image sampled at exactly its bandwidth has bw = 1/SS, and rounding may put bw/2 one ulp
     # beyond the bound: the support is clipped to it (2 dk is exact, so ImpRespBW <= 2 dk).
-    dk = min(0.5 * bw, 0.5 / ss)
+    # A support off centre that crosses ±1/(2 SS) wraps the sampled band: DeltaK1, DeltaK2
+    # are then the whole of it (sarpy's Grid estimate_deltak does the same).
+    half = 0.5 / ss
+    centre = dk_coa or 0.0
+    lo, hi = centre - 0.5 * bw, centre + 0.5 * bw
+    if lo < -half or hi > half:
+        lo, hi = -half, half
     return {
         "UVectECF": {"X": u[0], "Y": u[1], "Z": u[2]},
         "SS": ss,
         "ImpRespWid": res.irw_m if irw_m is None else irw_m,
         "Sgn": -1,
-        "ImpRespBW": min(bw, 2.0 * dk),
+        "ImpRespBW": min(bw, hi - lo),
         "KCtr": kctr,
-        "DeltaK1": -dk,
-        "DeltaK2": dk,
+        "DeltaK1": lo,
+        "DeltaK2": hi,
+        **({} if dk_coa is None else {"DeltaKCOAPoly": {"Coefs": [[dk_coa]]}}),
         "WgtType": {"WindowName": "UNIFORM" if res.window == "rect" else res.window.upper()},
         **({} if res.window == "rect" else {"WgtFunct": list(res.weights)}),
     }
@@ -301,12 +346,6 @@ def write_sicd(
                 "SICD's grid is uniform"
             )
     cfg = image_config(attrs, image_path)
-    if cfg.geometry.squinted:  # its azimuth spectrum sits at f_dc: DeltaKCOAPoly, not written
-        raise ValueError(
-            f"{image_path} is squinted (Doppler centroid {cfg.geometry.doppler_centroid_hz:g} "
-            "Hz): SICD export of squinted images is not supported yet (its azimuth spectral "
-            "support would be declared centred on zero); the image file keeps the centroid"
-        )
     kept = attrs.get("collection_start_utc")
     start = None if kept is None else parse_utc(kept, f"{image_path}: collection_start_utc")
     # sarpy logs what it finds odd (a degenerate geometry) on stderr; the error here says it.

@@ -113,7 +113,14 @@ def test_the_centre_of_aperture_trails_closest_approach(exported):
     speed = cfg.geometry.along_track_step_m * cfg.geometry.prf_hz
     r_scp = sicd.RMA.INCA.R_CA_SCP
     lag_s = sicd.SCPCOA.SCPTime - sicd.RMA.INCA.TimeCAPoly[0]
-    assert lag_s == pytest.approx(r_scp * s / math.sqrt(1.0 - s * s) / speed, rel=1e-6)
+    tan_t = s / math.sqrt(1.0 - s * s)
+    assert lag_s == pytest.approx(r_scp * tan_t / speed, rel=1e-6)
+    # and at every pixel: R0 tan θ / V with R0 its own range (row coordinate: metres from the
+    # SCP's range; column: along track)
+    for row_m, col_m in ((-4000.0, -500.0), (0.0, 700.0), (4000.0, 0.0)):
+        coa = sicd.Grid.TimeCOAPoly(row_m, col_m)
+        ca = sicd.RMA.INCA.TimeCAPoly(col_m)
+        assert coa - ca == pytest.approx((r_scp + row_m) * tan_t / speed, rel=1e-9)
     assert sicd.SCPCOA.DopplerConeAng == pytest.approx(90.0 + math.degrees(math.asin(s)), abs=1e-4)
 
 

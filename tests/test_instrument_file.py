@@ -13,13 +13,8 @@ import numpy as np
 import pytest
 import scipy.io
 
-from rtsar.sources.formats.instrument_file import (
-    InstrumentFile,
-    dc_offset,
-    iter_pulse_blocks,
-    load_replica,
-    read_instrument_file,
-)
+from rtsar.sources.formats.instrument_file import InstrumentFile, read_instrument_file
+from rtsar.sources.formats.instrument_samples import dc_offset, iter_pulse_blocks, load_replica
 
 PULSES, SAMPLES = 8, 16
 SHARED = Path(__file__).parents[2] / "shared" / "data" / "radarsat1"

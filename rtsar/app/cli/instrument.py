@@ -18,11 +18,8 @@ from ...lens import make_lens, make_plan
 from ...params import C_M_PER_S
 from ...sinks.io import RecordingWriter, replace_when_complete
 from ...sources.formats.instrument_config import instrument_config
-from ...sources.formats.instrument_file import (
-    dc_and_kept_pulses,
-    iter_pulse_blocks,
-    read_instrument_file,
-)
+from ...sources.formats.instrument_file import read_instrument_file
+from ...sources.formats.instrument_samples import dc_and_kept_pulses, iter_pulse_blocks
 from .. import signals
 from ..progress import Progress
 from .options import die

@@ -37,6 +37,15 @@ def test_the_fractional_centroid_is_the_pulse_to_pulse_phase(fraction):
     assert coherence == pytest.approx(1.0, abs=0.02)  # 63 of 64 pulses' power in the sum
 
 
+def test_small_single_precision_lines_give_the_same_fraction():
+    """A review: single-precision lines of 1e-25 of full scale (a block scaled 1e-30, every
+    value a normal float32) had their products underflow to zero, "the echoes are all zero"."""
+    y = lines(64, 32, 0.2 * PRF_HZ, 0.0)
+    small = (y * 1e-25).astype(np.complex64)  # products 1e-50: under float32's least
+    assert np.all(np.abs(small[np.abs(y) > 1e-3]) > np.finfo(np.float32).tiny)
+    assert fractional_centroid_hz(small, PRF_HZ)[0] == pytest.approx(0.2 * PRF_HZ, abs=1e-3)
+
+
 @pytest.mark.parametrize("walk_bins", [3.3, -2.6, 7.5])
 def test_the_range_walk_is_found_to_a_tenth_of_a_bin(walk_bins):
     """Over a lag of L pulses the envelope moves walk_bins: the correlation peak, refined by a

@@ -125,7 +125,7 @@ def test_no_estimate_and_a_centroid_many_prfs_away_point_at_the_layout(tmp_path,
     toml = _instrument(tmp_path, _noise())
     assert main(["import", str(toml), "-o", str(tmp_path / "n.h5")]) == 0
     err = capsys.readouterr().err
-    assert "noise, not a scene" in err and 'axes = "sample,pulse"' in err
+    assert "noise, not a scene" in err and "check how it is read: data.axes" in err
     far = _scene_at(120.0, pulses=1600)
     toml = _instrument(tmp_path, far, doppler="doppler_centroid_hz = -1800")
     toml.write_text(toml.read_text().replace("prf_hz = 1000.0", "prf_hz = 200.0"))
@@ -135,6 +135,16 @@ def test_no_estimate_and_a_centroid_many_prfs_away_point_at_the_layout(tmp_path,
     toml = _instrument(tmp_path, far, doppler="doppler_centroid_hz = -880")
     assert main(["import", str(toml), "-o", str(tmp_path / "g.h5")]) == 0
     assert "more than an ambiguity" not in capsys.readouterr().err  # one PRF: an ambiguity
+    # A sign written wrong is said as such, however many PRFs it makes (a review: RADARSAT-1's
+    # +6900 Hz, 11 PRF from the data's -7044, was sent to the layout keys)
+    from types import SimpleNamespace
+
+    from rtsar.app.cli.instrument import warn_centroid_apart
+
+    warn_centroid_apart(6900.0, SimpleNamespace(centroid_hz=-7044.2), 1256.98)
+    err = capsys.readouterr().err
+    assert "+11.1 PRF" in err and "its sign looks flipped" in err
+    assert "more than an ambiguity" not in err
 
 
 def test_import_never_overwrites_what_it_reads(tmp_path, capsys):

@@ -58,7 +58,9 @@ class DopplerEstimate:
 
 def fractional_centroid_hz(lines: np.ndarray, prf_hz: float) -> tuple[float, float]:
     """(D1): (f_frac in Hz, coherence) of range-compressed lines[pulse, range_bin]."""
-    y = np.asarray(lines)
+    # in double: a block of small samples (1e-30 of full scale) underflowed single precision's
+    # sums to zero and was called "all zero" (a review)
+    y = np.asarray(lines, np.complex128)
     if y.ndim != 2 or len(y) < 2:
         raise ValueError("the Doppler centroid needs at least two range lines [pulse, bin]")
     c = complex(np.vdot(y[:-1], y[1:]))  # Σ conj(y[p]) · y[p + 1]

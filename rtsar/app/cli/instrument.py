@@ -30,11 +30,18 @@ ESTIMATE_PULSES = 2048  # pulses range-compressed to estimate the Doppler centro
 # little-endian cf32 read as big-endian came out as denormals, "echoes all zero" (a judge's run)
 SMALLEST_SAMPLE = float(np.finfo(np.float32).tiny)
 LAYOUT_PRFS = 8  # a centroid this many PRFs from the data's: the block's layout is suspect
-LAYOUT_KEYS = (
-    "data.axes, and for raw binary data.pulses, samples_per_pulse, sample_type, byte_order;"
-    " an HDF5 array written [pulse, sample] by a tool other than MATLAB needs "
-    'axes = "sample,pulse"'
-)
+
+
+def layout_keys(inst) -> str:
+    """The keys that say how ``inst``'s block is read, for its format."""
+    if inst.data_format == "raw":
+        return "data.axes, pulses, samples_per_pulse, sample_type and byte_order"
+    if inst.data_format == "mat73":
+        return (
+            "data.axes: an HDF5 array written [pulse, sample] in its own order (not MATLAB's, "
+            'which h5py sees transposed) needs axes = "sample,pulse"'
+        )
+    return "data.axes"
 
 
 def estimate_centroid(inst, shots: np.ndarray) -> DopplerEstimate:
@@ -100,12 +107,12 @@ def cmd_import(args) -> int:
             except ValueError as exc:  # all-zero echoes, say: told, fatal only if needed
                 print(
                     f"no Doppler centroid from the data: {exc} (where the block holds a scene,"
-                    f" check how it is read: {LAYOUT_KEYS})",
+                    f" check how it is read: {layout_keys(inst)})",
                     file=sys.stderr,
                 )
         if inst.doppler_centroid_hz is not None and not args.estimate_doppler:
             f_dc, source = inst.doppler_centroid_hz, "the instrument file's"
-            warn_centroid_apart(f_dc, estimate, inst.prf_hz)
+            warn_centroid_apart(f_dc, estimate, inst.prf_hz, layout_keys(inst))
         elif estimate is not None:
             f_dc, source = estimate.centroid_hz, "estimated"
         else:
@@ -183,24 +190,33 @@ def cmd_import(args) -> int:
     return 0
 
 
-def warn_centroid_apart(f_dc: float, estimate: DopplerEstimate | None, prf_hz: float) -> None:
+def warn_centroid_apart(
+    f_dc: float, estimate: DopplerEstimate | None, prf_hz: float, keys: str = "data.axes"
+) -> None:
     """A warning where the instrument file's Doppler centroid is more than half a PRF from the
-    data's estimate: another ambiguity, or the sign wrong, focuses nothing."""
+    data's estimate: another ambiguity, or the sign wrong, focuses nothing.  Where the sign
+    alone is wrong it says so; where they are more than LAYOUT_PRFS apart otherwise, it names
+    the ``keys`` that say how the block is read too."""
     if estimate is None or abs(f_dc - estimate.centroid_hz) <= 0.5 * prf_hz:
         return
     apart = (f_dc - estimate.centroid_hz) / prf_hz
+    flipped = abs(f_dc + estimate.centroid_hz) <= 0.5 * prf_hz
+    if flipped:
+        why = f"its sign looks flipped: the estimate's opposite is {-estimate.centroid_hz:.1f} Hz"
+    else:
+        why = "check its sign and ambiguity"
     # A few PRFs: an ambiguity; many: the data's range walk is not an echo's (a block read
     # across its pulses, as an untransposed v7.3 array was: +13.2 PRF, a judge's run)
     layout = (
         f" {abs(apart):.0f} PRF is more than an ambiguity: check too how the block is read"
-        f" ({LAYOUT_KEYS})."
-        if abs(apart) > LAYOUT_PRFS
+        f" ({keys})."
+        if abs(apart) > LAYOUT_PRFS and not flipped
         else ""
     )
     print(
         f"warning: the instrument file's Doppler centroid {f_dc:.1f} Hz is {apart:+.1f} PRF "
-        f"from the data's estimate {estimate.centroid_hz:.1f} Hz (check its sign and "
-        f"ambiguity): it is used as given; --estimate-doppler takes the data's.{layout}",
+        f"from the data's estimate {estimate.centroid_hz:.1f} Hz ({why}): it is used as "
+        f"given; --estimate-doppler takes the data's.{layout}",
         file=sys.stderr,
     )
 

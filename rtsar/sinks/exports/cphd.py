@@ -300,7 +300,8 @@ def write_cphd(rec, path: str | Path, frame: LocalFrame | None = None) -> dict:
         raise ValueError(
             f"{rec.path} is squinted (Doppler centroid {rec.config.geometry.doppler_centroid_hz:g}"
             " Hz): CPHD export of squinted recordings is not supported yet (the scene, image "
-            "area and dwell times would be placed abeam); SigMF keeps the shots as they are"
+            "area and dwell times would be placed abeam); SigMF keeps the shots as they are, "
+            "and its focused image exports as SICD (rtsar process, then export --sicd)"
         )
     if rec.pulses < 1:
         raise ValueError(f"{rec.path}: no shots to export")

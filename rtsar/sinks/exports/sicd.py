@@ -75,8 +75,8 @@ def sicd_structure(
     scp_local = np.array([x_scp, np.sqrt(r_scp**2 - h**2), 0.0])
     scp = frame.to_ecf(scp_local)
     n = proc.aperture_pulses
-    # Pulse 0's platform position: line 0's aperture centre less its zero-Doppler offset u_mid
-    # (rtsar.ccd.base.line_azimuth_m; 0 broadside).
+    # Pulse 0's platform position: line 0's zero-Doppler position, plus the squinted beam's
+    # look-back u_mid, less half an aperture (rtsar.ccd.base.line_azimuth_m; u_mid 0 broadside).
     half_m = 0.5 * (n - 1) * geo.along_track_step_m
     x_start = float(azimuth_m[0]) - half_m + beam_look_back_m(cfg)
     t_of = lambda x: (x - x_start) / speed  # noqa: E731 - the track's time at position x
@@ -129,6 +129,8 @@ def sicd_structure(
             "Type": "RGZERO",
             "TimeCOAPoly": {
                 "Coefs": [[t_scp + squint["coa_s"], 1.0 / speed], [squint["coa_s_per_m"], 0.0]]
+                if cfg.geometry.squinted
+                else [[t_scp, 1.0 / speed]]  # broadside: closest approach
             },
             "Row": _direction(
                 u_row, d_rg, range_resolution(cfg), 2.0 * f0 / C_M_PER_S, None, squint["row_dk"]

@@ -10,6 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from point_focus import three_points_focused
 
 from rtsar.analysis.azimuth_response import antenna_gain, azimuth_theory
 from rtsar.analysis.doppler_centroid import estimate_doppler_centroid
@@ -21,7 +22,6 @@ from rtsar.presets import preset
 from rtsar.scene import Simulator
 from rtsar.scene.effects.antenna import AntennaPattern
 from rtsar.scene.model import point_scene
-from rtsar.stream.engine import process_block
 from rtsar.windows import window
 
 C = 299_792_458.0
@@ -30,15 +30,9 @@ C = 299_792_458.0
 @pytest.fixture(scope="module")
 def squinted():
     cfg = preset("radarsat1")
-    g = cfg.geometry
-    plan = make_plan(cfg)
     # truth: closest-approach along-track and range, off the pixel grid
-    xs = np.array([3000.0, 3400.0, 3800.0])
-    rs = plan.range_m[[800, 1024, 1240]] + np.array([1.3, 0.7, 2.1])
-    scene = point_scene(cfg, xs, rs, effects=[("antenna_pattern", {"main_lobe_only": True})])
-    shots = Simulator(scene).block(scene.pulses)
-    image, az, rg = process_block(cfg, shots, "numpy", scene.start_along_track_m)
-    return cfg, g, scene, shots, image, az, rg, xs, rs
+    scene, shots, image, az, rg, xs, rs = three_points_focused(cfg)
+    return cfg, cfg.geometry, scene, shots, image, az, rg, xs, rs
 
 
 def test_the_scene_is_hard(squinted):

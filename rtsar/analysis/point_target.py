@@ -262,11 +262,10 @@ def range_carrier_cycles(config) -> float:
     mask's phase (4π/λ)(sqrt(R² + u²) - R) with u = R tan θ at a column's beam centre
     changes by (4π/λ)(cos θ - 1) a metre of range, 2 (cos θ - 1) δr / λ cycles a bin of δr
     (RADARSAT-1: -0.063; the focused points measure -0.064), in [-1/2, 1/2); 0 broadside."""
-    s = config.geometry.squint_sin
-    cos_minus_1 = -s * s / (1.0 + math.sqrt(1.0 - s * s))  # cos θ - 1, free of cancellation
     r = range_axis_m(config)
     step_m = float(r[1] - r[0]) if len(r) > 1 else 0.0
-    cycles = 2.0 * cos_minus_1 * step_m / config.geometry.wavelength_m
+    g = config.geometry
+    cycles = 2.0 * g.squint_cos_less_one * step_m / g.wavelength_m
     return float(np.mod(cycles + 0.5, 1.0) - 0.5)
 
 

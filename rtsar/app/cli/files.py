@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...ccd.base import squint_aperture_pulses
+from ...ccd.base import azimuth_cell_m, squint_aperture_pulses
 from ...lens import range_axis_m
 from ...lens.plan import make_plan
 from ...presets import PRESETS, preset
@@ -51,7 +51,7 @@ def cmd_presets(args) -> int:
                 "slant_range_m": c.geometry.slant_range_m,
                 "swath_m": [float(rm[0]), float(rm[-1])],
                 "range_resolution_m": c.waveform.range_resolution_m,
-                "azimuth_resolution_m": c.geometry.wavelength_m * r0 / (2.0 * aperture_m),
+                "azimuth_resolution_m": azimuth_cell_m(c),
                 "aperture_pulses": c.processor.aperture_pulses,
                 "column_aperture_pulses": column,
                 "range_bins": c.processor.range_bins,

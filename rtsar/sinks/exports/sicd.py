@@ -81,8 +81,8 @@ def sicd_structure(
     x_start = float(azimuth_m[0]) - half_m + beam_look_back_m(cfg)
     t_of = lambda x: (x - x_start) / speed  # noqa: E731 - the track's time at position x
     t_scp = t_of(x_scp)
-    duration = t_of(float(azimuth_m[-1]) + half_m + beam_look_back_m(cfg))
-    squint = _squint_terms(cfg, r_scp)
+    duration = (float(azimuth_m[-1] - azimuth_m[0]) + 2 * half_m) / speed  # the look-back cancels
+    squint = _squint_terms(cfg, r_scp, t_scp)
     arp0 = frame.to_ecf([x_start, 0.0, h])
     vel = frame.vectors_to_ecf([speed, 0.0, 0.0])
     arp_scp = arp0 + vel * t_scp
@@ -127,11 +127,7 @@ def sicd_structure(
         "Grid": {
             "ImagePlane": "SLANT",
             "Type": "RGZERO",
-            "TimeCOAPoly": {
-                "Coefs": [[t_scp + squint["coa_s"], 1.0 / speed], [squint["coa_s_per_m"], 0.0]]
-                if cfg.geometry.squinted
-                else [[t_scp, 1.0 / speed]]  # broadside: closest approach
-            },
+            "TimeCOAPoly": {"Coefs": squint["time_coa"]},
             "Row": _direction(
                 u_row, d_rg, range_resolution(cfg), 2.0 * f0 / C_M_PER_S, None, squint["row_dk"]
             ),
@@ -227,23 +223,23 @@ def sicd_structure(
     return sicd
 
 
-def _squint_terms(cfg, r_scp: float) -> dict:
+def _squint_terms(cfg, r_scp: float, t_scp: float) -> dict:
     """What a squint of sin θ = -λ f_dc / 2V adds to an INCA image's grid: the centre of
-    aperture trails closest approach by R0 tan θ / V (rtsar.params.Geometry
-    beam_centre_offset_m), ``coa_s`` at the SCP's range and ``coa_s_per_m`` more a metre of
-    range; the spatial frequencies at that centre sit off KCtr by -2 sin θ / λ = f_dc / V along
-    track (``col_dk``: INCA's DopCentroidPoly times TimeCAPoly's slope, as SICD requires) and
+    aperture trails closest approach (TimeCAPoly: t_scp at the SCP, 1/V a metre along track)
+    by R0 tan θ / V (rtsar.params.Geometry beam_centre_offset_m), R0 the pixel's range
+    (``time_coa``, TimeCOAPoly's coefficients [row power][column power]); the spatial
+    frequencies at that centre sit off KCtr by -2 sin θ / λ = f_dc / V along track
+    (``col_dk``: INCA's DopCentroidPoly times TimeCAPoly's slope, as SICD requires) and
     2 (cos θ - 1) / λ in range (``row_dk``: the component of 2/λ along the closest-approach
-    direction).  All zero broadside, where none is written."""
+    direction).  Broadside: closest approach, and no DeltaKCOAPoly written (None)."""
     geo = cfg.geometry
+    speed = geo.speed_mps
     if not geo.squinted:
-        return {"coa_s": 0.0, "coa_s_per_m": 0.0, "row_dk": None, "col_dk": None}
-    speed, s = geo.speed_mps, geo.squint_sin
-    cos_less_one = -s * s / (1.0 + math.sqrt(1.0 - s * s))  # cos θ - 1, without cancellation
+        return {"time_coa": [[t_scp, 1.0 / speed]], "row_dk": None, "col_dk": None}
+    lag_s_per_m = geo.squint_tan / speed
     return {
-        "coa_s": geo.beam_centre_offset_m(r_scp) / speed,
-        "coa_s_per_m": geo.squint_tan / speed,
-        "row_dk": 2.0 * cos_less_one / geo.wavelength_m,
+        "time_coa": [[t_scp + r_scp * lag_s_per_m, 1.0 / speed], [lag_s_per_m, 0.0]],
+        "row_dk": 2.0 * geo.squint_cos_less_one / geo.wavelength_m,
         "col_dk": geo.doppler_centroid_hz / speed,
     }
 

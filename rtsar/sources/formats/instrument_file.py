@@ -198,24 +198,12 @@ def _data_format(check: _Checker, data: dict, file: Path) -> str:
         return data["format"]
     suffix = file.suffix.lower()
     if suffix == ".mat":  # v7.3 is HDF5 after a 512-byte header (MATLAB's "userblock")
-        return "mat73" if _is_hdf5(file) else "mat5"
+        import h5py  # (HDF5's signature at 0, or after a user block of 512·2^k bytes)
+
+        return "mat73" if h5py.is_hdf5(file) else "mat5"
     if suffix in (".npy", ".bin", ".dat", ".raw"):
         return "npy" if suffix == ".npy" else "raw"
     raise check.fail("data.format", f"{file.name}: unknown suffix; give one of {FORMATS}")
-
-
-def _is_hdf5(file: Path) -> bool:
-    """HDF5's signature where its superblock may sit: at 0, or after a user block of 512,
-    1024, 2048, … bytes (MATLAB v7.3 writes 512; h5py, none)."""
-    size = file.stat().st_size
-    with open(file, "rb") as f:
-        at = 0
-        while at + 8 <= size:
-            f.seek(at)
-            if f.read(8) == b"\x89HDF\r\n\x1a\n":
-                return True
-            at = 512 if at == 0 else 2 * at
-    return False
 
 
 def _stored_shape(check: _Checker, data: dict, fmt: str, file: Path, variable) -> tuple:

@@ -14,7 +14,7 @@ from .instrument_file import CU8_OFFSET, SAMPLE_TYPES, InstrumentFile
 
 def _complex(x: np.ndarray, offset: float = 0.0) -> np.ndarray:
     """complex128 from complex samples, a MATLAB compound (real, imag), or I, Q on the last axis."""
-    if x.dtype.names is not None and not np.iscomplexobj(x):
+    if x.dtype.names is not None:
         return x["real"].astype(np.float64) + 1j * x["imag"].astype(np.float64)
     if np.iscomplexobj(x):
         return x.astype(np.complex128)

@@ -210,12 +210,6 @@ class Geometry:
         return s / math.sqrt(1.0 - s * s)
 
     @property
-    def squint_cos_less_one(self) -> float:
-        """cos θ - 1 of the squint, formed without cancellation as -sin²θ / (1 + cos θ)."""
-        s = self.squint_sin
-        return -s * s / (1.0 + math.sqrt(1.0 - s * s))
-
-    @property
     def squinted(self) -> bool:
         return self.doppler_centroid_hz != 0.0
 

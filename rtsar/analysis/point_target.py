@@ -12,6 +12,7 @@ import numpy as np
 from scipy import fft as _fft
 from scipy import optimize as _opt
 
+from ..ccd.base import squint_cos_less_one
 from ..lens.plan import range_axis_m
 from .cut import CutMetrics, analyse_cut, finite_number
 from .interpolation import band_centre_cycles, check_factor, synthesis_vector
@@ -265,7 +266,7 @@ def range_carrier_cycles(config) -> float:
     r = range_axis_m(config)
     step_m = float(r[1] - r[0]) if len(r) > 1 else 0.0
     g = config.geometry
-    cycles = 2.0 * g.squint_cos_less_one * step_m / g.wavelength_m
+    cycles = 2.0 * squint_cos_less_one(config) * step_m / g.wavelength_m
     return float(np.mod(cycles + 0.5, 1.0) - 0.5)
 
 

@@ -67,6 +67,14 @@ def beam_look_back_m(cfg: Config) -> float:
     return cfg.geometry.beam_centre_offset_m(_range_centre_m(cfg))
 
 
+def squint_cos_less_one(cfg: Config) -> float:
+    """cos θ - 1 of the beam's squint (Geometry.squint_sin), formed without cancellation as
+    -sin²θ / (1 + cos θ): what the range spectrum's centre 2 (cos θ - 1) / λ cycles a metre
+    of a squinted image takes (rtsar.analysis.point_target, the SICD export)."""
+    s = cfg.geometry.squint_sin
+    return -s * s / (1.0 + math.sqrt(1.0 - s * s))
+
+
 def squint_aperture_pulses(cfg: Config) -> int:
     """Rows of the mask each range column uses: all N broadside; with squint, N less the rows
     the beam centre u_c = R0 tan θ moves across the swath (the mask of each column follows its

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ... import __version__
-from ...ccd.base import beam_look_back_m
+from ...ccd.base import beam_look_back_m, squint_cos_less_one
 from ...params import C_M_PER_S
 from ...sources.formats.geometry import LocalFrame, platform_height_m
 from ...sources.formats.requirements import require_formats
@@ -239,7 +239,7 @@ def _squint_terms(cfg, r_scp: float, t_scp: float) -> dict:
     lag_s_per_m = geo.squint_tan / speed
     return {
         "time_coa": [[t_scp + r_scp * lag_s_per_m, 1.0 / speed], [lag_s_per_m, 0.0]],
-        "row_dk": 2.0 * geo.squint_cos_less_one / geo.wavelength_m,
+        "row_dk": 2.0 * squint_cos_less_one(cfg) / geo.wavelength_m,
         "col_dk": geo.doppler_centroid_hz / speed,
     }
 
